@@ -1,0 +1,283 @@
+//! `.npy` files: typed arrays with checked shapes and dtypes, written atomically.
+//!
+//! The header is read and written by `npyz`; the data is the little-endian bytes of the
+//! records themselves, so a write followed by a read gives identical bytes. A record with one
+//! field is stored as a plain array (`tran.npy` is `(N, 4, 4) float64`); a record with several
+//! fields as a structured array whose field names are the Rust field names.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+use npyz::{DType, Field as NpyField, TypeStr, WriterBuilder};
+
+use crate::error::{FoundryError, Result};
+use crate::layout::{Record, Scalar};
+
+/// An array read from a `.npy` file: element type, shape and raw little-endian bytes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    /// Element type.
+    pub scalar: Scalar,
+    /// Shape, outermost first (C order).
+    pub shape: Vec<u64>,
+    /// The data, `shape.product() * scalar.size()` bytes.
+    pub bytes: Vec<u8>,
+}
+
+fn plain(scalar: Scalar) -> DType {
+    DType::Plain(
+        scalar
+            .numpy()
+            .parse::<TypeStr>()
+            .expect("valid type string"),
+    )
+}
+
+fn scalar_of(dtype: &DType) -> Option<Scalar> {
+    let DType::Plain(ty) = dtype else { return None };
+    [Scalar::F32, Scalar::F64, Scalar::U32, Scalar::I32]
+        .into_iter()
+        .find(|s| ty.to_string() == s.numpy())
+}
+
+/// The dtype and per-record shape under which records of type `R` are stored.
+pub fn record_dtype<R: Record>() -> (DType, Vec<u64>) {
+    match R::fields() {
+        [single] => (
+            plain(single.scalar),
+            single.shape.iter().map(|&n| n as u64).collect(),
+        ),
+        fields => {
+            let fields = fields
+                .iter()
+                .map(|f| NpyField {
+                    name: f.name.to_string(),
+                    dtype: f.shape.iter().rev().fold(plain(f.scalar), |inner, &n| {
+                        DType::Array(n as u64, Box::new(inner))
+                    }),
+                })
+                .collect();
+            (DType::Record(fields), Vec::new())
+        }
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
+/// `path` never holds a partial file.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    let io_err = |source| FoundryError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".hytrace-")
+        .tempfile_in(dir)
+        .map_err(io_err)?;
+    {
+        let mut w = BufWriter::new(tmp.as_file_mut());
+        write(&mut w).map_err(io_err)?;
+        w.flush().map_err(io_err)?;
+    }
+    tmp.persist(path).map_err(|e| io_err(e.error))?;
+    Ok(())
+}
+
+fn write_with_header(path: &Path, dtype: DType, shape: &[u64], bytes: &[u8]) -> Result<()> {
+    write_atomically(path, |w| {
+        let w = npyz::WriteOptions::new_header_only()
+            .dtype(dtype)
+            .shape(shape)
+            .writer(w)
+            .write_header_only()?;
+        w.write_all(bytes)
+    })
+}
+
+/// Writes a plain array of `scalar` elements with the given shape.
+pub fn write_array(path: &Path, scalar: Scalar, shape: &[u64], bytes: &[u8]) -> Result<()> {
+    let expected = shape.iter().product::<u64>() * scalar.size() as u64;
+    if expected != bytes.len() as u64 {
+        return Err(FoundryError::Build(format!(
+            "{}: shape {shape:?} needs {expected} bytes, got {}",
+            path.display(),
+            bytes.len()
+        )));
+    }
+    write_with_header(path, plain(scalar), shape, bytes)
+}
+
+/// Writes records as `(N, ...)` plain or `(N,)` structured arrays (see the module docs).
+pub fn write_records<R: Record>(path: &Path, records: &[R]) -> Result<()> {
+    let (dtype, per_record) = record_dtype::<R>();
+    let mut shape = vec![records.len() as u64];
+    shape.extend(per_record);
+    write_with_header(path, dtype, &shape, bytemuck::cast_slice(records))
+}
+
+struct RawNpy {
+    dtype: DType,
+    shape: Vec<u64>,
+    bytes: Vec<u8>,
+}
+
+fn file_error(path: &Path, problem: impl Into<String>) -> FoundryError {
+    FoundryError::File {
+        path: path.to_path_buf(),
+        problem: problem.into(),
+    }
+}
+
+/// Reads the header and exactly the data bytes it announces.
+fn read_raw(path: &Path) -> Result<RawNpy> {
+    let file = File::open(path).map_err(|source| FoundryError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = BufReader::new(file);
+    let header = npyz::NpyHeader::from_reader(&mut reader)
+        .map_err(|e| file_error(path, format!("not a valid .npy file: {e}")))?;
+    let npy = npyz::NpyFile::with_header(header, reader);
+    let dtype = npy.dtype();
+    let shape = npy.shape().to_vec();
+    if npy.order() != npyz::Order::C {
+        return Err(file_error(
+            path,
+            "Fortran-ordered arrays are not supported; save with C order",
+        ));
+    }
+    let item = dtype
+        .num_bytes()
+        .ok_or_else(|| file_error(path, format!("unsupported dtype {}", dtype.descr())))?;
+    let expected = shape
+        .iter()
+        .try_fold(item as u64, |acc, &n| acc.checked_mul(n))
+        .filter(|&n| n <= isize::MAX as u64)
+        .ok_or_else(|| file_error(path, format!("shape {shape:?} is too large")))?;
+    let file_len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(u64::MAX);
+    if expected > file_len {
+        return Err(file_error(path, format!("truncated: shape {shape:?} needs {expected} data bytes, the file has {file_len} bytes in all")));
+    }
+    let mut bytes = Vec::with_capacity(expected as usize);
+    let mut reader = npy.into_inner();
+    reader
+        .by_ref()
+        .take(expected)
+        .read_to_end(&mut bytes)
+        .map_err(|source| FoundryError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if (bytes.len() as u64) < expected {
+        return Err(file_error(
+            path,
+            format!(
+                "truncated: shape {shape:?} needs {expected} data bytes, found {}",
+                bytes.len()
+            ),
+        ));
+    }
+    let mut extra = [0u8; 1];
+    if reader.read(&mut extra).unwrap_or(0) != 0 {
+        return Err(file_error(
+            path,
+            format!("trailing bytes after the {expected} data bytes of shape {shape:?}"),
+        ));
+    }
+    Ok(RawNpy {
+        dtype,
+        shape,
+        bytes,
+    })
+}
+
+/// Reads a plain (non-structured) array of one of the supported scalar types.
+pub fn read_array(path: &Path) -> Result<NpyArray> {
+    let raw = read_raw(path)?;
+    let scalar = scalar_of(&raw.dtype).ok_or_else(|| {
+        file_error(
+            path,
+            format!(
+                "dtype {} is not one of float32, float64, uint32, int32",
+                raw.dtype.descr()
+            ),
+        )
+    })?;
+    Ok(NpyArray {
+        scalar,
+        shape: raw.shape,
+        bytes: raw.bytes,
+    })
+}
+
+/// Reads records written by [`write_records`] (or by NumPy with the same dtype and shape).
+pub fn read_records<R: Record>(path: &Path) -> Result<Vec<R>> {
+    let raw = read_raw(path)?;
+    let (dtype, per_record) = record_dtype::<R>();
+    if raw.dtype != dtype {
+        return Err(file_error(
+            path,
+            format!(
+                "wrong dtype for {} records: expected {}, found {}",
+                R::NAME,
+                dtype.descr(),
+                raw.dtype.descr()
+            ),
+        ));
+    }
+    if raw.shape.len() != 1 + per_record.len() || raw.shape[1..] != per_record[..] {
+        let mut want = vec!["N".to_string()];
+        want.extend(per_record.iter().map(u64::to_string));
+        return Err(file_error(
+            path,
+            format!(
+                "wrong shape for {} records: expected ({}), found {:?}",
+                R::NAME,
+                want.join(", "),
+                raw.shape
+            ),
+        ));
+    }
+    Ok(bytemuck::pod_collect_to_vec(&raw.bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::records::{Node, Transform64};
+
+    #[test]
+    fn structured_dtype_names_every_field() {
+        let (dtype, shape) = record_dtype::<Node>();
+        assert!(shape.is_empty());
+        let descr = dtype.descr();
+        for f in Node::fields() {
+            assert!(descr.contains(&format!("'{}'", f.name)), "{descr}");
+        }
+        assert_eq!(dtype.num_bytes(), Some(64));
+        let (dtype, shape) = record_dtype::<Transform64>();
+        assert_eq!(dtype.descr(), "'<f8'");
+        assert_eq!(shape, vec![4, 4]);
+    }
+
+    #[test]
+    fn records_round_trip_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.npy");
+        let t = [
+            Transform64::translation([1.0, -2.0, 3.5]),
+            Transform64::IDENTITY,
+        ];
+        write_records(&path, &t).unwrap();
+        assert_eq!(read_records::<Transform64>(&path).unwrap(), t);
+        let err = read_records::<Node>(&path).unwrap_err().to_string();
+        assert!(err.contains("wrong dtype"), "{err}");
+    }
+}

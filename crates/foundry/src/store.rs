@@ -1,0 +1,369 @@
+//! The Foundry: every array of a scene, and the builder that appends solids to it.
+
+use crate::error::{FoundryError, Result};
+use crate::records::{
+    pack_label, Brick, Instance, Node, Plane, Prim, Solid, Transform, Transform64, Triangle,
+    COMPLEMENT_BIT,
+};
+use crate::typecode::{PrimKind, TypeCode};
+
+/// Boundary and identity value meaning "unset".
+pub const UNSET: u32 = u32::MAX;
+
+/// A whole scene in flat arrays of POD records.
+///
+/// Indices between arrays are plain integers, so the arrays can be uploaded to a GPU or
+/// written to `.npy` files as they are. The GPU receives eight of them: `solid`, `prim`,
+/// `node`, `plan`, `itra`, `inst`, `tri` and `brick`. `tran` and `inst_tran` keep the double
+/// precision originals for the CPU's f64 path.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Foundry {
+    /// Solids: ranges of prims.
+    pub solid: Vec<Solid>,
+    /// Prims: CSG trees, triangle ranges or brick ranges.
+    pub prim: Vec<Prim>,
+    /// CSG nodes, each prim's tree stored as a complete binary tree.
+    pub node: Vec<Node>,
+    /// Planes of convex polyhedra.
+    pub plan: Vec<Plane>,
+    /// Node and prim transforms (local to parent), double precision originals.
+    pub tran: Vec<Transform64>,
+    /// Inverses of `tran` in single precision, for the GPU.
+    pub itra: Vec<Transform>,
+    /// Placements of solids in the world.
+    pub inst: Vec<Instance>,
+    /// Local-to-world transforms of `inst`, double precision originals.
+    pub inst_tran: Vec<Transform64>,
+    /// Triangles of mesh prims.
+    pub tri: Vec<Triangle>,
+    /// Bricks of volume prims.
+    pub brick: Vec<Brick>,
+    /// Full name of every solid.
+    pub solid_names: Vec<String>,
+}
+
+/// One CSG tree ready to be appended as a prim.
+///
+/// `nodes` is a complete binary tree in level order. Node transform indices are 1-based into
+/// `transforms` (0: none, bit 31: complement) and convex-polyhedron plane indices are 0-based
+/// into `planes`; both are relocated when the prim is added.
+#[derive(Clone, Debug, Default)]
+pub struct CsgTree {
+    /// Nodes of the complete binary tree, root first.
+    pub nodes: Vec<Node>,
+    /// Transforms referenced by the nodes.
+    pub transforms: Vec<Transform64>,
+    /// Planes referenced by convex-polyhedron nodes.
+    pub planes: Vec<Plane>,
+}
+
+/// Appends the prims of one solid to a [`Foundry`]; see [`Foundry::begin_solid`].
+pub struct SolidBuilder<'a> {
+    foundry: &'a mut Foundry,
+    name: String,
+    first_prim: usize,
+}
+
+impl Foundry {
+    /// An empty Foundry.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Starts a solid; its prims are added through the returned builder.
+    pub fn begin_solid(&mut self, name: &str) -> SolidBuilder<'_> {
+        let first_prim = self.prim.len();
+        SolidBuilder {
+            foundry: self,
+            name: name.to_string(),
+            first_prim,
+        }
+    }
+
+    /// Appends a transform and its inverse; returns its 1-based index.
+    pub fn add_transform(&mut self, transform: Transform64) -> Result<u32> {
+        let inverse = invert(&transform)?;
+        self.tran.push(transform);
+        self.itra.push(inverse.to_f32());
+        index_u32(self.tran.len(), "transforms")
+    }
+
+    /// Places `solid` in the world with the local-to-world `transform`; returns the
+    /// instance index.
+    pub fn add_instance(
+        &mut self,
+        solid: u32,
+        transform: Transform64,
+        identity: u32,
+        copy_number: i32,
+    ) -> Result<usize> {
+        if solid as usize >= self.solid.len() {
+            return Err(FoundryError::Build(format!(
+                "instance of solid {solid}, but only {} solids exist",
+                self.solid.len()
+            )));
+        }
+        let inverse = invert(&transform)?.to_f32();
+        self.inst.push(Instance {
+            itra: [inverse.rows[0], inverse.rows[1], inverse.rows[2]],
+            solid,
+            identity,
+            copy_number,
+            boundary: UNSET,
+        });
+        self.inst_tran.push(transform);
+        Ok(self.inst.len() - 1)
+    }
+
+    /// Largest CSG tree height in the store (0 without CSG prims).
+    pub fn max_tree_height(&self) -> u32 {
+        self.solid.iter().map(|s| s.max_height).max().unwrap_or(0)
+    }
+}
+
+impl SolidBuilder<'_> {
+    /// Appends a CSG tree as a prim; returns the prim index.
+    pub fn add_csg(&mut self, tree: CsgTree, identity: u32, boundary: u32) -> Result<usize> {
+        let f = &mut *self.foundry;
+        let n = tree.nodes.len();
+        if n == 0 || !(n + 1).is_power_of_two() {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: a CSG tree needs 2^k - 1 nodes, got {n}",
+                self.name
+            )));
+        }
+        let tran_offset = index_u32(f.tran.len(), "transforms")?;
+        let plan_offset = index_u32(f.plan.len(), "planes")?;
+        let node_offset = index_u32(f.node.len(), "nodes")?;
+        let mut nodes = tree.nodes;
+        for (i, node) in nodes.iter_mut().enumerate() {
+            let local = node.transform & !COMPLEMENT_BIT;
+            if local as usize > tree.transforms.len() {
+                return Err(FoundryError::Build(format!(
+                    "solid `{}`: node {i} uses transform {local} of {}",
+                    self.name,
+                    tree.transforms.len()
+                )));
+            }
+            if local > 0 {
+                node.transform += tran_offset;
+            }
+            if node.typecode == TypeCode::ConvexPolyhedron as u32 {
+                let first = node.param[0].to_bits();
+                let count = node.param[1].to_bits();
+                if first as usize + count as usize > tree.planes.len() {
+                    return Err(FoundryError::Build(format!(
+                        "solid `{}`: node {i} uses planes {first}..{} of {}",
+                        self.name,
+                        first as usize + count as usize,
+                        tree.planes.len()
+                    )));
+                }
+                node.param[0] = f32::from_bits(first + plan_offset);
+            }
+        }
+        for t in tree.transforms {
+            f.add_transform(t)?;
+        }
+        f.plan.extend(tree.planes);
+        let aabb = nodes[0].aabb;
+        f.node.extend(nodes);
+        f.prim.push(Prim {
+            num_node: n as u32,
+            node_offset,
+            tran_offset,
+            plan_offset,
+            kind: PrimKind::Csg as u32,
+            aabb,
+            identity,
+            boundary,
+            ..Prim::default()
+        });
+        Ok(f.prim.len() - 1)
+    }
+
+    /// Appends a triangle mesh as a prim, its vertices mapped into the solid's frame by
+    /// `transform` (identity when `None`); returns the prim index.
+    pub fn add_mesh(
+        &mut self,
+        triangles: &[Triangle],
+        transform: Option<Transform64>,
+        identity: u32,
+        boundary: u32,
+    ) -> Result<usize> {
+        if triangles.is_empty() {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: a mesh prim needs at least one triangle",
+                self.name
+            )));
+        }
+        let points = triangles
+            .iter()
+            .flat_map(|t| t.v.iter().map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]));
+        let aabb = transformed_bounds(points, transform.as_ref());
+        let f = &mut *self.foundry;
+        let item_offset = index_u32(f.tri.len(), "triangles")?;
+        f.tri.extend_from_slice(triangles);
+        self.push_data_prim(
+            PrimKind::Mesh,
+            item_offset,
+            triangles.len(),
+            aabb,
+            transform,
+            identity,
+            boundary,
+        )
+    }
+
+    /// Appends volume bricks (index space) as a prim, mapped into the solid's frame by
+    /// `transform`; returns the prim index. Each brick's `prim` field is set here.
+    pub fn add_volume(
+        &mut self,
+        bricks: &[Brick],
+        transform: Option<Transform64>,
+        identity: u32,
+    ) -> Result<usize> {
+        if bricks.is_empty() {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: a volume prim needs at least one brick",
+                self.name
+            )));
+        }
+        let corners = bricks.iter().flat_map(|b| {
+            [
+                [b.aabb[0], b.aabb[1], b.aabb[2]],
+                [b.aabb[3], b.aabb[4], b.aabb[5]],
+            ]
+            .map(|c| c.map(f64::from))
+        });
+        let aabb = transformed_bounds(corners, transform.as_ref());
+        let f = &mut *self.foundry;
+        let prim = index_u32(f.prim.len(), "prims")?;
+        let item_offset = index_u32(f.brick.len(), "bricks")?;
+        f.brick.extend(bricks.iter().map(|b| Brick { prim, ..*b }));
+        self.push_data_prim(
+            PrimKind::Volume,
+            item_offset,
+            bricks.len(),
+            aabb,
+            transform,
+            identity,
+            UNSET,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push_data_prim(
+        &mut self,
+        kind: PrimKind,
+        item_offset: u32,
+        item_count: usize,
+        aabb: [f32; 6],
+        transform: Option<Transform64>,
+        identity: u32,
+        boundary: u32,
+    ) -> Result<usize> {
+        let f = &mut *self.foundry;
+        let transform = match transform {
+            Some(t) => f.add_transform(t)?,
+            None => 0,
+        };
+        f.prim.push(Prim {
+            kind: kind as u32,
+            item_offset,
+            item_count: index_u32(item_count, "items")?,
+            tran_offset: index_u32(f.tran.len(), "transforms")?,
+            plan_offset: index_u32(f.plan.len(), "planes")?,
+            aabb,
+            transform,
+            identity,
+            boundary,
+            ..Prim::default()
+        });
+        Ok(f.prim.len() - 1)
+    }
+
+    /// Closes the solid; returns its index.
+    pub fn finish(self, identity: u32) -> Result<u32> {
+        let f = self.foundry;
+        let prims = &f.prim[self.first_prim..];
+        if prims.is_empty() {
+            return Err(FoundryError::Build(format!(
+                "solid `{}` has no prims",
+                self.name
+            )));
+        }
+        let summary = crate::validate::summarize_prims(prims);
+        f.solid.push(Solid {
+            label: pack_label(&self.name),
+            num_prim: prims.len() as u32,
+            prim_offset: self.first_prim as u32,
+            content: summary.content,
+            max_height: summary.max_height,
+            aabb: summary.aabb,
+            extent: summary.extent,
+            identity,
+        });
+        f.solid_names.push(self.name);
+        index_u32(f.solid.len() - 1, "solids")
+    }
+}
+
+/// Union of AABBs given as min xyz, max xyz.
+pub fn aabb_union(a: [f32; 6], b: [f32; 6]) -> [f32; 6] {
+    [
+        a[0].min(b[0]),
+        a[1].min(b[1]),
+        a[2].min(b[2]),
+        a[3].max(b[3]),
+        a[4].max(b[4]),
+        a[5].max(b[5]),
+    ]
+}
+
+/// Bounds of points after an optional transform, rounded outward to f32.
+fn transformed_bounds(
+    points: impl Iterator<Item = [f64; 3]>,
+    transform: Option<&Transform64>,
+) -> [f32; 6] {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        let q = transform.map_or(p, |t| t.apply_point(p));
+        for k in 0..3 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    aabb_to_f32_outward(&[lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]])
+}
+
+/// Rounds double-precision bounds (min xyz, max xyz) outward to single precision, so the
+/// f32 box still contains the f64 one.
+pub fn aabb_to_f32_outward(b: &[f64; 6]) -> [f32; 6] {
+    std::array::from_fn(|k| {
+        let f = b[k] as f32;
+        if k < 3 && f as f64 > b[k] {
+            f.next_down()
+        } else if k >= 3 && (f as f64) < b[k] {
+            f.next_up()
+        } else {
+            f
+        }
+    })
+}
+
+fn invert(t: &Transform64) -> Result<Transform64> {
+    if !t.is_affine() {
+        return Err(FoundryError::Build(format!(
+            "transform is not a finite affine matrix: {:?}",
+            t.rows
+        )));
+    }
+    t.inverse()
+        .ok_or_else(|| FoundryError::Build(format!("transform is singular: {:?}", t.rows)))
+}
+
+fn index_u32(n: usize, what: &str) -> Result<u32> {
+    u32::try_from(n).map_err(|_| FoundryError::Build(format!("too many {what}: {n}")))
+}
