@@ -1,1 +1,9 @@
-//! placeholder
+//! Tracers, rendering and the `hytrace` command-line tool.
+//!
+//! This crate owns the GPU layer ([`gpu`]: wgpu device, WGSL composition, the Foundry's
+//! upload as eight storage buffers and the kernels with their CPU twins) and the scenes the
+//! command line reads ([`scene`]).
+
+pub mod gpu;
+pub mod report;
+pub mod scene;

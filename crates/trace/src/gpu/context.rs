@@ -1,0 +1,149 @@
+//! Adapter and device acquisition, error capture and buffer readback.
+
+use std::sync::mpsc;
+
+/// What went wrong on the GPU path.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter (Vulkan, Metal, DX12 or GL driver) could be found.
+    #[error("no GPU adapter found ({0}); on Debian install `mesa-vulkan-drivers` for the lavapipe software rasterizer")]
+    NoAdapter(String),
+    /// The adapter refused to create a device.
+    #[error("GPU device request failed: {0}")]
+    Device(String),
+    /// The scene does not fit the device's limits.
+    #[error("scene too big for this GPU: {0}")]
+    SceneTooBig(String),
+    /// A shader failed to compose or compile.
+    #[error("shader `{name}`: {problem}")]
+    Shader {
+        /// The kernel.
+        name: String,
+        /// What failed.
+        problem: String,
+    },
+    /// wgpu reported a validation or out-of-memory error.
+    #[error("GPU error during {what}: {problem}")]
+    Operation {
+        /// The operation.
+        what: String,
+        /// wgpu's message.
+        problem: String,
+    },
+}
+
+/// A wgpu device and queue with the adapter's own limits.
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// Name, driver and backend of the adapter.
+    pub adapter_info: wgpu::AdapterInfo,
+    /// The limits the device was created with (the adapter's maximum).
+    pub limits: wgpu::Limits,
+}
+
+impl GpuContext {
+    /// Opens the best available adapter with its full limits.
+    pub fn new() -> Result<GpuContext, GpuError> {
+        pollster::block_on(async {
+            let instance = wgpu::Instance::new(
+                wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+            );
+            let adapter = instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+            let limits = adapter.limits();
+            let (device, queue) = adapter
+                .request_device(&wgpu::DeviceDescriptor {
+                    label: Some("hytrace"),
+                    required_limits: limits.clone(),
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| GpuError::Device(e.to_string()))?;
+            Ok(GpuContext {
+                device,
+                queue,
+                adapter_info: adapter.get_info(),
+                limits,
+            })
+        })
+    }
+
+    /// For tests: a context, or `None` with the reason printed. When `HYTRACE_REQUIRE_GPU=1`
+    /// a missing adapter panics instead, so CI cannot pass by skipping GPU tests.
+    pub fn for_tests() -> Option<GpuContext> {
+        match GpuContext::new() {
+            Ok(ctx) => Some(ctx),
+            Err(e) if std::env::var("HYTRACE_REQUIRE_GPU").as_deref() == Ok("1") => {
+                panic!("HYTRACE_REQUIRE_GPU=1 but no GPU is usable: {e}")
+            }
+            Err(e) => {
+                eprintln!("SKIPPED: GPU test needs an adapter: {e}");
+                None
+            }
+        }
+    }
+
+    /// One line describing the adapter.
+    pub fn describe(&self) -> String {
+        let i = &self.adapter_info;
+        format!(
+            "{} ({:?}, {:?}, driver {} {})",
+            i.name, i.device_type, i.backend, i.driver, i.driver_info
+        )
+    }
+
+    /// Runs `f`, turning any validation or out-of-memory error it causes into a [`GpuError`].
+    pub fn checked<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let value = f();
+        let errors = pollster::block_on(async { (validation.pop().await, oom.pop().await) });
+        match errors {
+            (Some(e), _) | (None, Some(e)) => Err(GpuError::Operation {
+                what: what.to_string(),
+                problem: e.to_string(),
+            }),
+            (None, None) => Ok(value),
+        }
+    }
+
+    /// Copies `size` bytes of a storage buffer back to the CPU.
+    pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([encoder.finish()]);
+        let (tx, rx) = mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        let failed = |problem: String| GpuError::Operation {
+            what: "readback".to_string(),
+            problem,
+        };
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| failed(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| failed(e.to_string()))?
+            .map_err(|e| failed(e.to_string()))?;
+        let bytes = staging
+            .get_mapped_range(..)
+            .map_err(|e| failed(e.to_string()))?
+            .to_vec();
+        Ok(bytes)
+    }
+}

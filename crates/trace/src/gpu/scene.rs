@@ -1,0 +1,92 @@
+//! The Foundry on the GPU: eight storage buffers in one bind group (group 0 of every kernel).
+
+use hytrace_foundry::{gpu_arrays, Foundry};
+use wgpu::util::DeviceExt;
+
+use super::context::{GpuContext, GpuError};
+
+/// A Foundry uploaded to the GPU.
+pub struct GpuScene {
+    /// Layout of group 0, shared by every kernel's pipeline layout.
+    pub layout: wgpu::BindGroupLayout,
+    /// The bind group of the eight arrays.
+    pub bind_group: wgpu::BindGroup,
+    /// The buffers, in binding order of [`gpu_arrays`].
+    pub buffers: Vec<wgpu::Buffer>,
+}
+
+impl GpuScene {
+    /// Uploads the eight GPU arrays of `foundry` (eight buffer writes, whatever the scene's
+    /// size). An array larger than the device's storage-binding limit is an error.
+    pub fn upload(ctx: &GpuContext, foundry: &Foundry) -> Result<GpuScene, GpuError> {
+        let limit = ctx.limits.max_storage_buffer_binding_size as u64;
+        let names = gpu_arrays();
+        let arrays = foundry.gpu_array_bytes();
+        for ((name, _), bytes) in names.iter().zip(&arrays) {
+            if bytes.len() as u64 > limit {
+                return Err(GpuError::SceneTooBig(format!(
+                    "array `{name}` has {} bytes, the device binds at most {limit}",
+                    bytes.len()
+                )));
+            }
+        }
+        ctx.checked("scene upload", || {
+            let buffers: Vec<wgpu::Buffer> = names
+                .iter()
+                .zip(&arrays)
+                .map(|((name, _), bytes)| {
+                    // A binding cannot be empty: an empty array gets one zeroed record.
+                    let padded;
+                    let contents = if bytes.is_empty() {
+                        padded = vec![0u8; 64];
+                        &padded[..]
+                    } else {
+                        bytes
+                    };
+                    ctx.device
+                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some(name),
+                            contents,
+                            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                        })
+                })
+                .collect();
+            let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..buffers.len() as u32)
+                .map(|binding| wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                })
+                .collect();
+            let layout = ctx
+                .device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("foundry"),
+                    entries: &entries,
+                });
+            let bind_entries: Vec<wgpu::BindGroupEntry> = buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("foundry"),
+                layout: &layout,
+                entries: &bind_entries,
+            });
+            GpuScene {
+                layout,
+                bind_group,
+                buffers,
+            }
+        })
+    }
+}

@@ -1,0 +1,77 @@
+//! Human-readable and JSON summaries of a Foundry (`hytrace info`).
+
+use hytrace_foundry::{file_names, Foundry, PrimKind};
+use serde_json::json;
+
+/// Sizes of the arrays and a line per solid.
+pub fn summary(f: &Foundry) -> serde_json::Value {
+    let count = |k: PrimKind| f.prim.iter().filter(|p| p.kind == k as u32).count();
+    let gpu_bytes: usize = f.gpu_array_bytes().iter().map(|b| b.len()).sum();
+    let cpu_only_bytes =
+        (f.tran.len() + f.inst_tran.len()) * size_of::<hytrace_foundry::Transform64>();
+    let solids: Vec<_> = f
+        .solid
+        .iter()
+        .zip(&f.solid_names)
+        .enumerate()
+        .map(|(i, (s, name))| {
+            json!({
+                "index": i,
+                "name": name,
+                "prims": s.num_prim,
+                "max_tree_height": s.max_height,
+                "instances": f.inst.iter().filter(|x| x.solid as usize == i).count(),
+                "aabb": s.aabb,
+            })
+        })
+        .collect();
+    json!({
+        "solids": f.solid.len(),
+        "prims": { "csg": count(PrimKind::Csg), "mesh": count(PrimKind::Mesh), "volume": count(PrimKind::Volume) },
+        "nodes": f.node.len(),
+        "planes": f.plan.len(),
+        "transforms": f.tran.len(),
+        "instances": f.inst.len(),
+        "triangles": f.tri.len(),
+        "bricks": f.brick.len(),
+        "gpu_bytes": gpu_bytes,
+        "cpu_only_bytes": cpu_only_bytes,
+        "files": file_names(),
+        "solid_list": solids,
+    })
+}
+
+/// The summary as aligned text.
+pub fn summary_text(f: &Foundry) -> String {
+    let s = summary(f);
+    let mut out =
+        format!(
+        "solids {}  prims {} (csg {}, mesh {}, volume {})  nodes {}  planes {}  transforms {}\n\
+         instances {}  triangles {}  bricks {}  GPU bytes {}  CPU-only bytes {}\n",
+        s["solids"], f.prim.len(), s["prims"]["csg"], s["prims"]["mesh"], s["prims"]["volume"],
+        s["nodes"], s["planes"], s["transforms"], s["instances"], s["triangles"], s["bricks"],
+        s["gpu_bytes"], s["cpu_only_bytes"],
+    );
+    out.push_str(&format!(
+        "{:>5}  {:<20} {:>5} {:>6} {:>9}  bounds (solid frame, mm)\n",
+        "index", "solid", "prims", "height", "instances"
+    ));
+    for row in s["solid_list"].as_array().into_iter().flatten() {
+        let b: Vec<String> = row["aabb"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|v| format!("{:.1}", v.as_f64().unwrap_or(f64::NAN)))
+            .collect();
+        out.push_str(&format!(
+            "{:>5}  {:<20} {:>5} {:>6} {:>9}  [{}]\n",
+            row["index"].to_string(),
+            row["name"].as_str().unwrap_or(""),
+            row["prims"].to_string(),
+            row["max_tree_height"].to_string(),
+            row["instances"].to_string(),
+            b.join(", ")
+        ));
+    }
+    out
+}

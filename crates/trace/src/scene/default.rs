@@ -1,0 +1,81 @@
+//! The embedded default scene: a detector-like vessel built from CSG booleans.
+//!
+//! An acrylic-like spherical shell with a chimney, a torus support ring, a floor slab and a
+//! ring of PMT-like solids (ellipsoidal window on a cylindrical neck) placed as instances
+//! facing the centre.
+
+use std::f64::consts::PI;
+
+use anyhow::Context;
+use hytrace_csg::{box3, cylinder, sphere, to_tree, torus, Shape};
+use hytrace_foundry::{Foundry, Transform64, UNSET};
+
+/// Number of PMT-like instances in the default scene.
+pub const DEFAULT_PMT_COUNT: usize = 48;
+
+fn add_csg_solid(f: &mut Foundry, name: &str, shape: &Shape, identity: u32) -> anyhow::Result<u32> {
+    let tree = to_tree(shape).with_context(|| format!("solid `{name}`"))?;
+    let mut s = f.begin_solid(name);
+    s.add_csg(tree, identity, UNSET)?;
+    Ok(s.finish(identity)?)
+}
+
+/// Rotation taking local +z to the unit vector `dir`, followed by a translation to `at`.
+fn facing(dir: [f64; 3], at: [f64; 3]) -> Transform64 {
+    // Orthonormal frame (u, v, dir) with u perpendicular to z where possible.
+    let helper = if dir[2].abs() < 0.9 {
+        [0.0, 0.0, 1.0]
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let norm = |a: [f64; 3]| {
+        let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        a.map(|x| x / l)
+    };
+    let u = norm(cross(helper, dir));
+    let v = cross(dir, u);
+    Transform64 {
+        rows: [
+            [u[0], v[0], dir[0], at[0]],
+            [u[1], v[1], dir[1], at[1]],
+            [u[2], v[2], dir[2], at[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    }
+}
+
+/// Builds the default scene.
+pub fn default_scene() -> anyhow::Result<Foundry> {
+    let mut f = Foundry::new();
+    let shell = sphere(1000.0)? - sphere(980.0)?;
+    let chimney = cylinder(150.0, 900.0, 1400.0)? - cylinder(130.0, 890.0, 1410.0)?;
+    let vessel = add_csg_solid(&mut f, "vessel", &(shell + chimney), 0)?;
+    let ring = add_csg_solid(&mut f, "support_ring", &torus(0.0, 25.0, 1010.0)?, 1)?;
+    let floor = add_csg_solid(&mut f, "floor", &box3(5000.0, 5000.0, 200.0)?, 2)?;
+    // PMT: ellipsoidal window (a scaled sphere) on a neck, pointing along local +z.
+    let pmt_shape = sphere(100.0)?.scale(1.0, 1.0, 0.6) + cylinder(45.0, -180.0, 0.0)?;
+    let pmt = add_csg_solid(&mut f, "pmt", &pmt_shape, 3)?;
+
+    f.add_instance(vessel, Transform64::IDENTITY, 0, 0)?;
+    f.add_instance(ring, Transform64::IDENTITY, 1, 0)?;
+    f.add_instance(floor, Transform64::translation([0.0, 0.0, -1600.0]), 2, 0)?;
+    // PMTs on a sphere of radius 1300 (golden-angle spiral), windows facing the centre.
+    let golden = PI * (3.0 - 5f64.sqrt());
+    for i in 0..DEFAULT_PMT_COUNT {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / DEFAULT_PMT_COUNT as f64;
+        let r = (1.0 - z * z).sqrt();
+        let phi = golden * i as f64;
+        let out = [r * phi.cos(), r * phi.sin(), z];
+        let at = out.map(|c| 1300.0 * c);
+        f.add_instance(pmt, facing(out.map(|c| -c), at), 3, i as i32)?;
+    }
+    f.validate()?;
+    Ok(f)
+}
