@@ -238,13 +238,11 @@ impl Transform64 {
             return None;
         }
         let mut inv = Self::IDENTITY;
-        for i in 0..3 {
-            for j in 0..3 {
-                inv.rows[i][j] = cof[j][i] / det;
+        for (i, row) in inv.rows[..3].iter_mut().enumerate() {
+            for (j, v) in row[..3].iter_mut().enumerate() {
+                *v = cof[j][i] / det;
             }
-        }
-        for i in 0..3 {
-            inv.rows[i][3] = -(0..3).map(|k| inv.rows[i][k] * m[k][3]).sum::<f64>();
+            row[3] = -(0..3).map(|k| row[k] * m[k][3]).sum::<f64>();
         }
         Some(inv)
     }

@@ -256,15 +256,15 @@ impl Foundry {
                     }
                     check_range("node", i, "param", first, count, self.node.len(), "node")?;
                 }
-                c if c.is_primitive() => {
-                    if n.param.iter().chain(&n.param_ext).any(|v| !v.is_finite()) {
-                        return Err(record_error(
-                            "node",
-                            i,
-                            "param",
-                            format!("not finite: {:?} {:?}", n.param, n.param_ext),
-                        ));
-                    }
+                c if c.is_primitive()
+                    && n.param.iter().chain(&n.param_ext).any(|v| !v.is_finite()) =>
+                {
+                    return Err(record_error(
+                        "node",
+                        i,
+                        "param",
+                        format!("not finite: {:?} {:?}", n.param, n.param_ext),
+                    ));
                 }
                 _ => {}
             }

@@ -80,7 +80,10 @@ impl GpuContext {
     /// a missing adapter panics instead, so CI cannot pass by skipping GPU tests.
     pub fn for_tests() -> Option<GpuContext> {
         match GpuContext::new() {
-            Ok(ctx) => Some(ctx),
+            Ok(ctx) => {
+                eprintln!("GPU tests on: {}", ctx.describe());
+                Some(ctx)
+            }
             Err(e) if std::env::var("HYTRACE_REQUIRE_GPU").as_deref() == Ok("1") => {
                 panic!("HYTRACE_REQUIRE_GPU=1 but no GPU is usable: {e}")
             }

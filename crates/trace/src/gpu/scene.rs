@@ -19,7 +19,7 @@ impl GpuScene {
     /// Uploads the eight GPU arrays of `foundry` (eight buffer writes, whatever the scene's
     /// size). An array larger than the device's storage-binding limit is an error.
     pub fn upload(ctx: &GpuContext, foundry: &Foundry) -> Result<GpuScene, GpuError> {
-        let limit = ctx.limits.max_storage_buffer_binding_size as u64;
+        let limit = ctx.limits.max_storage_buffer_binding_size;
         let names = gpu_arrays();
         let arrays = foundry.gpu_array_bytes();
         for ((name, _), bytes) in names.iter().zip(&arrays) {

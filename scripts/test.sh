@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Runs every check and test of hytrace, installing what cargo cannot:
+#  - Mesa's lavapipe Vulkan driver (Debian: mesa-vulkan-drivers, libvulkan1), so GPU tests
+#    run on machines without a GPU;
+#  - the Python oracle environment (.venv, from tests/requirements.txt).
+# GPU and oracle tests fail (not skip) when their dependencies are missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+apt_packages=(mesa-vulkan-drivers libvulkan1)
+missing=()
+for p in "${apt_packages[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then
+    echo "installing ${missing[*]} (Debian)"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  elif command -v sudo >/dev/null; then
+    sudo apt-get update -qq
+    sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "error: install ${missing[*]} (Debian packages) as root, then run $0 again" >&2
+    exit 1
+  fi
+fi
+
+venv=.venv
+stamp=$venv/.requirements
+if [ ! -x "$venv/bin/python" ] || ! cmp -s tests/requirements.txt "$stamp"; then
+  echo "creating the Python oracle environment in $venv"
+  python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install -q --upgrade pip
+  "$venv/bin/python" -m pip install -q -r tests/requirements.txt
+  cp tests/requirements.txt "$stamp"
+fi
+
+export HYTRACE_PYTHON="$PWD/$venv/bin/python"
+export HYTRACE_REQUIRE_ORACLES=1
+export HYTRACE_REQUIRE_GPU="${HYTRACE_REQUIRE_GPU:-1}"
+# GPU tests run on Vulkan (lavapipe without a GPU), not on a GL fallback.
+export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
+# Mesa's window-system probing complains without it; compute needs no display.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+
+cargo fmt --all -- --check
+cargo clippy --workspace --all-targets -- -D warnings
+cargo test --workspace

@@ -1,0 +1,55 @@
+//! Helpers for the cross-crate and oracle tests: finding the Python oracle environment.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The Python interpreter of the oracle environment (`HYTRACE_PYTHON`, set by
+/// `scripts/test.sh`), or `None` with the reason printed. With `HYTRACE_REQUIRE_ORACLES=1` a
+/// missing interpreter or module panics, so CI cannot pass by skipping oracle tests.
+pub fn oracle_python(modules: &[&str]) -> Option<PathBuf> {
+    let required = std::env::var("HYTRACE_REQUIRE_ORACLES").as_deref() == Ok("1");
+    let fail = |why: String| {
+        if required {
+            panic!("HYTRACE_REQUIRE_ORACLES=1 but {why}");
+        }
+        eprintln!("SKIPPED: oracle test needs {why}; run scripts/test.sh");
+        None
+    };
+    let Some(python) = std::env::var_os("HYTRACE_PYTHON").map(PathBuf::from) else {
+        return fail("HYTRACE_PYTHON to name the oracle environment's python".to_string());
+    };
+    let import = format!(
+        "import {}",
+        if modules.is_empty() {
+            "sys".to_string()
+        } else {
+            modules.join(", ")
+        }
+    );
+    match Command::new(&python).args(["-c", &import]).output() {
+        Ok(out) if out.status.success() => Some(python),
+        Ok(out) => fail(format!(
+            "{} to import {modules:?}: {}",
+            python.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        )),
+        Err(e) => fail(format!("{} to run: {e}", python.display())),
+    }
+}
+
+/// Runs a Python script with arguments in the oracle environment; panics with its stderr on
+/// failure.
+pub fn run_python(python: &PathBuf, script: &str, args: &[&str]) -> String {
+    let out = Command::new(python)
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "python failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
