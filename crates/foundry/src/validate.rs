@@ -136,6 +136,38 @@ fn inverse_mismatch(original: &Transform64, stored: &[[f32; 4]]) -> Option<f64> 
     Some(worst / scale)
 }
 
+/// Checks record `i` of an f64 transform array (`original`: array and field) and the f32
+/// inverse stored for it (`inverse`: array and field): affine, invertible, and consistent.
+fn check_inverse_pair(
+    original: (&'static str, &'static str),
+    inverse: (&'static str, &'static str),
+    i: usize,
+    transform: &Transform64,
+    stored: &[[f32; 4]],
+) -> Result<()> {
+    if !transform.is_affine() {
+        return Err(record_error(
+            original.0,
+            i,
+            original.1,
+            "not a finite affine matrix (last row must be 0 0 0 1)",
+        ));
+    }
+    match inverse_mismatch(transform, stored) {
+        None => Err(record_error(original.0, i, original.1, "singular matrix")),
+        Some(d) if d > INVERSE_TOLERANCE => Err(record_error(
+            inverse.0,
+            i,
+            inverse.1,
+            format!(
+                "not the inverse of {}[{i}] (relative difference {d:.3e})",
+                original.0
+            ),
+        )),
+        Some(_) => Ok(()),
+    }
+}
+
 impl Foundry {
     /// Checks every cross-array reference and every field that a reader would trust.
     pub fn validate(&self) -> Result<()> {
@@ -160,26 +192,7 @@ impl Foundry {
             });
         }
         for (i, (t, it)) in self.tran.iter().zip(&self.itra).enumerate() {
-            if !t.is_affine() {
-                return Err(record_error(
-                    "tran",
-                    i,
-                    "rows",
-                    "not a finite affine matrix (last row must be 0 0 0 1)",
-                ));
-            }
-            match inverse_mismatch(t, &it.rows) {
-                None => return Err(record_error("tran", i, "rows", "singular matrix")),
-                Some(d) if d > INVERSE_TOLERANCE => {
-                    return Err(record_error(
-                        "itra",
-                        i,
-                        "rows",
-                        format!("not the inverse of tran[{i}] (relative difference {d:.3e})"),
-                    ))
-                }
-                Some(_) => {}
-            }
+            check_inverse_pair(("tran", "rows"), ("itra", "rows"), i, t, &it.rows)?;
         }
         Ok(())
     }
@@ -502,26 +515,7 @@ impl Foundry {
                     format!("solid {} of {}", inst.solid, self.solid.len()),
                 ));
             }
-            if !t.is_affine() {
-                return Err(record_error(
-                    "inst_tran",
-                    i,
-                    "rows",
-                    "not a finite affine matrix (last row must be 0 0 0 1)",
-                ));
-            }
-            match inverse_mismatch(t, &inst.itra) {
-                None => return Err(record_error("inst_tran", i, "rows", "singular matrix")),
-                Some(d) if d > INVERSE_TOLERANCE => {
-                    return Err(record_error(
-                        "inst",
-                        i,
-                        "itra",
-                        format!("not the inverse of inst_tran[{i}] (relative difference {d:.3e})"),
-                    ))
-                }
-                Some(_) => {}
-            }
+            check_inverse_pair(("inst_tran", "rows"), ("inst", "itra"), i, t, &inst.itra)?;
         }
         Ok(())
     }

@@ -150,3 +150,29 @@ impl GpuContext {
         Ok(bytes)
     }
 }
+
+/// Layout entry of a storage buffer visible to compute shaders.
+pub fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// Bind group entries binding each of `buffers` whole, at bindings 0, 1, 2, ...
+pub fn whole_buffer_entries(buffers: &[wgpu::Buffer]) -> Vec<wgpu::BindGroupEntry<'_>> {
+    buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect()
+}

@@ -8,7 +8,7 @@ use hytrace_foundry::{Foundry, PrimKind, TypeCode, UNSET};
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{GpuContext, GpuError};
+use super::context::{storage_layout_entry, whole_buffer_entries, GpuContext, GpuError};
 use super::scene::GpuScene;
 
 const KERNEL: &str = "kernels/foundry_probe";
@@ -88,19 +88,6 @@ pub struct ProbeKernels {
     locate: wgpu::ComputePipeline,
 }
 
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 impl ProbeKernels {
     /// Composes and compiles the kernels for scenes uploaded as `scene`.
     pub fn new(ctx: &GpuContext, scene: &GpuScene) -> Result<ProbeKernels, GpuError> {
@@ -120,10 +107,10 @@ impl ProbeKernels {
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                     label: Some("probe io"),
                     entries: &[
-                        storage_entry(0, true),
-                        storage_entry(1, true),
-                        storage_entry(2, false),
-                        storage_entry(3, false),
+                        storage_layout_entry(0, true),
+                        storage_layout_entry(1, true),
+                        storage_layout_entry(2, false),
+                        storage_layout_entry(3, false),
                     ],
                 });
             let layout = ctx
@@ -191,14 +178,7 @@ impl ProbeKernels {
                 output("out_points"),
                 output("out_locate"),
             ];
-            let entries: Vec<_> = buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
+            let entries = whole_buffer_entries(&buffers);
             let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("probe io"),
                 layout: &self.io_layout,

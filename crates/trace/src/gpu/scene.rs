@@ -3,7 +3,7 @@
 use hytrace_foundry::{gpu_arrays, Foundry};
 use wgpu::util::DeviceExt;
 
-use super::context::{GpuContext, GpuError};
+use super::context::{storage_layout_entry, whole_buffer_entries, GpuContext, GpuError};
 
 /// A Foundry uploaded to the GPU.
 pub struct GpuScene {
@@ -52,16 +52,7 @@ impl GpuScene {
                 })
                 .collect();
             let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..buffers.len() as u32)
-                .map(|binding| wgpu::BindGroupLayoutEntry {
-                    binding,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                })
+                .map(|binding| storage_layout_entry(binding, true))
                 .collect();
             let layout = ctx
                 .device
@@ -69,14 +60,7 @@ impl GpuScene {
                     label: Some("foundry"),
                     entries: &entries,
                 });
-            let bind_entries: Vec<wgpu::BindGroupEntry> = buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
+            let bind_entries = whole_buffer_entries(&buffers);
             let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("foundry"),
                 layout: &layout,

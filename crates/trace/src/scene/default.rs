@@ -1,14 +1,15 @@
 //! The embedded default scene: a detector-like vessel built from CSG booleans.
 //!
-//! An acrylic-like spherical shell with a chimney, a torus support ring, a floor slab and a
-//! ring of PMT-like solids (ellipsoidal window on a cylindrical neck) placed as instances
-//! facing the centre.
+//! An acrylic-like spherical shell with a chimney, a torus support ring, a floor slab, a ring
+//! of PMT-like solids (ellipsoidal window on a cylindrical neck) placed as instances facing
+//! the centre, and a procedural fog sphere (8^3 bricks) filling the vessel.
 
 use std::f64::consts::PI;
 
 use anyhow::Context;
 use hytrace_csg::{box3, cylinder, sphere, to_tree, torus, Shape};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
+use hytrace_volume::{bricks, fog_sphere};
 
 /// Number of PMT-like instances in the default scene.
 pub const DEFAULT_PMT_COUNT: usize = 48;
@@ -63,7 +64,18 @@ pub fn default_scene() -> anyhow::Result<Foundry> {
     let pmt_shape = sphere(100.0)?.scale(1.0, 1.0, 0.6) + cylinder(45.0, -180.0, 0.0)?;
     let pmt = add_csg_solid(&mut f, "pmt", &pmt_shape, 3)?;
 
+    // Fog: a sphere of 24 voxels (blend 6) at 30 mm per voxel, radius 720 mm.
+    let fog_grid = fog_sphere(24.0, 6.0)?;
+    let mut voxel_to_mm = Transform64::IDENTITY;
+    for (k, row) in voxel_to_mm.rows[..3].iter_mut().enumerate() {
+        row[k] = 30.0;
+    }
+    let mut s = f.begin_solid("fog");
+    s.add_volume(&bricks(&fog_grid), Some(voxel_to_mm), 4)?;
+    let fog = s.finish(4)?;
+
     f.add_instance(vessel, Transform64::IDENTITY, 0, 0)?;
+    f.add_instance(fog, Transform64::IDENTITY, 4, 0)?;
     f.add_instance(ring, Transform64::IDENTITY, 1, 0)?;
     f.add_instance(floor, Transform64::translation([0.0, 0.0, -1600.0]), 2, 0)?;
     // PMTs on a sphere of radius 1300 (golden-angle spiral), windows facing the centre.
