@@ -51,11 +51,28 @@ pub fn file_names() -> Vec<String> {
     names
 }
 
+/// Whether `dir` holds a `meta.json` of this format (any version), i.e. was written by
+/// [`Foundry::save`] and may be replaced.
+fn is_foundry_dir(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join("meta.json"))
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .is_some_and(|meta| meta["format"] == FORMAT_NAME)
+}
+
 impl Foundry {
     /// Validates the store and writes it to `dir` (created or replaced as a whole: the files
-    /// are written into a temporary directory beside it, which is then renamed).
+    /// are written into a temporary directory beside it, which is then renamed). An existing
+    /// `dir` is replaced only if it is a Foundry directory; anything else is left untouched
+    /// and reported as an error.
     pub fn save(&self, dir: &Path) -> Result<()> {
         self.validate()?;
+        if dir.exists() && !is_foundry_dir(dir) {
+            return Err(FoundryError::File {
+                path: dir.to_path_buf(),
+                problem: "exists and is not a Foundry directory (no hytrace meta.json); refusing to replace it".to_string(),
+            });
+        }
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| FoundryError::Io { path, source }

@@ -85,3 +85,30 @@ fn failed_write_leaves_no_partial_output() {
     let entries: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
     assert_eq!(entries.len(), 1, "only the blocking file remains");
 }
+
+#[test]
+fn existing_non_foundry_output_is_never_replaced() {
+    let tmp = tempfile::tempdir().unwrap();
+    // A user's directory and a user's file: both must survive an `-o` pointing at them.
+    let dir = tmp.path().join("mydata");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(dir.join("precious.txt"), "keep me").unwrap();
+    let file = tmp.path().join("notes.txt");
+    std::fs::write(&file, "keep me too").unwrap();
+    for target in [&dir, &file] {
+        let o = hytrace(&[s("foundry"), s("-o"), target.as_os_str()]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("refusing to replace"), "{}", stderr(&o));
+    }
+    assert_eq!(
+        std::fs::read_to_string(dir.join("precious.txt")).unwrap(),
+        "keep me"
+    );
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "keep me too");
+    // An existing Foundry directory is replaced.
+    let store = tmp.path().join("store");
+    let o = hytrace(&[s("foundry"), s("-o"), store.as_os_str()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = hytrace(&[s("foundry"), s("-o"), store.as_os_str()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
