@@ -158,24 +158,6 @@ record! {
     }
 }
 
-impl Transform {
-    /// The identity transform.
-    pub const IDENTITY: Transform = Transform {
-        rows: [
-            [1.0, 0.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-            [0.0, 0.0, 0.0, 1.0],
-        ],
-    };
-
-    /// Applies the transform to a point.
-    pub fn apply_point(&self, p: [f32; 3]) -> [f32; 3] {
-        let r = &self.rows;
-        std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + r[i][3])
-    }
-}
-
 impl Transform64 {
     /// The identity transform.
     pub const IDENTITY: Transform64 = Transform64 {

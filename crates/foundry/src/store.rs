@@ -114,11 +114,6 @@ impl Foundry {
         self.inst_tran.push(transform);
         Ok(self.inst.len() - 1)
     }
-
-    /// Largest CSG tree height in the store (0 without CSG prims).
-    pub fn max_tree_height(&self) -> u32 {
-        self.solid.iter().map(|s| s.max_height).max().unwrap_or(0)
-    }
 }
 
 impl SolidBuilder<'_> {

@@ -19,11 +19,6 @@ pub const MODULES: &[(&str, &str)] = &[
     ),
 ];
 
-/// The source of a module.
-pub fn module_source(name: &str) -> Option<&'static str> {
-    MODULES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
-}
-
 /// The modules a source imports, in the order written.
 pub fn imports(source: &str) -> impl Iterator<Item = &str> {
     source
