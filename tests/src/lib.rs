@@ -1,4 +1,7 @@
-//! Helpers for the cross-crate and oracle tests: finding the Python oracle environment.
+//! Helpers for the cross-crate and oracle tests: finding the Python oracle environment and
+//! running the Geant4 oracle.
+
+pub mod geant4;
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -26,7 +29,11 @@ pub fn oracle_python(modules: &[&str]) -> Option<PathBuf> {
             modules.join(", ")
         }
     );
-    match Command::new(&python).args(["-c", &import]).output() {
+    match Command::new(&python)
+        .args(["-c", &import])
+        .env("GEANT4_DATA_DIR", geant4_data_dir())
+        .output()
+    {
         Ok(out) if out.status.success() => Some(python),
         Ok(out) => fail(format!(
             "{} to import {modules:?}: {}",
@@ -35,6 +42,14 @@ pub fn oracle_python(modules: &[&str]) -> Option<PathBuf> {
         )),
         Err(e) => fail(format!("{} to run: {e}", python.display())),
     }
+}
+
+/// An existing empty directory for `GEANT4_DATA_DIR`, so that importing geant4_pybind
+/// neither downloads physics data nor asks for it (geometry queries need none).
+pub fn geant4_data_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join("hytrace-geant4-data");
+    std::fs::create_dir_all(&dir).expect("creating the Geant4 data directory");
+    dir
 }
 
 /// Runs a Python script with arguments in the oracle environment; panics with its stderr on

@@ -1,13 +1,28 @@
 //! Constructive solid geometry for hytrace.
 //!
-//! [`Shape`] is a CSG expression built from primitives ([`sphere`], [`box3`], [`cylinder`],
-//! [`cone`], [`torus`]) with `+` (union), `*` (intersection), `-` (difference), `!`
-//! (complement) and placement methods. [`Shape::to_tree`] serializes it into the Foundry's
-//! complete binary tree of nodes, with each leaf's transform and every node's bounds.
+//! - [`Shape`] is a CSG expression built from primitives ([`sphere`], [`box3`], [`tube`],
+//!   [`cone`], [`torus`], [`polyhedron`], cuts...) with `+` (union), `*` (intersection), `-`
+//!   (difference), `!` (complement) and placement methods. [`to_tree`] serializes it into the
+//!   Foundry's complete binary tree of nodes.
+//! - [`PrimTree`] prepares a Foundry CSG prim for intersection in f32 or f64 ([`Real`]) and
+//!   finds the first surface crossing of a ray without recursion, as the GPU does.
+//! - [`geant4`] maps Geant4 solids onto these primitives.
 
 mod bounds;
+pub mod expr;
+pub mod geant4;
+pub mod kernel;
+mod prim_tree;
+mod real;
 mod shape;
 mod tree;
 
-pub use shape::{box3, cone, cylinder, sphere, torus, CsgError, Primitive, Shape};
-pub use tree::to_tree;
+pub use bounds::{polyhedron_vertices, Aabb, UNBOUNDED};
+pub use expr::{parse_shape, ExprError};
+pub use prim_tree::{ray_meets_bounds, Bounds, PrimTree};
+pub use real::{Crossing, Ray, Real, V3};
+pub use shape::{
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
+    theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape,
+};
+pub use tree::{to_tree, LIST_MIN_MEMBERS};

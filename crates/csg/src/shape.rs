@@ -14,13 +14,22 @@ pub struct CsgError {
     pub problem: String,
 }
 
-/// A primitive solid in its own frame (all lengths in mm).
+/// A primitive solid in its own frame (lengths in mm, angles in radians).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Primitive {
     /// Sphere of `radius` centred on the origin.
     Sphere {
         /// Radius.
         radius: f64,
+    },
+    /// Sphere of `radius` centred on the origin, cut by the planes `z = z1` and `z = z2`.
+    ZSphere {
+        /// Radius.
+        radius: f64,
+        /// Lower cut.
+        z1: f64,
+        /// Upper cut.
+        z2: f64,
     },
     /// Axis-aligned box of full side lengths `size`, centred on the origin.
     Box3 {
@@ -31,6 +40,17 @@ pub enum Primitive {
     Cylinder {
         /// Radius.
         radius: f64,
+        /// Lower cap.
+        z1: f64,
+        /// Upper cap.
+        z2: f64,
+    },
+    /// Tube (annular cylinder) between radii `rmin` and `rmax` along z from `z1` to `z2`.
+    Tube {
+        /// Inner radius.
+        rmin: f64,
+        /// Outer radius.
+        rmax: f64,
         /// Lower cap.
         z1: f64,
         /// Upper cap.
@@ -47,6 +67,17 @@ pub enum Primitive {
         /// Upper cap.
         z2: f64,
     },
+    /// One-sheet hyperboloid `x^2 + y^2 = r0^2 + (tan_stereo z)^2` from `z1` to `z2`.
+    Hyperboloid {
+        /// Waist radius at z = 0.
+        r0: f64,
+        /// Tangent of the stereo angle (0: a cylinder).
+        tan_stereo: f64,
+        /// Lower cap.
+        z1: f64,
+        /// Upper cap.
+        z2: f64,
+    },
     /// Torus around z: tube radius `rmax` (hollow inside `rmin`), swept radius `rtor`.
     Torus {
         /// Inner tube radius (0 for a solid tube).
@@ -55,6 +86,51 @@ pub enum Primitive {
         rmax: f64,
         /// Swept radius.
         rtor: f64,
+    },
+    /// Paraboloid of revolution with radius `rlo` at `z = -dz` and `rhi` at `z = +dz`.
+    Paraboloid {
+        /// Radius at -dz.
+        rlo: f64,
+        /// Radius at +dz.
+        rhi: f64,
+        /// Half length.
+        dz: f64,
+    },
+    /// Convex polyhedron: the intersection of `dot(n, x) <= d` over planes `[nx, ny, nz, d]`
+    /// with unit normals.
+    Polyhedron {
+        /// The bounding planes.
+        planes: Vec<[f64; 4]>,
+    },
+    /// Half-space `dot(normal, x) <= distance` (unbounded: only inside intersections).
+    HalfSpace {
+        /// Unit outward normal.
+        normal: [f64; 3],
+        /// Signed distance of the plane from the origin.
+        distance: f64,
+    },
+    /// Slab `a <= dot(normal, x) <= b` (unbounded).
+    Slab {
+        /// Unit normal.
+        normal: [f64; 3],
+        /// Lower bound.
+        a: f64,
+        /// Upper bound.
+        b: f64,
+    },
+    /// Wedge of azimuth from `phi0` counter-clockwise over `dphi` (unbounded).
+    PhiCut {
+        /// Start angle.
+        phi0: f64,
+        /// Opening angle, in (0, 2 pi).
+        dphi: f64,
+    },
+    /// Polar angles between `theta0` and `theta1` from +z, apex at the origin (unbounded).
+    ThetaCut {
+        /// Smallest polar angle (0: open).
+        theta0: f64,
+        /// Largest polar angle (pi: open).
+        theta1: f64,
     },
 }
 
@@ -90,12 +166,52 @@ fn positive(v: f64) -> bool {
     v.is_finite() && v > 0.0
 }
 
+fn non_negative(v: f64) -> bool {
+    v.is_finite() && v >= 0.0
+}
+
+fn z_range(primitive: &'static str, z1: f64, z2: f64) -> Result<(), CsgError> {
+    check(
+        primitive,
+        z1.is_finite() && z2.is_finite() && z1 < z2,
+        || format!("needs finite z1 < z2, got {z1} {z2}"),
+    )
+}
+
+fn unit(primitive: &'static str, n: [f64; 3]) -> Result<[f64; 3], CsgError> {
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    check(primitive, len.is_finite() && len > 0.0, || {
+        format!("needs a finite non-zero normal, got {n:?}")
+    })?;
+    Ok(n.map(|v| v / len))
+}
+
+fn leaf(p: Primitive) -> Result<Shape, CsgError> {
+    Ok(Shape::Leaf(p))
+}
+
 /// A sphere of `radius` centred on the origin.
 pub fn sphere(radius: f64) -> Result<Shape, CsgError> {
     check("sphere", positive(radius), || {
         format!("radius must be finite and > 0, got {radius}")
     })?;
-    Ok(Shape::Leaf(Primitive::Sphere { radius }))
+    leaf(Primitive::Sphere { radius })
+}
+
+/// A sphere of `radius` cut to `z1 <= z <= z2` (cuts outside the sphere are ignored).
+pub fn zsphere(radius: f64, z1: f64, z2: f64) -> Result<Shape, CsgError> {
+    check("zsphere", positive(radius), || {
+        format!("radius must be finite and > 0, got {radius}")
+    })?;
+    z_range("zsphere", z1, z2)?;
+    check("zsphere", z1 < radius && z2 > -radius, || {
+        format!("cuts {z1}..{z2} leave nothing of radius {radius}")
+    })?;
+    leaf(Primitive::ZSphere {
+        radius,
+        z1: z1.max(-radius),
+        z2: z2.min(radius),
+    })
 }
 
 /// A box of full side lengths `x`, `y`, `z` centred on the origin.
@@ -103,7 +219,7 @@ pub fn box3(x: f64, y: f64, z: f64) -> Result<Shape, CsgError> {
     check("box", [x, y, z].into_iter().all(positive), || {
         format!("sides must be finite and > 0, got {x} {y} {z}")
     })?;
-    Ok(Shape::Leaf(Primitive::Box3 { size: [x, y, z] }))
+    leaf(Primitive::Box3 { size: [x, y, z] })
 }
 
 /// A cylinder of `radius` along z from `z1` to `z2`.
@@ -111,64 +227,248 @@ pub fn cylinder(radius: f64, z1: f64, z2: f64) -> Result<Shape, CsgError> {
     check("cylinder", positive(radius), || {
         format!("radius must be finite and > 0, got {radius}")
     })?;
-    check(
-        "cylinder",
-        z1.is_finite() && z2.is_finite() && z1 < z2,
-        || format!("needs finite z1 < z2, got {z1} {z2}"),
-    )?;
-    Ok(Shape::Leaf(Primitive::Cylinder { radius, z1, z2 }))
+    z_range("cylinder", z1, z2)?;
+    leaf(Primitive::Cylinder { radius, z1, z2 })
 }
 
-/// A cone frustum with radius `r1` at `z1` and `r2` at `z2`.
+/// A tube between radii `rmin` and `rmax` along z from `z1` to `z2` (`rmin = 0`: a
+/// cylinder).
+pub fn tube(rmin: f64, rmax: f64, z1: f64, z2: f64) -> Result<Shape, CsgError> {
+    check(
+        "tube",
+        non_negative(rmin) && positive(rmax) && rmin < rmax,
+        || format!("needs 0 <= rmin < rmax, got {rmin} {rmax}"),
+    )?;
+    z_range("tube", z1, z2)?;
+    if rmin == 0.0 {
+        return cylinder(rmax, z1, z2);
+    }
+    leaf(Primitive::Tube { rmin, rmax, z1, z2 })
+}
+
+/// A cone frustum with radius `r1` at `z1` and `r2` at `z2` (`r1 == r2`: a cylinder).
 pub fn cone(r1: f64, z1: f64, r2: f64, z2: f64) -> Result<Shape, CsgError> {
-    let ok_r = |r: f64| r.is_finite() && r >= 0.0;
-    check("cone", ok_r(r1) && ok_r(r2) && r1.max(r2) > 0.0, || {
-        format!("radii must be finite, >= 0 and not both 0, got {r1} {r2}")
-    })?;
-    check("cone", z1.is_finite() && z2.is_finite() && z1 < z2, || {
-        format!("needs finite z1 < z2, got {z1} {z2}")
-    })?;
-    Ok(Shape::Leaf(Primitive::Cone { r1, z1, r2, z2 }))
+    check(
+        "cone",
+        non_negative(r1) && non_negative(r2) && r1.max(r2) > 0.0,
+        || format!("radii must be finite, >= 0 and not both 0, got {r1} {r2}"),
+    )?;
+    z_range("cone", z1, z2)?;
+    if r1 == r2 {
+        return cylinder(r1, z1, z2);
+    }
+    leaf(Primitive::Cone { r1, z1, r2, z2 })
+}
+
+/// A one-sheet hyperboloid of waist radius `r0` and stereo angle tangent `tan_stereo`, from
+/// `z1` to `z2` (`tan_stereo = 0`: a cylinder).
+pub fn hyperboloid(r0: f64, tan_stereo: f64, z1: f64, z2: f64) -> Result<Shape, CsgError> {
+    check(
+        "hyperboloid",
+        positive(r0) && non_negative(tan_stereo),
+        || format!("needs r0 > 0 and tan(stereo) >= 0, got {r0} {tan_stereo}"),
+    )?;
+    z_range("hyperboloid", z1, z2)?;
+    if tan_stereo == 0.0 {
+        return cylinder(r0, z1, z2);
+    }
+    leaf(Primitive::Hyperboloid {
+        r0,
+        tan_stereo,
+        z1,
+        z2,
+    })
 }
 
 /// A torus around z with tube radius `rmax` (hollow inside `rmin`) swept at radius `rtor`.
 pub fn torus(rmin: f64, rmax: f64, rtor: f64) -> Result<Shape, CsgError> {
     check(
         "torus",
-        rmin.is_finite() && rmin >= 0.0 && positive(rmax) && rmin < rmax,
+        non_negative(rmin) && positive(rmax) && rmin < rmax,
         || format!("needs 0 <= rmin < rmax, got {rmin} {rmax}"),
     )?;
     check("torus", positive(rtor) && rtor >= rmax, || {
         format!("swept radius must be >= rmax, got {rtor} (rmax {rmax})")
     })?;
-    Ok(Shape::Leaf(Primitive::Torus { rmin, rmax, rtor }))
+    leaf(Primitive::Torus { rmin, rmax, rtor })
+}
+
+/// A paraboloid with radius `rlo` at `z = -dz` and `rhi > rlo` at `z = +dz`.
+pub fn paraboloid(rlo: f64, rhi: f64, dz: f64) -> Result<Shape, CsgError> {
+    check(
+        "paraboloid",
+        non_negative(rlo) && positive(rhi) && rlo < rhi && positive(dz),
+        || format!("needs 0 <= rlo < rhi and dz > 0, got {rlo} {rhi} {dz}"),
+    )?;
+    leaf(Primitive::Paraboloid { rlo, rhi, dz })
+}
+
+/// A convex polyhedron bounded by planes `[nx, ny, nz, d]` (`dot(n, x) <= d` inside;
+/// normals are normalized here). Needs at least four planes enclosing a bounded region.
+pub fn polyhedron(planes: &[[f64; 4]]) -> Result<Shape, CsgError> {
+    check("polyhedron", planes.len() >= 4, || {
+        format!("needs at least 4 planes, got {}", planes.len())
+    })?;
+    let mut unit_planes = Vec::with_capacity(planes.len());
+    for p in planes {
+        let n = unit("polyhedron", [p[0], p[1], p[2]])?;
+        let len = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        check("polyhedron", p[3].is_finite(), || {
+            format!("plane distance must be finite, got {}", p[3])
+        })?;
+        unit_planes.push([n[0], n[1], n[2], p[3] / len]);
+    }
+    let shape = Primitive::Polyhedron {
+        planes: unit_planes,
+    };
+    check(
+        "polyhedron",
+        crate::bounds::polyhedron_vertices(match &shape {
+            Primitive::Polyhedron { planes } => planes,
+            _ => unreachable!(),
+        })
+        .len()
+            >= 4,
+        || "the planes do not enclose a bounded solid".to_string(),
+    )?;
+    leaf(shape)
+}
+
+/// The half-space `dot(normal, x) <= distance` (for intersections and differences).
+pub fn halfspace(normal: [f64; 3], distance: f64) -> Result<Shape, CsgError> {
+    let len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
+    let normal = unit("halfspace", normal)?;
+    check("halfspace", distance.is_finite(), || {
+        format!("distance must be finite, got {distance}")
+    })?;
+    leaf(Primitive::HalfSpace {
+        normal,
+        distance: distance / len,
+    })
+}
+
+/// The slab `a <= dot(normal, x) <= b` (for intersections and differences).
+pub fn slab(normal: [f64; 3], a: f64, b: f64) -> Result<Shape, CsgError> {
+    let len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
+    let normal = unit("slab", normal)?;
+    check("slab", a.is_finite() && b.is_finite() && a < b, || {
+        format!("needs finite a < b, got {a} {b}")
+    })?;
+    leaf(Primitive::Slab {
+        normal,
+        a: a / len,
+        b: b / len,
+    })
+}
+
+/// The wedge of azimuths from `phi0` over `dphi` radians, `0 < dphi < 2 pi`.
+pub fn phi_cut(phi0: f64, dphi: f64) -> Result<Shape, CsgError> {
+    check(
+        "phicut",
+        phi0.is_finite() && dphi > 0.0 && dphi < 2.0 * std::f64::consts::PI,
+        || format!("needs 0 < dphi < 2 pi, got phi0 {phi0} dphi {dphi}"),
+    )?;
+    leaf(Primitive::PhiCut { phi0, dphi })
+}
+
+/// Polar angles from `theta0` to `theta1` (radians from +z, `0 <= theta0 < theta1 <= pi`,
+/// not both open).
+pub fn theta_cut(theta0: f64, theta1: f64) -> Result<Shape, CsgError> {
+    let pi = std::f64::consts::PI;
+    check(
+        "thetacut",
+        theta0 >= 0.0 && theta1 <= pi && theta0 < theta1 && (theta0 > 0.0 || theta1 < pi),
+        || format!("needs 0 <= theta0 < theta1 <= pi, not 0..pi, got {theta0} {theta1}"),
+    )?;
+    leaf(Primitive::ThetaCut { theta0, theta1 })
 }
 
 impl Primitive {
-    /// The Foundry typecode and node parameters (see [`TypeCode`]'s conventions).
+    /// The Foundry typecode and node parameters (see [`TypeCode`]'s conventions). Convex
+    /// polyhedra return their plane count in `param[1]`; the caller sets the first plane.
     pub fn node_params(&self) -> (TypeCode, [f32; 4], [f32; 2]) {
         let f = |v: f64| v as f32;
-        match *self {
-            Primitive::Sphere { radius } => {
+        match self {
+            &Primitive::Sphere { radius } => {
                 (TypeCode::Sphere, [0.0, 0.0, 0.0, f(radius)], [0.0; 2])
             }
-            Primitive::Box3 { size } => (
+            &Primitive::ZSphere { radius, z1, z2 } => (
+                TypeCode::ZSphere,
+                [0.0, 0.0, 0.0, f(radius)],
+                [f(z1), f(z2)],
+            ),
+            &Primitive::Box3 { size } => (
                 TypeCode::Box3,
                 [f(size[0]), f(size[1]), f(size[2]), 0.0],
                 [0.0; 2],
             ),
-            Primitive::Cylinder { radius, z1, z2 } => (
+            &Primitive::Cylinder { radius, z1, z2 } => (
                 TypeCode::Cylinder,
                 [0.0, 0.0, 0.0, f(radius)],
                 [f(z1), f(z2)],
             ),
-            Primitive::Cone { r1, z1, r2, z2 } => {
+            &Primitive::Tube { rmin, rmax, z1, z2 } => {
+                (TypeCode::Disc, [0.0, 0.0, f(rmin), f(rmax)], [f(z1), f(z2)])
+            }
+            &Primitive::Cone { r1, z1, r2, z2 } => {
                 (TypeCode::Cone, [f(r1), f(z1), f(r2), f(z2)], [0.0; 2])
             }
-            Primitive::Torus { rmin, rmax, rtor } => {
+            &Primitive::Hyperboloid {
+                r0,
+                tan_stereo,
+                z1,
+                z2,
+            } => (
+                TypeCode::Hyperboloid,
+                [f(r0), f(tan_stereo), f(z1), f(z2)],
+                [0.0; 2],
+            ),
+            &Primitive::Torus { rmin, rmax, rtor } => {
                 (TypeCode::Torus, [f(rmin), f(rmax), f(rtor), 0.0], [0.0; 2])
             }
+            &Primitive::Paraboloid { rlo, rhi, dz } => {
+                (TypeCode::Paraboloid, [f(rlo), f(rhi), f(dz), 0.0], [0.0; 2])
+            }
+            Primitive::Polyhedron { planes } => (
+                TypeCode::ConvexPolyhedron,
+                [0.0, f32::from_bits(planes.len() as u32), 0.0, 0.0],
+                [0.0; 2],
+            ),
+            &Primitive::HalfSpace { normal, distance } => (
+                TypeCode::HalfSpace,
+                [f(normal[0]), f(normal[1]), f(normal[2]), f(distance)],
+                [0.0; 2],
+            ),
+            &Primitive::Slab { normal, a, b } => (
+                TypeCode::Slab,
+                [f(normal[0]), f(normal[1]), f(normal[2]), 0.0],
+                [f(a), f(b)],
+            ),
+            &Primitive::PhiCut { phi0, dphi } => {
+                let phi1 = phi0 + dphi;
+                (
+                    TypeCode::PhiCut,
+                    [f(phi0.cos()), f(phi0.sin()), f(phi1.cos()), f(phi1.sin())],
+                    [0.0; 2],
+                )
+            }
+            &Primitive::ThetaCut { theta0, theta1 } => (
+                TypeCode::ThetaCut,
+                [f(theta0), f(theta1), 0.0, 0.0],
+                [0.0; 2],
+            ),
         }
+    }
+
+    /// Whether the primitive encloses a bounded region.
+    pub fn is_bounded(&self) -> bool {
+        !matches!(
+            self,
+            Primitive::HalfSpace { .. }
+                | Primitive::Slab { .. }
+                | Primitive::PhiCut { .. }
+                | Primitive::ThetaCut { .. }
+        )
     }
 }
 

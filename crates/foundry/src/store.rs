@@ -44,13 +44,17 @@ pub struct Foundry {
 
 /// One CSG tree ready to be appended as a prim.
 ///
-/// `nodes` is a complete binary tree in level order. Node transform indices are 1-based into
-/// `transforms` (0: none, bit 31: complement) and convex-polyhedron plane indices are 0-based
-/// into `planes`; both are relocated when the prim is added.
+/// `nodes` is a complete binary tree in level order; `members` holds the primitives of its
+/// list nodes, stored right after the tree (a list node's `param[0]` is the 0-based index of
+/// its first member in `members`, `param[1]` the count). Node transform indices are 1-based
+/// into `transforms` (0: none, bit 31: complement) and convex-polyhedron plane indices are
+/// 0-based into `planes`. All are relocated when the prim is added.
 #[derive(Clone, Debug, Default)]
 pub struct CsgTree {
     /// Nodes of the complete binary tree, root first.
     pub nodes: Vec<Node>,
+    /// Members of the tree's list nodes.
+    pub members: Vec<Node>,
     /// Transforms referenced by the nodes.
     pub transforms: Vec<Transform64>,
     /// Planes referenced by convex-polyhedron nodes.
@@ -130,7 +134,9 @@ impl SolidBuilder<'_> {
         let tran_offset = index_u32(f.tran.len(), "transforms")?;
         let plan_offset = index_u32(f.plan.len(), "planes")?;
         let node_offset = index_u32(f.node.len(), "nodes")?;
+        let members_offset = node_offset + n as u32;
         let mut nodes = tree.nodes;
+        nodes.extend(tree.members.iter().copied());
         for (i, node) in nodes.iter_mut().enumerate() {
             let local = node.transform & !COMPLEMENT_BIT;
             if local as usize > tree.transforms.len() {
@@ -155,6 +161,20 @@ impl SolidBuilder<'_> {
                     )));
                 }
                 node.param[0] = f32::from_bits(first + plan_offset);
+            }
+            let code = TypeCode::from_u32(node.typecode);
+            if code.is_some_and(TypeCode::is_list) {
+                let first = node.param[0].to_bits();
+                let count = node.param[1].to_bits();
+                if i >= n || first as usize + count as usize > tree.members.len() {
+                    return Err(FoundryError::Build(format!(
+                        "solid `{}`: list node {i} uses members {first}..{} of {}",
+                        self.name,
+                        first as usize + count as usize,
+                        tree.members.len()
+                    )));
+                }
+                node.param[0] = f32::from_bits(first + members_offset);
             }
         }
         for t in tree.transforms {

@@ -6,9 +6,10 @@ use crate::records::{Prim, Transform, Transform64, COMPLEMENT_BIT};
 use crate::store::{aabb_union, Foundry};
 use crate::typecode::{PrimKind, TypeCode};
 
-/// Deepest CSG tree the store accepts: node indices of a complete binary tree of this height
-/// still fit the 32-bit postorder arithmetic of the evaluators.
-pub const MAX_TREE_HEIGHT: u32 = 30;
+/// Deepest CSG tree the store accepts: the evaluators keep one stack frame per level, so
+/// their fixed-size stacks (CPU and GPU) are sized by it. Deeper expressions are rebuilt
+/// (n-ary lists, rebalanced unions and intersections) or rejected when the tree is built.
+pub const MAX_TREE_HEIGHT: u32 = 10;
 
 /// Largest relative difference allowed between an f32 inverse and the inverse of its f64
 /// original (a few ulps of f32, relative to the matrix's scale).
@@ -268,6 +269,17 @@ impl Foundry {
                         ));
                     }
                     check_range("node", i, "param", first, count, self.node.len(), "node")?;
+                    let members = &self.node[first as usize..(first + count) as usize];
+                    if let Some(m) = members.iter().position(|m| {
+                        !TypeCode::from_u32(m.typecode).is_some_and(TypeCode::is_primitive)
+                    }) {
+                        return Err(record_error(
+                            "node",
+                            i,
+                            "param",
+                            format!("list member {} is not a primitive", first as usize + m),
+                        ));
+                    }
                 }
                 c if c.is_primitive()
                     && n.param.iter().chain(&n.param_ext).any(|v| !v.is_finite()) =>

@@ -4,6 +4,9 @@
 //! upload as eight storage buffers and the kernels with their CPU twins) and the scenes the
 //! command line reads ([`scene`]).
 
+pub mod cpu;
 pub mod gpu;
 pub mod report;
+pub mod scan;
 pub mod scene;
+pub mod sweep;

@@ -6,6 +6,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use hytrace_trace::gpu::GpuContext;
+use hytrace_trace::scan::{self, Precision};
+use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::{report, scene};
 
 /// Hybrid ray tracing of analytic CSG solids, triangle meshes and sparse volumes.
@@ -34,6 +36,34 @@ enum Command {
         #[arg(short, long)]
         out: PathBuf,
     },
+    /// Trace rays against the scene's CSG solids on the CPU: the first boundary crossing of
+    /// each ray (Geant4's distance to the next boundary), written as NumPy arrays.
+    Scan {
+        /// `default`, a Foundry directory or a .toml scene file.
+        scene: Option<PathBuf>,
+        /// Rays, (N, 8) float32/float64: ox oy oz tmin dx dy dz tmax. With --sweep, the
+        /// generated rays are written here instead (optional).
+        #[arg(long)]
+        rays: Option<PathBuf>,
+        /// Generate a sweep around the scene instead of reading rays.
+        #[arg(long, value_enum)]
+        sweep: Option<Sweep>,
+        /// Rays in the sweep (origins for `axis` and `circle`, per side for `rect`).
+        #[arg(long, default_value_t = 1000)]
+        count: usize,
+        /// Hits, (N, 4): nx ny nz t (t = inf on a miss).
+        #[arg(long)]
+        out: PathBuf,
+        /// Instance crossed by each ray, int32 (N,), -1 on a miss.
+        #[arg(long)]
+        ids: Option<PathBuf>,
+        /// Arithmetic precision (and dtype of the hits).
+        #[arg(long, value_enum, default_value_t = Precision::F32)]
+        precision: Precision,
+        /// Print one JSON line of counts and timings.
+        #[arg(long)]
+        stats: bool,
+    },
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
 }
@@ -58,6 +88,48 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 hytrace_foundry::file_names().len(),
                 out.display()
             );
+        }
+        Command::Scan {
+            scene,
+            rays,
+            sweep: sweep_kind,
+            count,
+            out,
+            ids,
+            precision,
+            stats,
+        } => {
+            let t0 = std::time::Instant::now();
+            let f = scene::load_scene(scene.as_deref())?;
+            let ray_rows = match (sweep_kind, &rays) {
+                (Some(kind), _) => {
+                    let bounds =
+                        sweep::scene_bounds(&f).context("the scene has no solids to sweep")?;
+                    let generated = sweep::generate(kind, &bounds, count);
+                    if let Some(p) = &rays {
+                        scan::write_rays(p, &generated)
+                            .with_context(|| format!("writing {}", p.display()))?;
+                    }
+                    generated
+                }
+                (None, Some(p)) => scan::read_rays(p)?,
+                (None, None) => anyhow::bail!("give --rays RAYS.npy or --sweep KIND"),
+            };
+            let load_s = t0.elapsed().as_secs_f64();
+            let (result, times) = scan::scan(&f, &ray_rows, precision)?;
+            scan::write_hits(&result, precision, &out, ids.as_deref())
+                .with_context(|| format!("writing {}", out.display()))?;
+            let hits = result.ids.iter().filter(|&&i| i >= 0).count();
+            if stats {
+                println!("{}", scan::stats_json(ray_rows.len(), load_s, &times, hits));
+            } else {
+                eprintln!(
+                    "{} rays, {hits} hits, {:.3} s tracing; wrote {}",
+                    ray_rows.len(),
+                    times.trace_s,
+                    out.display()
+                );
+            }
         }
         Command::GpuInfo => {
             let ctx = GpuContext::new()?;

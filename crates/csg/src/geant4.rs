@@ -1,0 +1,698 @@
+//! Geant4 solids as CSG expressions over hytrace's primitives.
+//!
+//! [`G4Solid`] holds the parameters of a Geant4 solid exactly as its constructor takes them
+//! (lengths in mm, angles in radians, Geant4's half-lengths), and [`G4Solid::to_shape`]
+//! builds the equivalent [`Shape`]:
+//!
+//! | Geant4 | expression |
+//! |---|---|
+//! | G4Box, G4Orb | box, sphere |
+//! | G4Sphere | (sphere - inner sphere) * theta cut * phi cut |
+//! | G4Tubs, G4CutTubs | tube * phi cut (* two half-spaces) |
+//! | G4Cons | (cone - inner cone) * phi cut |
+//! | G4Torus | torus * phi cut |
+//! | G4Trd, G4Trap, G4Para, G4Tet | convex polyhedron |
+//! | G4Polycone | (union of cones - union of inner cones) * phi cut |
+//! | G4Polyhedra | union of convex polyhedra (one per z section and phi half) minus the inner ones |
+//! | G4Hype | hyperboloid - inner hyperboloid (or inner double cone) |
+//! | G4Paraboloid | paraboloid |
+//! | G4Ellipsoid, G4EllipticalTube, G4EllipticalCone | scaled z-cut sphere, cylinder, cone |
+//! | G4UnionSolid, G4SubtractionSolid, G4IntersectionSolid | `+`, `-`, `*` |
+//!
+//! Booleans place their second operand by `p_first = rotation * p_second + translation`
+//! (the `G4Transform3D` form: the rotation applies to the solid, not the frame).
+//!
+//! The JSON form (`{"type": "tubs", "rmin": ..., ...}`) is the one written by the project's
+//! Geant4 oracle, `tests/oracle/geant4_oracle.py`.
+
+use std::f64::consts::PI;
+
+use serde::Deserialize;
+
+use crate::shape::{
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
+    theta_cut, torus, tube, zsphere, CsgError, Shape,
+};
+use hytrace_foundry::Transform64;
+
+/// A Geant4 solid with its constructor's parameters (mm, rad, half-lengths).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "camelCase", deny_unknown_fields)]
+#[allow(missing_docs)]
+pub enum G4Solid {
+    /// G4Box(dx, dy, dz).
+    Box { dx: f64, dy: f64, dz: f64 },
+    /// G4Orb(r).
+    Orb { r: f64 },
+    /// G4Sphere(rmin, rmax, sphi, dphi, stheta, dtheta).
+    Sphere {
+        rmin: f64,
+        rmax: f64,
+        sphi: f64,
+        dphi: f64,
+        stheta: f64,
+        dtheta: f64,
+    },
+    /// G4Tubs(rmin, rmax, dz, sphi, dphi).
+    Tubs {
+        rmin: f64,
+        rmax: f64,
+        dz: f64,
+        sphi: f64,
+        dphi: f64,
+    },
+    /// G4CutTubs(rmin, rmax, dz, sphi, dphi, low normal, high normal).
+    CutTubs {
+        rmin: f64,
+        rmax: f64,
+        dz: f64,
+        sphi: f64,
+        dphi: f64,
+        low: [f64; 3],
+        high: [f64; 3],
+    },
+    /// G4Cons(rmin1, rmax1, rmin2, rmax2, dz, sphi, dphi).
+    Cons {
+        rmin1: f64,
+        rmax1: f64,
+        rmin2: f64,
+        rmax2: f64,
+        dz: f64,
+        sphi: f64,
+        dphi: f64,
+    },
+    /// G4Torus(rmin, rmax, rtor, sphi, dphi).
+    Torus {
+        rmin: f64,
+        rmax: f64,
+        rtor: f64,
+        sphi: f64,
+        dphi: f64,
+    },
+    /// G4Trd(dx1, dx2, dy1, dy2, dz).
+    Trd {
+        dx1: f64,
+        dx2: f64,
+        dy1: f64,
+        dy2: f64,
+        dz: f64,
+    },
+    /// G4Trap(dz, theta, phi, dy1, dx1, dx2, alpha1, dy2, dx3, dx4, alpha2).
+    Trap {
+        dz: f64,
+        theta: f64,
+        phi: f64,
+        dy1: f64,
+        dx1: f64,
+        dx2: f64,
+        alpha1: f64,
+        dy2: f64,
+        dx3: f64,
+        dx4: f64,
+        alpha2: f64,
+    },
+    /// G4Para(dx, dy, dz, alpha, theta, phi).
+    Para {
+        dx: f64,
+        dy: f64,
+        dz: f64,
+        alpha: f64,
+        theta: f64,
+        phi: f64,
+    },
+    /// G4Polycone(sphi, dphi, z planes, inner radii, outer radii).
+    Polycone {
+        sphi: f64,
+        dphi: f64,
+        z: Vec<f64>,
+        rmin: Vec<f64>,
+        rmax: Vec<f64>,
+    },
+    /// G4Polyhedra(sphi, dphi, numside, z planes, inner, outer) with radii to the side
+    /// planes (the z-plane constructor's convention).
+    Polyhedra {
+        sphi: f64,
+        dphi: f64,
+        numside: u32,
+        z: Vec<f64>,
+        rmin: Vec<f64>,
+        rmax: Vec<f64>,
+    },
+    /// G4Hype(rmin, rmax, stereo_in, stereo_out, dz).
+    Hype {
+        rmin: f64,
+        rmax: f64,
+        stereo_in: f64,
+        stereo_out: f64,
+        dz: f64,
+    },
+    /// G4Paraboloid(dz, rlo, rhi).
+    Paraboloid { dz: f64, rlo: f64, rhi: f64 },
+    /// G4Ellipsoid(ax, by, cz, zbottom, ztop).
+    Ellipsoid {
+        ax: f64,
+        by: f64,
+        cz: f64,
+        zbottom: f64,
+        ztop: f64,
+    },
+    /// G4EllipticalTube(dx, dy, dz).
+    Eltube { dx: f64, dy: f64, dz: f64 },
+    /// G4EllipticalCone(xsemi, ysemi, zheight, zcut).
+    Elcone {
+        xsemi: f64,
+        ysemi: f64,
+        zheight: f64,
+        zcut: f64,
+    },
+    /// G4Tet(anchor, p2, p3, p4).
+    Tet {
+        anchor: [f64; 3],
+        p2: [f64; 3],
+        p3: [f64; 3],
+        p4: [f64; 3],
+    },
+    /// G4UnionSolid(a, b, transform).
+    Union(Boolean),
+    /// G4SubtractionSolid(a, b, transform).
+    Subtraction(Boolean),
+    /// G4IntersectionSolid(a, b, transform).
+    Intersection(Boolean),
+}
+
+/// The operands of a Geant4 boolean solid: `b` is placed in `a`'s frame by
+/// `p_a = rotation * p_b + translation`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Boolean {
+    /// First operand.
+    pub a: Box<G4Solid>,
+    /// Second operand.
+    pub b: Box<G4Solid>,
+    /// Rotation matrix, row-major.
+    pub rotation: [[f64; 3]; 3],
+    /// Translation.
+    pub translation: [f64; 3],
+}
+
+fn bad(primitive: &'static str, problem: String) -> CsgError {
+    CsgError { primitive, problem }
+}
+
+/// `shape * phi_cut(sphi, dphi)` unless the range covers the full circle.
+fn with_phi(shape: Shape, sphi: f64, dphi: f64) -> Result<Shape, CsgError> {
+    if dphi >= 2.0 * PI {
+        Ok(shape)
+    } else {
+        Ok(shape * phi_cut(sphi, dphi)?)
+    }
+}
+
+/// The convex hull of a hexahedron given as bottom `v[0..4]` and top `v[4..8]` faces in
+/// Geant4's G4Trap vertex order, as a polyhedron of its six face planes.
+fn hexahedron(v: &[[f64; 3]; 8]) -> Result<Shape, CsgError> {
+    const FACES: [[usize; 4]; 6] = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    faces_to_polyhedron(v, &FACES)
+}
+
+/// A convex polyhedron from faces given as vertex indices; each face's plane comes from
+/// Newell's method and is oriented away from the centroid.
+fn faces_to_polyhedron<const N: usize>(
+    v: &[[f64; 3]],
+    faces: &[[usize; N]],
+) -> Result<Shape, CsgError> {
+    let centroid: [f64; 3] =
+        std::array::from_fn(|k| v.iter().map(|p| p[k]).sum::<f64>() / v.len() as f64);
+    let mut planes = Vec::with_capacity(faces.len());
+    for face in faces {
+        let mut n = [0.0f64; 3];
+        let mut mid = [0.0f64; 3];
+        for (i, &a) in face.iter().enumerate() {
+            let (p, q) = (v[a], v[face[(i + 1) % N]]);
+            n[0] += (p[1] - q[1]) * (p[2] + q[2]);
+            n[1] += (p[2] - q[2]) * (p[0] + q[0]);
+            n[2] += (p[0] - q[0]) * (p[1] + q[1]);
+            for k in 0..3 {
+                mid[k] += p[k] / N as f64;
+            }
+        }
+        let d = n[0] * mid[0] + n[1] * mid[1] + n[2] * mid[2];
+        let c = n[0] * centroid[0] + n[1] * centroid[1] + n[2] * centroid[2];
+        if c > d {
+            planes.push([-n[0], -n[1], -n[2], -d]);
+        } else {
+            planes.push([n[0], n[1], n[2], d]);
+        }
+    }
+    polyhedron(&planes)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn trap_vertices(
+    dz: f64,
+    theta: f64,
+    phi: f64,
+    dy1: f64,
+    dx1: f64,
+    dx2: f64,
+    alpha1: f64,
+    dy2: f64,
+    dx3: f64,
+    dx4: f64,
+    alpha2: f64,
+) -> [[f64; 3]; 8] {
+    let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
+    let (ta1, ta2) = (alpha1.tan(), alpha2.tan());
+    let face = |z: f64, dy: f64, ta: f64, dxa: f64, dxb: f64| {
+        let (cx, cy) = (z * tx, z * ty);
+        [
+            [cx - dy * ta - dxa, cy - dy, z],
+            [cx - dy * ta + dxa, cy - dy, z],
+            [cx + dy * ta - dxb, cy + dy, z],
+            [cx + dy * ta + dxb, cy + dy, z],
+        ]
+    };
+    let (b, t) = (face(-dz, dy1, ta1, dx1, dx2), face(dz, dy2, ta2, dx3, dx4));
+    [b[0], b[1], b[2], b[3], t[0], t[1], t[2], t[3]]
+}
+
+/// The union of `parts` (at least one).
+fn union_of(parts: Vec<Shape>) -> Shape {
+    let mut it = parts.into_iter();
+    let first = it.next().expect("at least one part");
+    it.fold(first, |a, b| a + b)
+}
+
+fn check_planes(what: &'static str, z: &[f64], rmin: &[f64], rmax: &[f64]) -> Result<(), CsgError> {
+    if z.len() < 2 || z.len() != rmin.len() || z.len() != rmax.len() {
+        return Err(bad(
+            what,
+            format!(
+                "needs at least 2 z planes and as many radii, got {} z, {} rmin, {} rmax",
+                z.len(),
+                rmin.len(),
+                rmax.len()
+            ),
+        ));
+    }
+    if z.windows(2).any(|w| w[1] < w[0]) {
+        return Err(bad(what, format!("z planes must not decrease, got {z:?}")));
+    }
+    if rmin.iter().zip(rmax).any(|(a, b)| *a < 0.0 || a > b) {
+        return Err(bad(what, "needs 0 <= rmin <= rmax at every z plane".into()));
+    }
+    Ok(())
+}
+
+/// Side planes of one z section of a regular polygon prism frustum over the phi range
+/// `[phi_a, phi_b]` of `sides` sides (of the solid's `numside` over `dphi`), with apothems
+/// `r1` at `z1` and `r2` at `z2`, closed by radial planes when the range is partial.
+#[allow(clippy::too_many_arguments)]
+fn polygon_section(
+    sphi: f64,
+    step: f64,
+    sides: std::ops::Range<u32>,
+    full: bool,
+    z1: f64,
+    z2: f64,
+    r1: f64,
+    r2: f64,
+) -> Result<Shape, CsgError> {
+    let mut planes = vec![[0.0, 0.0, -1.0, -z1], [0.0, 0.0, 1.0, z2]];
+    for j in sides.clone() {
+        let phi = sphi + (j as f64 + 0.5) * step;
+        let (c, s) = (phi.cos(), phi.sin());
+        let n = [c * (z2 - z1), s * (z2 - z1), -(r2 - r1)];
+        let d = n[0] * r1 * c + n[1] * r1 * s + n[2] * z1;
+        planes.push([n[0], n[1], n[2], d]);
+    }
+    if !full {
+        let (pa, pb) = (
+            sphi + sides.start as f64 * step,
+            sphi + sides.end as f64 * step,
+        );
+        planes.push([pa.sin(), -pa.cos(), 0.0, 0.0]);
+        planes.push([-pb.sin(), pb.cos(), 0.0, 0.0]);
+    }
+    polyhedron(&planes)
+}
+
+impl G4Solid {
+    /// The equivalent CSG expression; impossible parameters give an error naming the solid.
+    pub fn to_shape(&self) -> Result<Shape, CsgError> {
+        match self {
+            &G4Solid::Box { dx, dy, dz } => box3(2.0 * dx, 2.0 * dy, 2.0 * dz),
+            &G4Solid::Orb { r } => sphere(r),
+            &G4Solid::Sphere {
+                rmin,
+                rmax,
+                sphi,
+                dphi,
+                stheta,
+                dtheta,
+            } => {
+                let mut s = sphere(rmax)?;
+                if rmin > 0.0 {
+                    s = s - sphere(rmin)?;
+                }
+                let theta1 = (stheta + dtheta).min(PI);
+                if stheta > 0.0 || theta1 < PI {
+                    s = s * theta_cut(stheta, theta1)?;
+                }
+                with_phi(s, sphi, dphi)
+            }
+            &G4Solid::Tubs {
+                rmin,
+                rmax,
+                dz,
+                sphi,
+                dphi,
+            } => with_phi(tube(rmin, rmax, -dz, dz)?, sphi, dphi),
+            &G4Solid::CutTubs {
+                rmin,
+                rmax,
+                dz,
+                sphi,
+                dphi,
+                low,
+                high,
+            } => {
+                // The tube must reach past both tilted cut planes everywhere inside rmax.
+                let reach = |n: [f64; 3]| rmax * (n[0] * n[0] + n[1] * n[1]).sqrt() / n[2].abs();
+                if !(low[2] < 0.0 && high[2] > 0.0) {
+                    return Err(bad(
+                        "cutTubs",
+                        format!("low normal needs z < 0 and high z > 0, got {low:?} {high:?}"),
+                    ));
+                }
+                let h = dz + reach(low).max(reach(high)) + 1.0;
+                let s = tube(rmin, rmax, -h, h)?
+                    * halfspace(low, -dz * low[2])?
+                    * halfspace(high, dz * high[2])?;
+                with_phi(s, sphi, dphi)
+            }
+            &G4Solid::Cons {
+                rmin1,
+                rmax1,
+                rmin2,
+                rmax2,
+                dz,
+                sphi,
+                dphi,
+            } => {
+                let mut s = cone(rmax1, -dz, rmax2, dz)?;
+                if rmin1 > 0.0 || rmin2 > 0.0 {
+                    s = s - cone(rmin1, -dz, rmin2, dz)?;
+                }
+                with_phi(s, sphi, dphi)
+            }
+            &G4Solid::Torus {
+                rmin,
+                rmax,
+                rtor,
+                sphi,
+                dphi,
+            } => with_phi(torus(rmin, rmax, rtor)?, sphi, dphi),
+            &G4Solid::Trd {
+                dx1,
+                dx2,
+                dy1,
+                dy2,
+                dz,
+            } => hexahedron(&trap_vertices(
+                dz, 0.0, 0.0, dy1, dx1, dx1, 0.0, dy2, dx2, dx2, 0.0,
+            )),
+            &G4Solid::Trap {
+                dz,
+                theta,
+                phi,
+                dy1,
+                dx1,
+                dx2,
+                alpha1,
+                dy2,
+                dx3,
+                dx4,
+                alpha2,
+            } => hexahedron(&trap_vertices(
+                dz, theta, phi, dy1, dx1, dx2, alpha1, dy2, dx3, dx4, alpha2,
+            )),
+            &G4Solid::Para {
+                dx,
+                dy,
+                dz,
+                alpha,
+                theta,
+                phi,
+            } => hexahedron(&trap_vertices(
+                dz, theta, phi, dy, dx, dx, alpha, dy, dx, dx, alpha,
+            )),
+            G4Solid::Tet { anchor, p2, p3, p4 } => {
+                let v = [*anchor, *p2, *p3, *p4];
+                faces_to_polyhedron(&v, &[[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+            }
+            G4Solid::Polycone {
+                sphi,
+                dphi,
+                z,
+                rmin,
+                rmax,
+            } => {
+                check_planes("polycone", z, rmin, rmax)?;
+                let (mut outer, mut inner) = (Vec::new(), Vec::new());
+                for i in 0..z.len() - 1 {
+                    if z[i + 1] == z[i] {
+                        continue;
+                    }
+                    outer.push(cone(rmax[i], z[i], rmax[i + 1], z[i + 1])?);
+                    if rmin[i] > 0.0 || rmin[i + 1] > 0.0 {
+                        inner.push(cone(rmin[i], z[i], rmin[i + 1], z[i + 1])?);
+                    }
+                }
+                if outer.is_empty() {
+                    return Err(bad("polycone", "all sections have zero height".into()));
+                }
+                let mut s = union_of(outer);
+                if !inner.is_empty() {
+                    s = s - union_of(inner);
+                }
+                with_phi(s, *sphi, *dphi)
+            }
+            G4Solid::Polyhedra {
+                sphi,
+                dphi,
+                numside,
+                z,
+                rmin,
+                rmax,
+            } => {
+                check_planes("polyhedra", z, rmin, rmax)?;
+                if *numside < 3 && *dphi >= 2.0 * PI {
+                    return Err(bad(
+                        "polyhedra",
+                        format!("needs 3 or more sides, got {numside}"),
+                    ));
+                }
+                if *numside == 0 {
+                    return Err(bad("polyhedra", "needs at least one side".into()));
+                }
+                let full = *dphi >= 2.0 * PI;
+                let dphi = dphi.min(2.0 * PI);
+                let step = dphi / *numside as f64;
+                // Partial ranges wider than pi are split so every piece is convex.
+                let halves: Vec<std::ops::Range<u32>> = if full || dphi <= PI || *numside < 2 {
+                    vec![0..*numside]
+                } else {
+                    vec![0..numside / 2, numside / 2..*numside]
+                };
+                let (mut outer, mut inner) = (Vec::new(), Vec::new());
+                for i in 0..z.len() - 1 {
+                    if z[i + 1] == z[i] {
+                        continue;
+                    }
+                    for h in &halves {
+                        let (z1, z2) = (z[i], z[i + 1]);
+                        outer.push(polygon_section(
+                            *sphi,
+                            step,
+                            h.clone(),
+                            full,
+                            z1,
+                            z2,
+                            rmax[i],
+                            rmax[i + 1],
+                        )?);
+                        if rmin[i] > 0.0 || rmin[i + 1] > 0.0 {
+                            inner.push(polygon_section(
+                                *sphi,
+                                step,
+                                h.clone(),
+                                full,
+                                z1,
+                                z2,
+                                rmin[i],
+                                rmin[i + 1],
+                            )?);
+                        }
+                    }
+                }
+                if outer.is_empty() {
+                    return Err(bad("polyhedra", "all sections have zero height".into()));
+                }
+                let s = union_of(outer);
+                Ok(if inner.is_empty() {
+                    s
+                } else {
+                    s - union_of(inner)
+                })
+            }
+            &G4Solid::Hype {
+                rmin,
+                rmax,
+                stereo_in,
+                stereo_out,
+                dz,
+            } => {
+                let outer = hyperboloid(rmax, stereo_out.tan(), -dz, dz)?;
+                if rmin > 0.0 {
+                    Ok(outer - hyperboloid(rmin, stereo_in.tan(), -dz, dz)?)
+                } else if stereo_in != 0.0 {
+                    // A zero inner radius with a stereo angle is a double cone.
+                    let r = dz * stereo_in.tan();
+                    Ok(outer - (cone(r, -dz, 0.0, 0.0)? + cone(0.0, 0.0, r, dz)?))
+                } else {
+                    Ok(outer)
+                }
+            }
+            &G4Solid::Paraboloid { dz, rlo, rhi } => paraboloid(rlo, rhi, dz),
+            &G4Solid::Ellipsoid {
+                ax,
+                by,
+                cz,
+                zbottom,
+                ztop,
+            } => {
+                if !(ax > 0.0 && by > 0.0) {
+                    return Err(bad(
+                        "ellipsoid",
+                        format!("semi-axes must be > 0, got {ax} {by}"),
+                    ));
+                }
+                Ok(zsphere(cz, zbottom, ztop)?.scale(ax / cz, by / cz, 1.0))
+            }
+            &G4Solid::Eltube { dx, dy, dz } => {
+                if !(dx > 0.0) {
+                    return Err(bad("eltube", format!("dx must be > 0, got {dx}")));
+                }
+                Ok(cylinder(dy, -dz, dz)?.scale(dx / dy, 1.0, 1.0))
+            }
+            &G4Solid::Elcone {
+                xsemi,
+                ysemi,
+                zheight,
+                zcut,
+            } => {
+                if !(xsemi > 0.0 && ysemi > 0.0 && zcut > 0.0 && zcut < zheight) {
+                    return Err(bad(
+                        "elcone",
+                        format!("needs semi-axes > 0 and 0 < zcut < zheight, got {xsemi} {ysemi} {zheight} {zcut}"),
+                    ));
+                }
+                Ok(cone(zheight + zcut, -zcut, zheight - zcut, zcut)?.scale(xsemi, ysemi, 1.0))
+            }
+            G4Solid::Union(b) => Ok(b.a.to_shape()? + b.placed_b()?),
+            G4Solid::Subtraction(b) => Ok(b.a.to_shape()? - b.placed_b()?),
+            G4Solid::Intersection(b) => Ok(b.a.to_shape()? * b.placed_b()?),
+        }
+    }
+}
+
+impl Boolean {
+    fn placed_b(&self) -> Result<Shape, CsgError> {
+        let r = &self.rotation;
+        let t = &self.translation;
+        let m = Transform64 {
+            rows: [
+                [r[0][0], r[0][1], r[0][2], t[0]],
+                [r[1][0], r[1][1], r[1][2], t[1]],
+                [r[2][0], r[2][1], r[2][2], t[2]],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+        };
+        if !m.is_affine() || m.inverse().is_none() {
+            return Err(bad(
+                "boolean",
+                format!("singular or non-finite placement {r:?} {t:?}"),
+            ));
+        }
+        Ok(self.b.to_shape()?.placed(m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_round_trip_of_a_boolean() {
+        let j = r#"{"type":"subtraction","a":{"type":"box","dx":1,"dy":2,"dz":3},
+            "b":{"type":"tubs","rmin":0,"rmax":1,"dz":5,"sphi":0,"dphi":7},
+            "rotation":[[1,0,0],[0,1,0],[0,0,1]],"translation":[0,0,1]}"#;
+        let s: G4Solid = serde_json::from_str(j).unwrap();
+        assert!(matches!(s, G4Solid::Subtraction(_)));
+        assert!(s.to_shape().is_ok());
+        let bad: Result<G4Solid, _> = serde_json::from_str(r#"{"type":"box","dx":1}"#);
+        assert!(bad.is_err());
+        let unknown: Result<G4Solid, _> = serde_json::from_str(r#"{"type":"twistedBox"}"#);
+        assert!(unknown.is_err());
+    }
+
+    #[test]
+    fn impossible_parameters_are_errors_not_panics() {
+        let cases = [
+            G4Solid::Box {
+                dx: 0.0,
+                dy: 1.0,
+                dz: 1.0,
+            },
+            G4Solid::Tubs {
+                rmin: 2.0,
+                rmax: 1.0,
+                dz: 1.0,
+                sphi: 0.0,
+                dphi: 1.0,
+            },
+            G4Solid::Torus {
+                rmin: 0.0,
+                rmax: 2.0,
+                rtor: 1.0,
+                sphi: 0.0,
+                dphi: 7.0,
+            },
+            G4Solid::Polycone {
+                sphi: 0.0,
+                dphi: 7.0,
+                z: vec![0.0],
+                rmin: vec![0.0],
+                rmax: vec![1.0],
+            },
+            G4Solid::Tubs {
+                rmin: 0.0,
+                rmax: 1.0,
+                dz: 1.0,
+                sphi: 0.0,
+                dphi: 0.0,
+            },
+        ];
+        for c in cases {
+            assert!(c.to_shape().is_err(), "{c:?}");
+        }
+    }
+}

@@ -1,0 +1,251 @@
+//! Primitive kernels, generic over f32 and f64: the spans of a ray inside each primitive,
+//! signed distances, and the first surface crossing of a (possibly complemented,
+//! transformed) leaf after a given ray parameter.
+
+mod cuts;
+mod planar;
+mod quadric;
+mod ring;
+pub mod spans;
+pub mod torus;
+
+use hytrace_foundry::{Transform64, TypeCode};
+
+use crate::real::{Ray, Real, V3};
+use spans::Spans;
+
+/// An affine frame: maps points of a parent frame into a node's own frame as
+/// `inverse * (p - origin)`. Subtracting the origin first keeps f32 exact for solids placed
+/// far from the world origin when rays start near them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame<T> {
+    /// Rows of the inverse of the linear part.
+    inverse: [V3<T>; 3],
+    /// Where the frame's origin lies in the parent frame.
+    origin: V3<T>,
+}
+
+impl<T: Real> Frame<T> {
+    /// The frame of a local-to-parent transform, inverted in f64; `None` if singular.
+    pub fn from_transform(t: &Transform64) -> Option<Self> {
+        let inv = t.inverse()?;
+        let row = |k: usize| V3::from_f64([inv.rows[k][0], inv.rows[k][1], inv.rows[k][2]]);
+        Some(Frame {
+            inverse: [row(0), row(1), row(2)],
+            origin: V3::from_f64([t.rows[0][3], t.rows[1][3], t.rows[2][3]]),
+        })
+    }
+
+    fn linear(&self, v: V3<T>) -> V3<T> {
+        V3::new(
+            self.inverse[0].dot(v),
+            self.inverse[1].dot(v),
+            self.inverse[2].dot(v),
+        )
+    }
+
+    /// A parent-frame point in this frame.
+    pub fn point_to_local(&self, p: V3<T>) -> V3<T> {
+        self.linear(p - self.origin)
+    }
+
+    /// A parent-frame ray in this frame (same parameter `t` along both).
+    pub fn ray_to_local(&self, ray: &Ray<T>) -> Ray<T> {
+        Ray {
+            origin: self.point_to_local(ray.origin),
+            direction: self.linear(ray.direction),
+        }
+    }
+
+    /// A normal of this frame in the parent frame (inverse transpose; not normalized).
+    pub fn normal_to_parent(&self, n: V3<T>) -> V3<T> {
+        self.inverse[0] * n.x + self.inverse[1] * n.y + self.inverse[2] * n.z
+    }
+}
+
+/// A primitive node ready to be intersected: typecode, parameters, planes, frame and
+/// complement flag.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Leaf<T> {
+    /// Which primitive.
+    pub code: TypeCode,
+    /// Parameters (`param` then `param_ext`, see [`TypeCode`]).
+    pub params: [T; 6],
+    /// Convex polyhedra: the range of the tree's plane list.
+    pub planes: std::ops::Range<usize>,
+    /// The node's frame, if it has a transform.
+    pub frame: Option<Frame<T>>,
+    /// Whether the leaf is complemented (inside-out).
+    pub complement: bool,
+}
+
+/// Whether a primitive encloses a bounded region (cuts and half-spaces do not).
+pub fn is_bounded(code: TypeCode) -> bool {
+    !matches!(
+        code,
+        TypeCode::HalfSpace | TypeCode::Slab | TypeCode::PhiCut | TypeCode::ThetaCut
+    )
+}
+
+/// The spans of a ray (in the primitive's own frame) inside a primitive.
+pub fn primitive_spans<T: Real>(
+    code: TypeCode,
+    p: &[T; 6],
+    planes: &[[T; 4]],
+    o: V3<T>,
+    d: V3<T>,
+) -> Spans<T> {
+    match code {
+        TypeCode::Sphere => quadric::sphere_spans(p, o, d),
+        TypeCode::ZSphere => quadric::zsphere_spans(p, o, d),
+        TypeCode::Cylinder => quadric::cylinder_spans(p, o, d),
+        TypeCode::Disc => quadric::tube_spans(p, o, d),
+        TypeCode::Cone => quadric::cone_spans(p, o, d),
+        TypeCode::Hyperboloid => quadric::hyperboloid_spans(p, o, d),
+        TypeCode::Paraboloid => quadric::paraboloid_spans(p, o, d),
+        TypeCode::Torus => ring::torus_spans(p, o, d),
+        TypeCode::Box3 => planar::box_spans(p, o, d),
+        TypeCode::ConvexPolyhedron => planar::polyhedron_spans(planes, o, d),
+        TypeCode::HalfSpace => planar::halfspace_spans(p, o, d),
+        TypeCode::Slab => planar::slab_spans(p, o, d),
+        TypeCode::PhiCut => cuts::phicut_spans(p, o, d),
+        TypeCode::ThetaCut => cuts::thetacut_spans(p, o, d),
+        _ => Spans::empty(),
+    }
+}
+
+/// Signed distance from a point (in the primitive's own frame) to a primitive: negative
+/// inside. Exact for sphere, cylinder, tube, torus, box, half-space and slab; a bound with
+/// the exact sign for the others.
+pub fn primitive_sdf<T: Real>(code: TypeCode, p: &[T; 6], planes: &[[T; 4]], x: V3<T>) -> T {
+    match code {
+        TypeCode::Sphere => quadric::sphere_sdf(p, x),
+        TypeCode::ZSphere => quadric::zsphere_sdf(p, x),
+        TypeCode::Cylinder => quadric::cylinder_sdf(p, x),
+        TypeCode::Disc => quadric::tube_sdf(p, x),
+        TypeCode::Cone => quadric::cone_sdf(p, x),
+        TypeCode::Hyperboloid => quadric::hyperboloid_sdf(p, x),
+        TypeCode::Paraboloid => quadric::paraboloid_sdf(p, x),
+        TypeCode::Torus => ring::torus_prim_sdf(p, x),
+        TypeCode::Box3 => planar::box_sdf(p, x),
+        TypeCode::ConvexPolyhedron => planar::polyhedron_sdf(planes, x),
+        TypeCode::HalfSpace => planar::halfspace_sdf(p, x),
+        TypeCode::Slab => planar::slab_sdf(p, x),
+        TypeCode::PhiCut => cuts::phicut_sdf(p, x),
+        TypeCode::ThetaCut => cuts::thetacut_sdf(p, x),
+        _ => T::INFINITY,
+    }
+}
+
+/// The first surface crossing of a node after a ray parameter, or a miss.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step<T> {
+    /// Ray parameter of the crossing (`+inf`: no crossing).
+    pub t: T,
+    /// Outward normal of the node's region at the crossing (not normalized).
+    pub normal: V3<T>,
+    /// Whether the ray is inside the node's region just before `t` (for a miss: all along).
+    pub inside_before: bool,
+}
+
+impl<T: Real> Step<T> {
+    /// No crossing; the ray is inside (or outside) all along.
+    pub fn miss(inside: bool) -> Self {
+        Step {
+            t: T::INFINITY,
+            normal: V3::zero(),
+            inside_before: inside,
+        }
+    }
+
+    /// Whether there is a crossing.
+    pub fn is_hit(&self) -> bool {
+        self.t < T::INFINITY
+    }
+
+    /// Whether the ray is inside just after `t` (for a miss: all along).
+    pub fn inside_after(&self) -> bool {
+        self.inside_before != self.is_hit()
+    }
+
+    /// The same crossing as a boundary of the complement.
+    pub fn complemented(self) -> Self {
+        Step {
+            t: self.t,
+            normal: -self.normal,
+            inside_before: !self.inside_before,
+        }
+    }
+}
+
+/// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
+/// spans shorter than `tol` (tangent touches, not crossings). Normals are oriented outward
+/// from the span's role (entries face against the ray, exits along it).
+pub fn first_crossing<T: Real>(spans: &Spans<T>, shift: T, d: V3<T>, tmin: T, tol: T) -> Step<T> {
+    let after = tmin + tol;
+    for s in spans.as_slice() {
+        if s.t1 - s.t0 <= tol {
+            continue;
+        }
+        let (t0, t1) = (s.t0 + shift, s.t1 + shift);
+        if t0 > after {
+            let n = if s.n0.dot(d) > T::ZERO { -s.n0 } else { s.n0 };
+            return Step {
+                t: t0,
+                normal: n,
+                inside_before: false,
+            };
+        }
+        if t1 > after {
+            let n = if s.n1.dot(d) < T::ZERO { -s.n1 } else { s.n1 };
+            return Step {
+                t: t1,
+                normal: n,
+                inside_before: true,
+            };
+        }
+    }
+    Step::miss(false)
+}
+
+impl<T: Real> Leaf<T> {
+    /// The first crossing of the leaf's surface by `ray` (in the tree's frame) after
+    /// `tmin + tol`; normals in the tree's frame.
+    pub fn step(&self, planes: &[[T; 4]], ray: &Ray<T>, tmin: T, tol: T) -> Step<T> {
+        let local = match &self.frame {
+            Some(f) => f.ray_to_local(ray),
+            None => *ray,
+        };
+        // Move the origin to the closest approach to the primitive's origin: the quadrics
+        // are then solved with O(size) coefficients however far away the ray starts.
+        let d = local.direction;
+        let shift = -local.origin.dot(d) / d.length_squared();
+        let shift = if shift.is_finite() { shift } else { T::ZERO };
+        let o = local.origin.at(d, shift);
+        let spans = primitive_spans(self.code, &self.params, &planes[self.planes.clone()], o, d);
+        let mut step = first_crossing(&spans, shift, d, tmin, tol);
+        if let Some(f) = &self.frame {
+            step.normal = f.normal_to_parent(step.normal);
+        }
+        if self.complement {
+            step.complemented()
+        } else {
+            step
+        }
+    }
+
+    /// Signed distance bound of the leaf at a point of the tree's frame (negative inside;
+    /// see [`primitive_sdf`]).
+    pub fn sdf(&self, planes: &[[T; 4]], x: V3<T>) -> T {
+        let local = match &self.frame {
+            Some(f) => f.point_to_local(x),
+            None => x,
+        };
+        let s = primitive_sdf(self.code, &self.params, &planes[self.planes.clone()], local);
+        if self.complement {
+            -s
+        } else {
+            s
+        }
+    }
+}

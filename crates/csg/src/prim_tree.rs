@@ -1,0 +1,534 @@
+//! A Foundry CSG prim prepared for intersection in one precision, and its evaluators.
+//!
+//! The first crossing of a tree is found without recursion, in the form the GPU kernels
+//! use: a stack of frames, one per tree level, walking the complete binary tree by index
+//! arithmetic (children of position `p` are `2p` and `2p + 1`). Each operator node combines
+//! the first crossings of its children with the state table of its boolean operation
+//! (Kensler's single-hit algorithm, written with inside states so that coincident crossings
+//! of both children and complements that miss are handled exactly): a child crossing that
+//! changes the operator's inside state is the operator's crossing; one that does not is
+//! skipped by querying that child again after it.
+//!
+//! Signed distances (and so inside tests) walk the tree in postorder with the same index
+//! arithmetic and a value stack.
+
+use std::ops::Range;
+
+use hytrace_foundry::{Foundry, Node, PrimKind, TypeCode, COMPLEMENT_BIT, MAX_TREE_HEIGHT};
+
+use crate::kernel::{is_bounded, Frame, Leaf, Step};
+use crate::real::{Ray, Real, V3};
+use crate::shape::CsgError;
+
+/// Bounds `[min, max]` in the prim's frame.
+pub type Bounds<T> = [V3<T>; 2];
+
+/// One slot of the complete binary tree.
+#[derive(Clone, Debug, PartialEq)]
+enum Slot<T> {
+    /// Below a leaf.
+    Empty,
+    /// Union, intersection or difference of the two children.
+    Operator(TypeCode),
+    /// N-ary union or intersection of primitive members.
+    List {
+        code: TypeCode,
+        members: Range<usize>,
+        bounds: Bounds<T>,
+    },
+    /// A primitive.
+    Leaf(Leaf<T>),
+}
+
+/// A CSG prim ready for intersection and inside tests in precision `T`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrimTree<T> {
+    slots: Vec<Slot<T>>,
+    members: Vec<(Leaf<T>, Bounds<T>)>,
+    planes: Vec<[T; 4]>,
+    height: u32,
+    bounds: Bounds<T>,
+    scale: T,
+}
+
+/// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
+/// the same surface are at least this far apart, coincident faces within it.
+fn tolerance<T: Real>(scale: T, t: T) -> T {
+    T::SURFACE_TOLERANCE * (scale + t.abs())
+}
+
+fn bounds_of<T: Real>(aabb: &[f32; 6]) -> Bounds<T> {
+    [
+        V3::new(
+            T::from_f32(aabb[0]),
+            T::from_f32(aabb[1]),
+            T::from_f32(aabb[2]),
+        ),
+        V3::new(
+            T::from_f32(aabb[3]),
+            T::from_f32(aabb[4]),
+            T::from_f32(aabb[5]),
+        ),
+    ]
+}
+
+/// Whether `ray` meets `bounds` at some parameter in `[tmin, tmax]` (slab test, exact for
+/// zero direction components).
+pub fn ray_meets_bounds<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> bool {
+    let (mut lo, mut hi) = (tmin, tmax);
+    for k in 0..3 {
+        let (o, d) = (ray.origin.get(k), ray.direction.get(k));
+        let (a, b) = (bounds[0].get(k), bounds[1].get(k));
+        if d == T::ZERO {
+            if o < a || o > b {
+                return false;
+            }
+            continue;
+        }
+        let (ta, tb) = ((a - o) / d, (b - o) / d);
+        lo = lo.max(ta.min(tb));
+        hi = hi.min(ta.max(tb));
+    }
+    lo <= hi
+}
+
+fn operator_inside(code: TypeCode, a: bool, b: bool) -> bool {
+    match code {
+        TypeCode::Union | TypeCode::ListContiguous | TypeCode::ListDiscontiguous => a || b,
+        TypeCode::Intersection | TypeCode::ListOverlap => a && b,
+        _ => a && !b,
+    }
+}
+
+/// What an operator node does with its children's first crossings.
+enum Decision<T> {
+    /// The operator's first crossing (or miss).
+    Done(Step<T>),
+    /// Query again the children that cross first (left, right) after their crossings.
+    Advance(bool, bool),
+}
+
+/// The state table of a binary operator: combines the children's next crossings.
+fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decision<T> {
+    let t = a.t.min(b.t);
+    if !(t < T::INFINITY) {
+        return Decision::Done(Step::miss(operator_inside(
+            code,
+            a.inside_before,
+            b.inside_before,
+        )));
+    }
+    let tol = tolerance(scale, t);
+    let (cross_a, cross_b) = (a.t <= t + tol, b.t <= t + tol);
+    let before = operator_inside(code, a.inside_before, b.inside_before);
+    let a_after = a.inside_before != cross_a;
+    let b_after = b.inside_before != cross_b;
+    if operator_inside(code, a_after, b_after) == before {
+        return Decision::Advance(cross_a, cross_b);
+    }
+    // The crossing child that changes the result on its own gives the surface.
+    let use_a = cross_a && (!cross_b || operator_inside(code, a_after, b.inside_before) != before);
+    let crossing = if use_a {
+        Step {
+            inside_before: before,
+            ..*a
+        }
+    } else {
+        let normal = if code == TypeCode::Difference {
+            -b.normal
+        } else {
+            b.normal
+        };
+        Step {
+            t: b.t,
+            normal,
+            inside_before: before,
+        }
+    };
+    Decision::Done(crossing)
+}
+
+/// Which child an operator frame waits for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Phase {
+    FirstLeft,
+    FirstRight,
+    AgainLeft { then_right: bool },
+    AgainRight,
+    Decide,
+}
+
+/// The evaluation state of one operator node.
+#[derive(Clone, Copy, Debug)]
+struct OperatorFrame<T> {
+    position: usize,
+    tmin: T,
+    left: Step<T>,
+    right: Step<T>,
+    phase: Phase,
+}
+
+impl<T: Real> PrimTree<T> {
+    /// Prepares CSG prim `prim` of a validated Foundry.
+    pub fn from_foundry(foundry: &Foundry, prim: usize) -> Result<Self, CsgError> {
+        let err = |problem: String| CsgError {
+            primitive: "prim",
+            problem: format!("prim {prim}: {problem}"),
+        };
+        let p = foundry
+            .prim
+            .get(prim)
+            .ok_or_else(|| err("no such prim".into()))?;
+        if p.kind != PrimKind::Csg as u32 {
+            return Err(err("not a CSG prim".into()));
+        }
+        let nodes = foundry
+            .node
+            .get(p.node_offset as usize..(p.node_offset + p.num_node) as usize)
+            .ok_or_else(|| err("node range out of bounds".into()))?;
+        let height = (p.num_node + 1).trailing_zeros().saturating_sub(1);
+        if !(p.num_node + 1).is_power_of_two() || height > MAX_TREE_HEIGHT {
+            return Err(err(format!(
+                "{} nodes is not a complete binary tree of height <= {MAX_TREE_HEIGHT}",
+                p.num_node
+            )));
+        }
+        let mut planes = Vec::new();
+        let mut members = Vec::new();
+        let mut slots = Vec::with_capacity(nodes.len());
+        for n in nodes {
+            let code = TypeCode::from_u32(n.typecode)
+                .ok_or_else(|| err(format!("unknown typecode {}", n.typecode)))?;
+            slots.push(match code {
+                TypeCode::Zero => Slot::Empty,
+                c if c.is_operator() => Slot::Operator(c),
+                c if c.is_list() => {
+                    let (first, count) = (n.param[0].to_bits() as usize, n.param[1].to_bits());
+                    let list = foundry
+                        .node
+                        .get(first..first + count as usize)
+                        .ok_or_else(|| err("list members out of bounds".into()))?;
+                    let start = members.len();
+                    for m in list {
+                        let leaf = make_leaf(foundry, m, &mut planes).map_err(err)?;
+                        if leaf.complement || !is_bounded(leaf.code) {
+                            return Err(err(
+                                "list members must be bounded, uncomplemented primitives".into(),
+                            ));
+                        }
+                        members.push((leaf, bounds_of(&m.aabb)));
+                    }
+                    Slot::List {
+                        code: c,
+                        members: start..members.len(),
+                        bounds: bounds_of(&n.aabb),
+                    }
+                }
+                _ => Slot::Leaf(make_leaf(foundry, n, &mut planes).map_err(err)?),
+            });
+        }
+        let bounds = bounds_of(&p.aabb);
+        let size = bounds[1] - bounds[0];
+        let scale = T::HALF * size.max_abs();
+        Ok(PrimTree {
+            slots,
+            members,
+            planes,
+            height,
+            bounds,
+            scale: if scale.is_finite() { scale } else { T::ONE },
+        })
+    }
+
+    /// Bounds of the prim in its solid's frame.
+    pub fn bounds(&self) -> &Bounds<T> {
+        &self.bounds
+    }
+
+    /// Height of the tree (0 for a single primitive).
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The first crossing of the prim's surface by `ray` after `tmin` (see the module docs),
+    /// with the outward normal in the solid's frame and whether the ray is inside before.
+    pub fn first_crossing(&self, ray: &Ray<T>, tmin: T) -> Step<T> {
+        if let Some(step) = self.non_operator_step(1, ray, tmin) {
+            return step;
+        }
+        let mut stack = [OperatorFrame {
+            position: 1,
+            tmin,
+            left: Step::miss(false),
+            right: Step::miss(false),
+            phase: Phase::FirstLeft,
+        }; MAX_TREE_HEIGHT as usize + 1];
+        let mut depth = 1;
+        let mut incoming: Option<Step<T>> = None;
+        loop {
+            let frame = &mut stack[depth - 1];
+            if let Some(step) = incoming.take() {
+                frame.phase = match frame.phase {
+                    Phase::FirstLeft => {
+                        frame.left = step;
+                        Phase::FirstRight
+                    }
+                    Phase::FirstRight => {
+                        frame.right = step;
+                        Phase::Decide
+                    }
+                    Phase::AgainLeft { then_right } => {
+                        frame.left = step;
+                        if then_right {
+                            Phase::AgainRight
+                        } else {
+                            Phase::Decide
+                        }
+                    }
+                    Phase::AgainRight | Phase::Decide => {
+                        frame.right = step;
+                        Phase::Decide
+                    }
+                };
+            }
+            let (child, child_tmin) = match frame.phase {
+                Phase::FirstLeft => (2 * frame.position, frame.tmin),
+                Phase::FirstRight => (2 * frame.position + 1, frame.tmin),
+                Phase::AgainLeft { .. } => (2 * frame.position, frame.left.t),
+                Phase::AgainRight => (2 * frame.position + 1, frame.right.t),
+                Phase::Decide => {
+                    let Slot::Operator(code) = self.slots[frame.position - 1] else {
+                        unreachable!("frames are only pushed for operators");
+                    };
+                    match decide(code, &frame.left, &frame.right, self.scale) {
+                        Decision::Done(step) => {
+                            depth -= 1;
+                            if depth == 0 {
+                                return step;
+                            }
+                            incoming = Some(step);
+                        }
+                        Decision::Advance(left, right) => {
+                            frame.phase = if left {
+                                Phase::AgainLeft { then_right: right }
+                            } else {
+                                Phase::AgainRight
+                            };
+                        }
+                    }
+                    continue;
+                }
+            };
+            match self.non_operator_step(child, ray, child_tmin) {
+                Some(step) => incoming = Some(step),
+                None => {
+                    stack[depth] = OperatorFrame {
+                        position: child,
+                        tmin: child_tmin,
+                        left: Step::miss(false),
+                        right: Step::miss(false),
+                        phase: Phase::FirstLeft,
+                    };
+                    depth += 1;
+                }
+            }
+        }
+    }
+
+    /// The first crossing of a leaf or list slot; `None` for operators.
+    fn non_operator_step(&self, position: usize, ray: &Ray<T>, tmin: T) -> Option<Step<T>> {
+        match &self.slots[position - 1] {
+            Slot::Operator(_) => None,
+            Slot::Empty => Some(Step::miss(false)),
+            Slot::Leaf(leaf) => Some(leaf.step(&self.planes, ray, tmin, self.tol(tmin))),
+            Slot::List {
+                code,
+                members,
+                bounds,
+            } => Some(self.list_step(*code, members.clone(), bounds, ray, tmin)),
+        }
+    }
+
+    fn tol(&self, t: T) -> T {
+        tolerance(self.scale, t)
+    }
+
+    /// First crossing of an n-ary union or intersection: walks the members' crossings in
+    /// order, counting how many members the ray is inside, until the count crosses the
+    /// operator's threshold (more than zero for unions, all for intersections). Members
+    /// whose bounds the ray misses are skipped without intersecting them.
+    fn list_step(
+        &self,
+        code: TypeCode,
+        members: Range<usize>,
+        bounds: &Bounds<T>,
+        ray: &Ray<T>,
+        tmin: T,
+    ) -> Step<T> {
+        let all = members.len();
+        let inside = |count: usize| match code {
+            TypeCode::ListOverlap => count == all,
+            _ => count > 0,
+        };
+        if !ray_meets_bounds(ray, bounds, tmin, T::INFINITY) {
+            return Step::miss(false);
+        }
+        let mut tau = tmin;
+        loop {
+            let (mut best, mut count) = (T::INFINITY, 0usize);
+            let (mut entries, mut exits) = (0usize, 0usize);
+            let (mut entry_normal, mut exit_normal) = (V3::zero(), V3::zero());
+            for (leaf, b) in &self.members[members.clone()] {
+                if !ray_meets_bounds(ray, b, tau, T::INFINITY) {
+                    continue;
+                }
+                let s = leaf.step(&self.planes, ray, tau, self.tol(tau));
+                count += s.inside_before as usize;
+                if !s.is_hit() {
+                    continue;
+                }
+                let tol = self.tol(s.t);
+                if s.t < best - tol {
+                    (best, entries, exits) = (s.t, 0, 0);
+                } else if s.t > best + tol {
+                    continue;
+                }
+                best = best.min(s.t);
+                if s.inside_before {
+                    exits += 1;
+                    exit_normal = s.normal;
+                } else {
+                    entries += 1;
+                    entry_normal = s.normal;
+                }
+            }
+            if !(best < T::INFINITY) {
+                return Step::miss(inside(count));
+            }
+            let after = count + entries - exits;
+            if inside(count) != inside(after) {
+                return Step {
+                    t: best,
+                    normal: if inside(after) {
+                        entry_normal
+                    } else {
+                        exit_normal
+                    },
+                    inside_before: inside(count),
+                };
+            }
+            tau = best;
+        }
+    }
+
+    /// Signed distance bound of the prim at a point of the solid's frame: negative inside,
+    /// with the exact sign (unions take the minimum, intersections the maximum, differences
+    /// the maximum of the left and the negated right).
+    pub fn sdf(&self, x: V3<T>) -> T {
+        let mut values = [T::ZERO; MAX_TREE_HEIGHT as usize + 2];
+        let mut top = 0;
+        // Postorder over the perfect tree of this height: start at the leftmost deepest
+        // position; a left child is followed by the leftmost deepest descendant of its
+        // sibling, a right child by its parent.
+        let deepest = self.height;
+        let mut position = 1usize << deepest;
+        loop {
+            match &self.slots[position - 1] {
+                Slot::Empty => {}
+                Slot::Leaf(leaf) => {
+                    values[top] = leaf.sdf(&self.planes, x);
+                    top += 1;
+                }
+                Slot::List { code, members, .. } => {
+                    let mut v = if *code == TypeCode::ListOverlap {
+                        -T::INFINITY
+                    } else {
+                        T::INFINITY
+                    };
+                    for (leaf, _) in &self.members[members.clone()] {
+                        let s = leaf.sdf(&self.planes, x);
+                        v = if *code == TypeCode::ListOverlap {
+                            v.max(s)
+                        } else {
+                            v.min(s)
+                        };
+                    }
+                    values[top] = v;
+                    top += 1;
+                }
+                Slot::Operator(code) => {
+                    let (a, b) = (values[top - 2], values[top - 1]);
+                    top -= 1;
+                    values[top - 1] = match code {
+                        TypeCode::Union => a.min(b),
+                        TypeCode::Intersection => a.max(b),
+                        _ => a.max(-b),
+                    };
+                }
+            }
+            if position == 1 {
+                return values[0];
+            }
+            position = if position & 1 == 1 {
+                position >> 1
+            } else {
+                let sibling = position + 1;
+                let level = usize::BITS - 1 - sibling.leading_zeros();
+                sibling << (deepest - level)
+            };
+        }
+    }
+
+    /// Whether a point of the solid's frame is inside the prim.
+    pub fn contains(&self, x: V3<T>) -> bool {
+        self.sdf(x) < T::ZERO
+    }
+}
+
+fn make_leaf<T: Real>(
+    foundry: &Foundry,
+    n: &Node,
+    planes: &mut Vec<[T; 4]>,
+) -> Result<Leaf<T>, String> {
+    let code = TypeCode::from_u32(n.typecode)
+        .filter(|c| c.is_primitive())
+        .ok_or_else(|| format!("typecode {} is not a primitive", n.typecode))?;
+    let tran = (n.transform & !COMPLEMENT_BIT) as usize;
+    let frame = match tran {
+        0 => None,
+        k => {
+            let t = foundry
+                .tran
+                .get(k - 1)
+                .ok_or_else(|| format!("transform {k} out of range"))?;
+            Some(Frame::from_transform(t).ok_or_else(|| format!("transform {k} is singular"))?)
+        }
+    };
+    let mut leaf_planes = 0..0;
+    if code == TypeCode::ConvexPolyhedron {
+        let (first, count) = (n.param[0].to_bits() as usize, n.param[1].to_bits() as usize);
+        let src = foundry
+            .plan
+            .get(first..first + count)
+            .ok_or_else(|| "planes out of range".to_string())?;
+        let start = planes.len();
+        planes.extend(src.iter().map(|p| p.plane.map(T::from_f32)));
+        leaf_planes = start..planes.len();
+    }
+    let params = [
+        n.param[0],
+        n.param[1],
+        n.param[2],
+        n.param[3],
+        n.param_ext[0],
+        n.param_ext[1],
+    ]
+    .map(T::from_f32);
+    Ok(Leaf {
+        code,
+        params,
+        planes: leaf_planes,
+        frame,
+        complement: n.transform & COMPLEMENT_BIT != 0,
+    })
+}

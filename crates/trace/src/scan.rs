@@ -1,0 +1,225 @@
+//! `hytrace scan`: rays in, first boundary crossings out, as NumPy arrays.
+//!
+//! Rays are `(N, 8)` float32 or float64 rows `ox oy oz tmin dx dy dz tmax`. Directions are
+//! normalized, so `t` is a distance. Hits are `(N, 4)` rows `nx ny nz t`: the unit outward
+//! normal of the surface crossed and `t`, `+inf` on a miss, in float32 (`f32` precision)
+//! or float64 (`f64`). Ids are int32: the instance crossed, or -1.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use hytrace_csg::{Ray, Real, V3};
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_foundry::Foundry;
+use rayon::prelude::*;
+use serde_json::json;
+
+use crate::cpu::CpuScene;
+
+/// Arithmetic precision of the intersection kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Precision {
+    /// Single precision (what the GPU runs).
+    F32,
+    /// Double precision.
+    F64,
+}
+
+/// One validated ray in f64: origin, unit direction, parameter range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayRow {
+    /// Origin.
+    pub origin: [f64; 3],
+    /// Unit direction.
+    pub direction: [f64; 3],
+    /// Smallest accepted distance (exclusive).
+    pub tmin: f64,
+    /// Largest accepted distance (exclusive; may be +inf).
+    pub tmax: f64,
+}
+
+/// Validates raw `(N, 8)` rows, naming `source` and the first bad row in errors.
+pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<RayRow>> {
+    rows.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let o = [r[0], r[1], r[2]];
+            let d = [r[4], r[5], r[6]];
+            let (tmin, tmax) = (r[3], r[7]);
+            if !o.iter().all(|v| v.is_finite()) {
+                bail!("{source}: ray {i}: origin {o:?} is not finite");
+            }
+            if !d.iter().all(|v| v.is_finite()) {
+                bail!("{source}: ray {i}: direction {d:?} is not finite");
+            }
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if !(len > 0.0) || !len.is_finite() {
+                bail!("{source}: ray {i}: direction {d:?} has zero length");
+            }
+            if !tmin.is_finite() || tmax.is_nan() || !(tmin < tmax) {
+                bail!("{source}: ray {i}: needs finite tmin < tmax, got {tmin} {tmax}");
+            }
+            Ok(RayRow {
+                origin: o,
+                direction: d.map(|v| v / len),
+                tmin,
+                tmax,
+            })
+        })
+        .collect()
+}
+
+/// Reads and validates a rays file.
+pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
+    let a = read_array(path)?;
+    let source = path.display().to_string();
+    if a.shape.len() != 2 || a.shape[1] != 8 {
+        bail!(
+            "{source}: rays need shape (N, 8) (ox oy oz tmin dx dy dz tmax), got {:?}",
+            a.shape
+        );
+    }
+    let values: Vec<f64> = match a.scalar {
+        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        Scalar::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&a.bytes),
+        other => bail!("{source}: rays must be float32 or float64, got {other:?}"),
+    };
+    let rows: Vec<[f64; 8]> = values
+        .chunks_exact(8)
+        .map(|c| std::array::from_fn(|k| c[k]))
+        .collect();
+    rays_from_rows(&rows, &source)
+}
+
+/// Writes rays as an `(N, 8)` float64 array.
+pub fn write_rays(path: &Path, rays: &[RayRow]) -> anyhow::Result<()> {
+    let flat: Vec<f64> = rays
+        .iter()
+        .flat_map(|r| {
+            let (o, d) = (r.origin, r.direction);
+            [o[0], o[1], o[2], r.tmin, d[0], d[1], d[2], r.tmax]
+        })
+        .collect();
+    write_array(
+        path,
+        Scalar::F64,
+        &[rays.len() as u64, 8],
+        bytemuck::cast_slice(&flat),
+    )?;
+    Ok(())
+}
+
+/// The answers of a scan in f64: `nx ny nz t` per ray and the instance (or -1).
+#[derive(Clone, Debug, Default)]
+pub struct ScanResult {
+    /// `(N, 4)` rows.
+    pub hits: Vec<[f64; 4]>,
+    /// Instance crossed, or -1.
+    pub ids: Vec<i32>,
+}
+
+fn trace_all<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> ScanResult {
+    let answers: Vec<([f64; 4], i32)> = rays
+        .par_iter()
+        .map(|r| {
+            let ray = Ray {
+                origin: V3::from_f64(r.origin),
+                direction: V3::from_f64(r.direction),
+            };
+            let tmax = if r.tmax.is_finite() {
+                T::from_f64(r.tmax)
+            } else {
+                T::INFINITY
+            };
+            match scene.trace(&ray, T::from_f64(r.tmin), tmax) {
+                Some(h) => {
+                    let n = h.normal.to_f64();
+                    ([n[0], n[1], n[2], h.t.to_f64()], h.instance as i32)
+                }
+                None => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
+            }
+        })
+        .collect();
+    ScanResult {
+        hits: answers.iter().map(|a| a.0).collect(),
+        ids: answers.iter().map(|a| a.1).collect(),
+    }
+}
+
+/// Timings of one scan.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ScanTimes {
+    /// Seconds preparing the scene for the tracer.
+    pub build_s: f64,
+    /// Seconds tracing.
+    pub trace_s: f64,
+}
+
+/// Traces every ray against the scene's CSG solids in the given precision.
+pub fn scan(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    fn run<T: Real>(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
+        let t0 = Instant::now();
+        let scene = CpuScene::<T>::new(f)?;
+        let build_s = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let result = trace_all(&scene, rays);
+        let trace_s = t1.elapsed().as_secs_f64();
+        Ok((result, ScanTimes { build_s, trace_s }))
+    }
+    match precision {
+        Precision::F32 => run::<f32>(foundry, rays),
+        Precision::F64 => run::<f64>(foundry, rays),
+    }
+}
+
+/// Writes hits (and ids) atomically: float32 or float64 per the precision.
+pub fn write_hits(
+    result: &ScanResult,
+    precision: Precision,
+    hits_path: &Path,
+    ids_path: Option<&Path>,
+) -> anyhow::Result<()> {
+    let shape = [result.hits.len() as u64, 4];
+    match precision {
+        Precision::F32 => {
+            let flat: Vec<f32> = result.hits.iter().flatten().map(|&v| v as f32).collect();
+            write_array(hits_path, Scalar::F32, &shape, bytemuck::cast_slice(&flat))?;
+        }
+        Precision::F64 => {
+            let flat: Vec<f64> = result.hits.iter().flatten().copied().collect();
+            write_array(hits_path, Scalar::F64, &shape, bytemuck::cast_slice(&flat))?;
+        }
+    }
+    if let Some(p) = ids_path {
+        write_array(
+            p,
+            Scalar::I32,
+            &[result.ids.len() as u64],
+            bytemuck::cast_slice(&result.ids),
+        )
+        .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
+
+/// The stats line of `--stats`.
+pub fn stats_json(rays: usize, load_s: f64, times: &ScanTimes, hits: usize) -> serde_json::Value {
+    json!({
+        "rays": rays,
+        "hits": hits,
+        "load_s": load_s,
+        "build_s": times.build_s,
+        "trace_s": times.trace_s,
+        "rays_per_s": if times.trace_s > 0.0 { rays as f64 / times.trace_s } else { 0.0 },
+        "threads": rayon::current_num_threads(),
+    })
+}

@@ -1,0 +1,187 @@
+//! Running the project's Geant4 oracle (`tests/oracle/geant4_oracle.py`) and comparing
+//! hytrace's CSG answers with it, ray by ray.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use hytrace_csg::geant4::G4Solid;
+use hytrace_csg::{to_tree, PrimTree, Ray, Real, V3};
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::read_array;
+use hytrace_foundry::{Foundry, UNSET};
+use serde::Deserialize;
+
+/// One oracle run: the solids, rays and Geant4's answers.
+pub struct OracleData {
+    /// Kind name of each solid.
+    pub kinds: Vec<String>,
+    /// Geant4 parameters of each solid.
+    pub solids: Vec<G4Solid>,
+    /// Rays `ox oy oz tmin dx dy dz tmax`.
+    pub rays: Vec<[f64; 8]>,
+    /// Solid of each ray.
+    pub ray_solid: Vec<i32>,
+    /// Ray family (0 random, 1 aimed, 2 axis, 3 inside).
+    pub ray_family: Vec<i32>,
+    /// Non-zero where Geant4 contradicts itself on the ray (its `Inside` along the ray
+    /// disagrees with its distance) or warned: no reference there.
+    pub ray_flags: Vec<i32>,
+    /// Geant4's distance to the next boundary (inf: none) and inside code (0 out, 1 surface,
+    /// 2 in).
+    pub expected: Vec<[f64; 2]>,
+    /// The oracle's timing summary.
+    pub timing: serde_json::Value,
+}
+
+#[derive(Deserialize)]
+struct SolidsFile {
+    solids: Vec<SolidEntry>,
+}
+
+#[derive(Deserialize)]
+struct SolidEntry {
+    kind: String,
+    spec: G4Solid,
+}
+
+/// The oracle script's path.
+pub fn oracle_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/geant4_oracle.py")
+}
+
+fn f64_array(path: &Path) -> (Vec<u64>, Vec<f64>) {
+    let a = read_array(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(a.scalar, Scalar::F64, "{}", path.display());
+    (a.shape, bytemuck::pod_collect_to_vec(&a.bytes))
+}
+
+fn i32_array(path: &Path) -> Vec<i32> {
+    let a = read_array(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(a.scalar, Scalar::I32, "{}", path.display());
+    bytemuck::pod_collect_to_vec(&a.bytes)
+}
+
+/// Runs the oracle with `python` into `dir` and reads what it wrote.
+pub fn run_oracle(python: &Path, dir: &Path, args: &[&str]) -> OracleData {
+    let out = Command::new(python)
+        .arg(oracle_script())
+        .arg("--out")
+        .arg(dir)
+        .args(args)
+        .env("GEANT4_DATA_DIR", crate::geant4_data_dir())
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "geant4 oracle failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(dir.join("solids.json")).unwrap();
+    let file: SolidsFile =
+        serde_json::from_str(&text).unwrap_or_else(|e| panic!("solids.json: {e}"));
+    let (shape, rays) = f64_array(&dir.join("rays.npy"));
+    assert_eq!(shape[1], 8);
+    let (_, expected) = f64_array(&dir.join("expected.npy"));
+    let timing =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("timing.json")).unwrap()).unwrap();
+    OracleData {
+        kinds: file.solids.iter().map(|s| s.kind.clone()).collect(),
+        solids: file.solids.into_iter().map(|s| s.spec).collect(),
+        rays: rays
+            .chunks_exact(8)
+            .map(|c| std::array::from_fn(|k| c[k]))
+            .collect(),
+        ray_solid: i32_array(&dir.join("ray_solid.npy")),
+        ray_family: i32_array(&dir.join("ray_family.npy")),
+        ray_flags: i32_array(&dir.join("ray_flags.npy")),
+        expected: expected.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+        timing,
+    }
+}
+
+/// Builds one Foundry solid per Geant4 solid and prepares each for tracing in `T`.
+pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PrimTree<T>> {
+    let mut f = Foundry::new();
+    for (i, s) in solids.iter().enumerate() {
+        let shape = s
+            .to_shape()
+            .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
+        let tree = to_tree(&shape).unwrap_or_else(|e| panic!("solid {i}: {e}"));
+        let mut b = f.begin_solid(&format!("oracle{i}"));
+        b.add_csg(tree, i as u32, UNSET).unwrap();
+        b.finish(i as u32).unwrap();
+    }
+    f.validate().unwrap();
+    (0..solids.len())
+        .map(|i| PrimTree::from_foundry(&f, i).unwrap())
+        .collect()
+}
+
+/// hytrace's answer for one oracle ray: the first crossing distance (inf: none) and whether
+/// the ray starts inside by the tree's inside test.
+pub fn answer<T: Real>(tree: &PrimTree<T>, r: &[f64; 8]) -> (f64, bool) {
+    let ray = Ray {
+        origin: V3::from_f64([r[0], r[1], r[2]]),
+        direction: V3::from_f64([r[4], r[5], r[6]]),
+    };
+    let step = tree.first_crossing(&ray, T::from_f64(r[3]));
+    (step.t.to_f64(), tree.contains(ray.origin))
+}
+
+/// The agreement tolerance of the CSG issue: `max(1e-4 mm, 2e-6 (|origin| + t))`.
+pub fn tolerance(r: &[f64; 8], t: f64) -> f64 {
+    let o = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+    (2e-6 * (o + t)).max(1e-4)
+}
+
+/// Agreement counts of one kind of solid.
+#[derive(Clone, Debug, Default)]
+pub struct KindStats {
+    /// Rays compared (origins on a surface excluded).
+    pub rays: usize,
+    /// Rays without a reference: Geant4 contradicted itself there.
+    pub flagged: usize,
+    /// Rays whose distance agrees within [`tolerance`].
+    pub distance_ok: usize,
+    /// Rays whose inside test agrees with Geant4's `Inside`.
+    pub inside_ok: usize,
+    /// Up to five disagreements, described.
+    pub examples: Vec<String>,
+}
+
+/// Compares hytrace in precision `T` with the oracle's answers, per kind.
+pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
+    let trees = prepare::<T>(&data.solids);
+    let mut stats: BTreeMap<String, KindStats> = BTreeMap::new();
+    for (i, r) in data.rays.iter().enumerate() {
+        let [want, code] = data.expected[i];
+        if code == 1.0 || want.is_nan() {
+            continue;
+        }
+        let solid = data.ray_solid[i] as usize;
+        let s = stats.entry(data.kinds[solid].clone()).or_default();
+        if data.ray_flags[i] != 0 {
+            s.flagged += 1;
+            continue;
+        }
+        let (got, inside) = answer(&trees[solid], r);
+        s.rays += 1;
+        let ok = if want.is_infinite() {
+            got.is_infinite()
+        } else {
+            (got - want).abs() <= tolerance(r, want)
+        };
+        s.distance_ok += ok as usize;
+        s.inside_ok += (inside == (code == 2.0)) as usize;
+        if !ok && s.examples.len() < 5 {
+            s.examples.push(format!(
+                "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {} {got}; ray {r:?}",
+                data.ray_family[i],
+                if code == 2.0 { "inside" } else { "outside" },
+                T::NAME,
+            ));
+        }
+    }
+    stats
+}

@@ -1,0 +1,85 @@
+//! hytrace's CSG against Geant4, ray by ray: randomised solids of every kind the CSG issue
+//! lists and boolean trees of depth 1-4, shot with random, aimed, axis-aligned and inside
+//! rays. Geant4's `DistanceToIn` (outside) or `DistanceToOut` (inside) is the reference for
+//! the first boundary crossing; `Inside` for the inside test.
+
+use std::collections::BTreeMap;
+
+use hytrace_csg::Real;
+use hytrace_tests::geant4::{compare, run_oracle, KindStats, OracleData};
+use hytrace_tests::oracle_python;
+
+/// Per kind: 20 solids x 500 rays = 10^4 rays, so 99.99% allows one disagreement.
+const SOLIDS_PER_KIND: &str = "20";
+const RAYS_PER_SOLID: &str = "500";
+const REQUIRED_AGREEMENT: f64 = 0.9999;
+
+fn oracle() -> Option<(tempfile::TempDir, OracleData)> {
+    let python = oracle_python(&["numpy", "geant4_pybind"])?;
+    let dir = tempfile::tempdir().unwrap();
+    let data = run_oracle(
+        &python,
+        dir.path(),
+        &[
+            "--seed",
+            "20261121",
+            "--solids-per-kind",
+            SOLIDS_PER_KIND,
+            "--rays-per-solid",
+            RAYS_PER_SOLID,
+        ],
+    );
+    Some((dir, data))
+}
+
+/// Prints the agreement of each kind; returns the kinds below the requirement.
+fn check<T: Real>(stats: &BTreeMap<String, KindStats>) -> Vec<String> {
+    let mut failures = Vec::new();
+    for (kind, s) in stats {
+        let distance = s.distance_ok as f64 / s.rays as f64;
+        let inside = s.inside_ok as f64 / s.rays as f64;
+        eprintln!(
+            "{} {kind:>12}: {} rays ({} without reference), distance {:.5}, inside {:.5}",
+            T::NAME,
+            s.rays,
+            s.flagged,
+            distance,
+            inside
+        );
+        if distance < REQUIRED_AGREEMENT || inside < REQUIRED_AGREEMENT {
+            failures.push(format!(
+                "{kind}: distance {distance:.5}, inside {inside:.5} of {} rays\n  {}",
+                s.rays,
+                s.examples.join("\n  ")
+            ));
+        }
+    }
+    failures
+        .into_iter()
+        .map(|f| format!("{}: {f}", T::NAME))
+        .collect()
+}
+
+#[test]
+fn every_solid_kind_agrees_with_geant4_in_f32_and_f64() {
+    let Some((_dir, data)) = oracle() else { return };
+    // Every kind the oracle knows is present, with enough rays for the 99.99% criterion.
+    let f64_stats = compare::<f64>(&data);
+    for (kind, s) in &f64_stats {
+        assert!(
+            s.rays >= 9000,
+            "{kind}: only {} comparable rays ({} where Geant4 contradicts itself)",
+            s.rays,
+            s.flagged
+        );
+    }
+    assert!(f64_stats.len() >= 19, "kinds: {:?}", f64_stats.keys());
+    let f32_stats = compare::<f32>(&data);
+    let mut failures = check::<f64>(&f64_stats);
+    failures.extend(check::<f32>(&f32_stats));
+    assert!(
+        failures.is_empty(),
+        "below {REQUIRED_AGREEMENT} agreement with Geant4:\n{}",
+        failures.join("\n")
+    );
+}
