@@ -97,4 +97,4 @@ const PRIM_VOLUME: u32 = 2u;
 
 const COMPLEMENT_BIT: u32 = 0x80000000u;
 const UNSET: u32 = 0xffffffffu;
-const MAX_TREE_HEIGHT: u32 = 30u;
+const MAX_TREE_HEIGHT: u32 = 10u;

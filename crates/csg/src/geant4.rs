@@ -507,11 +507,15 @@ impl G4Solid {
                 let dphi = dphi.min(2.0 * PI);
                 let step = dphi / *numside as f64;
                 // Partial ranges wider than pi are split so every piece is convex.
-                let halves: Vec<std::ops::Range<u32>> = if full || dphi <= PI || *numside < 2 {
-                    vec![0..*numside]
+                let split = if full || dphi <= PI || *numside < 2 {
+                    *numside
                 } else {
-                    vec![0..numside / 2, numside / 2..*numside]
+                    numside / 2
                 };
+                let halves: Vec<std::ops::Range<u32>> = [0..split, split..*numside]
+                    .into_iter()
+                    .filter(|r| !r.is_empty())
+                    .collect();
                 let (mut outer, mut inner) = (Vec::new(), Vec::new());
                 for i in 0..z.len() - 1 {
                     if z[i + 1] == z[i] {
@@ -579,7 +583,7 @@ impl G4Solid {
                 zbottom,
                 ztop,
             } => {
-                if !(ax > 0.0 && by > 0.0) {
+                if ax.is_nan() || by.is_nan() || ax <= 0.0 || by <= 0.0 {
                     return Err(bad(
                         "ellipsoid",
                         format!("semi-axes must be > 0, got {ax} {by}"),
@@ -588,7 +592,7 @@ impl G4Solid {
                 Ok(zsphere(cz, zbottom, ztop)?.scale(ax / cz, by / cz, 1.0))
             }
             &G4Solid::Eltube { dx, dy, dz } => {
-                if !(dx > 0.0) {
+                if dx.is_nan() || dx <= 0.0 {
                     return Err(bad("eltube", format!("dx must be > 0, got {dx}")));
                 }
                 Ok(cylinder(dy, -dz, dz)?.scale(dx / dy, 1.0, 1.0))

@@ -111,7 +111,7 @@ enum Decision<T> {
 /// The state table of a binary operator: combines the children's next crossings.
 fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decision<T> {
     let t = a.t.min(b.t);
-    if !(t < T::INFINITY) {
+    if !t.is_finite() {
         return Decision::Done(Step::miss(operator_inside(
             code,
             a.inside_before,
@@ -238,6 +238,22 @@ impl<T: Real> PrimTree<T> {
             bounds,
             scale: if scale.is_finite() { scale } else { T::ONE },
         })
+    }
+
+    /// Prepares a shape directly (one prim of a throwaway Foundry), for users of the builder
+    /// API and for tests.
+    pub fn from_shape(shape: &crate::Shape) -> Result<Self, CsgError> {
+        let tree = crate::to_tree(shape)?;
+        let mut f = Foundry::new();
+        let mut solid = f.begin_solid("shape");
+        let built = solid
+            .add_csg(tree, 0, hytrace_foundry::UNSET)
+            .and_then(|_| solid.finish(0));
+        built.map_err(|e| CsgError {
+            primitive: "tree",
+            problem: e.to_string(),
+        })?;
+        Self::from_foundry(&f, 0)
     }
 
     /// Bounds of the prim in its solid's frame.
@@ -402,7 +418,7 @@ impl<T: Real> PrimTree<T> {
                     entry_normal = s.normal;
                 }
             }
-            if !(best < T::INFINITY) {
+            if best == T::INFINITY {
                 return Step::miss(inside(count));
             }
             let after = count + entries - exits;

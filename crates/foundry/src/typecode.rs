@@ -43,11 +43,13 @@ code_enum! {
     /// Primitive parameter conventions (`param[0..4]`, then `param_ext[0..2]`), in the node's
     /// own frame after its transform:
     /// - `Sphere`: centre x, y, z, radius.
-    /// - `ZSphere`: centre x, y, z, radius; `param_ext`: z1, z2 cut planes (z1 < z2).
+    /// - `ZSphere`: centre x, y, z, radius; `param_ext`: z1, z2 cut planes relative to the centre
+    ///   (z1 < z2).
     /// - `Cylinder`: centre x, y, -, radius; `param_ext`: z1, z2 (z1 < z2).
-    /// - `Disc`: centre x, y, inner radius, radius; `param_ext`: z1, z2.
+    /// - `Disc`: centre x, y, inner radius, outer radius; `param_ext`: z1, z2 (a tube: the
+    ///   annular cylinder of G4Tubs).
     /// - `Cone`: r1, z1, r2, z2 (z1 < z2).
-    /// - `Hyperboloid`: r0 (waist radius at z = 0), zf (z where the radius is sqrt(2) r0), z1, z2.
+    /// - `Hyperboloid`: r0 (waist radius at z = 0), tan(stereo) (`r^2 = r0^2 + (tan z)^2`), z1, z2.
     /// - `Torus`: rmin, rmax (tube radii), rtor (swept radius).
     /// - `Box3`: full side lengths x, y, z; centred on the origin.
     /// - `ConvexPolyhedron`: first plane index (bits of param[0] as u32), plane count (bits of param[1]).
@@ -77,7 +79,7 @@ code_enum! {
         ZSphere = 102 => "ZSPHERE",
         /// Capped cylinder along z.
         Cylinder = 103 => "CYLINDER",
-        /// Thin annulus along z.
+        /// Tube: annular cylinder along z.
         Disc = 104 => "DISC",
         /// Capped cone frustum along z.
         Cone = 105 => "CONE",

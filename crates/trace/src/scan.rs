@@ -55,10 +55,10 @@ pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<Ray
                 bail!("{source}: ray {i}: direction {d:?} is not finite");
             }
             let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if !(len > 0.0) || !len.is_finite() {
+            if len == 0.0 || !len.is_finite() {
                 bail!("{source}: ray {i}: direction {d:?} has zero length");
             }
-            if !tmin.is_finite() || tmax.is_nan() || !(tmin < tmax) {
+            if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
                 bail!("{source}: ray {i}: needs finite tmin < tmax, got {tmin} {tmax}");
             }
             Ok(RayRow {

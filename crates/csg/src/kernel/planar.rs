@@ -30,8 +30,8 @@ fn plane_span<T: Real>(o: V3<T>, d: V3<T>, n: V3<T>, dist: T) -> Option<Span<T>>
 /// Box `[sx, sy, sz]` (full side lengths) centred on the origin.
 pub fn box_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
     let mut span = Span::everywhere();
-    for k in 0..3 {
-        let h = T::HALF * p[k];
+    for (k, &size) in p[..3].iter().enumerate() {
+        let h = T::HALF * size;
         let mut axis = V3::zero();
         match k {
             0 => axis.x = T::ONE,

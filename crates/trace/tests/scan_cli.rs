@@ -1,0 +1,302 @@
+//! `hytrace scan` end to end: TOML scenes, rays in, hits and ids out (checked against
+//! analytic answers), sweeps, stats, and bad input that must fail cleanly without output.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+
+fn hytrace(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A sphere of radius 100 placed 20 m out and a box at the origin.
+const SCENE: &str = r#"
+[solids.ball]
+shape = "sphere(100)"
+
+[solids.crate]
+shape = "box(50, 50, 50) - sphere(20)"
+
+[[place]]
+solid = "ball"
+translate = [20000, 0, 0]
+
+[[place]]
+solid = "crate"
+rotate = [0, 0, 1, 45]
+"#;
+
+fn write_f32_rays(path: &Path, rows: &[[f32; 8]]) {
+    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+    write_array(
+        path,
+        Scalar::F32,
+        &[rows.len() as u64, 8],
+        bytemuck::cast_slice(&flat),
+    )
+    .unwrap();
+}
+
+fn read_f64(path: &Path) -> (Vec<u64>, Vec<f64>) {
+    let a = read_array(path).unwrap();
+    let v = match a.scalar {
+        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        Scalar::F64 => bytemuck::pod_collect_to_vec(&a.bytes),
+        s => panic!("unexpected {s:?}"),
+    };
+    (a.shape, v)
+}
+
+fn setup() -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    (tmp, scene)
+}
+
+#[test]
+fn scan_answers_match_the_analytic_sphere_and_name_the_instance() {
+    let (tmp, scene) = setup();
+    let rays = tmp.path().join("rays.npy");
+    // Rays from 1 m left of the far sphere towards points of its disc; one starting inside;
+    // one whose tmax stops short; one missing everything.
+    let mut rows = Vec::new();
+    for k in 0..50 {
+        let y = -90.0 + 3.6 * k as f32;
+        rows.push([19000.0, y, 0.0, 0.0, 1.0, 0.0, 0.0, f32::INFINITY]);
+    }
+    rows.push([20000.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY]);
+    rows.push([19000.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 800.0]);
+    rows.push([19000.0, 500.0, 0.0, 0.0, 1.0, 0.0, 0.0, f32::INFINITY]);
+    write_f32_rays(&rays, &rows);
+    for precision in ["f32", "f64"] {
+        let hits = tmp.path().join(format!("hits-{precision}.npy"));
+        let ids = tmp.path().join(format!("ids-{precision}.npy"));
+        let o = hytrace(&[
+            "scan",
+            scene.to_str().unwrap(),
+            "--rays",
+            rays.to_str().unwrap(),
+            "--out",
+            hits.to_str().unwrap(),
+            "--ids",
+            ids.to_str().unwrap(),
+            "--precision",
+            precision,
+            "--stats",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        for key in ["rays", "load_s", "build_s", "trace_s", "rays_per_s"] {
+            assert!(stats.get(key).is_some(), "stats lack {key}: {stats}");
+        }
+        assert_eq!(stats["rays"], rows.len());
+        let (shape, h) = read_f64(&hits);
+        assert_eq!(shape, vec![rows.len() as u64, 4]);
+        assert_eq!(
+            read_array(&hits).unwrap().scalar,
+            if precision == "f32" {
+                Scalar::F32
+            } else {
+                Scalar::F64
+            }
+        );
+        let ids = read_array(&ids).unwrap();
+        assert_eq!(ids.scalar, Scalar::I32);
+        let ids: Vec<i32> = bytemuck::pod_collect_to_vec(&ids.bytes);
+        let tol = if precision == "f32" { 1e-3 } else { 1e-6 };
+        for (k, r) in rows[..50].iter().enumerate() {
+            let y = r[1] as f64;
+            let want = 1000.0 - (100.0f64 * 100.0 - y * y).sqrt();
+            let hit = &h[4 * k..4 * k + 4];
+            assert!(
+                (hit[3] - want).abs() <= tol,
+                "{precision} ray {k}: t {} want {want}",
+                hit[3]
+            );
+            // Outward unit normal of the sphere at the hit point.
+            let n = [(-1000.0 + hit[3]) / 100.0, y / 100.0, 0.0];
+            for c in 0..3 {
+                assert!(
+                    (hit[c] - n[c]).abs() < 1e-3,
+                    "{precision} ray {k}: normal {hit:?} want {n:?}"
+                );
+            }
+            assert_eq!(ids[k], 0, "the far sphere is the first placement");
+        }
+        // From the centre of the ball upwards: the exit at 100 with normal +z.
+        let inside = &h[4 * 50..4 * 51];
+        assert!(
+            (inside[3] - 100.0).abs() <= tol && inside[2] > 0.999,
+            "{inside:?}"
+        );
+        // tmax 800 stops before the sphere at 900; the last ray misses.
+        assert!(h[4 * 51 + 3].is_infinite() && ids[51] == -1);
+        assert!(h[4 * 52 + 3].is_infinite() && ids[52] == -1);
+    }
+}
+
+#[test]
+fn sweeps_generate_rays_and_the_default_scene_scans() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rays = tmp.path().join("rays.npy");
+    let hits = tmp.path().join("hits.npy");
+    let o = hytrace(&[
+        "scan",
+        "default",
+        "--sweep",
+        "rect",
+        "--count",
+        "20",
+        "--rays",
+        rays.to_str().unwrap(),
+        "--out",
+        hits.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read_array(&rays).unwrap().shape, vec![400, 8]);
+    let (_, h) = read_f64(&hits);
+    assert!(h.chunks(4).any(|c| c[3].is_finite()));
+    // The same rays read back give the same hits.
+    let again = tmp.path().join("again.npy");
+    let o = hytrace(&[
+        "scan",
+        "--rays",
+        rays.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read_f64(&again).1, h);
+    for sweep in ["axis", "circle"] {
+        let out = tmp.path().join(format!("{sweep}.npy"));
+        let o = hytrace(&[
+            "scan",
+            "--sweep",
+            sweep,
+            "--count",
+            "50",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (_, h) = read_f64(&out);
+        assert!(
+            h.chunks(4).filter(|c| c[3].is_finite()).count() > 10,
+            "{sweep}"
+        );
+    }
+}
+
+#[test]
+fn bad_rays_and_scenes_fail_clearly_without_output() {
+    let (tmp, scene) = setup();
+    let out = tmp.path().join("hits.npy");
+    let scan = |scene: &Path, rays: &Path| {
+        hytrace(&[
+            "scan",
+            scene.to_str().unwrap(),
+            "--rays",
+            rays.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let good = [0.0f32, 0.0, -500.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY];
+    let mut cases: Vec<(String, PathBuf, &str)> = Vec::new();
+    let mut rays_case = |name: &str, rows: Vec<[f32; 8]>, needle: &'static str| {
+        let p = tmp.path().join(format!("{name}.npy"));
+        write_f32_rays(&p, &rows);
+        cases.push((name.to_string(), p, needle));
+    };
+    let mut nan = good;
+    nan[5] = f32::NAN;
+    rays_case("nan-direction", vec![good, nan], "ray 1: direction");
+    let mut zero = good;
+    zero[4..7].copy_from_slice(&[0.0, 0.0, 0.0]);
+    rays_case("zero-direction", vec![zero], "zero length");
+    let mut reversed = good;
+    reversed[3] = 10.0;
+    reversed[7] = 5.0;
+    rays_case(
+        "reversed-range",
+        vec![good, good, reversed],
+        "ray 2: needs finite tmin < tmax",
+    );
+    let mut inf_origin = good;
+    inf_origin[0] = f32::INFINITY;
+    rays_case("infinite-origin", vec![inf_origin], "origin");
+    // Wrong shape, wrong dtype, truncated, not npy.
+    let p = tmp.path().join("shape.npy");
+    write_array(&p, Scalar::F32, &[2, 7], &[0u8; 56]).unwrap();
+    cases.push(("shape".into(), p, "shape (N, 8)"));
+    let p = tmp.path().join("dtype.npy");
+    write_array(&p, Scalar::I32, &[1, 8], &[0u8; 32]).unwrap();
+    cases.push(("dtype".into(), p, "float32 or float64"));
+    let p = tmp.path().join("truncated.npy");
+    write_f32_rays(&p, &[good, good]);
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() - 10]).unwrap();
+    cases.push(("truncated".into(), p, "truncated.npy"));
+    let p = tmp.path().join("text.npy");
+    std::fs::write(&p, "not numpy").unwrap();
+    cases.push(("text".into(), p, "text.npy"));
+    for (name, path, needle) in &cases {
+        let o = scan(&scene, path);
+        assert!(!o.status.success(), "{name} must fail");
+        let e = stderr(&o);
+        assert!(e.contains(needle), "{name}: {e}");
+        assert!(
+            e.contains(path.file_name().unwrap().to_str().unwrap()),
+            "{name} names the file: {e}"
+        );
+        assert!(!out.exists(), "{name} left an output file");
+    }
+    // Scene files: unknown primitive, bad syntax, unknown solid, impossible parameter.
+    let good_rays = tmp.path().join("good.npy");
+    write_f32_rays(&good_rays, &[good]);
+    let scenes = [
+        (
+            "[solids.a]\nshape = \"blob(3)\"\n",
+            "unknown primitive `blob`",
+        ),
+        (
+            "[solids.a]\nshape = \"sphere(3\"\n",
+            "at column 9: expected `,`",
+        ),
+        (
+            "[solids.a]\nshape = \"sphere(3)\"\n[[place]]\nsolid = \"b\"\n",
+            "unknown solid `b`",
+        ),
+        ("[solids.a]\nshape = \"torus(0, 5, 2)\"\n", "swept radius"),
+        ("[solids.a\nshape = 1\n", "not a valid scene file"),
+        (
+            "[solids.a]\nshape = \"sphere(1) * sphere(1).translate(5, 0, 0)\"\n",
+            "empty",
+        ),
+    ];
+    for (k, (text, needle)) in scenes.iter().enumerate() {
+        let p = tmp.path().join(format!("bad{k}.toml"));
+        std::fs::write(&p, text).unwrap();
+        let o = scan(&p, &good_rays);
+        assert!(!o.status.success(), "{text}");
+        let e = stderr(&o);
+        assert!(
+            e.contains(needle) && e.contains(&format!("bad{k}.toml")),
+            "{text}: {e}"
+        );
+        assert!(!out.exists());
+    }
+}
