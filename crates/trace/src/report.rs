@@ -38,8 +38,30 @@ pub fn summary(f: &Foundry) -> serde_json::Value {
         "cpu_only_bytes": cpu_only_bytes,
         "files": file_names(),
         "solid_list": solids,
+        "placements": placements(f),
     })
 }
+
+/// Every placement in instance order: the numbering of `hytrace scan --ids`.
+fn placements(f: &Foundry) -> Vec<serde_json::Value> {
+    f.inst
+        .iter()
+        .zip(&f.inst_tran)
+        .enumerate()
+        .map(|(i, (inst, t))| {
+            json!({
+                "instance": i,
+                "solid": inst.solid,
+                "solid_name": f.solid_names.get(inst.solid as usize),
+                "copy_number": inst.copy_number,
+                "position": [t.rows[0][3], t.rows[1][3], t.rows[2][3]],
+            })
+        })
+        .collect()
+}
+
+/// Placements listed in text before the rest are summarized.
+const LISTED_PLACEMENTS: usize = 20;
 
 /// The summary as aligned text.
 pub fn summary_text(f: &Foundry) -> String {
@@ -71,6 +93,33 @@ pub fn summary_text(f: &Foundry) -> String {
             row["max_tree_height"].to_string(),
             row["instances"].to_string(),
             b.join(", ")
+        ));
+    }
+    out.push_str(&format!(
+        "{:>8}  {:<20} {:>6}  position (mm)   [instance numbers are scan --ids values]\n",
+        "instance", "solid", "copy"
+    ));
+    let rows = s["placements"].as_array().cloned().unwrap_or_default();
+    for row in rows.iter().take(LISTED_PLACEMENTS) {
+        let p: Vec<String> = row["position"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|v| format!("{:.1}", v.as_f64().unwrap_or(f64::NAN)))
+            .collect();
+        out.push_str(&format!(
+            "{:>8}  {:<20} {:>6}  ({})\n",
+            row["instance"].to_string(),
+            row["solid_name"].as_str().unwrap_or(""),
+            row["copy_number"].to_string(),
+            p.join(", ")
+        ));
+    }
+    if rows.len() > LISTED_PLACEMENTS {
+        out.push_str(&format!(
+            "{:>8}  ... {} more (all in `info --json`)\n",
+            "",
+            rows.len() - LISTED_PLACEMENTS
         ));
     }
     out

@@ -300,3 +300,36 @@ fn bad_rays_and_scenes_fail_clearly_without_output() {
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn every_scene_file_in_scenes_loads_and_scans() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    let tmp = tempfile::tempdir().unwrap();
+    let mut seen = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        seen += 1;
+        let out = tmp.path().join("hits.npy");
+        let o = hytrace(&[
+            "scan",
+            path.to_str().unwrap(),
+            "--sweep",
+            "circle",
+            "--count",
+            "360",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}: {}", path.display(), stderr(&o));
+        let (_, h) = read_f64(&out);
+        assert!(
+            h.chunks(4).any(|c| c[3].is_finite()),
+            "{}: no hits",
+            path.display()
+        );
+    }
+    assert!(seen > 0);
+}
