@@ -107,7 +107,7 @@ fn main() {
             .unwrap_or(f64::NAN)
             * 1e6
     );
-    println!("| solid kind | rays | hytrace f32 (rays/s) | hytrace f64 (rays/s) | Geant4 via geant4-pybind, 1 thread (queries/s) |");
+    println!("| solid kind | rays | hytrace f32 (rays/s) | hytrace f64 (rays/s) | Geant4 via geant4-pybind, 1 thread (rays/s) |");
     println!("|---|---:|---:|---:|---:|");
     let mut kinds: Vec<&String> = data.kinds.iter().collect();
     kinds.sort();

@@ -379,6 +379,18 @@ def gen_sphere(rng, i, s):
             "dphi": dphi, "stheta": stheta, "dtheta": dtheta}
 
 
+def _variant_phi(rng, v):
+    """The phi range of a solid variant ("phi_lt", "phi_gt", "inner_phi" or
+    a full turn)."""
+    if v == "phi_lt":
+        return phi_range(rng, "lt")
+    if v == "phi_gt":
+        return phi_range(rng, "gt")
+    if v == "inner_phi":
+        return phi_range(rng, pick_phi_variant(rng, 0.0))
+    return 0.0, F32_TWO_PI
+
+
 def _tubs_radii_phi(rng, i, s):
     variants = ["full", "inner", "phi_lt", "phi_gt", "inner_phi"]
     v = variants[i % len(variants)]
@@ -386,13 +398,7 @@ def _tubs_radii_phi(rng, i, s):
     rmin = 0.0
     if v in ("inner", "inner_phi"):
         rmin = f32(rmax * rng.uniform(0.15, 0.85))
-    sphi, dphi = 0.0, F32_TWO_PI
-    if v == "phi_lt":
-        sphi, dphi = phi_range(rng, "lt")
-    elif v == "phi_gt":
-        sphi, dphi = phi_range(rng, "gt")
-    elif v == "inner_phi":
-        sphi, dphi = phi_range(rng, pick_phi_variant(rng, 0.0))
+    sphi, dphi = _variant_phi(rng, v)
     return rmin, rmax, sphi, dphi
 
 
@@ -467,13 +473,7 @@ def gen_torus(rng, i, s):
     if v in ("inner", "inner_phi"):
         rmin = f32(rmax * rng.uniform(0.2, 0.8))
     rtor = f32(rmax * rng.uniform(1.3, 4.0))
-    sphi, dphi = 0.0, F32_TWO_PI
-    if v == "phi_lt":
-        sphi, dphi = phi_range(rng, "lt")
-    elif v == "phi_gt":
-        sphi, dphi = phi_range(rng, "gt")
-    elif v == "inner_phi":
-        sphi, dphi = phi_range(rng, pick_phi_variant(rng, 0.0))
+    sphi, dphi = _variant_phi(rng, v)
     if dphi < TWO_PI and (sphi < 0.0 or sphi + dphi > TWO_PI):
         # G4Torus::Inside (11.4) answers "not inside" for every interior point
         # when the phi range contains phi = 0, which also corrupts the

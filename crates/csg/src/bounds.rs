@@ -7,6 +7,16 @@ use crate::shape::Primitive;
 /// Bounds as min xyz, max xyz in double precision.
 pub type Aabb = [f64; 6];
 
+/// The empty bounds (min +inf, max -inf): the identity of bounds unions.
+pub const EMPTY_AABB: Aabb = [
+    f64::INFINITY,
+    f64::INFINITY,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    f64::NEG_INFINITY,
+    f64::NEG_INFINITY,
+];
+
 /// Half-size of the box standing for "everywhere" in the bounds of unbounded primitives
 /// (finite, so it survives transforms and f32 storage).
 pub const UNBOUNDED: f64 = 1e30;
@@ -39,14 +49,7 @@ pub fn primitive_bounds(p: &Primitive) -> Aabb {
         }
         &Primitive::Paraboloid { rhi, dz, .. } => revolution(rhi, -dz, dz),
         Primitive::Polyhedron { planes } => {
-            let mut b = [
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::INFINITY,
-                -f64::INFINITY,
-                -f64::INFINITY,
-                -f64::INFINITY,
-            ];
+            let mut b = EMPTY_AABB;
             for v in polyhedron_vertices(planes) {
                 for k in 0..3 {
                     b[k] = b[k].min(v[k]);
@@ -130,14 +133,7 @@ fn meet(a: &[f64; 4], b: &[f64; 4], c: &[f64; 4]) -> Option<[f64; 3]> {
 
 /// Bounds of the eight corners of `b` mapped through `t`.
 pub fn transform_bounds(b: &Aabb, t: &Transform64) -> Aabb {
-    let mut out = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
+    let mut out = EMPTY_AABB;
     for corner in 0..8 {
         let p = [0, 1, 2].map(|k| if corner >> k & 1 == 0 { b[k] } else { b[k + 3] });
         let q = t.apply_point(p);

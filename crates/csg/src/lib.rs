@@ -17,7 +17,7 @@ mod real;
 mod shape;
 mod tree;
 
-pub use bounds::{polyhedron_vertices, Aabb, UNBOUNDED};
+pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
 pub use expr::{parse_shape, ExprError};
 pub use prim_tree::{ray_meets_bounds, Bounds, PrimTree};
 pub use real::{Crossing, Ray, Real, V3};

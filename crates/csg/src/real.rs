@@ -31,6 +31,8 @@ pub trait Real:
     const INFINITY: Self;
     /// Pi.
     const PI: Self;
+    /// Machine epsilon (the gap between 1 and the next representable value).
+    const EPSILON: Self;
     /// Relative surface tolerance: crossings closer than this times the solid's size to the
     /// start of a query are the surface the query starts on, and two crossings closer than
     /// this are one (coincident faces).
@@ -80,6 +82,7 @@ macro_rules! impl_real {
             const HALF: Self = 0.5;
             const INFINITY: Self = $t::INFINITY;
             const PI: Self = std::$t::consts::PI;
+            const EPSILON: Self = $t::EPSILON;
             const SURFACE_TOLERANCE: Self = $tol;
             const NAME: &'static str = stringify!($t);
 

@@ -60,6 +60,17 @@ fn placements(f: &Foundry) -> Vec<serde_json::Value> {
         .collect()
 }
 
+/// A JSON array of numbers as comma-separated text with one decimal.
+fn one_decimal(values: &serde_json::Value) -> String {
+    let parts: Vec<String> = values
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|v| format!("{:.1}", v.as_f64().unwrap_or(f64::NAN)))
+        .collect();
+    parts.join(", ")
+}
+
 /// Placements listed in text before the rest are summarized.
 const LISTED_PLACEMENTS: usize = 20;
 
@@ -79,12 +90,7 @@ pub fn summary_text(f: &Foundry) -> String {
         "index", "solid", "prims", "height", "instances"
     ));
     for row in s["solid_list"].as_array().into_iter().flatten() {
-        let b: Vec<String> = row["aabb"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .map(|v| format!("{:.1}", v.as_f64().unwrap_or(f64::NAN)))
-            .collect();
+        let b = one_decimal(&row["aabb"]);
         out.push_str(&format!(
             "{:>5}  {:<20} {:>5} {:>6} {:>9}  [{}]\n",
             row["index"].to_string(),
@@ -92,7 +98,7 @@ pub fn summary_text(f: &Foundry) -> String {
             row["prims"].to_string(),
             row["max_tree_height"].to_string(),
             row["instances"].to_string(),
-            b.join(", ")
+            b
         ));
     }
     out.push_str(&format!(
@@ -101,18 +107,13 @@ pub fn summary_text(f: &Foundry) -> String {
     ));
     let rows = s["placements"].as_array().cloned().unwrap_or_default();
     for row in rows.iter().take(LISTED_PLACEMENTS) {
-        let p: Vec<String> = row["position"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .map(|v| format!("{:.1}", v.as_f64().unwrap_or(f64::NAN)))
-            .collect();
+        let p = one_decimal(&row["position"]);
         out.push_str(&format!(
             "{:>8}  {:<20} {:>6}  ({})\n",
             row["instance"].to_string(),
             row["solid_name"].as_str().unwrap_or(""),
             row["copy_number"].to_string(),
-            p.join(", ")
+            p
         ));
     }
     if rows.len() > LISTED_PLACEMENTS {

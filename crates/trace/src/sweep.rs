@@ -1,6 +1,7 @@
 //! Ray sweeps around a scene in the style of Opticks' ScanTest: `axis`, `rect` and
 //! `circle` fans generated from the scene's bounds.
 
+use hytrace_csg::{transform_bounds, EMPTY_AABB};
 use hytrace_foundry::Foundry;
 
 use crate::scan::RayRow;
@@ -19,24 +20,13 @@ pub enum Sweep {
 
 /// World bounds of every placed solid, `[min xyz, max xyz]` (`None` for an empty scene).
 pub fn scene_bounds(f: &Foundry) -> Option<[f64; 6]> {
-    let mut b = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
+    let mut b = EMPTY_AABB;
     for (inst, tran) in f.inst.iter().zip(&f.inst_tran) {
-        let a = f.solid[inst.solid as usize].aabb;
-        for corner in 0..8 {
-            let p: [f64; 3] =
-                std::array::from_fn(|k| a[if corner >> k & 1 == 0 { k } else { k + 3 }] as f64);
-            let q = tran.apply_point(p);
-            for k in 0..3 {
-                b[k] = b[k].min(q[k]);
-                b[k + 3] = b[k + 3].max(q[k]);
-            }
+        let a = f.solid[inst.solid as usize].aabb.map(f64::from);
+        let w = transform_bounds(&a, tran);
+        for k in 0..3 {
+            b[k] = b[k].min(w[k]);
+            b[k + 3] = b[k + 3].max(w[k + 3]);
         }
     }
     (b[0] <= b[3]).then_some(b)

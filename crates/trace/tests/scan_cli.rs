@@ -299,6 +299,22 @@ fn bad_rays_and_scenes_fail_clearly_without_output() {
         );
         assert!(!out.exists());
     }
+    // A tree that regrouping cannot make shallow enough is rejected, naming the solid.
+    let mut deep = "sphere(100)".to_string();
+    for i in 0..12 {
+        let op = if i % 2 == 0 { "*" } else { "+" };
+        deep = format!("({deep} {op} sphere(50).translate({i}, 0, 0))");
+    }
+    let p = tmp.path().join("deep.toml");
+    std::fs::write(&p, format!("[solids.tower]\nshape = \"{deep}\"\n")).unwrap();
+    let o = scan(&p, &good_rays);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("solid `tower`") && e.contains("exceeds the evaluator's limit"),
+        "{e}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]

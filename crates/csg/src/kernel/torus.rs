@@ -76,21 +76,11 @@ const SPHERE_MARGIN: f64 = 1.0 / 64.0;
 /// least every second step).
 const MAX_ITERATIONS: usize = 64;
 
-/// Machine epsilon of `T` (2^-52 for f64, 2^-23 for f32): whether `1 + 2^-30` rounds to 1
-/// tells the two apart. `Real` has no such constant; this folds to one at compile time.
-fn machine_epsilon<T: Real>() -> T {
-    if T::from_f64(1.0 + 1.0 / 1_073_741_824.0) > T::ONE {
-        T::from_f64(f64::EPSILON)
-    } else {
-        T::from_f64(f32::EPSILON as f64)
-    }
-}
-
 /// `a * b` as an unevaluated sum `hi + lo` (Dekker's product with Veltkamp's split: exact in
 /// round-to-nearest binary arithmetic barring overflow, and needs no fused multiply-add).
 fn two_product<T: Real>(a: T, b: T) -> (T, T) {
     // 2^ceil(p/2) + 1 for the p-bit significand of T.
-    let splitter = if machine_epsilon::<T>() < T::from_f64(1e-10) {
+    let splitter = if T::EPSILON < T::from_f64(1e-10) {
         T::from_f64(134_217_729.0)
     } else {
         T::from_f64(4097.0)
@@ -235,7 +225,7 @@ struct Line<T> {
 impl<T: Real> Line<T> {
     fn new(c: V3<T>, u: V3<T>, big: T, small: T) -> Self {
         let m = c.x * u.y - c.y * u.x;
-        let eps = machine_epsilon::<T>();
+        let eps = T::EPSILON;
         Line {
             c,
             u,

@@ -8,7 +8,7 @@
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
-use hytrace_csg::{ray_meets_bounds, Bounds, PrimTree, Ray, Real, V3};
+use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PrimTree, Ray, Real, V3};
 use hytrace_foundry::{Foundry, PrimKind};
 
 /// One placement of a solid.
@@ -38,22 +38,12 @@ pub struct CpuScene<T> {
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for corner in 0..8 {
-        let p: [f64; 3] =
-            std::array::from_fn(|k| aabb[if corner >> k & 1 == 0 { k } else { k + 3 }] as f64);
-        let q = t.apply_point(p);
-        for k in 0..3 {
-            lo[k] = lo[k].min(q[k]);
-            hi[k] = hi[k].max(q[k]);
-        }
-    }
+    let b = transform_bounds(&aabb.map(f64::from), t);
     // Widen by a relative hair so rounding to T never clips a surface.
-    let pad = 1e-6 * (0..3).fold(1.0f64, |a, k| a.max(lo[k].abs()).max(hi[k].abs()));
+    let pad = 1e-6 * b.iter().fold(1.0f64, |a, v| a.max(v.abs()));
     [
-        V3::from_f64(lo.map(|v| v - pad)),
-        V3::from_f64(hi.map(|v| v + pad)),
+        V3::from_f64([b[0] - pad, b[1] - pad, b[2] - pad]),
+        V3::from_f64([b[3] + pad, b[4] + pad, b[5] + pad]),
     ]
 }
 
