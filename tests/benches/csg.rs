@@ -14,7 +14,10 @@ use hytrace_tests::oracle_python;
 use rayon::prelude::*;
 
 /// Rays per second of `trees` answering `rays` (tree index, ray), repeated for >= 0.3 s.
-fn rate<T: Real>(trees: &[PrimTree<T>], rays: &[(usize, [f64; 8])]) -> f64 {
+fn rate<T: Real, P: Sync + Fn(usize, &Ray<T>) -> bool>(
+    first_hit: P,
+    rays: &[(usize, [f64; 8])],
+) -> f64 {
     let prepared: Vec<(usize, Ray<T>)> = rays
         .iter()
         .map(|(i, r)| {
@@ -32,7 +35,7 @@ fn rate<T: Real>(trees: &[PrimTree<T>], rays: &[(usize, [f64; 8])]) -> f64 {
     while start.elapsed().as_secs_f64() < 0.3 {
         let hits: usize = prepared
             .par_iter()
-            .map(|(i, ray)| trees[*i].first_crossing(ray, T::ZERO).is_hit() as usize)
+            .map(|(i, ray)| first_hit(*i, ray) as usize)
             .sum();
         std::hint::black_box(hits);
         done += prepared.len();
@@ -126,8 +129,14 @@ fn main() {
         println!(
             "| {kind} | {} | {:.3e} | {:.3e} | {:.3e} |",
             rays.len(),
-            rate(&trees32, &rays),
-            rate(&trees64, &rays),
+            rate(
+                |i, r: &Ray<f32>| trees32[i].first_crossing(r, 0.0).is_hit(),
+                &rays
+            ),
+            rate(
+                |i, r: &Ray<f64>| trees64[i].first_crossing(r, 0.0).is_hit(),
+                &rays
+            ),
             g4_rate
         );
     }
@@ -175,8 +184,14 @@ fn main() {
         }
         println!(
             "| {height} | {nodes} | {:.3e} | {:.3e} |",
-            rate(&t32, &rays),
-            rate(&t64, &rays)
+            rate(
+                |i, r: &Ray<f32>| t32[i].first_crossing(r, 0.0).is_hit(),
+                &rays
+            ),
+            rate(
+                |i, r: &Ray<f64>| t64[i].first_crossing(r, 0.0).is_hit(),
+                &rays
+            )
         );
     }
 }

@@ -5,11 +5,11 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use hytrace_csg::geant4::G4Solid;
-use hytrace_csg::{to_tree, PrimTree, Ray, Real, V3};
+use hytrace_csg::geant4::{G4Geometry, G4Solid};
+use hytrace_csg::{to_tree, PreparedPrim, Ray, Real, V3};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
-use hytrace_foundry::{Foundry, UNSET};
+use hytrace_foundry::{Foundry, Triangle, UNSET};
 use serde::Deserialize;
 
 /// One oracle run: the solids, rays and Geant4's answers.
@@ -100,33 +100,54 @@ pub fn run_oracle(python: &Path, dir: &Path, args: &[&str]) -> OracleData {
     }
 }
 
-/// Builds one Foundry solid per Geant4 solid and prepares each for tracing in `T`.
-pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PrimTree<T>> {
+/// Distance within which meshes of solids with no analytic form follow the true surface.
+pub const TESSELLATION_TOLERANCE: f64 = 1e-3;
+
+/// Builds one Foundry solid per Geant4 solid (CSG, or a mesh within
+/// [`TESSELLATION_TOLERANCE`]) and prepares each for tracing in `T`.
+pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PreparedPrim<T>> {
     let mut f = Foundry::new();
     for (i, s) in solids.iter().enumerate() {
-        let shape = s
-            .to_shape()
+        let geometry = s
+            .to_geometry(TESSELLATION_TOLERANCE)
             .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
-        let tree = to_tree(&shape).unwrap_or_else(|e| panic!("solid {i}: {e}"));
         let mut b = f.begin_solid(&format!("oracle{i}"));
-        b.add_csg(tree, i as u32, UNSET).unwrap();
+        match geometry {
+            G4Geometry::Csg(shape) => {
+                let tree = to_tree(&shape).unwrap_or_else(|e| panic!("solid {i}: {e}"));
+                b.add_csg(tree, i as u32, UNSET).unwrap();
+            }
+            G4Geometry::Mesh(tris) => {
+                let tris: Vec<Triangle> = tris
+                    .iter()
+                    .map(|t| Triangle {
+                        v: t.map(|v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0]),
+                    })
+                    .collect();
+                b.add_mesh(&tris, None, i as u32, UNSET).unwrap();
+            }
+        }
         b.finish(i as u32).unwrap();
     }
     f.validate().unwrap();
     (0..solids.len())
-        .map(|i| PrimTree::from_foundry(&f, i).unwrap())
+        .map(|i| {
+            PreparedPrim::from_foundry(&f, i)
+                .unwrap()
+                .expect("a surface prim")
+        })
         .collect()
 }
 
 /// hytrace's answer for one oracle ray: the first crossing distance (inf: none) and whether
-/// the ray starts inside by the tree's inside test.
-pub fn answer<T: Real>(tree: &PrimTree<T>, r: &[f64; 8]) -> (f64, bool) {
+/// the ray starts inside by the prim's inside test.
+pub fn answer<T: Real>(prim: &PreparedPrim<T>, r: &[f64; 8]) -> (f64, bool) {
     let ray = Ray {
         origin: V3::from_f64([r[0], r[1], r[2]]),
         direction: V3::from_f64([r[4], r[5], r[6]]),
     };
-    let step = tree.first_crossing(&ray, T::from_f64(r[3]));
-    (step.t.to_f64(), tree.contains(ray.origin))
+    let step = prim.first_crossing(&ray, T::from_f64(r[3]));
+    (step.t.to_f64(), prim.contains(ray.origin))
 }
 
 /// The agreement tolerance of the CSG issue: `max(1e-4 mm, 2e-6 (|origin| + t))`.

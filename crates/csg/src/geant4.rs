@@ -33,6 +33,7 @@ use crate::shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Shape,
 };
+use crate::tessellate::{ruled_solid, section_stack, signed_area2, Tri};
 use hytrace_foundry::Transform64;
 
 /// A Geant4 solid with its constructor's parameters (mm, rad, half-lengths).
@@ -172,12 +173,77 @@ pub enum G4Solid {
         p3: [f64; 3],
         p4: [f64; 3],
     },
+    /// G4TwistedBox(twistedangle, dx, dy, dz): a box twisted about z (mesh).
+    TwistedBox {
+        twistedangle: f64,
+        dx: f64,
+        dy: f64,
+        dz: f64,
+    },
+    /// G4TwistedTrd(dx1, dx2, dy1, dy2, dz, twistedangle) (mesh).
+    TwistedTrd {
+        dx1: f64,
+        dx2: f64,
+        dy1: f64,
+        dy2: f64,
+        dz: f64,
+        twistedangle: f64,
+    },
+    /// G4TwistedTrap(twistedangle, dz, theta, phi, dy1, dx1, dx2, dy2, dx3, dx4, alpha)
+    /// (mesh).
+    TwistedTrap {
+        twistedangle: f64,
+        dz: f64,
+        theta: f64,
+        phi: f64,
+        dy1: f64,
+        dx1: f64,
+        dx2: f64,
+        dy2: f64,
+        dx3: f64,
+        dx4: f64,
+        alpha: f64,
+    },
+    /// G4GenericTrap(dz, 8 xy vertices: four at -dz, four at +dz) (mesh; exact when
+    /// untwisted).
+    GenericTrap { dz: f64, vertices: Vec<[f64; 2]> },
+    /// G4ExtrudedSolid(polygon, z sections) (exact mesh).
+    Xtru {
+        polygon: Vec<[f64; 2]>,
+        sections: Vec<XtruSection>,
+    },
+    /// G4TessellatedSolid of triangular or quadrangular facets (absolute vertices,
+    /// counter-clockwise seen from outside) (exact mesh).
+    Tessellated { facets: Vec<Vec<[f64; 3]>> },
     /// G4UnionSolid(a, b, transform).
     Union(Boolean),
     /// G4SubtractionSolid(a, b, transform).
     Subtraction(Boolean),
     /// G4IntersectionSolid(a, b, transform).
     Intersection(Boolean),
+}
+
+/// One z section of a G4ExtrudedSolid: the polygon scaled by `scale` and moved by
+/// `offset` at height `z`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct XtruSection {
+    /// Height.
+    pub z: f64,
+    /// xy offset of the polygon.
+    pub offset: [f64; 2],
+    /// Scale of the polygon.
+    pub scale: f64,
+}
+
+/// What a Geant4 solid becomes: an exact CSG expression, or a closed triangle mesh where
+/// no analytic form exists here (twisted solids, extrusions, tessellated solids).
+#[derive(Clone, Debug, PartialEq)]
+pub enum G4Geometry {
+    /// An exact expression.
+    Csg(Shape),
+    /// Triangles counter-clockwise seen from outside, in the solid's frame.
+    Mesh(Vec<Tri>),
 }
 
 /// The operands of a Geant4 boolean solid: `b` is placed in `a`'s frame by
@@ -611,9 +677,235 @@ impl G4Solid {
                 }
                 Ok(cone(zheight + zcut, -zcut, zheight - zcut, zcut)?.scale(xsemi, ysemi, 1.0))
             }
+            G4Solid::TwistedBox { .. }
+            | G4Solid::TwistedTrd { .. }
+            | G4Solid::TwistedTrap { .. }
+            | G4Solid::GenericTrap { .. }
+            | G4Solid::Xtru { .. }
+            | G4Solid::Tessellated { .. } => Err(bad(
+                "geant4",
+                format!(
+                    "{} has no analytic form: it is a mesh (see to_geometry)",
+                    self.kind()
+                ),
+            )),
             G4Solid::Union(b) => Ok(b.a.to_shape()? + b.placed_b()?),
             G4Solid::Subtraction(b) => Ok(b.a.to_shape()? - b.placed_b()?),
             G4Solid::Intersection(b) => Ok(b.a.to_shape()? * b.placed_b()?),
+        }
+    }
+}
+
+impl G4Solid {
+    /// The solid's JSON `type` name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            G4Solid::Box { .. } => "box",
+            G4Solid::Orb { .. } => "orb",
+            G4Solid::Sphere { .. } => "sphere",
+            G4Solid::Tubs { .. } => "tubs",
+            G4Solid::CutTubs { .. } => "cutTubs",
+            G4Solid::Cons { .. } => "cons",
+            G4Solid::Torus { .. } => "torus",
+            G4Solid::Trd { .. } => "trd",
+            G4Solid::Trap { .. } => "trap",
+            G4Solid::Para { .. } => "para",
+            G4Solid::Polycone { .. } => "polycone",
+            G4Solid::Polyhedra { .. } => "polyhedra",
+            G4Solid::Hype { .. } => "hype",
+            G4Solid::Paraboloid { .. } => "paraboloid",
+            G4Solid::Ellipsoid { .. } => "ellipsoid",
+            G4Solid::Eltube { .. } => "eltube",
+            G4Solid::Elcone { .. } => "elcone",
+            G4Solid::Tet { .. } => "tet",
+            G4Solid::TwistedBox { .. } => "twistedBox",
+            G4Solid::TwistedTrd { .. } => "twistedTrd",
+            G4Solid::TwistedTrap { .. } => "twistedTrap",
+            G4Solid::GenericTrap { .. } => "genericTrap",
+            G4Solid::Xtru { .. } => "xtru",
+            G4Solid::Tessellated { .. } => "tessellated",
+            G4Solid::Union(_) => "union",
+            G4Solid::Subtraction(_) => "subtraction",
+            G4Solid::Intersection(_) => "intersection",
+        }
+    }
+
+    /// The solid as an exact expression, or as a closed mesh within `tolerance` mm of the
+    /// true surface for the solids with no analytic form here.
+    pub fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError> {
+        let rotated = |p: [f64; 2], angle: f64, z: f64| {
+            let (s, c) = angle.sin_cos();
+            [c * p[0] - s * p[1], s * p[0] + c * p[1], z]
+        };
+        let positive = |what: &'static str, v: &[f64]| {
+            if v.iter().all(|x| x.is_finite() && *x > 0.0) {
+                Ok(())
+            } else {
+                Err(bad(
+                    what,
+                    format!("lengths must be finite and > 0, got {v:?}"),
+                ))
+            }
+        };
+        match self {
+            &G4Solid::TwistedBox {
+                twistedangle,
+                dx,
+                dy,
+                dz,
+            } => {
+                positive("twistedBox", &[dx, dy, dz])?;
+                let section = |z: f64| {
+                    let a = twistedangle * z / (2.0 * dz);
+                    [[-dx, -dy], [dx, -dy], [dx, dy], [-dx, dy]]
+                        .map(|p| rotated(p, a, z))
+                        .to_vec()
+                };
+                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
+            }
+            &G4Solid::TwistedTrd {
+                dx1,
+                dx2,
+                dy1,
+                dy2,
+                dz,
+                twistedangle,
+            } => {
+                positive("twistedTrd", &[dx1, dx2, dy1, dy2, dz])?;
+                let section = |z: f64| {
+                    let f = (z + dz) / (2.0 * dz);
+                    let (hx, hy) = (dx1 + f * (dx2 - dx1), dy1 + f * (dy2 - dy1));
+                    let a = twistedangle * z / (2.0 * dz);
+                    [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]
+                        .map(|p| rotated(p, a, z))
+                        .to_vec()
+                };
+                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
+            }
+            &G4Solid::TwistedTrap {
+                twistedangle,
+                dz,
+                theta,
+                phi,
+                dy1,
+                dx1,
+                dx2,
+                dy2,
+                dx3,
+                dx4,
+                alpha,
+            } => {
+                positive("twistedTrap", &[dz, dy1, dx1, dx2, dy2, dx3, dx4])?;
+                let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
+                let ta = alpha.tan();
+                let section = |z: f64| {
+                    let f = (z + dz) / (2.0 * dz);
+                    let dy = dy1 + f * (dy2 - dy1);
+                    let (xa, xb) = (dx1 + f * (dx3 - dx1), dx2 + f * (dx4 - dx2));
+                    let a = twistedangle * z / (2.0 * dz);
+                    // The trapezoid in its own plane, rotated, then shifted along the
+                    // (theta, phi) axis.
+                    [
+                        [-dy * ta - xa, -dy],
+                        [-dy * ta + xa, -dy],
+                        [dy * ta + xb, dy],
+                        [dy * ta - xb, dy],
+                    ]
+                    .map(|p| {
+                        let q = rotated(p, a, z);
+                        [q[0] + z * tx, q[1] + z * ty, z]
+                    })
+                    .to_vec()
+                };
+                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
+            }
+            G4Solid::GenericTrap { dz, vertices } => {
+                let dz = *dz;
+                positive("genericTrap", &[dz])?;
+                if vertices.len() != 8 || !vertices.iter().flatten().all(|v| v.is_finite()) {
+                    return Err(bad(
+                        "genericTrap",
+                        format!("needs 8 finite vertices, got {}", vertices.len()),
+                    ));
+                }
+                let (mut bottom, mut top) = (vertices[..4].to_vec(), vertices[4..].to_vec());
+                // Geant4 lists the vertices clockwise; sections run counter-clockwise.
+                let area = signed_area2(&bottom) + signed_area2(&top);
+                if area < 0.0 {
+                    bottom.reverse();
+                    top.reverse();
+                } else if area == 0.0 {
+                    return Err(bad("genericTrap", "the faces have no area".into()));
+                }
+                let section = |z: f64| {
+                    let f = (z + dz) / (2.0 * dz);
+                    (0..4)
+                        .map(|k| {
+                            let (b, t) = (bottom[k], top[k]);
+                            [b[0] + f * (t[0] - b[0]), b[1] + f * (t[1] - b[1]), z]
+                        })
+                        .collect()
+                };
+                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
+            }
+            G4Solid::Xtru { polygon, sections } => {
+                if sections.len() < 2
+                    || sections
+                        .windows(2)
+                        .any(|w| w[0].z.partial_cmp(&w[1].z) != Some(std::cmp::Ordering::Less))
+                {
+                    return Err(bad(
+                        "xtru",
+                        "needs 2 or more sections with increasing z".into(),
+                    ));
+                }
+                if sections.iter().any(|s| {
+                    s.scale.is_nan() || s.scale <= 0.0 || !s.offset.iter().all(|v| v.is_finite())
+                }) {
+                    return Err(bad(
+                        "xtru",
+                        "section scales must be > 0 and offsets finite".into(),
+                    ));
+                }
+                let mut poly = polygon.clone();
+                if signed_area2(&poly) < 0.0 {
+                    poly.reverse();
+                }
+                let levels: Vec<Vec<[f64; 3]>> = sections
+                    .iter()
+                    .map(|s| {
+                        poly.iter()
+                            .map(|p| {
+                                [
+                                    s.scale * p[0] + s.offset[0],
+                                    s.scale * p[1] + s.offset[1],
+                                    s.z,
+                                ]
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let corners: Vec<usize> = (0..poly.len()).collect();
+                Ok(G4Geometry::Mesh(section_stack(&levels, &corners)?))
+            }
+            G4Solid::Tessellated { facets } => {
+                let mut tris: Vec<Tri> = Vec::with_capacity(facets.len());
+                for (i, f) in facets.iter().enumerate() {
+                    if !(f.len() == 3 || f.len() == 4) || !f.iter().flatten().all(|v| v.is_finite())
+                    {
+                        return Err(bad(
+                            "tessellated",
+                            format!("facet {i}: needs 3 or 4 finite vertices, got {}", f.len()),
+                        ));
+                    }
+                    tris.push([f[0], f[1], f[2]]);
+                    if f.len() == 4 {
+                        tris.push([f[0], f[2], f[3]]);
+                    }
+                }
+                Ok(G4Geometry::Mesh(tris))
+            }
+            other => other.to_shape().map(G4Geometry::Csg),
         }
     }
 }

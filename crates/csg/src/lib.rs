@@ -12,13 +12,18 @@ mod bounds;
 pub mod expr;
 pub mod geant4;
 pub mod kernel;
+pub mod mesh;
+mod prepared;
 mod prim_tree;
 mod real;
 mod shape;
+pub mod tessellate;
 mod tree;
 
 pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
 pub use expr::{parse_shape, ExprError};
+pub use mesh::MeshPrim;
+pub use prepared::PreparedPrim;
 pub use prim_tree::{ray_meets_bounds, Bounds, PrimTree};
 pub use real::{Crossing, Ray, Real, V3};
 pub use shape::{

@@ -1,15 +1,15 @@
 //! The CPU tracer: the first surface crossing of a ray among all placed CSG solids of a
 //! Foundry, in f32 or f64.
 //!
-//! Every instance is tested by its world bounds, then its solid's CSG prims by their bounds
-//! in the solid's frame, then the prims' trees (see [`hytrace_csg::PrimTree`]). Mesh and
-//! volume prims are not surfaces this tracer crosses. A bounding volume hierarchy over the
+//! Every instance is tested by its world bounds, then its solid's CSG and mesh prims by
+//! their bounds in the solid's frame, then the prims themselves (see
+//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. A bounding volume hierarchy over the
 //! instances replaces the linear loop in the BVH issue; the answers do not change.
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
-use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PrimTree, Ray, Real, V3};
-use hytrace_foundry::{Foundry, PrimKind};
+use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3};
+use hytrace_foundry::Foundry;
 
 /// One placement of a solid.
 #[derive(Clone, Debug)]
@@ -34,7 +34,7 @@ pub struct Hit<T> {
 #[derive(Clone, Debug)]
 pub struct CpuScene<T> {
     placements: Vec<Placement<T>>,
-    solids: Vec<Vec<PrimTree<T>>>,
+    solids: Vec<Vec<PreparedPrim<T>>>,
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
@@ -54,11 +54,10 @@ impl<T: Real> CpuScene<T> {
         for (i, s) in f.solid.iter().enumerate() {
             let mut trees = Vec::new();
             for p in s.prim_offset as usize..(s.prim_offset + s.num_prim) as usize {
-                if f.prim[p].kind == PrimKind::Csg as u32 {
-                    trees.push(PrimTree::from_foundry(f, p).with_context(|| {
-                        format!("solid {i} `{}`", f.solid_names.get(i).map_or("", |n| n))
-                    })?);
-                }
+                let prepared = PreparedPrim::from_foundry(f, p).with_context(|| {
+                    format!("solid {i} `{}`", f.solid_names.get(i).map_or("", |n| n))
+                })?;
+                trees.extend(prepared);
             }
             solids.push(trees);
         }

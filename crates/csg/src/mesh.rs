@@ -1,0 +1,180 @@
+//! Triangle-mesh prims: closed meshes (tessellated solids, or solids with no analytic form
+//! here) traced in f32 or f64 with the same crossing semantics as CSG trees.
+//!
+//! Triangles are tested one by one after a bounds test (a BVH over large meshes comes with
+//! the BVH issue). Triangles are counter-clockwise seen from outside, so the geometric
+//! normal `(v1 - v0) x (v2 - v0)` points out and classifies each crossing as an entry or an
+//! exit.
+
+use hytrace_foundry::{Foundry, PrimKind, Transform64};
+
+use crate::kernel::Step;
+use crate::prim_tree::{ray_meets_bounds, Bounds};
+use crate::real::{Ray, Real, V3};
+use crate::shape::CsgError;
+
+/// A closed triangle mesh ready for intersection in precision `T`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshPrim<T> {
+    triangles: Vec<[V3<T>; 3]>,
+    bounds: Bounds<T>,
+    scale: T,
+}
+
+/// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
+/// components, so it does not run along the edges of ordinary meshes.
+const PARITY_DIRECTION: [f64; 3] = [0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8];
+
+impl<T: Real> MeshPrim<T> {
+    /// A mesh from triangles (f64 vertices in the solid's frame).
+    pub fn new(triangles: &[[[f64; 3]; 3]]) -> Result<Self, CsgError> {
+        if triangles.is_empty() {
+            return Err(CsgError {
+                primitive: "mesh",
+                problem: "a mesh needs at least one triangle".into(),
+            });
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for v in triangles.iter().flatten() {
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(CsgError {
+                    primitive: "mesh",
+                    problem: format!("vertex {v:?} is not finite"),
+                });
+            }
+            for k in 0..3 {
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+        }
+        let size = (0..3).fold(0.0f64, |a, k| a.max(hi[k] - lo[k]));
+        // Rounding vertices to T must not clip them out of the bounds.
+        let pad = 1e-6 * (size + (0..3).fold(0.0f64, |a, k| a.max(lo[k].abs()).max(hi[k].abs())));
+        Ok(MeshPrim {
+            triangles: triangles.iter().map(|t| t.map(V3::from_f64)).collect(),
+            bounds: [
+                V3::from_f64(lo.map(|v| v - pad)),
+                V3::from_f64(hi.map(|v| v + pad)),
+            ],
+            scale: T::from_f64(0.5 * size.max(f64::MIN_POSITIVE)),
+        })
+    }
+
+    /// Mesh prim `prim` of a validated Foundry, its triangles mapped into the solid's frame.
+    pub fn from_foundry(foundry: &Foundry, prim: usize) -> Result<Self, CsgError> {
+        let err = |problem: String| CsgError {
+            primitive: "mesh",
+            problem: format!("prim {prim}: {problem}"),
+        };
+        let p = foundry
+            .prim
+            .get(prim)
+            .ok_or_else(|| err("no such prim".into()))?;
+        if p.kind != PrimKind::Mesh as u32 {
+            return Err(err("not a mesh prim".into()));
+        }
+        let tris = foundry
+            .tri
+            .get(p.item_offset as usize..(p.item_offset + p.item_count) as usize)
+            .ok_or_else(|| err("triangle range out of bounds".into()))?;
+        let transform = match p.transform {
+            0 => Transform64::IDENTITY,
+            k => *foundry
+                .tran
+                .get(k as usize - 1)
+                .ok_or_else(|| err(format!("transform {k} out of range")))?,
+        };
+        let triangles: Vec<[[f64; 3]; 3]> = tris
+            .iter()
+            .map(|t| {
+                t.v.map(|v| transform.apply_point([v[0], v[1], v[2]].map(f64::from)))
+            })
+            .collect();
+        Self::new(&triangles)
+    }
+
+    /// Bounds of the mesh in its solid's frame.
+    pub fn bounds(&self) -> &Bounds<T> {
+        &self.bounds
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Whether the mesh has no triangles (never true for a constructed mesh).
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Every crossing of the ray with the mesh after `tmin + tol`, nearest first, through
+    /// `visit(t, normal)`; returns the nearest.
+    fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
+        let (o, d) = (ray.origin, ray.direction);
+        let mut best: Option<(T, V3<T>)> = None;
+        for [v0, v1, v2] in &self.triangles {
+            // Moller-Trumbore, edges inclusive so shared edges are never both missed.
+            let (e1, e2) = (*v1 - *v0, *v2 - *v0);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
+            if det == T::ZERO {
+                continue;
+            }
+            let inv = T::ONE / det;
+            let s = o - *v0;
+            let u = s.dot(p) * inv;
+            if u < T::ZERO || u > T::ONE {
+                continue;
+            }
+            let q = s.cross(e1);
+            let v = d.dot(q) * inv;
+            if v < T::ZERO || u + v > T::ONE {
+                continue;
+            }
+            let t = e2.dot(q) * inv;
+            if t > after && best.is_none_or(|(b, _)| t < b) {
+                best = Some((t, e1.cross(e2)));
+            }
+        }
+        best
+    }
+
+    /// The first crossing of the mesh's surface after `tmin` (crossings within the surface
+    /// tolerance of `tmin` are the surface the ray starts on), with the outward normal and
+    /// whether the ray is inside before it.
+    pub fn first_crossing(&self, ray: &Ray<T>, tmin: T) -> Step<T> {
+        if !ray_meets_bounds(ray, &self.bounds, tmin, T::INFINITY) {
+            return Step::miss(false);
+        }
+        let after = tmin + T::SURFACE_TOLERANCE * (self.scale + tmin.abs());
+        match self.nearest(ray, after) {
+            Some((t, normal)) => Step {
+                t,
+                normal,
+                inside_before: normal.dot(ray.direction) > T::ZERO,
+            },
+            None => Step::miss(false),
+        }
+    }
+
+    /// Whether a point of the solid's frame is inside the mesh (parity of the crossings of
+    /// a ray from it).
+    pub fn contains(&self, x: V3<T>) -> bool {
+        let ray = Ray {
+            origin: x,
+            direction: V3::from_f64(PARITY_DIRECTION),
+        };
+        if !ray_meets_bounds(&ray, &self.bounds, T::ZERO, T::INFINITY) {
+            return false;
+        }
+        let mut inside = false;
+        let mut after = T::ZERO;
+        while let Some((t, _)) = self.nearest(&ray, after) {
+            inside = !inside;
+            after = t;
+        }
+        inside
+    }
+}
