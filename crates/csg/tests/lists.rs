@@ -1,0 +1,149 @@
+//! N-ary list nodes against float64 interval arithmetic: unions of many overlapping,
+//! touching or disjoint spheres and intersections of many spheres, walked crossing by
+//! crossing from outside and from inside.
+
+use hytrace_csg::{sphere, to_tree, PrimTree, Ray, Shape, V3};
+use hytrace_foundry::TypeCode;
+
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+/// The interval of a ray (unit direction) inside a sphere, if any.
+fn sphere_span(c: [f64; 3], r: f64, o: [f64; 3], d: [f64; 3]) -> Option<(f64, f64)> {
+    let oc = [o[0] - c[0], o[1] - c[1], o[2] - c[2]];
+    let b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
+    let h = [oc[0] - b * d[0], oc[1] - b * d[1], oc[2] - b * d[2]];
+    let q = r * r - (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+    (q > 0.0).then(|| (-b - q.sqrt(), -b + q.sqrt()))
+}
+
+/// Boundary points of a union (or intersection) of intervals, ascending.
+fn boundaries(spans: &[(f64, f64)], union: bool) -> Vec<f64> {
+    let mut events: Vec<(f64, i32)> = spans.iter().flat_map(|&(a, b)| [(a, 1), (b, -1)]).collect();
+    events.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    let need = if union { 1 } else { spans.len() as i32 };
+    let (mut count, mut out) = (0, Vec::new());
+    for (t, delta) in events {
+        let before = count >= need;
+        count += delta;
+        if before != (count >= need) {
+            out.push(t);
+        }
+    }
+    out
+}
+
+fn check(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64) {
+    let parts: Vec<Shape> = centres
+        .iter()
+        .zip(radii)
+        .map(|(c, &r)| sphere(r).unwrap().translate(c[0], c[1], c[2]))
+        .collect();
+    let shape = parts
+        .iter()
+        .cloned()
+        .reduce(|a, b| if union { a + b } else { a * b })
+        .unwrap();
+    let tree = to_tree(&shape).unwrap();
+    let want = if union {
+        TypeCode::ListContiguous
+    } else {
+        TypeCode::ListOverlap
+    };
+    assert_eq!(tree.nodes[0].typecode, want as u32, "one list node");
+    let prim = PrimTree::<f64>::from_shape(&shape).unwrap();
+    let mut rng = Rng(seed);
+    for _ in 0..2000 {
+        let o = [
+            rng.range(-60., 60.),
+            rng.range(-60., 60.),
+            rng.range(-60., 60.),
+        ];
+        let t = [
+            rng.range(-20., 20.),
+            rng.range(-20., 20.),
+            rng.range(-20., 20.),
+        ];
+        let d = [t[0] - o[0], t[1] - o[1], t[2] - o[2]];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let d = d.map(|c| c / l);
+        let spans: Vec<(f64, f64)> = centres
+            .iter()
+            .zip(radii)
+            .filter_map(|(c, &r)| sphere_span(*c, r, o, d))
+            .collect();
+        let reference: Vec<f64> = if !union && spans.len() < centres.len() {
+            Vec::new()
+        } else {
+            boundaries(&spans, union)
+                .into_iter()
+                .filter(|&t| t > 1e-9)
+                .collect()
+        };
+        let ray = Ray {
+            origin: V3::from_f64(o),
+            direction: V3::from_f64(d),
+        };
+        let mut tmin = 0.0;
+        for (k, want) in reference.iter().enumerate() {
+            let s = prim.first_crossing(&ray, tmin);
+            assert!(
+                (s.t - want).abs() < 1e-9,
+                "crossing {k}: {} vs {want} ({o:?} {d:?})",
+                s.t
+            );
+            tmin = s.t;
+        }
+        assert!(
+            prim.first_crossing(&ray, tmin).t.is_infinite(),
+            "extra crossing"
+        );
+    }
+}
+
+#[test]
+fn union_list_of_overlapping_and_disjoint_spheres_matches_intervals() {
+    let mut rng = Rng(1);
+    let centres: Vec<[f64; 3]> = (0..24)
+        .map(|_| {
+            [
+                rng.range(-30., 30.),
+                rng.range(-30., 30.),
+                rng.range(-30., 30.),
+            ]
+        })
+        .collect();
+    // Radii exact in f32, as the Foundry stores primitive parameters.
+    let radii: Vec<f64> = (0..24).map(|_| rng.range(3., 12.) as f32 as f64).collect();
+    check(&centres, &radii, true, 2);
+}
+
+#[test]
+fn union_list_of_touching_spheres_has_no_internal_crossings() {
+    // A row of spheres touching at single points: internal tangencies are not crossings.
+    let centres: Vec<[f64; 3]> = (0..8)
+        .map(|i| [-35.0 + 10.0 * i as f64, 0.0, 0.0])
+        .collect();
+    check(&centres, &[5.0; 8], true, 3);
+}
+
+#[test]
+fn intersection_list_of_spheres_matches_intervals() {
+    let mut rng = Rng(4);
+    let centres: Vec<[f64; 3]> = (0..7)
+        .map(|_| [rng.range(-8., 8.), rng.range(-8., 8.), rng.range(-8., 8.)])
+        .collect();
+    let radii: Vec<f64> = (0..7).map(|_| rng.range(25., 35.) as f32 as f64).collect();
+    check(&centres, &radii, false, 5);
+}
