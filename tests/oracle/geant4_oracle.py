@@ -14,18 +14,25 @@ Command line::
 
     geant4_oracle.py --out DIR --seed S --solids-per-kind K --rays-per-solid M
                      [--kinds k1,k2,...] [--bench] [--march N]
-                     [--self-check]
+                     [--self-check] [--describe-twisted]
+    geant4_oracle.py --describe-twisted
 
 Run it with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
 directory; when it is unset the script points it to an empty temporary one,
 since geant4_pybind would otherwise try to download the Geant4 data sets
 (the geometry needs none of them).  ``--self-check`` runs the convention
 checks of ``self_check()`` first and prints their report to stderr.
+``--describe-twisted`` checks the twisted-solid formulas of the section
+"Twisted solids" below against Geant4 (``describe_twisted()``) and prints
+its report to stderr, one JSON line per kind; without ``--out`` only this
+check runs, stdout gets ``{"describe_twisted_ok": bool, "seconds": s}`` and
+the exit status is 1 when a check fails.
 
 Everything is generated from ``numpy.random.default_rng`` seeded with ``S``
 (each kind draws from its own stream ``default_rng([S, KIND_INDEX])`` where
 KIND_INDEX is the kind's position in ``KINDS`` below, so the solids of one
-kind do not depend on which other kinds are selected).  The output is fully
+kind do not depend on which other kinds are selected; kinds added later are
+appended, so older kinds keep their streams).  The output is fully
 deterministic for given arguments.
 
 Conventions
@@ -110,6 +117,55 @@ elcone        xsemi, ysemi, zheight, zcut       G4EllipticalCone: xsemi and
               (x/xsemi)^2 + (y/ysemi)^2 = (zheight - z)^2, solid spans
               -zcut <= z <= zcut, zcut < zheight.
 tet           anchor, p2, p3, p4 (each [x,y,z])  G4Tet (any orientation)
+twistedBox    twistedangle, dx, dy, dz
+              G4TwistedBox(name, twistedangle, dx, dy, dz) (half lengths);
+              |twistedangle| 10..80 deg, either sign.  Exact geometry: see
+              "Twisted solids" below (also for the next three).
+twistedTrd    dx1, dx2, dy1, dy2, dz, twistedangle
+              G4TwistedTrd(name, dx1, dx2, dy1, dy2, dz, twistedangle)
+              (index 1 at z = -dz, 2 at z = +dz).
+twistedTrap   twistedangle, dz, theta, phi, dy1, dx1, dx2, dy2, dx3, dx4,
+              alpha
+              G4TwistedTrap(name, twistedangle, dz, theta, phi, dy1, dx1,
+              dx2, dy2, dx3, dx4, alpha) (the general constructor): dx1 /
+              dx2 are the half x lengths of the edges at y = -dy1 / +dy1
+              (z = -dz), dx3 / dx4 those at y = -dy2 / +dy2 (z = +dz).
+              theta < 19 deg; either dx1 == dx2 and dx3 == dx4, or
+              (dx1 - dx2) * dy2 == (dx3 - dx4) * dy1 exactly (1/64 mm grid);
+              every fourth solid has theta = phi = alpha = 0.
+genericTrap   dz, vertices: [[x, y] x 8]
+              G4GenericTrap(name, dz, vertices): vertices 0-3 at z = -dz,
+              4-7 at z = +dz, vertex k + 4 above vertex k; each quadruple
+              is CLOCKWISE seen from +z (Geant4's order) and convex, and so
+              is every cross-section.  Variants (i % 3): planar (top =
+              k * bottom + shift, exact on a 1/64 mm grid, so every lateral
+              face has exactly parallel bottom and top edges: all faces
+              planar), twisted (top = bottom scaled by 0.6..1.4, rotated by
+              5..40 deg either way and shifted: four twisted faces), mixed
+              (planar with one top vertex moved: two twisted faces).
+xtru          polygon: [[x, y], ...],
+              sections: [{"z": z, "offset": [x, y], "scale": s}, ...]
+              G4ExtrudedSolid(name, polygon, [ZSection(z, offset, scale)]).
+              polygon: 3..10 vertices, CLOCKWISE (negative shoelace area),
+              the order Geant4 keeps (it silently reverses an anticlockwise
+              polygon); shapes (i % 5): convex, L, T, star (6/8/10
+              vertices), random star-shaped (5..10); simple, no three
+              vertices nearly collinear.  sections: 2..4, z strictly
+              increasing; the cross-section at z_k is
+              scale_k * polygon + offset_k, and between two sections scale
+              and offset are linear in z (so the sides are planar
+              quadrilaterals; checked with Inside on 12000 points).  Every
+              third solid (i % 3 == 0) is a right prism: 2 sections,
+              scale 1, offset [0, 0].
+tessellated   facets: [[[x,y,z], [x,y,z], [x,y,z]], ...]
+              G4TessellatedSolid with one G4TriangularFacet(a, b, c,
+              ABSOLUTE) per facet, then SetSolidClosed(true).  Each facet is
+              COUNTER-CLOCKWISE seen from outside: its outward normal is
+              (b - a) x (c - a) (Geant4's convention: SurfaceNormal equals
+              it; a reversed mesh gets a "negative cubic volume" warning
+              and an inverted Inside).  Closed, non-self-intersecting,
+              generally non-convex star-shaped meshes of 80 or 320 facets
+              (see gen_tessellated); shared vertices are bit-identical.
 ============  ===============================================================
 
 Boolean specs (kind ``boolean``, trees of depth 1..4)::
@@ -120,7 +176,8 @@ Boolean specs (kind ``boolean``, trees of depth 1..4)::
      "translation": [x, y, z]}
 
 Leaves are box, orb, tubs, cons, sphere, torus or trd (sphere leaves never
-have pi < dphi < 2 pi, see gen_leaf).  Rotation entries are
+have pi < dphi < 2 pi, see gen_leaf); the twisted, genericTrap, xtru and
+tessellated kinds are never boolean operands.  Rotation entries are
 f64 (identity, signed axis permutations, or arbitrary); translations are
 float32-representable.
 
@@ -143,7 +200,8 @@ float32-representable.
 ``timing.json``    {"queries", "seconds", "per_query_s", "per_kind":
                    {kind: {"queries", "seconds"}}, "flagged_rays",
                    "flagged_g4_warning", "flagged_inconsistent",
-                   "flagged_missed", "g4_warnings", "total_seconds"}:
+                   "flagged_missed", "flagged_formula", "g4_warnings",
+                   "total_seconds"}:
                    queries = Inside + Distance calls (1 for a surface
                    origin, else 2 per ray); seconds = wall time of the loop
                    over those calls only (the G4ThreeVectors are built
@@ -165,14 +223,111 @@ float32-representable.
                    other side or on a surface, i.e. Geant4 skipped a
                    crossing or misclassified the interior (32 samples for
                    hype, boolean and torus, 16 for other kinds, --march N
-                   for more).  Flagged answers are Geant4
+                   for more); bit 3 (8), twistedBox, twistedTrd,
+                   twistedTrap and genericTrap only: the exact
+                   cross-section formula ("Twisted solids") puts a point of
+                   the ray before d (inside the bounding box) more than
+                   1e-6 * (1 + size) mm on the other side of the surface
+                   (256 vectorised samples, then 4 rounds of zooming in on
+                   the sample closest to the other side; see
+                   formula_missed).  Flagged answers are Geant4
                    bugs (seen with 11.4: G4Hype::DistanceToIn reporting hits
                    on the hyperboloids beyond |z| = dz, or missing entries,
-                   for ~0.1% of rays); compare only unflagged rays.
+                   for ~0.1% of rays; G4VTwistedFaceted missing lateral
+                   faces on rays exactly parallel to z, ~0.5% of twistedBox
+                   rays); compare only unflagged rays.
+``origin_distance.npy`` float64 (N,): for the twisted kinds and genericTrap,
+                   the distance of the origin to the surface measured in the
+                   plane z = const (an upper bound of the 3D distance), from
+                   the exact section formulas below; NaN for other kinds.
+                   Lets a comparison with a tessellated approximation set
+                   aside origins within its tolerance band of the surface.
 ``geant4.log``     whatever Geant4 printed (G4cout and G4cerr).
 
 stdout gets exactly one JSON line on success:
 ``{"solids": n, "rays": n, "seconds": total_wall_time}``.
+
+Twisted solids: exact geometry
+------------------------------
+Established numerically with Geant4 11.4 (``--describe-twisted``, see
+``describe_twisted()``; ``twisted_cross_section()`` and
+``twisted_signed_distance()`` implement the formulas).
+
+G4TwistedBox, G4TwistedTrd, G4TwistedTrap (all G4VTwistedFaceted) reduce
+to the general parameters (tw, dz, theta, phi, dy1, dx1, dx2, dy2, dx3,
+dx4, alpha)::
+
+    twistedBox  (tw, dx, dy, dz)  -> (tw, dz, 0, 0, dy, dx, dx, dy, dx, dx, 0)
+    twistedTrd  (dx1, dx2, dy1, dy2, dz, tw)
+                -> (tw, dz, 0, 0, dy1, dx1, dx1, dy2, dx2, dx2, 0)
+    twistedTrap its own parameters
+
+For -dz <= z <= dz let u = (z + dz) / (2 dz) and::
+
+    a(z) = dx1 + (dx3 - dx1) u     half x length of the edge at y' = -b
+    c(z) = dx2 + (dx4 - dx2) u     half x length of the edge at y' = +b
+    b(z) = dy1 + (dy2 - dy1) u     half y length
+    t    = tan(alpha)
+
+    local section, counter-clockwise (the untilted G4Trap section):
+    A0 = (-a - b t, -b)   A1 = (a - b t, -b)   A2 = (c + b t, b)
+    A3 = (-c + b t, b)
+
+    section at height z:
+    P_k(z) = R(phi(z)) A_k(z) + z tan(theta) (cos phi, sin phi)
+    phi(z) = tw * z / (2 dz)
+
+R(w) is the counter-clockwise rotation by w about +z, so the section turns
+counter-clockwise (seen from +z) with increasing z for tw > 0: -tw/2 at the
+bottom, 0 at z = 0, +tw/2 at the top.  alpha shears the local section
+(x' += y' tan alpha) before the rotation; the theta/phi offset is applied
+AFTER the rotation (it is not rotated: the section centre stays on the
+straight line z tan(theta) (cos phi, sin phi), as in G4Trap).  The solid is
+the union over |z| <= dz of the convex quadrilaterals P_0..P_3(z) (this is
+what G4VTwistedFaceted::Inside evaluates); the end caps are the flat
+sections at z = -dz and z = +dz.  Lateral face k (k = 0..3, P_4 = P_0) is
+exactly the ruled surface swept by the straight segment P_k(z) P_k+1(z),
+z from -dz to dz: face 0 is the -y' side, 1 the +x' side, 2 the +y' side,
+3 the -x' side.  The vertices P_k(z) move on helix-like curves (turning
+with phi(z)), not on straight lines, so the faces are not bilinear
+patches; their straight rulings are the segments in the planes z = const.
+
+G4GenericTrap: with v_0..v_7 the vertices as given (clockwise), the section
+at height z is the quadrilateral (clockwise)::
+
+    P_k(z) = v_k + (v_k+4 - v_k) (z + dz) / (2 dz),   k = 0..3
+
+i.e. each lateral edge is the straight segment from v_k at z = -dz to
+v_k+4 at z = +dz, and lateral face k (between P_k and P_k+1) is swept by
+the straight segment P_k(z) P_k+1(z): the bilinear patch (hyperbolic
+paraboloid) through v_k, v_k+1, v_k+5, v_k+4 (k + 1 taken mod 4: face 3
+joins v_3, v_0, v_4, v_7), a plane when its bottom and top edges are
+parallel.  Geant4 classifies a point by the four half-planes
+of the section's directed edges (inside = to the right of every edge), so
+this is the polygon only for convex sections (all generated ones are).
+
+Evidence (``--describe-twisted``, 8 generated solids per kind):
+classification of 16000 points per kind (half uniform in the enlarged
+bounding box, half within 2% of the size around the formula's lateral
+surface): 0 disagreements with Geant4's Inside for all four kinds, while
+the wrong candidates disagree at many points: rotation sign flipped
+3972 / 3208 / 3340 points (twistedBox / twistedTrd / twistedTrap), rotation
+starting at 0 at the bottom 4355 / 3512 / 3790, x and y swapped
+5160 / 4714 (box / trd), theta/phi offset rotated with the section 433,
+alpha sign flipped 1599, dx1/dx2 exchanged 1184 (twistedTrap), vertices
+interpolated in polar coordinates 358 (genericTrap).  The boundary found by
+bisecting Geant4's Inside along 1600 rays per kind is within 5.0e-10 mm
+(6.7e-10 for genericTrap) of the formula's surface, i.e. at Geant4's half
+surface tolerance; the hit points of Geant4's DistanceToIn / DistanceToOut
+(about 3000 per kind) lie within 1e-13 mm of it, so the distance functions
+use the same surfaces; 1600 points per kind on the straight segments
+P_k(z) P_k+1(z) are kSurface, and 1e-6 * (1 + size) mm off them in the plane
+z = const kOutside (outward) / kInside (inward).  In the default run
+(seed 1, 20 x 500) the finite distance of every unflagged ray of the four
+kinds ends within 3.4e-13 mm of the formula's surface, with the formula
+putting the ray on the origin's side 1e-6 mm before and on the other side
+1e-6 mm after it (checked offline); bit 3 of ray_flags checks that the
+formula finds no earlier crossing.
 
 Geant4 quirks handled here
 --------------------------
@@ -207,6 +362,40 @@ Geant4 quirks handled here
   switches it can skip the overlap and answer kInfinity or a later entry.
   Rare (about 1 boolean ray in 10^4); caught by the sampling check.
 * G4Ellipsoid reads zbottom == ztop == 0 as "no cuts".
+* G4VTwistedFaceted (11.4) with theta = 0: rays exactly parallel to z
+  (axis family +-z) sometimes miss the twisted lateral faces (DistanceToIn
+  answers kInfinity although the ray enters, DistanceToOut kInfinity from
+  inside); tilting the direction by 1e-12 avoids it.  About 0.5% of all
+  twistedBox rays (6% of its +-z rays), a few per 10^4 for twistedTrd and
+  twistedTrap; flagged (bits 1, 2, 3: some of the inside intervals are too
+  short for 16 Inside() samples, hence the formula check of bit 3).
+* G4GenericTrap::DistanceToIn (11.4) misses the entry of some rays into
+  some twisted solids (answers kInfinity): 10 of 10^5 genericTrap rays over
+  seeds 7 and 8 (100 solids each), all on one twisted solid with an
+  elongated bottom; flagged (bits 2 and 3).
+* G4VTwistedFaceted aborts for |twistedangle| >= 90 deg, theta >= 90 deg,
+  |alpha| >= 90 deg, any half length <= 2e-9 mm, when only one end of a
+  twistedTrap is rectangular-like (dx1 == dx2 xor dx3 == dx4), or when
+  dy2 != dy1 (dx3 - dx4) / (dx1 - dx2) by more than 1e-9 mm (planarity of
+  the untwisted shape).
+* G4GenericTrap wants clockwise vertex quadruples: anticlockwise ones are
+  re-ordered (v1 <-> v3, v5 <-> v7) with a GeomSolids1001 warning; bottom
+  and top in opposite orientations, non-convex quadruples, more than one
+  collapsed edge or a lateral face twisted by more than 90 degrees are
+  fatal.
+* G4ExtrudedSolid silently reverses an anticlockwise polygon, removes
+  collinear or coincident vertices with a warning, and aborts ("Making
+  facets failed") when its ear clipping meets three collinear vertices
+  (e.g. a T whose two arms have the same thickness: the four vertices under
+  the bar are collinear), so the generator rejects polygons with any three
+  nearly collinear vertices.
+* geant4_pybind 0.1.3 binds G4TessellatedSolid::DistanceToOut(p, v) only
+  with all five arguments (no defaults); the G4VSolid binding is used
+  instead (same virtual function).  AddFacet takes ownership of the facet.
+* geant4_pybind 0.1.3 segfaults when twisted or extruded solids are only
+  destroyed at interpreter shutdown; all solids live in the Builder inside
+  run(), and an unexpected exception ends the process with os._exit(1)
+  after printing its traceback.
 """
 
 import argparse
@@ -216,6 +405,7 @@ import os
 import sys
 import tempfile
 import time
+import traceback
 
 import numpy as np
 
@@ -227,6 +417,8 @@ KINDS = [
     "box", "orb", "sphere", "tubs", "cutTubs", "cons", "torus", "trd",
     "trap", "para", "polycone", "polyhedra", "hype", "paraboloid",
     "ellipsoid", "eltube", "elcone", "tet", "boolean",
+    "twistedBox", "twistedTrd", "twistedTrap", "genericTrap", "xtru",
+    "tessellated",
 ]
 LEAF_KINDS = ["box", "orb", "tubs", "cons", "sphere", "torus", "trd"]
 
@@ -238,6 +430,13 @@ FLAG_G4_WARNING = 1     # Geant4 printed a G4Exception while answering
 FLAG_INCONSISTENT = 2   # Geant4's distance disagrees with its own Inside()
 FLAG_MISSED = 4         # sampling Inside() along the ray found a crossing
                         # before Geant4's distance (kinds in MARCH_SAMPLES)
+FLAG_FORMULA = 8        # twisted kinds: the exact cross-section formula
+                        # finds a crossing before Geant4's distance
+# Samples per ray of the FLAG_FORMULA check (vectorised, plus zooming in on
+# the sample closest to the other side); G4VTwistedFaceted (11.4) misses the
+# lateral faces for some rays exactly parallel to z, and 16 Inside() samples
+# do not catch the short inside intervals of such rays.
+FORMULA_SAMPLES = 256
 # Inside() samples along each ray (inside the bounding box) used to detect
 # crossings that Geant4's distance skipped.  G4Hype (11.4) misses entries for
 # some rays and G4IntersectionSolid::DistanceToIn can skip a valid range (see
@@ -657,6 +856,328 @@ def gen_tet(rng, i, s):
             "p4": [float(c) for c in pts[3]]}
 
 
+# --- twisted and tessellated kinds (never boolean operands) ----------------
+
+_GRID = 1.0 / 64.0  # dyadic grid: sums, differences and products by the
+                    # ratios used below stay exact in float32 and float64
+
+
+def _on_grid(x):
+    return max(_GRID, round(x / _GRID) * _GRID)
+
+
+def _on_grid_signed(x):
+    return round(float(x) / _GRID) * _GRID
+
+
+def _twist_angle(rng):
+    """Twist angle of 10..80 degrees, either sign (Geant4 needs < 90)."""
+    a = math.radians(rng.uniform(10.0, 80.0))
+    return f32(a if rng.uniform() < 0.5 else -a)
+
+
+def gen_twisted_box(rng, i, s):
+    return {"type": "twistedBox", "twistedangle": _twist_angle(rng),
+            "dx": f32(s * rng.uniform(0.2, 1.0)),
+            "dy": f32(s * rng.uniform(0.2, 1.0)),
+            "dz": f32(s * rng.uniform(0.2, 1.0))}
+
+
+def gen_twisted_trd(rng, i, s):
+    return {"type": "twistedTrd", "dx1": f32(s * rng.uniform(0.1, 1.0)),
+            "dx2": f32(s * rng.uniform(0.1, 1.0)),
+            "dy1": f32(s * rng.uniform(0.1, 1.0)),
+            "dy2": f32(s * rng.uniform(0.1, 1.0)),
+            "dz": f32(s * rng.uniform(0.2, 1.0)),
+            "twistedangle": _twist_angle(rng)}
+
+
+def gen_twisted_trap(rng, i, s):
+    # G4VTwistedFaceted aborts unless either dx1 == dx2 and dx3 == dx4, or
+    # dy2 == dy1 * (dx3 - dx4) / (dx1 - dx2) to 1e-9 mm (planar endcaps of
+    # the untwisted shape).  As in gen_trap the half lengths live on a dyadic
+    # grid where dx3 - dx4 == ratio * (dx1 - dx2) and dy2 == ratio * dy1 hold
+    # exactly.  Variant 1 has rectangular-like ends (dx1 == dx2, dx3 == dx4).
+    v = i % 4
+    while True:
+        dy1 = _on_grid(s * rng.uniform(0.2, 1.0))
+        ratio = float(rng.choice([0.5, 0.75, 1.0, 1.25, 1.5, 2.0]))
+        dy2 = dy1 * ratio
+        dx1 = _on_grid(s * rng.uniform(0.15, 1.0))
+        dx2 = dx1 if v == 1 else _on_grid(s * rng.uniform(0.15, 1.0))
+        dx3 = _on_grid(s * rng.uniform(0.15, 1.0))
+        dx4 = dx3 + ratio * (dx2 - dx1)
+        if dx4 < 0.1 * s or dx4 < 0.5:
+            continue
+        break
+    for x in (dy1, dy2, dx1, dx2, dx3, dx4):
+        assert f32(x) == x
+    assert (dx3 - dx4) * dy1 == (dx1 - dx2) * dy2
+    assert (dx1 == dx2) == (dx3 == dx4)
+    theta = f32(rng.uniform(0.0, math.radians(19.0)))
+    phi = f32(rng.uniform(-PI, PI))
+    alpha = f32(rng.uniform(-0.45, 0.45))
+    if v == 3:  # no tilt at all
+        theta, phi, alpha = 0.0, 0.0, 0.0
+    return {"type": "twistedTrap", "twistedangle": _twist_angle(rng),
+            "dz": f32(s * rng.uniform(0.2, 1.0)), "theta": theta,
+            "phi": phi, "dy1": dy1, "dx1": dx1, "dx2": dx2, "dy2": dy2,
+            "dx3": dx3, "dx4": dx4, "alpha": alpha}
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _polygon_area(poly):
+    """Signed (shoelace) area: > 0 for a counter-clockwise polygon."""
+    p = np.asarray(poly, dtype=np.float64)
+    return 0.5 * float(np.sum(_cross2(p, np.roll(p, -1, axis=0))))
+
+
+def _strictly_convex_cw(quad, margin):
+    """All turns of the closed polygon clockwise by more than margin."""
+    q = np.asarray(quad, dtype=np.float64)
+    e = np.roll(q, -1, axis=0) - q
+    return bool(np.all(_cross2(e, np.roll(e, -1, axis=0)) < -margin))
+
+
+def gen_generic_trap(rng, i, s):
+    # Geant4 wants each end polygon convex and clockwise (an anticlockwise
+    # pair is re-ordered with a warning); vertex k + 4 is joined to vertex k.
+    v = ["planar", "twisted", "mixed"][i % 3]
+    dz = f32(s * rng.uniform(0.2, 1.0))
+    while True:
+        # clockwise quadrilateral inscribed in an ellipse (strictly convex)
+        ang = np.sort(rng.uniform(0.0, TWO_PI, 4))[::-1]
+        gaps = np.diff(np.concatenate([ang, [ang[0] - TWO_PI]]))
+        if np.any(-gaps < 0.6) or np.any(-gaps > PI - 0.3):
+            continue
+        ax, by = s * rng.uniform(0.3, 1.0), s * rng.uniform(0.3, 1.0)
+        c = s * rng.uniform(-0.2, 0.2, 2)
+        bot = np.stack([c[0] + ax * np.cos(ang), c[1] + by * np.sin(ang)], 1)
+        bot = np.vectorize(_on_grid_signed)(bot)
+        if v == "twisted":
+            rot = math.radians(rng.uniform(5.0, 40.0)) * rng.choice([-1, 1])
+            k = rng.uniform(0.6, 1.4)
+            cr, sr = math.cos(rot), math.sin(rot)
+            R = np.array([[cr, -sr], [sr, cr]])
+            top = (k * bot) @ R.T + s * rng.uniform(-0.25, 0.25, 2)
+            top = np.vectorize(f32)(top)
+        else:
+            # top = k * bottom + shift, exactly on the grid, so that every
+            # lateral face is exactly planar (parallel bottom/top edges)
+            k = float(rng.choice([0.5, 0.75, 1.0, 1.25, 1.5]))
+            shift = np.vectorize(_on_grid_signed)(
+                s * rng.uniform(-0.25, 0.25, 2))
+            top = k * bot + shift
+            if v == "mixed":  # move one top vertex: its two faces twist
+                j = int(rng.integers(4))
+                top[j] = top[j] + np.vectorize(_on_grid_signed)(
+                    s * rng.uniform(-0.2, 0.2, 2))
+        size2 = float(np.max(np.abs(np.concatenate([bot, top])))) ** 2
+        # every cross-section (linear interpolation) must stay convex and
+        # clockwise: Geant4's Inside assumes a convex section
+        ok = all(_strictly_convex_cw((1.0 - t) * bot + t * top,
+                                     1e-3 * size2)
+                 for t in np.linspace(0.0, 1.0, 33))
+        # Geant4 aborts when a lateral face twists by more than 90 degrees
+        # (angle between its bottom and top edges); keep well below
+        eb = np.roll(bot, -1, axis=0) - bot
+        et = np.roll(top, -1, axis=0) - top
+        cosang = np.einsum("ij,ij->i", eb, et) / (
+            np.linalg.norm(eb, axis=1) * np.linalg.norm(et, axis=1))
+        ok = ok and bool(np.all(cosang > math.cos(math.radians(60.0))))
+        if ok and all(f32(x) == x for x in np.concatenate([bot, top]).flat):
+            break
+    verts = [[float(x), float(y)] for x, y in np.concatenate([bot, top])]
+    return {"type": "genericTrap", "dz": dz, "vertices": verts}
+
+
+def _xtru_polygon(rng, shape, r):
+    """Clockwise polygon (list of [x, y]) of the given shape, size ~r."""
+    if shape == "convex":
+        n = int(rng.integers(3, 9))
+        while True:
+            ang = np.sort(rng.uniform(0.0, TWO_PI, n))
+            gaps = np.diff(np.concatenate([ang, [ang[0] + TWO_PI]]))
+            if np.all(gaps > 0.35) and np.all(gaps < PI - 0.2):
+                break
+        rad = r * np.ones(n)
+        pts = np.stack([rad * np.cos(ang), rad * rng.uniform(0.5, 1.0) *
+                        np.sin(ang)], 1)
+    elif shape == "L":
+        w, h = r * rng.uniform(1.0, 2.0), r * rng.uniform(1.0, 2.0)
+        tx, ty = w * rng.uniform(0.2, 0.6), h * rng.uniform(0.2, 0.6)
+        pts = np.array([[0, 0], [w, 0], [w, ty], [tx, ty], [tx, h], [0, h]])
+        pts = pts - np.array([0.4 * w, 0.4 * h])
+    elif shape == "T":
+        # The two arms have different thicknesses: with equal ones the four
+        # vertices under the bar are collinear, and Geant4's ear clipping
+        # can then cut a degenerate triangle and abort ("Making facets
+        # failed").
+        w, h = r * rng.uniform(1.2, 2.0), r * rng.uniform(1.0, 2.0)
+        sw = w * rng.uniform(0.15, 0.5)
+        th1, th2 = h * rng.uniform(0.2, 0.35), h * rng.uniform(0.4, 0.55)
+        if rng.uniform() < 0.5:
+            th1, th2 = th2, th1
+        x0 = rng.uniform(0.1, 0.9) * (w - sw) - 0.5 * w  # stem position
+        pts = np.array([[x0, 0], [x0 + sw, 0], [x0 + sw, h - th2],
+                        [0.5 * w, h - th2], [0.5 * w, h], [-0.5 * w, h],
+                        [-0.5 * w, h - th1], [x0, h - th1]])
+        pts = pts - np.array([0.0, 0.6 * h])
+    elif shape == "star":
+        k = int(rng.integers(3, 6))  # 6, 8 or 10 vertices
+        ang = np.arange(2 * k) * (PI / k)
+        rad = np.where(np.arange(2 * k) % 2 == 0, r,
+                       r * rng.uniform(0.3, 0.6))
+        rad = rad * rng.uniform(0.85, 1.0, 2 * k)
+        pts = np.stack([rad * np.cos(ang), rad * np.sin(ang)], 1)
+    else:  # random star-shaped (non-convex in general) polygon
+        n = int(rng.integers(5, 11))
+        while True:
+            ang = np.sort(rng.uniform(0.0, TWO_PI, n))
+            gaps = np.diff(np.concatenate([ang, [ang[0] + TWO_PI]]))
+            if np.all(gaps > 0.3) and np.all(gaps < PI - 0.2):
+                break
+        rad = r * rng.uniform(0.35, 1.0, n)
+        pts = np.stack([rad * np.cos(ang), rad * np.sin(ang)], 1)
+    a = rng.uniform(-PI, PI)
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    pts = pts @ R.T + r * rng.uniform(-0.2, 0.2, 2)
+    pts = np.vectorize(f32)(pts)
+    if _polygon_area(pts) > 0.0:
+        pts = pts[::-1]
+    return pts
+
+
+def _polygon_ok(pts, r):
+    """No edge shorter than 5% of r, no three (nearly) collinear vertices
+    and no self-intersection.  Geant4 drops collinear consecutive vertices
+    with a warning, its ear clipping aborts when it meets a degenerate
+    triangle (three collinear vertices, consecutive once the ears between
+    them are cut), and a self-intersecting polygon cannot be triangulated."""
+    n = len(pts)
+    for k in range(n):
+        if np.linalg.norm(pts[(k + 1) % n] - pts[k]) < 0.05 * r:
+            return False
+    for a in range(n):
+        for b in range(a + 1, n):
+            for c in range(b + 1, n):
+                ab, ac = pts[b] - pts[a], pts[c] - pts[a]
+                if abs(float(_cross2(ab, ac))) < 0.02 * np.linalg.norm(ab) \
+                        * np.linalg.norm(ac):
+                    return False
+    for k in range(n):  # edge k: pts[k] -> pts[k+1]; non-adjacent pairs
+        for m in range(k + 2, n):
+            if k == 0 and m == n - 1:
+                continue
+            p, q = pts[k], pts[(k + 1) % n]
+            u, w = pts[m], pts[(m + 1) % n]
+            d1 = _cross2(q - p, u - p) * _cross2(q - p, w - p)
+            d2 = _cross2(w - u, p - u) * _cross2(w - u, q - u)
+            if d1 <= 0 and d2 <= 0:
+                return False
+    return True
+
+
+def gen_xtru(rng, i, s):
+    shape = ["convex", "L", "T", "star", "random"][i % 5]
+    r = s * rng.uniform(0.3, 0.6)
+    while True:
+        pts = _xtru_polygon(rng, shape, r)
+        if _polygon_ok(pts, r):
+            break
+    prism = (i % 3 == 0)  # right prism: 2 sections, scale 1, no offset
+    nsec = 2 if prism else int(rng.integers(2, 5))
+    z = [f32(-s * rng.uniform(0.2, 0.8))]
+    for _ in range(nsec - 1):
+        z.append(f32(z[-1] + s * rng.uniform(0.15, 0.7)))
+    sections = []
+    for zk in z:
+        if prism:
+            off, sc = [0.0, 0.0], 1.0
+        else:
+            off = [f32(c) for c in s * rng.uniform(-0.25, 0.25, 2)]
+            sc = f32(rng.uniform(0.5, 1.5))
+        sections.append({"z": zk, "offset": off, "scale": sc})
+    return {"type": "xtru",
+            "polygon": [[float(x), float(y)] for x, y in pts],
+            "sections": sections}
+
+
+_ICO_CACHE = {}
+
+
+def _icosphere(level):
+    """Unit-sphere triangulation: (vertices (n,3), faces (m,3) int) with
+    every face counter-clockwise seen from outside."""
+    if level in _ICO_CACHE:
+        return _ICO_CACHE[level]
+    g = (1.0 + math.sqrt(5.0)) / 2.0
+    verts = [[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0],
+             [0, -1, g], [0, 1, g], [0, -1, -g], [0, 1, -g],
+             [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]]
+    verts = [list(np.array(v, float) / np.linalg.norm(v)) for v in verts]
+    # faces: the 20 triangles whose edges all have the minimal length
+    V = np.array(verts)
+    faces = []
+    for a in range(12):
+        for b in range(a + 1, 12):
+            for c in range(b + 1, 12):
+                dd = [np.linalg.norm(V[a] - V[b]), np.linalg.norm(V[b] - V[c]),
+                      np.linalg.norm(V[a] - V[c])]
+                if max(dd) < 1.1:
+                    faces.append([a, b, c])
+    assert len(faces) == 20
+    for _ in range(level):
+        mid = {}
+        new_faces = []
+
+        def midpoint(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in mid:
+                m = np.array(verts[a]) + np.array(verts[b])
+                verts.append(list(m / np.linalg.norm(m)))
+                mid[key] = len(verts) - 1
+            return mid[key]
+        for a, b, c in faces:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            new_faces += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        faces = new_faces
+    V = np.array(verts)
+    F = np.array(faces)
+    # orient every face outward: (b - a) x (c - a) . a > 0
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    flip = np.einsum("ij,ij->i", n, V[F[:, 0]]) < 0
+    F[flip] = F[flip][:, [0, 2, 1]]
+    _ICO_CACHE[level] = (V, F)
+    return V, F
+
+
+def gen_tessellated(rng, i, s):
+    # Star-shaped polyhedron: the vertex in direction d_k of a subdivided
+    # icosahedron is placed at c + A (r_k d_k), r_k random in [0.6, 1] R and
+    # A = diag(ax, ay, az) a positive scaling.  Each facet stays inside the
+    # cone of its three directions, so the mesh is closed, never
+    # self-intersecting, generally non-convex, and keeps the outward
+    # (counter-clockwise seen from outside) orientation of the icosphere.
+    V, F = _icosphere(1 + i % 2)  # 80 or 320 facets
+    R = s * rng.uniform(0.5, 1.0)
+    rad = R * rng.uniform(0.6, 1.0, len(V))
+    A = rng.uniform(0.6, 1.0, 3)
+    c = s * rng.uniform(-0.2, 0.2, 3)
+    P = np.vectorize(f32)(c + (V * rad[:, None]) * A)
+    tri = P[F]  # (m, 3, 3)
+    rel = tri - c
+    det = np.einsum("ij,ij->i", rel[:, 0], np.cross(rel[:, 1], rel[:, 2]))
+    assert np.all(det > 0.0)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.all(np.linalg.norm(n, axis=1) > 1e-6 * R * R)
+    return {"type": "tessellated",
+            "facets": [[[float(x) for x in v] for v in t] for t in tri]}
+
+
 GENERATORS = {
     "box": gen_box, "orb": gen_orb, "sphere": gen_sphere, "tubs": gen_tubs,
     "cutTubs": gen_cut_tubs, "cons": gen_cons, "torus": gen_torus,
@@ -664,6 +1185,9 @@ GENERATORS = {
     "polycone": gen_polycone, "polyhedra": gen_polyhedra, "hype": gen_hype,
     "paraboloid": gen_paraboloid, "ellipsoid": gen_ellipsoid,
     "eltube": gen_eltube, "elcone": gen_elcone, "tet": gen_tet,
+    "twistedBox": gen_twisted_box, "twistedTrd": gen_twisted_trd,
+    "twistedTrap": gen_twisted_trap, "genericTrap": gen_generic_trap,
+    "xtru": gen_xtru, "tessellated": gen_tessellated,
 }
 
 
@@ -779,6 +1303,41 @@ class Builder:
             s = g4.G4Tet(name, pts[0], pts[1], pts[2], pts[3])
         elif t in ("polycone", "polyhedra"):
             s = self.build_gdml([spec])[0]
+        elif t == "twistedBox":
+            s = g4.G4TwistedBox(name, spec["twistedangle"], spec["dx"],
+                                spec["dy"], spec["dz"])
+        elif t == "twistedTrd":
+            s = g4.G4TwistedTrd(name, spec["dx1"], spec["dx2"], spec["dy1"],
+                                spec["dy2"], spec["dz"], spec["twistedangle"])
+        elif t == "twistedTrap":
+            s = g4.G4TwistedTrap(name, spec["twistedangle"], spec["dz"],
+                                 spec["theta"], spec["phi"], spec["dy1"],
+                                 spec["dx1"], spec["dx2"], spec["dy2"],
+                                 spec["dx3"], spec["dx4"], spec["alpha"])
+        elif t == "genericTrap":
+            verts = g4.G4TwoVectorVector(
+                [g4.G4TwoVector(float(x), float(y))
+                 for x, y in spec["vertices"]])
+            self.keep.append(verts)
+            s = g4.G4GenericTrap(name, spec["dz"], verts)
+        elif t == "xtru":
+            poly = g4.G4TwoVectorVector(
+                [g4.G4TwoVector(float(x), float(y))
+                 for x, y in spec["polygon"]])
+            zs = [g4.G4ExtrudedSolid.ZSection(
+                float(sec["z"]), g4.G4TwoVector(float(sec["offset"][0]),
+                                                float(sec["offset"][1])),
+                float(sec["scale"])) for sec in spec["sections"]]
+            self.keep += [poly, zs]
+            s = g4.G4ExtrudedSolid(name, poly, zs)
+        elif t == "tessellated":
+            s = g4.G4TessellatedSolid(name)
+            absolute = g4.G4FacetVertexType.ABSOLUTE
+            for a, b, c in spec["facets"]:
+                # AddFacet takes ownership of the facet (disowned in Python)
+                s.AddFacet(g4.G4TriangularFacet(self.vec(a), self.vec(b),
+                                                self.vec(c), absolute))
+            s.SetSolidClosed(True)
         elif t in ("union", "subtraction", "intersection"):
             a = self.build(spec["a"])
             b = self.build(spec["b"])
@@ -1041,6 +1600,19 @@ def make_rays(g4, solid, rng, m):
     return origins, snap_directions(dirs), fams
 
 
+def distance_to_out(g4, solid):
+    """DistanceToOut(p, v) (calcNorm = false) of the solid as a callable.
+
+    geant4_pybind 0.1.3 binds G4TessellatedSolid::DistanceToOut only with
+    all five arguments (no defaults); the G4VSolid binding has the defaults
+    and dispatches to the same virtual function."""
+    if isinstance(solid, g4.G4TessellatedSolid) and \
+            not isinstance(solid, g4.G4ExtrudedSolid):
+        base = g4.G4VSolid.DistanceToOut
+        return lambda p, v: base(solid, p, v)
+    return solid.DistanceToOut
+
+
 def trace(g4, solid, origins, dirs, counter, march=0):
     """Inside + distance for each ray; returns (expected (m,2), flags (m,),
     queries, seconds spent in the Geant4 loop); see FLAG_* for flags."""
@@ -1048,7 +1620,7 @@ def trace(g4, solid, origins, dirs, counter, march=0):
     pv = [(V(*o), V(*d)) for o, d in zip(origins.tolist(), dirs.tolist())]
     inside = solid.Inside
     dti = solid.DistanceToIn
-    dto = solid.DistanceToOut
+    dto = distance_to_out(g4, solid)
     k_out, k_in = g4.EInside.kOutside, g4.EInside.kInside
     codes = [0] * len(pv)
     dists = [0.0] * len(pv)
@@ -1135,6 +1707,369 @@ def trace(g4, solid, origins, dirs, counter, march=0):
     return out, np.array(flags, dtype=np.int32), queries, seconds
 
 
+def formula_missed(spec, origins, dirs, codes, dists, samples=FORMULA_SAMPLES,
+                   zoom_rounds=4, zoom_samples=32):
+    """FLAG_FORMULA check of a twisted kind (TWISTED_KINDS): True for the
+    rays on which the exact cross-section formula (twisted_signed_distance,
+    checked against Geant4 by --describe-twisted) puts a point before
+    Geant4's distance more than 1e-6 * (1 + size) mm on the other side of
+    the surface.  The ray segment inside the formula's bounding box is
+    sampled uniformly, then zoom_rounds times resampled around the sample
+    that comes closest to the other side."""
+    origins = np.asarray(origins, dtype=np.float64)
+    dirs = np.asarray(dirs, dtype=np.float64)
+    codes = np.asarray(codes)
+    dists = np.minimum(np.asarray(dists, dtype=np.float64), 1e30)
+    m = len(origins)
+    bad = np.zeros(m, dtype=bool)
+    if m == 0:
+        return bad
+    dz = spec["dz"]
+    poly = twisted_cross_section(spec, np.linspace(-dz, dz, 65)).reshape(-1,
+                                                                       2)
+    # the sections' vertices move on straight lines in genericTrap and on
+    # helices (bulging by < 1 - cos(40 deg)) otherwise: pad generously
+    lo = np.array([poly[:, 0].min(), poly[:, 1].min(), -dz])
+    hi = np.array([poly[:, 0].max(), poly[:, 1].max(), dz])
+    size = float(np.max(hi - lo))
+    lo, hi = lo - 0.05 * size, hi + 0.05 * size
+    tol = 1e-6 * (1.0 + size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = (lo - origins) / dirs
+        tb = (hi - origins) / dirs
+    par = dirs == 0.0
+    outside_slab = par & ((origins < lo) | (origins > hi))
+    ta = np.where(par, -np.inf, ta)
+    tb = np.where(par, np.inf, tb)
+    t0 = np.maximum(0.0, np.max(np.minimum(ta, tb), axis=1))
+    t1 = np.minimum(dists, np.min(np.maximum(ta, tb), axis=1))
+    live = (codes != 1) & (t1 > t0) & ~np.any(outside_slab, axis=1)
+    rows = np.nonzero(live)[0]
+    if len(rows) == 0:
+        return bad
+    # sign: > 0 means "on the other side" (inside for outside origins)
+    sgn = np.where(codes[rows] == 0, -1.0, 1.0)
+    o, v = origins[rows], dirs[rows]
+    a, b = t0[rows], t1[rows]
+
+    def other_side(ts):  # ts (k, n) -> signed excursion to the other side
+        k, n = ts.shape
+        pts = o[:, None, :] + ts[:, :, None] * v[:, None, :]
+        sd = twisted_signed_distance(spec, pts.reshape(-1, 3)).reshape(k, n)
+        return sgn[:, None] * sd
+
+    frac = (np.arange(samples) + 0.5) / samples
+    ts = a[:, None] + frac[None, :] * (b - a)[:, None]
+    ex = other_side(ts)
+    best = np.argmax(ex, axis=1)
+    worst = ex[np.arange(len(rows)), best]
+    step = (b - a) / samples
+    centre = ts[np.arange(len(rows)), best]
+    zf = np.linspace(-1.0, 1.0, zoom_samples)
+    for _ in range(zoom_rounds):
+        tz = np.clip(centre[:, None] + zf[None, :] * step[:, None],
+                     a[:, None], b[:, None])
+        ez = other_side(tz)
+        k = np.argmax(ez, axis=1)
+        e = ez[np.arange(len(rows)), k]
+        better = e > worst
+        worst = np.where(better, e, worst)
+        centre = np.where(better, tz[np.arange(len(rows)), k], centre)
+        step = step * 2.0 / (zoom_samples - 1)
+    bad[rows] = worst > tol
+    return bad
+
+
+# ---------------------------------------------------------------------------
+# Twisted solids: exact cross-sections (see "Twisted solids" in the module
+# doc), and --describe-twisted
+# ---------------------------------------------------------------------------
+
+TWISTED_KINDS = ["twistedBox", "twistedTrd", "twistedTrap", "genericTrap"]
+
+
+def twisted_faceted_params(spec):
+    """The G4VTwistedFaceted parameters (twist, dz, theta, phi, dy1, dx1,
+    dx2, dy2, dx3, dx4, alpha) of a twistedBox/twistedTrd/twistedTrap."""
+    t = spec["type"]
+    if t == "twistedBox":
+        dx, dy = spec["dx"], spec["dy"]
+        return (spec["twistedangle"], spec["dz"], 0.0, 0.0,
+                dy, dx, dx, dy, dx, dx, 0.0)
+    if t == "twistedTrd":
+        return (spec["twistedangle"], spec["dz"], 0.0, 0.0,
+                spec["dy1"], spec["dx1"], spec["dx1"],
+                spec["dy2"], spec["dx2"], spec["dx2"], 0.0)
+    if t == "twistedTrap":
+        return tuple(spec[k] for k in (
+            "twistedangle", "dz", "theta", "phi", "dy1", "dx1", "dx2", "dy2",
+            "dx3", "dx4", "alpha"))
+    raise ValueError(t)
+
+
+def twisted_cross_section(spec, z, variant="exact"):
+    """Vertices (n, 4, 2) of the cross-section of a twisted solid at the
+    heights z (n,), in Geant4's order: counter-clockwise for the
+    G4VTwistedFaceted kinds, the given (clockwise) order for genericTrap.
+
+    variant != "exact" gives the wrong candidate formulas that
+    --describe-twisted checks against Geant4 to show that the test tells
+    them apart."""
+    z = np.atleast_1d(np.asarray(z, dtype=np.float64))
+    if spec["type"] == "genericTrap":
+        dz = spec["dz"]
+        v = np.asarray(spec["vertices"], dtype=np.float64)
+        bot, top = v[:4], v[4:]
+        t = ((z + dz) / (2.0 * dz))[:, None, None]
+        if variant == "polar":
+            # vertices interpolated in polar coordinates about the centroids
+            cb, ct = bot.mean(axis=0), top.mean(axis=0)
+            rb, rt = bot - cb, top - ct
+            ab = np.arctan2(rb[:, 1], rb[:, 0])
+            at = np.arctan2(rt[:, 1], rt[:, 0])
+            da = (at - ab + PI) % TWO_PI - PI
+            lb, lt = np.hypot(rb[:, 0], rb[:, 1]), np.hypot(rt[:, 0],
+                                                            rt[:, 1])
+            tt = t[:, :, 0]
+            ang = ab + da * tt
+            rad = lb + (lt - lb) * tt
+            c = cb + (ct - cb) * t[:, 0, :]
+            return np.stack([c[:, None, 0] + rad * np.cos(ang),
+                             c[:, None, 1] + rad * np.sin(ang)], axis=2)
+        return bot[None] + (top - bot)[None] * t
+    (tw, dz, theta, phi, dy1, dx1, dx2, dy2, dx3, dx4,
+     alpha) = twisted_faceted_params(spec)
+    u = (z + dz) / (2.0 * dz)           # 0 at -dz, 1 at +dz
+    dxm = dx1 + (dx3 - dx1) * u          # half x length of the -y edge
+    dxp = dx2 + (dx4 - dx2) * u          # half x length of the +y edge
+    dy = dy1 + (dy2 - dy1) * u           # half y length
+    ta = math.tan(alpha)
+    if variant == "alpha_sign":
+        ta = -ta
+    if variant == "dx_swap":
+        dxm, dxp = dxp, dxm
+    loc = np.stack([np.stack([-dxm - dy * ta, -dy], 1),
+                    np.stack([dxm - dy * ta, -dy], 1),
+                    np.stack([dxp + dy * ta, dy], 1),
+                    np.stack([-dxp + dy * ta, dy], 1)], axis=1)  # (n,4,2)
+    ang = tw * z / (2.0 * dz)            # rotation, counter-clockwise
+    if variant == "rot_sign":
+        ang = -ang
+    elif variant == "rot_from_bottom":
+        ang = tw * u
+    c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    off = np.stack([z * math.tan(theta) * math.cos(phi),
+                    z * math.tan(theta) * math.sin(phi)], 1)  # (n,2)
+    if variant == "shift_rotated":  # tilt offset applied before rotating
+        loc = loc + off[:, None, :]
+        off = np.zeros_like(off)
+    x = c * loc[:, :, 0] - s * loc[:, :, 1] + off[:, None, 0]
+    y = s * loc[:, :, 0] + c * loc[:, :, 1] + off[:, None, 1]
+    return np.stack([x, y], axis=2)
+
+
+def twisted_signed_distance(spec, pts, variant="exact"):
+    """Signed 'distance' of points (n, 3) to a twisted solid by the
+    cross-section formula: max(|z| - dz, in-plane distances beyond the
+    section's edges); < 0 inside, > 0 outside, 0 on the surface (it is the
+    true distance only in the plane z = const; the cross-section is convex,
+    as for every solid generated here)."""
+    pts = np.asarray(pts, dtype=np.float64)
+    z = pts[:, 2]
+    poly = twisted_cross_section(spec, z, variant)
+    a = poly
+    b = np.roll(poly, -1, axis=1)
+    e = b - a
+    rel = pts[:, None, :2] - a
+    area = np.sum(_cross2(a, b), axis=1)  # 2 * signed area
+    orient = np.where(area > 0.0, 1.0, -1.0)[:, None]  # +1 ccw, -1 cw
+    # outward distance beyond each edge line
+    d_edge = -orient * _cross2(e, rel) / np.linalg.norm(e, axis=2)
+    return np.maximum(np.abs(z) - spec["dz"], np.max(d_edge, axis=1))
+
+
+# Wrong candidate formulas that --describe-twisted also tests (each must
+# disagree with Geant4 somewhere, showing that the check can tell them apart).
+_TWISTED_ALTERNATIVES = {
+    "twistedBox": ["rot_sign", "rot_from_bottom", "xy_swap"],
+    "twistedTrd": ["rot_sign", "rot_from_bottom", "xy_swap"],
+    "twistedTrap": ["rot_sign", "rot_from_bottom", "shift_rotated",
+                    "alpha_sign", "dx_swap"],
+    "genericTrap": ["polar"],
+}
+
+
+def _xy_swapped(spec):
+    """A twistedBox/twistedTrd spec with the x and y half lengths swapped
+    (the wrong-axes candidate of --describe-twisted)."""
+    s = dict(spec)
+    if s["type"] == "twistedBox":
+        s["dx"], s["dy"] = spec["dy"], spec["dx"]
+    else:
+        s["dx1"], s["dy1"] = spec["dy1"], spec["dx1"]
+        s["dx2"], s["dy2"] = spec["dy2"], spec["dx2"]
+    return s
+
+
+def _candidate_distance(spec, pts, variant):
+    if variant == "xy_swap":
+        return twisted_signed_distance(_xy_swapped(spec), pts)
+    return twisted_signed_distance(spec, pts, variant)
+
+
+def describe_twisted(g4, builder, solids_per_kind=8, n_points=2000,
+                     n_rays=200, seed=20240611):
+    """Checks the cross-section formulas of the module doc against Geant4.
+
+    For each twisted kind, solids_per_kind solids from the kind's generator:
+    1. classification: n_points uniform points of the bounding box enlarged
+       1.2x (float32-rounded); the formula (twisted_signed_distance < 0)
+       against Geant4's Inside; points within 1e-6 mm of the surface by the
+       formula are skipped.  The same for the wrong candidates.
+    2. surface points: from inside points along random directions, the
+       boundary found by bisecting Geant4's Inside (60 steps), and the hit
+       points p + d v of Geant4's DistanceToOut and (from outside points
+       aimed at the solid) DistanceToIn: the formula's |signed distance|
+       there (mm), i.e. the distance functions use the same surfaces.
+    3. ruled sides: points on the straight segment between consecutive
+       cross-section vertices at random heights must be kSurface, and
+       1e-6 * (1 + size) off the segment in the plane z = const, outward /
+       inward, kOutside / kInside.
+    Returns a JSON-able dict; "ok" is false if the formula disagrees with
+    Geant4 anywhere in 1. or 3., or 2. finds a surface point of Geant4 more
+    than 1e-6 mm off the formula's surface (ignoring DistanceToIn/Out
+    answers that Geant4's own Inside does not put on the surface).
+    """
+    V = g4.G4ThreeVector
+    k_in, k_out = g4.EInside.kInside, g4.EInside.kOutside
+    k_surf = g4.EInside.kSurface
+    report = {"ok": True, "kinds": {}}
+    for kind in TWISTED_KINDS:
+        rng = np.random.default_rng([seed, KINDS.index(kind)])
+        alts = _TWISTED_ALTERNATIVES[kind]
+        st = {"solids": 0, "points": 0, "skipped_near_surface": 0,
+              "disagree": 0, "alternatives_disagree": {a: 0 for a in alts},
+              "bisect_points": 0, "bisect_max_abs_sd": 0.0,
+              "dist_hits": 0, "dist_max_abs_sd": 0.0,
+              "dist_hits_off_g4_surface": 0, "dist_out_misses": 0,
+              "dist_in_misses": 0,
+              "ruled_points": 0, "ruled_fail": 0}
+        for i in range(solids_per_kind):
+            spec = GENERATORS[kind](rng, i, log_uniform(rng, 3, 200))
+            solid = builder.build(spec)
+            inside = solid.Inside
+            dto = distance_to_out(g4, solid)
+            lo, hi = bounding_box(g4, solid)
+            size = float(np.max(hi - lo))
+            centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            st["solids"] += 1
+            # 1. classification: half of the points uniform in the box,
+            # half in a thin shell (in-plane offsets up to 2% of the size)
+            # around the formula's lateral surface, where wrong candidates
+            # differ most
+            n_box = n_points // 2
+            pts = centre + rng.uniform(-1.2, 1.2, (n_points, 3)) * half
+            shell = _ruled_points(spec, rng, n_points - n_box)
+            off = rng.uniform(-0.02, 0.02, n_points - n_box) * size
+            pts[n_box:, :2] = shell[0] + off[:, None] * shell[1]
+            pts[n_box:, 2] = shell[2]
+            pts = _round_f32(pts)
+            sd = twisted_signed_distance(spec, pts)
+            g = [inside(V(*p)) for p in pts.tolist()]
+            g_in = np.array([c == k_in for c in g])
+            g_out = np.array([c == k_out for c in g])
+            far = np.abs(sd) > 1e-6
+            st["points"] += n_points
+            st["skipped_near_surface"] += int(np.count_nonzero(~far))
+            bad = far & (((sd < 0) & ~g_in) | ((sd > 0) & ~g_out))
+            st["disagree"] += int(np.count_nonzero(bad))
+            for a in alts:
+                sa = _candidate_distance(spec, pts, a)
+                fa = np.abs(sa) > 1e-6
+                st["alternatives_disagree"][a] += int(np.count_nonzero(
+                    fa & (((sa < 0) & ~g_in) | ((sa > 0) & ~g_out))))
+            # 2. surface points: bisection of Inside, Geant4's distances
+            starts = pts[g_in][:n_rays]
+            dirs = snap_directions(_isotropic_batch(rng, len(starts)))
+            for o, v in zip(starts.tolist(), dirs.tolist()):
+                o, v = np.array(o), np.array(v)
+                a, b = 0.0, 4.0 * size
+                for _ in range(60):
+                    m = 0.5 * (a + b)
+                    if inside(V(*(o + m * v))) == k_in:
+                        a = m
+                    else:
+                        b = m
+                q = o + 0.5 * (a + b) * v
+                e = abs(float(twisted_signed_distance(spec, q[None])[0]))
+                st["bisect_points"] += 1
+                st["bisect_max_abs_sd"] = max(st["bisect_max_abs_sd"], e)
+                _check_hit(st, spec, inside, V, k_surf, o, v,
+                           dto(V(*o), V(*v)), "dist_out_misses")
+            outs = pts[g_out][:n_rays]
+            tgt = _round_f32(centre + rng.uniform(-0.8, 0.8, (len(outs), 3))
+                             * half)
+            dirs = snap_directions(tgt - outs)
+            for o, v in zip(outs.tolist(), dirs.tolist()):
+                o, v = np.array(o), np.array(v)
+                _check_hit(st, spec, inside, V, k_surf, o, v,
+                           solid.DistanceToIn(V(*o), V(*v)), "dist_in_misses")
+            # 3. ruled sides
+            on, nrm, zs, us = _ruled_points(spec, rng, n_rays)
+            eps = 1e-6 * (1.0 + size)
+            for j in range(n_rays):
+                checks = [(on[j], k_surf), (on[j] + eps * nrm[j], k_out),
+                          (on[j] - eps * nrm[j], k_in)]
+                if not 0.02 < us[j] < 0.98:  # near a vertex: on-point only
+                    checks = checks[:1]
+                st["ruled_points"] += 1
+                for q2, want in checks:
+                    if inside(V(q2[0], q2[1], zs[j])) != want:
+                        st["ruled_fail"] += 1
+                        break
+        if (st["disagree"] or st["ruled_fail"] or
+                st["bisect_max_abs_sd"] > 1e-6 or
+                st["dist_max_abs_sd"] > 1e-6):
+            report["ok"] = False
+        report["kinds"][kind] = st
+    return report
+
+
+def _ruled_points(spec, rng, n):
+    """n random points on the lateral surface by the formula: a random
+    height z, side k and u in [0, 1] give the point (1 - u) P_k(z) +
+    u P_k+1(z) of the straight segment between consecutive cross-section
+    vertices.  Returns (xy (n,2), outward in-plane unit normals (n,2),
+    z (n,), u (n,))."""
+    dz = spec["dz"]
+    zs = rng.uniform(-dz, dz, n)
+    poly = twisted_cross_section(spec, zs)
+    ks = rng.integers(0, 4, n)
+    us = rng.uniform(0.0, 1.0, n)
+    rows = np.arange(n)
+    pa = poly[rows, ks]
+    e = poly[rows, (ks + 1) % 4] - pa
+    nrm = np.stack([e[:, 1], -e[:, 0]], 1) / np.linalg.norm(e, axis=1)[:,
+                                                                     None]
+    area = np.sum(_cross2(poly, np.roll(poly, -1, axis=1)), axis=1)
+    nrm[area < 0] *= -1.0  # outward normal of a clockwise section
+    return pa + us[:, None] * e, nrm, zs, us
+
+
+def _check_hit(st, spec, inside, V, k_surf, o, v, d, miss_key):
+    """Part 2 of describe_twisted for one Geant4 distance answer."""
+    if d >= K_INFINITY:
+        st[miss_key] += 1
+        return
+    q = o + d * v
+    if inside(V(*q.tolist())) != k_surf:
+        st["dist_hits_off_g4_surface"] += 1  # a Geant4 bug (flagged rays)
+        return
+    e = abs(float(twisted_signed_distance(spec, q[None])[0]))
+    st["dist_hits"] += 1
+    st["dist_max_abs_sd"] = max(st["dist_max_abs_sd"], e)
+
+
 # ---------------------------------------------------------------------------
 # Self check (conventions), --self-check
 # ---------------------------------------------------------------------------
@@ -1203,7 +2138,8 @@ def self_check(g4, builder):
 def parse_args(argv):
     ap = argparse.ArgumentParser(
         description="Generate Geant4 reference ray/solid answers for hytrace.")
-    ap.add_argument("--out", required=True, help="output directory")
+    ap.add_argument("--out", help="output directory (required unless "
+                    "--describe-twisted is given)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--solids-per-kind", type=int, default=20)
     ap.add_argument("--rays-per-solid", type=int, default=500)
@@ -1219,7 +2155,14 @@ def parse_args(argv):
     ap.add_argument("--self-check", action="store_true",
                     help="run convention checks and print their report "
                          "to stderr")
+    ap.add_argument("--describe-twisted", action="store_true",
+                    help="check the twisted-solid cross-section formulas "
+                         "of the module doc against Geant4 and print the "
+                         "report to stderr; without --out only this check "
+                         "runs (exit status 1 if it fails)")
     args = ap.parse_args(argv)
+    if args.out is None and not args.describe_twisted:
+        ap.error("--out is required (unless --describe-twisted is given)")
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
     unknown = [k for k in kinds if k not in KINDS]
     if unknown:
@@ -1241,14 +2184,17 @@ def parse_args(argv):
 def main(argv=None):
     t_start = time.perf_counter()
     args = parse_args(sys.argv[1:] if argv is None else argv)
-    os.makedirs(args.out, exist_ok=True)
+    describe_only = args.out is None
+    tmp = tempfile.TemporaryDirectory(prefix="hytrace_g4_")
+    if not describe_only:
+        os.makedirs(args.out, exist_ok=True)
 
     real_out, real_err = sys.stdout, sys.stderr
-    log = open(os.path.join(args.out, "geant4.log"), "w")
+    log = open(os.path.join(tmp.name if describe_only else args.out,
+                            "geant4.log"), "w")
     counter = [0]
     out_sink = _G4Sink(log, real_err, False, counter)
     err_sink = _G4Sink(log, real_err, True, counter)
-    tmp = tempfile.TemporaryDirectory(prefix="hytrace_g4_")
     if not os.environ.get("GEANT4_DATA_DIR"):
         # geant4_pybind would otherwise try to download its data sets; the
         # geometry needs none of them.
@@ -1258,11 +2204,31 @@ def main(argv=None):
     sys.stdout, sys.stderr = out_sink, err_sink
     try:
         import geant4_pybind as g4
-        result = run(g4, args, tmp.name, real_err, counter)
+        if describe_only:
+            report = run_describe_twisted(g4, Builder(g4, tmp.name),
+                                          real_err)
+        else:
+            result = run(g4, args, tmp.name, real_err, counter)
+    except Exception:
+        # Some Geant4 solids (twisted, extruded) crash when they are only
+        # destroyed at interpreter shutdown, as they would be here through
+        # the traceback: report the error and leave at once.
+        sys.stdout, sys.stderr = real_out, real_err
+        traceback.print_exc()
+        real_err.flush()
+        log.close()
+        tmp.cleanup()
+        os._exit(1)
     finally:
         sys.stdout, sys.stderr = real_out, real_err
         log.close()
         tmp.cleanup()
+    if describe_only:
+        real_out.write(json.dumps({"describe_twisted_ok": report["ok"],
+                                   "seconds": round(time.perf_counter() -
+                                                    t_start, 3)}) + "\n")
+        real_out.flush()
+        return 0 if report["ok"] else 1
     timing = result["timing"]
     timing["g4_warnings"] = counter[0]
     timing["total_seconds"] = time.perf_counter() - t_start
@@ -1277,14 +2243,29 @@ def main(argv=None):
     return 0
 
 
+def run_describe_twisted(g4, builder, real_err):
+    """--describe-twisted: run describe_twisted and print its report to
+    stderr (one line per kind)."""
+    report = describe_twisted(g4, builder)
+    for kind, st in report["kinds"].items():
+        real_err.write("describe-twisted %s: %s\n" % (kind, json.dumps(st)))
+    real_err.write("describe-twisted: %s\n"
+                   % ("ok" if report["ok"] else "FAILED"))
+    real_err.flush()
+    return report
+
+
 def run(g4, args, tmpdir, real_err, counter):
     builder = Builder(g4, tmpdir)
     if args.self_check:
         report = self_check(g4, builder)
         real_err.write("self-check: %s\n" % json.dumps(report))
+    if args.describe_twisted:
+        run_describe_twisted(g4, builder, real_err)
 
     solids_json = []
     rays, ray_solid, ray_family, expected, ray_flags = [], [], [], [], []
+    origin_distance = []
     per_kind = {}
     total_q, total_s = 0, 0.0
     K, M = args.solids_per_kind, args.rays_per_solid
@@ -1314,6 +2295,9 @@ def run(g4, args, tmpdir, real_err, counter):
             exp, flags, q, sec = trace(
                 g4, solid, origins, dirs, counter,
                 max(args.march, MARCH_SAMPLES.get(kind, MARCH_DEFAULT)))
+            if kind in TWISTED_KINDS:
+                flags[formula_missed(spec, origins, dirs, exp[:, 1],
+                                     exp[:, 0])] |= FLAG_FORMULA
             kq += q
             ks += sec
             r = np.zeros((M, 8))
@@ -1326,6 +2310,12 @@ def run(g4, args, tmpdir, real_err, counter):
             ray_family.append(fams)
             expected.append(exp)
             ray_flags.append(flags)
+            # Distance of each origin to the surface (in the plane z = const,
+            # an upper bound of the 3D distance) where the formula exists.
+            near = np.full(M, np.nan)
+            if kind in TWISTED_KINDS:
+                near = np.abs(twisted_signed_distance(spec, origins))
+            origin_distance.append(near)
         per_kind[kind] = {"queries": kq, "seconds": ks}
         total_q += kq
         total_s += ks
@@ -1344,6 +2334,8 @@ def run(g4, args, tmpdir, real_err, counter):
             cat(expected, (0, 2), np.float64).astype(np.float64))
     np.save(os.path.join(out, "ray_flags.npy"),
             cat(ray_flags, (0,), np.int32).astype(np.int32))
+    np.save(os.path.join(out, "origin_distance.npy"),
+            cat(origin_distance, (0,), np.float64).astype(np.float64))
     doc = {"format": FORMAT, "version": VERSION,
            "geant4": str(getattr(g4, "G4Version", "")).strip("$ ")
            .replace("Name: ", ""),
@@ -1365,6 +2357,9 @@ def run(g4, args, tmpdir, real_err, counter):
                   for f in ray_flags)),
               "flagged_missed": int(sum(
                   int(np.count_nonzero(f & FLAG_MISSED))
+                  for f in ray_flags)),
+              "flagged_formula": int(sum(
+                  int(np.count_nonzero(f & FLAG_FORMULA))
                   for f in ray_flags))}
     if args.bench:
         orb = builder.build({"type": "orb", "r": 10.0})

@@ -30,6 +30,9 @@ pub struct OracleData {
     /// Geant4's distance to the next boundary (inf: none) and inside code (0 out, 1 surface,
     /// 2 in).
     pub expected: Vec<[f64; 2]>,
+    /// For solids with a tessellated approximation: the origin's distance to the true
+    /// surface (an upper bound); NaN otherwise.
+    pub origin_distance: Vec<f64>,
     /// The oracle's timing summary.
     pub timing: serde_json::Value,
 }
@@ -95,13 +98,22 @@ pub fn run_oracle(python: &Path, dir: &Path, args: &[&str]) -> OracleData {
         ray_solid: i32_array(&dir.join("ray_solid.npy")),
         ray_family: i32_array(&dir.join("ray_family.npy")),
         ray_flags: i32_array(&dir.join("ray_flags.npy")),
+        origin_distance: f64_array(&dir.join("origin_distance.npy")).1,
         expected: expected.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
         timing,
     }
 }
 
 /// Distance within which meshes of solids with no analytic form follow the true surface.
-pub const TESSELLATION_TOLERANCE: f64 = 1e-3;
+/// Planar triangles approach a twisted face slowly (the deviation falls only as the inverse
+/// of the triangle count), so 0.01 mm keeps the oracle's 100-300 mm twisted solids at
+/// 10^4-10^5 triangles.
+pub const TESSELLATION_TOLERANCE: f64 = 1e-2;
+
+/// Kinds whose mesh approximates a curved (twisted) surface: distances agree within the
+/// tessellation tolerance over the cosine of incidence rather than the analytic tolerance.
+pub const APPROXIMATED_KINDS: [&str; 4] =
+    ["twistedBox", "twistedTrd", "twistedTrap", "genericTrap"];
 
 /// Builds one Foundry solid per Geant4 solid (CSG, or a mesh within
 /// [`TESSELLATION_TOLERANCE`]) and prepares each for tracing in `T`.
@@ -139,15 +151,21 @@ pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PreparedPrim<T>> {
         .collect()
 }
 
-/// hytrace's answer for one oracle ray: the first crossing distance (inf: none) and whether
-/// the ray starts inside by the prim's inside test.
-pub fn answer<T: Real>(prim: &PreparedPrim<T>, r: &[f64; 8]) -> (f64, bool) {
+/// hytrace's answer for one oracle ray: the first crossing distance (inf: none), the
+/// cosine between the ray and the surface normal there, and whether the ray starts inside
+/// by the prim's inside test.
+pub fn answer<T: Real>(prim: &PreparedPrim<T>, r: &[f64; 8]) -> (f64, f64, bool) {
     let ray = Ray {
         origin: V3::from_f64([r[0], r[1], r[2]]),
         direction: V3::from_f64([r[4], r[5], r[6]]),
     };
     let step = prim.first_crossing(&ray, T::from_f64(r[3]));
-    (step.t.to_f64(), prim.contains(ray.origin))
+    let cos = step
+        .normal
+        .normalized()
+        .dot(ray.direction.normalized())
+        .abs();
+    (step.t.to_f64(), cos.to_f64(), prim.contains(ray.origin))
 }
 
 /// The agreement tolerance of the CSG issue: `max(1e-4 mm, 2e-6 (|origin| + t))`.
@@ -163,6 +181,9 @@ pub struct KindStats {
     pub rays: usize,
     /// Rays without a reference: Geant4 contradicted itself there.
     pub flagged: usize,
+    /// Rays of approximated kinds whose origin lies within the tessellation band of the
+    /// true surface (where inside and outside legitimately differ).
+    pub in_band: usize,
     /// Rays whose distance agrees within [`tolerance`].
     pub distance_ok: usize,
     /// Rays whose inside test agrees with Geant4's `Inside`.
@@ -186,12 +207,22 @@ pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
             s.flagged += 1;
             continue;
         }
-        let (got, inside) = answer(&trees[solid], r);
+        let approximated = APPROXIMATED_KINDS.contains(&data.kinds[solid].as_str());
+        if approximated && data.origin_distance[i] <= 4.0 * TESSELLATION_TOLERANCE {
+            s.in_band += 1;
+            continue;
+        }
+        let (got, cos, inside) = answer(&trees[solid], r);
         s.rays += 1;
         let ok = if want.is_infinite() {
             got.is_infinite()
         } else {
-            (got - want).abs() <= tolerance(r, want)
+            let allowed = if approximated {
+                tolerance(r, want).max(2.0 * TESSELLATION_TOLERANCE / cos.max(0.05))
+            } else {
+                tolerance(r, want)
+            };
+            (got - want).abs() <= allowed
         };
         s.distance_ok += ok as usize;
         s.inside_ok += (inside == (code == 2.0)) as usize;

@@ -1,18 +1,22 @@
 //! hytrace's CSG against Geant4, ray by ray: randomised solids of every kind the CSG issue
 //! lists and boolean trees of depth 1-4, shot with random, aimed, axis-aligned and inside
 //! rays. Geant4's `DistanceToIn` (outside) or `DistanceToOut` (inside) is the reference for
-//! the first boundary crossing; `Inside` for the inside test.
+//! the first boundary crossing; `Inside` for the inside test. Solids with no analytic form
+//! (twisted, extruded, tessellated) are compared as meshes within their stated tolerance.
 
 use std::collections::BTreeMap;
 
 use hytrace_csg::Real;
-use hytrace_tests::geant4::{compare, run_oracle, KindStats, OracleData};
+use hytrace_tests::geant4::{compare, run_oracle, KindStats, OracleData, APPROXIMATED_KINDS};
 use hytrace_tests::oracle_python;
 
 /// Per kind: 20 solids x 500 rays = 10^4 rays, so 99.99% allows one disagreement.
 const SOLIDS_PER_KIND: &str = "20";
 const RAYS_PER_SOLID: &str = "500";
 const REQUIRED_AGREEMENT: f64 = 0.9999;
+/// Twisted solids are meshes within 0.01 mm of the true surface: rays grazing a face
+/// within that band (a few in 10^4) may legitimately hit one and miss the other.
+const REQUIRED_AGREEMENT_APPROXIMATED: f64 = 0.9995;
 
 fn oracle() -> Option<(tempfile::TempDir, OracleData)> {
     let python = oracle_python(&["numpy", "geant4_pybind"])?;
@@ -39,14 +43,21 @@ fn check<T: Real>(stats: &BTreeMap<String, KindStats>) -> Vec<String> {
         let distance = s.distance_ok as f64 / s.rays as f64;
         let inside = s.inside_ok as f64 / s.rays as f64;
         eprintln!(
-            "{} {kind:>12}: {} rays ({} without reference), distance {:.5}, inside {:.5}",
+            "{} {kind:>12}: {} rays ({} without reference, {} in the tessellation band), \
+             distance {:.5}, inside {:.5}",
             T::NAME,
             s.rays,
             s.flagged,
+            s.in_band,
             distance,
             inside
         );
-        if distance < REQUIRED_AGREEMENT || inside < REQUIRED_AGREEMENT {
+        let required = if APPROXIMATED_KINDS.contains(&kind.as_str()) {
+            REQUIRED_AGREEMENT_APPROXIMATED
+        } else {
+            REQUIRED_AGREEMENT
+        };
+        if distance < required || inside < required {
             failures.push(format!(
                 "{kind}: distance {distance:.5}, inside {inside:.5} of {} rays\n  {}",
                 s.rays,
@@ -68,18 +79,19 @@ fn every_solid_kind_agrees_with_geant4_in_f32_and_f64() {
     for (kind, s) in &f64_stats {
         assert!(
             s.rays >= 9000,
-            "{kind}: only {} comparable rays ({} where Geant4 contradicts itself)",
+            "{kind}: only {} comparable rays ({} where Geant4 contradicts itself, {} in band)",
             s.rays,
-            s.flagged
+            s.flagged,
+            s.in_band
         );
     }
-    assert!(f64_stats.len() >= 19, "kinds: {:?}", f64_stats.keys());
+    assert!(f64_stats.len() >= 25, "kinds: {:?}", f64_stats.keys());
     let f32_stats = compare::<f32>(&data);
     let mut failures = check::<f64>(&f64_stats);
     failures.extend(check::<f32>(&f32_stats));
     assert!(
         failures.is_empty(),
-        "below {REQUIRED_AGREEMENT} agreement with Geant4:\n{}",
+        "below the required agreement with Geant4:\n{}",
         failures.join("\n")
     );
 }

@@ -109,8 +109,22 @@ impl<T: Real> MeshPrim<T> {
         self.triangles.is_empty()
     }
 
-    /// Every crossing of the ray with the mesh after `tmin + tol`, nearest first, through
-    /// `visit(t, normal)`; returns the nearest.
+    /// The ray moved to its closest approach to the mesh's centre, and the parameter of
+    /// that point: working from there keeps f32 precise for rays starting far away.
+    fn recentred(&self, ray: &Ray<T>) -> (Ray<T>, T) {
+        let d = ray.direction;
+        let centre = (self.bounds[0] + self.bounds[1]) * T::HALF;
+        let shift = -(ray.origin - centre).dot(d) / d.length_squared();
+        let shift = if shift.is_finite() { shift } else { T::ZERO };
+        let moved = Ray {
+            origin: ray.origin.at(d, shift),
+            direction: d,
+        };
+        (moved, shift)
+    }
+
+    /// The nearest crossing after `after` of a (recentred) ray, with the triangle's
+    /// outward, not normalized, normal.
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
         let (o, d) = (ray.origin, ray.direction);
         let mut best: Option<(T, V3<T>)> = None;
@@ -149,9 +163,10 @@ impl<T: Real> MeshPrim<T> {
             return Step::miss(false);
         }
         let after = tmin + T::SURFACE_TOLERANCE * (self.scale + tmin.abs());
-        match self.nearest(ray, after) {
+        let (moved, shift) = self.recentred(ray);
+        match self.nearest(&moved, after - shift) {
             Some((t, normal)) => Step {
-                t,
+                t: t + shift,
                 normal,
                 inside_before: normal.dot(ray.direction) > T::ZERO,
             },
@@ -169,9 +184,12 @@ impl<T: Real> MeshPrim<T> {
         if !ray_meets_bounds(&ray, &self.bounds, T::ZERO, T::INFINITY) {
             return false;
         }
+        // Count crossings in the recentred parameter; each query starts strictly after the
+        // last crossing, so the walk ends.
+        let (moved, shift) = self.recentred(&ray);
         let mut inside = false;
-        let mut after = T::ZERO;
-        while let Some((t, _)) = self.nearest(&ray, after) {
+        let mut after = -shift;
+        while let Some((t, _)) = self.nearest(&moved, after) {
             inside = !inside;
             after = t;
         }
