@@ -1,12 +1,19 @@
 //! Triangle-mesh prims: closed meshes (tessellated solids, or solids with no analytic form
 //! here) traced in f32 or f64 with the same crossing semantics as CSG trees.
 //!
-//! Triangles are tested one by one after a bounds test (a BVH over large meshes comes with
-//! the BVH issue). Triangles are counter-clockwise seen from outside, so the geometric
-//! normal `(v1 - v0) x (v2 - v0)` points out and classifies each crossing as an entry or an
-//! exit.
+//! Triangles sit in a binary BVH built by obvhs (from their f32 copies); the traversal runs
+//! in the kernel's precision over node boxes padded for the f32 rounding, so it never culls
+//! a triangle the ray meets. Triangles are counter-clockwise seen from outside, so the
+//! geometric normal `(v1 - v0) x (v2 - v0)` points out and classifies each crossing as an
+//! entry or an exit.
 
+use std::time::Duration;
+
+use glam::Vec3A;
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
+use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::triangle::Triangle as BvhTriangle;
+use obvhs::BvhBuildParams;
 
 use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, Bounds};
@@ -19,6 +26,16 @@ pub struct MeshPrim<T> {
     triangles: Vec<[V3<T>; 3]>,
     bounds: Bounds<T>,
     scale: T,
+    nodes: Vec<MeshNode<T>>,
+}
+
+/// A BVH node: padded bounds, then either children `first, first + 1` (`count == 0`) or
+/// triangles `first..first + count` of the reordered triangle list.
+#[derive(Clone, Debug, PartialEq)]
+struct MeshNode<T> {
+    bounds: Bounds<T>,
+    first: u32,
+    count: u32,
 }
 
 /// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
@@ -51,13 +68,44 @@ impl<T: Real> MeshPrim<T> {
         let size = (0..3).fold(0.0f64, |a, k| a.max(hi[k] - lo[k]));
         // Rounding vertices to T must not clip them out of the bounds.
         let pad = 1e-6 * (size + (0..3).fold(0.0f64, |a, k| a.max(lo[k].abs()).max(hi[k].abs())));
+        let bvh_input: Vec<BvhTriangle> = triangles
+            .iter()
+            .map(|t| {
+                let [v0, v1, v2] = t.map(|v| Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32));
+                BvhTriangle { v0, v1, v2 }
+            })
+            .collect();
+        let bvh = build_bvh2_from_tris(
+            &bvh_input,
+            BvhBuildParams::fast_build(),
+            &mut Duration::default(),
+        );
+        // Triangles in the BVH's leaf order, so leaves index them directly.
+        let ordered: Vec<[V3<T>; 3]> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| triangles[i as usize].map(V3::from_f64))
+            .collect();
+        // Node boxes come from f32 vertices: pad them like the mesh bounds.
+        let padded =
+            |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
+        let nodes = bvh
+            .nodes
+            .iter()
+            .map(|n| MeshNode {
+                bounds: [padded(n.aabb.min, -1.0), padded(n.aabb.max, 1.0)],
+                first: n.first_index,
+                count: n.prim_count,
+            })
+            .collect();
         Ok(MeshPrim {
-            triangles: triangles.iter().map(|t| t.map(V3::from_f64)).collect(),
+            triangles: ordered,
             bounds: [
                 V3::from_f64(lo.map(|v| v - pad)),
                 V3::from_f64(hi.map(|v| v + pad)),
             ],
             scale: T::from_f64(0.5 * size.max(f64::MIN_POSITIVE)),
+            nodes,
         })
     }
 
@@ -128,7 +176,39 @@ impl<T: Real> MeshPrim<T> {
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
         let (o, d) = (ray.origin, ray.direction);
         let mut best: Option<(T, V3<T>)> = None;
-        for [v0, v1, v2] in &self.triangles {
+        let mut stack = Vec::with_capacity(64);
+        if !self.nodes.is_empty() {
+            stack.push(0u32);
+        }
+        while let Some(index) = stack.pop() {
+            let node = &self.nodes[index as usize];
+            let limit = best.map_or(T::INFINITY, |(b, _)| b);
+            if !ray_meets_bounds(ray, &node.bounds, after, limit) {
+                continue;
+            }
+            if node.count == 0 {
+                stack.push(node.first);
+                stack.push(node.first + 1);
+                continue;
+            }
+            let leaf = node.first as usize..(node.first + node.count) as usize;
+            if let Some(hit) = Self::nearest_in(&self.triangles[leaf], o, d, after, limit) {
+                best = Some(hit);
+            }
+        }
+        best
+    }
+
+    /// The nearest crossing in `(after, limit)` among `triangles`.
+    fn nearest_in(
+        triangles: &[[V3<T>; 3]],
+        o: V3<T>,
+        d: V3<T>,
+        after: T,
+        limit: T,
+    ) -> Option<(T, V3<T>)> {
+        let mut best: Option<(T, V3<T>)> = None;
+        for [v0, v1, v2] in triangles {
             // Moller-Trumbore, edges inclusive so shared edges are never both missed.
             let (e1, e2) = (*v1 - *v0, *v2 - *v0);
             let p = d.cross(e2);
@@ -148,7 +228,7 @@ impl<T: Real> MeshPrim<T> {
                 continue;
             }
             let t = e2.dot(q) * inv;
-            if t > after && best.is_none_or(|(b, _)| t < b) {
+            if t > after && t < limit && best.is_none_or(|(b, _)| t < b) {
                 best = Some((t, e1.cross(e2)));
             }
         }
