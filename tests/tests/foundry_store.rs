@@ -294,6 +294,36 @@ fn inconsistent_inverse_and_meta_are_caught() {
     assert!(load_error(&dir).contains("brick.npy"));
 }
 
+#[test]
+fn double_precision_copies_must_round_to_the_gpu_values() {
+    let (_tmp, dir, f) = saved_default();
+    let mut node64 = f.node64.clone();
+    // The vessel's outer sphere radius, moved by far more than an f32 ulp.
+    let k = f
+        .node
+        .iter()
+        .position(|n| n.typecode == hytrace_foundry::TypeCode::Sphere as u32)
+        .unwrap();
+    node64[k].param[3] += 0.5;
+    hytrace_foundry::npy::write_records(&dir.join("node64.npy"), &node64).unwrap();
+    let e = load_error(&dir);
+    assert!(
+        e.contains("node64.npy")
+            && e.contains(&format!("record {k}"))
+            && e.contains("does not round"),
+        "{e}"
+    );
+    let (_tmp, dir, f) = saved_default();
+    let mut node64 = f.node64.clone();
+    node64.pop();
+    hytrace_foundry::npy::write_records(&dir.join("node64.npy"), &node64).unwrap();
+    let e = load_error(&dir);
+    assert!(
+        e.contains("node64.npy") && e.contains("records for the"),
+        "{e}"
+    );
+}
+
 /// Deterministic pseudo-random numbers (SplitMix64).
 fn splitmix(state: &mut u64) -> u64 {
     *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);

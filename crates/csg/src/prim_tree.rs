@@ -14,7 +14,7 @@
 
 use std::ops::Range;
 
-use hytrace_foundry::{Foundry, Node, PrimKind, TypeCode, COMPLEMENT_BIT, MAX_TREE_HEIGHT};
+use hytrace_foundry::{Foundry, PrimKind, TypeCode, COMPLEMENT_BIT, MAX_TREE_HEIGHT};
 
 use crate::kernel::{is_bounded, Frame, Leaf, Step};
 use crate::real::{Ray, Real, V3};
@@ -196,7 +196,8 @@ impl<T: Real> PrimTree<T> {
         let mut planes = Vec::new();
         let mut members = Vec::new();
         let mut slots = Vec::with_capacity(nodes.len());
-        for n in nodes {
+        for (k, n) in nodes.iter().enumerate() {
+            let index = p.node_offset as usize + k;
             let code = TypeCode::from_u32(n.typecode)
                 .ok_or_else(|| err(format!("unknown typecode {}", n.typecode)))?;
             slots.push(match code {
@@ -204,13 +205,13 @@ impl<T: Real> PrimTree<T> {
                 c if c.is_operator() => Slot::Operator(c),
                 c if c.is_list() => {
                     let (first, count) = (n.param[0].to_bits() as usize, n.param[1].to_bits());
-                    let list = foundry
-                        .node
-                        .get(first..first + count as usize)
-                        .ok_or_else(|| err("list members out of bounds".into()))?;
+                    if foundry.node.get(first..first + count as usize).is_none() {
+                        return Err(err("list members out of bounds".into()));
+                    }
                     let start = members.len();
-                    for m in list {
-                        let leaf = make_leaf(foundry, m, &mut planes).map_err(err)?;
+                    for index in first..first + count as usize {
+                        let m = &foundry.node[index];
+                        let leaf = make_leaf(foundry, index, &mut planes).map_err(err)?;
                         if leaf.complement || !is_bounded(leaf.code) {
                             return Err(err(
                                 "list members must be bounded, uncomplemented primitives".into(),
@@ -224,7 +225,7 @@ impl<T: Real> PrimTree<T> {
                         bounds: bounds_of(&n.aabb),
                     }
                 }
-                _ => Slot::Leaf(make_leaf(foundry, n, &mut planes).map_err(err)?),
+                _ => Slot::Leaf(make_leaf(foundry, index, &mut planes).map_err(err)?),
             });
         }
         let bounds = bounds_of(&p.aabb);
@@ -501,11 +502,14 @@ impl<T: Real> PrimTree<T> {
     }
 }
 
+/// The leaf of node `index`, its parameters and planes from the double-precision copies
+/// (rounded to `T`: exactly the f32 values for f32).
 fn make_leaf<T: Real>(
     foundry: &Foundry,
-    n: &Node,
+    index: usize,
     planes: &mut Vec<[T; 4]>,
 ) -> Result<Leaf<T>, String> {
+    let n = &foundry.node[index];
     let code = TypeCode::from_u32(n.typecode)
         .filter(|c| c.is_primitive())
         .ok_or_else(|| format!("typecode {} is not a primitive", n.typecode))?;
@@ -524,22 +528,19 @@ fn make_leaf<T: Real>(
     if code == TypeCode::ConvexPolyhedron {
         let (first, count) = (n.param[0].to_bits() as usize, n.param[1].to_bits() as usize);
         let src = foundry
-            .plan
+            .plan64
             .get(first..first + count)
             .ok_or_else(|| "planes out of range".to_string())?;
         let start = planes.len();
-        planes.extend(src.iter().map(|p| p.plane.map(T::from_f32)));
+        planes.extend(src.iter().map(|p| p.plane.map(T::from_f64)));
         leaf_planes = start..planes.len();
     }
-    let params = [
-        n.param[0],
-        n.param[1],
-        n.param[2],
-        n.param[3],
-        n.param_ext[0],
-        n.param_ext[1],
-    ]
-    .map(T::from_f32);
+    let params = foundry
+        .node64
+        .get(index)
+        .ok_or_else(|| format!("node {index} has no double-precision parameters"))?
+        .param
+        .map(T::from_f64);
     Ok(Leaf {
         code,
         params,

@@ -384,79 +384,74 @@ pub fn theta_cut(theta0: f64, theta1: f64) -> Result<Shape, CsgError> {
 }
 
 impl Primitive {
-    /// The Foundry typecode and node parameters (see [`TypeCode`]'s conventions). Convex
-    /// polyhedra return their plane count in `param[1]`; the caller sets the first plane.
+    /// The Foundry typecode and node parameters in f32 (see [`TypeCode`]'s conventions):
+    /// [`Primitive::node_params64`] rounded. Convex polyhedra return their plane count in
+    /// `param[1]`; the caller sets the first plane.
     pub fn node_params(&self) -> (TypeCode, [f32; 4], [f32; 2]) {
-        let f = |v: f64| v as f32;
-        match self {
-            &Primitive::Sphere { radius } => {
-                (TypeCode::Sphere, [0.0, 0.0, 0.0, f(radius)], [0.0; 2])
-            }
-            &Primitive::ZSphere { radius, z1, z2 } => (
-                TypeCode::ZSphere,
-                [0.0, 0.0, 0.0, f(radius)],
-                [f(z1), f(z2)],
-            ),
-            &Primitive::Box3 { size } => (
-                TypeCode::Box3,
-                [f(size[0]), f(size[1]), f(size[2]), 0.0],
+        let (code, p) = self.node_params64();
+        if let Primitive::Polyhedron { planes } = self {
+            return (
+                code,
+                [0.0, f32::from_bits(planes.len() as u32), 0.0, 0.0],
                 [0.0; 2],
-            ),
-            &Primitive::Cylinder { radius, z1, z2 } => (
-                TypeCode::Cylinder,
-                [0.0, 0.0, 0.0, f(radius)],
-                [f(z1), f(z2)],
-            ),
+            );
+        }
+        let f = |v: f64| v as f32;
+        (
+            code,
+            [f(p[0]), f(p[1]), f(p[2]), f(p[3])],
+            [f(p[4]), f(p[5])],
+        )
+    }
+
+    /// The Foundry typecode and the six node parameters in double precision (`param` then
+    /// `param_ext`; zeros for convex polyhedra, whose parameters are plane indices).
+    pub fn node_params64(&self) -> (TypeCode, [f64; 6]) {
+        match self {
+            &Primitive::Sphere { radius } => (TypeCode::Sphere, [0.0, 0.0, 0.0, radius, 0.0, 0.0]),
+            &Primitive::ZSphere { radius, z1, z2 } => {
+                (TypeCode::ZSphere, [0.0, 0.0, 0.0, radius, z1, z2])
+            }
+            &Primitive::Box3 { size } => {
+                (TypeCode::Box3, [size[0], size[1], size[2], 0.0, 0.0, 0.0])
+            }
+            &Primitive::Cylinder { radius, z1, z2 } => {
+                (TypeCode::Cylinder, [0.0, 0.0, 0.0, radius, z1, z2])
+            }
             &Primitive::Tube { rmin, rmax, z1, z2 } => {
-                (TypeCode::Disc, [0.0, 0.0, f(rmin), f(rmax)], [f(z1), f(z2)])
+                (TypeCode::Disc, [0.0, 0.0, rmin, rmax, z1, z2])
             }
-            &Primitive::Cone { r1, z1, r2, z2 } => {
-                (TypeCode::Cone, [f(r1), f(z1), f(r2), f(z2)], [0.0; 2])
-            }
+            &Primitive::Cone { r1, z1, r2, z2 } => (TypeCode::Cone, [r1, z1, r2, z2, 0.0, 0.0]),
             &Primitive::Hyperboloid {
                 r0,
                 tan_stereo,
                 z1,
                 z2,
-            } => (
-                TypeCode::Hyperboloid,
-                [f(r0), f(tan_stereo), f(z1), f(z2)],
-                [0.0; 2],
-            ),
+            } => (TypeCode::Hyperboloid, [r0, tan_stereo, z1, z2, 0.0, 0.0]),
             &Primitive::Torus { rmin, rmax, rtor } => {
-                (TypeCode::Torus, [f(rmin), f(rmax), f(rtor), 0.0], [0.0; 2])
+                (TypeCode::Torus, [rmin, rmax, rtor, 0.0, 0.0, 0.0])
             }
             &Primitive::Paraboloid { rlo, rhi, dz } => {
-                (TypeCode::Paraboloid, [f(rlo), f(rhi), f(dz), 0.0], [0.0; 2])
+                (TypeCode::Paraboloid, [rlo, rhi, dz, 0.0, 0.0, 0.0])
             }
-            Primitive::Polyhedron { planes } => (
-                TypeCode::ConvexPolyhedron,
-                [0.0, f32::from_bits(planes.len() as u32), 0.0, 0.0],
-                [0.0; 2],
-            ),
+            Primitive::Polyhedron { .. } => (TypeCode::ConvexPolyhedron, [0.0; 6]),
             &Primitive::HalfSpace { normal, distance } => (
                 TypeCode::HalfSpace,
-                [f(normal[0]), f(normal[1]), f(normal[2]), f(distance)],
-                [0.0; 2],
+                [normal[0], normal[1], normal[2], distance, 0.0, 0.0],
             ),
-            &Primitive::Slab { normal, a, b } => (
-                TypeCode::Slab,
-                [f(normal[0]), f(normal[1]), f(normal[2]), 0.0],
-                [f(a), f(b)],
-            ),
+            &Primitive::Slab { normal, a, b } => {
+                (TypeCode::Slab, [normal[0], normal[1], normal[2], 0.0, a, b])
+            }
             &Primitive::PhiCut { phi0, dphi } => {
                 let phi1 = phi0 + dphi;
                 (
                     TypeCode::PhiCut,
-                    [f(phi0.cos()), f(phi0.sin()), f(phi1.cos()), f(phi1.sin())],
-                    [0.0; 2],
+                    [phi0.cos(), phi0.sin(), phi1.cos(), phi1.sin(), 0.0, 0.0],
                 )
             }
-            &Primitive::ThetaCut { theta0, theta1 } => (
-                TypeCode::ThetaCut,
-                [f(theta0), f(theta1), 0.0, 0.0],
-                [0.0; 2],
-            ),
+            &Primitive::ThetaCut { theta0, theta1 } => {
+                (TypeCode::ThetaCut, [theta0, theta1, 0.0, 0.0, 0.0, 0.0])
+            }
         }
     }
 

@@ -14,8 +14,8 @@
 //! tree still deeper than [`MAX_TREE_HEIGHT`] is rejected.
 
 use hytrace_foundry::{
-    aabb_to_f32_outward, CsgTree, Node, Plane, Transform64, TypeCode, COMPLEMENT_BIT,
-    MAX_TREE_HEIGHT, UNSET,
+    aabb_to_f32_outward, CsgTree, Node, NodeParam64, Plane, Plane64, Transform64, TypeCode,
+    COMPLEMENT_BIT, MAX_TREE_HEIGHT, UNSET,
 };
 
 use crate::bounds::{primitive_bounds, transform_bounds, Aabb};
@@ -192,9 +192,14 @@ fn empty_error() -> CsgError {
 
 struct Writer {
     nodes: Vec<Node>,
+    /// Double-precision parameters of `nodes` (index-carrying nodes are filled in by the
+    /// Foundry when it relocates them).
+    nodes64: Vec<NodeParam64>,
     members: Vec<Node>,
+    members64: Vec<NodeParam64>,
     transforms: Vec<Transform64>,
     planes: Vec<Plane>,
+    planes64: Vec<Plane64>,
 }
 
 impl Writer {
@@ -204,13 +209,16 @@ impl Writer {
         primitive: &Primitive,
         frame: &Transform64,
         complement: bool,
-    ) -> (Node, Extent) {
+    ) -> (Node, NodeParam64, Extent) {
         let (code, mut param, param_ext) = primitive.node_params();
+        let (_, param64) = primitive.node_params64();
         if let Primitive::Polyhedron { planes } = primitive {
             param[0] = f32::from_bits(self.planes.len() as u32);
             self.planes.extend(planes.iter().map(|p| Plane {
                 plane: p.map(|v| v as f32),
             }));
+            self.planes64
+                .extend(planes.iter().map(|p| Plane64 { plane: *p }));
         }
         let bounds = transform_bounds(&primitive_bounds(primitive), frame);
         let mut transform = 0;
@@ -234,7 +242,12 @@ impl Writer {
             surfaces: bounds,
             bounded: primitive.is_bounded() && !complement,
         };
-        (node, extent)
+        let wide = if code == TypeCode::ConvexPolyhedron {
+            NodeParam64::widened(&node)
+        } else {
+            NodeParam64 { param: param64 }
+        };
+        (node, wide, extent)
     }
 
     fn write(&mut self, shape: &Positive, position: usize) -> Result<Extent, CsgError> {
@@ -243,7 +256,11 @@ impl Writer {
                 primitive,
                 frame,
                 complement,
-            } => self.leaf_node(primitive, frame, *complement),
+            } => {
+                let (node, wide, extent) = self.leaf_node(primitive, frame, *complement);
+                self.nodes64[position - 1] = wide;
+                (node, extent)
+            }
             Positive::List(code, items) => {
                 let first = self.members.len();
                 let mut surfaces: Option<Aabb> = None;
@@ -254,8 +271,9 @@ impl Writer {
                     else {
                         unreachable!("lists hold plain leaves");
                     };
-                    let (node, e) = self.leaf_node(primitive, frame, false);
+                    let (node, wide, e) = self.leaf_node(primitive, frame, false);
                     self.members.push(node);
+                    self.members64.push(wide);
                     surfaces = Some(match (surfaces, *code) {
                         (None, _) => e.surfaces,
                         (Some(s), TypeCode::ListOverlap) => intersection(&s, &e.surfaces),
@@ -353,11 +371,15 @@ pub fn to_tree(shape: &Shape) -> Result<CsgTree, CsgError> {
             ),
         });
     }
+    let size = (1usize << (height + 1)) - 1;
     let mut w = Writer {
-        nodes: vec![Node::default(); (1usize << (height + 1)) - 1],
+        nodes: vec![Node::default(); size],
+        nodes64: vec![NodeParam64::default(); size],
         members: Vec::new(),
+        members64: Vec::new(),
         transforms: Vec::new(),
         planes: Vec::new(),
+        planes64: Vec::new(),
     };
     let root = w.write(&shape, 1)?;
     if !root.bounded {
@@ -366,11 +388,15 @@ pub fn to_tree(shape: &Shape) -> Result<CsgTree, CsgError> {
             problem: "the solid is unbounded (a complement or cut reaches the root)".to_string(),
         });
     }
+    let mut node64 = w.nodes64;
+    node64.extend(w.members64);
     Ok(CsgTree {
         nodes: w.nodes,
         members: w.members,
+        node64,
         transforms: w.transforms,
         planes: w.planes,
+        planes64: w.planes64,
     })
 }
 

@@ -12,7 +12,7 @@ use crate::store::Foundry;
 /// Value of `format` in `meta.json`.
 pub const FORMAT_NAME: &str = "hytrace-foundry";
 /// Version of the directory layout; bumped whenever a record changes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -28,7 +28,9 @@ macro_rules! for_each_array {
         $apply!($f, solid);
         $apply!($f, prim);
         $apply!($f, node);
+        $apply!($f, node64);
         $apply!($f, plan);
+        $apply!($f, plan64);
         $apply!($f, tran);
         $apply!($f, itra);
         $apply!($f, inst);

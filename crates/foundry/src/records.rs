@@ -119,6 +119,24 @@ record! {
 }
 
 record! {
+    /// The primitive parameters of a [`Node`] in double precision (CPU only): the originals
+    /// from which `param` and `param_ext` are rounded. Nodes whose parameters are indices
+    /// (lists, convex polyhedra) or that have none hold their f32 values widened.
+    pub struct NodeParam64 {
+        /// `param` then `param_ext`.
+        pub param: [f64; 6],
+    }
+}
+
+record! {
+    /// A [`Plane`] in double precision (CPU only): the original of the f32 plane.
+    pub struct Plane64 {
+        /// Unit outward normal xyz and the signed distance from the origin.
+        pub plane: [f64; 4],
+    }
+}
+
+record! {
     /// A plane `dot(normal, p) = distance` bounding a convex polyhedron (outward normal).
     pub struct Plane {
         /// Unit outward normal xyz and the signed distance from the origin.
@@ -233,6 +251,23 @@ impl Transform64 {
     pub fn to_f32(&self) -> Transform {
         Transform {
             rows: self.rows.map(|r| r.map(|v| v as f32)),
+        }
+    }
+}
+
+impl NodeParam64 {
+    /// The f32 parameters of a node widened to f64 (exact).
+    pub fn widened(node: &Node) -> Self {
+        let p = [
+            node.param[0],
+            node.param[1],
+            node.param[2],
+            node.param[3],
+            node.param_ext[0],
+            node.param_ext[1],
+        ];
+        NodeParam64 {
+            param: p.map(f64::from),
         }
     }
 }

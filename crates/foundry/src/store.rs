@@ -2,8 +2,8 @@
 
 use crate::error::{FoundryError, Result};
 use crate::records::{
-    pack_label, Brick, Instance, Node, Plane, Prim, Solid, Transform, Transform64, Triangle,
-    COMPLEMENT_BIT,
+    pack_label, Brick, Instance, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
+    Transform64, Triangle, COMPLEMENT_BIT,
 };
 use crate::typecode::{PrimKind, TypeCode};
 
@@ -14,8 +14,8 @@ pub const UNSET: u32 = u32::MAX;
 ///
 /// Indices between arrays are plain integers, so the arrays can be uploaded to a GPU or
 /// written to `.npy` files as they are. The GPU receives eight of them: `solid`, `prim`,
-/// `node`, `plan`, `itra`, `inst`, `tri` and `brick`. `tran` and `inst_tran` keep the double
-/// precision originals for the CPU's f64 path.
+/// `node`, `plan`, `itra`, `inst`, `tri` and `brick`. `tran`, `inst_tran`, `node64` and
+/// `plan64` keep the double precision originals for the CPU's f64 path.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Foundry {
     /// Solids: ranges of prims.
@@ -24,8 +24,12 @@ pub struct Foundry {
     pub prim: Vec<Prim>,
     /// CSG nodes, each prim's tree stored as a complete binary tree.
     pub node: Vec<Node>,
+    /// Double-precision originals of the nodes' parameters (CPU only), one per node.
+    pub node64: Vec<NodeParam64>,
     /// Planes of convex polyhedra.
     pub plan: Vec<Plane>,
+    /// Double-precision originals of the planes (CPU only), one per plane.
+    pub plan64: Vec<Plane64>,
     /// Node and prim transforms (local to parent), double precision originals.
     pub tran: Vec<Transform64>,
     /// Inverses of `tran` in single precision, for the GPU.
@@ -55,10 +59,15 @@ pub struct CsgTree {
     pub nodes: Vec<Node>,
     /// Members of the tree's list nodes.
     pub members: Vec<Node>,
+    /// Double-precision parameters of `nodes` then `members` (empty: the f32 values
+    /// widened).
+    pub node64: Vec<NodeParam64>,
     /// Transforms referenced by the nodes.
     pub transforms: Vec<Transform64>,
     /// Planes referenced by convex-polyhedron nodes.
     pub planes: Vec<Plane>,
+    /// Double-precision planes (empty: the f32 planes widened).
+    pub planes64: Vec<Plane64>,
 }
 
 /// Appends the prims of one solid to a [`Foundry`]; see [`Foundry::begin_solid`].
@@ -177,10 +186,51 @@ impl SolidBuilder<'_> {
                 node.param[0] = f32::from_bits(first + members_offset);
             }
         }
+        let node64 = if tree.node64.is_empty() {
+            nodes.iter().map(NodeParam64::widened).collect()
+        } else if tree.node64.len() == nodes.len() {
+            // Index-carrying nodes were relocated: their f64 copies follow the f32 values.
+            let mut p = tree.node64;
+            for (p, n) in p.iter_mut().zip(&nodes) {
+                let code = TypeCode::from_u32(n.typecode);
+                if !code.is_some_and(TypeCode::is_primitive)
+                    || code == Some(TypeCode::ConvexPolyhedron)
+                {
+                    *p = NodeParam64::widened(n);
+                }
+            }
+            p
+        } else {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: {} double-precision parameter rows for {} nodes",
+                self.name,
+                tree.node64.len(),
+                nodes.len()
+            )));
+        };
+        let planes64 = if tree.planes64.is_empty() {
+            tree.planes
+                .iter()
+                .map(|p| Plane64 {
+                    plane: p.plane.map(f64::from),
+                })
+                .collect()
+        } else if tree.planes64.len() == tree.planes.len() {
+            tree.planes64
+        } else {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: {} double-precision planes for {} planes",
+                self.name,
+                tree.planes64.len(),
+                tree.planes.len()
+            )));
+        };
         for t in tree.transforms {
             f.add_transform(t)?;
         }
         f.plan.extend(tree.planes);
+        f.plan64.extend(planes64);
+        f.node64.extend(node64);
         let aabb = nodes[0].aabb;
         f.node.extend(nodes);
         f.prim.push(Prim {

@@ -174,6 +174,7 @@ impl Foundry {
     pub fn validate(&self) -> Result<()> {
         self.validate_transforms()?;
         self.validate_planes()?;
+        self.validate_double_precision()?;
         self.validate_nodes()?;
         self.validate_prims()?;
         self.validate_solids()?;
@@ -208,6 +209,59 @@ impl Foundry {
                     i,
                     "plane",
                     format!("needs a finite unit normal and distance, got {:?}", p.plane),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `node64` and `plan64` have one row per node and plane, and round to exactly the f32
+    /// values the GPU gets.
+    fn validate_double_precision(&self) -> Result<()> {
+        let pairs = [
+            ("node64", "node", self.node64.len(), self.node.len()),
+            ("plan64", "plan", self.plan64.len(), self.plan.len()),
+        ];
+        for (wide, narrow, a, b) in pairs {
+            if a != b {
+                return Err(record_error(
+                    wide,
+                    a.min(b),
+                    if wide == "node64" { "param" } else { "plane" },
+                    format!("{a} records for the {b} records of `{narrow}`"),
+                ));
+            }
+        }
+        let rounds_to = |wide: &[f64], narrow: &[f32]| {
+            wide.iter()
+                .zip(narrow)
+                .all(|(w, n)| (*w as f32).to_bits() == n.to_bits() || (w.is_nan() && n.is_nan()))
+        };
+        for (i, (w, n)) in self.node64.iter().zip(&self.node).enumerate() {
+            let narrow = [
+                n.param[0],
+                n.param[1],
+                n.param[2],
+                n.param[3],
+                n.param_ext[0],
+                n.param_ext[1],
+            ];
+            if !rounds_to(&w.param, &narrow) {
+                return Err(record_error(
+                    "node64",
+                    i,
+                    "param",
+                    format!("{:?} does not round to node {i}'s {narrow:?}", w.param),
+                ));
+            }
+        }
+        for (i, (w, n)) in self.plan64.iter().zip(&self.plan).enumerate() {
+            if !rounds_to(&w.plane, &n.plane) {
+                return Err(record_error(
+                    "plan64",
+                    i,
+                    "plane",
+                    format!("{:?} does not round to plane {i}'s {:?}", w.plane, n.plane),
                 ));
             }
         }
