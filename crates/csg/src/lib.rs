@@ -25,7 +25,7 @@ pub use expr::{parse_shape, ExprError};
 pub use mesh::MeshPrim;
 pub use prepared::PreparedPrim;
 pub use prim_tree::{ray_meets_bounds, Bounds, PrimTree};
-pub use real::{Crossing, Ray, Real, V3};
+pub use real::{Ray, Real, V3};
 pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape,

@@ -147,16 +147,6 @@ impl<T: Real> MeshPrim<T> {
         &self.bounds
     }
 
-    /// Number of triangles.
-    pub fn len(&self) -> usize {
-        self.triangles.len()
-    }
-
-    /// Whether the mesh has no triangles (never true for a constructed mesh).
-    pub fn is_empty(&self) -> bool {
-        self.triangles.is_empty()
-    }
-
     /// The ray moved to its closest approach to the mesh's centre, and the parameter of
     /// that point: working from there keeps f32 precise for rays starting far away.
     fn recentred(&self, ray: &Ray<T>) -> (Ray<T>, T) {

@@ -58,8 +58,6 @@ pub trait Real:
     fn copysign(self, sign: Self) -> Self;
     /// Four-quadrant arctangent of `self / x`.
     fn atan2(self, x: Self) -> Self;
-    /// Arc cosine.
-    fn acos(self) -> Self;
     /// Cosine.
     fn cos(self) -> Self;
     /// Sine.
@@ -112,9 +110,6 @@ macro_rules! impl_real {
             }
             fn atan2(self, x: Self) -> Self {
                 $t::atan2(self, x)
-            }
-            fn acos(self) -> Self {
-                $t::acos(self)
             }
             fn cos(self) -> Self {
                 $t::cos(self)
@@ -256,20 +251,4 @@ pub struct Ray<T> {
     pub origin: V3<T>,
     /// Direction.
     pub direction: V3<T>,
-}
-
-impl<T: Real> Ray<T> {
-    /// The point at parameter `t`.
-    pub fn at(&self, t: T) -> V3<T> {
-        self.origin.at(self.direction, t)
-    }
-}
-
-/// A surface crossing: the ray parameter and the outward normal there (not normalized).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Crossing<T> {
-    /// Ray parameter.
-    pub t: T,
-    /// Outward normal of the solid whose surface is crossed, in the frame of the query.
-    pub normal: V3<T>,
 }
