@@ -64,7 +64,7 @@ pub fn record_dtype<R: Record>() -> (DType, Vec<u64>) {
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
-/// `path` never holds a partial file.
+/// `path` never holds a partial file. Missing parent directories are created.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
@@ -77,6 +77,8 @@ pub fn write_atomically(
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
+    // Missing parent directories are created, as for `hytrace foundry -o`.
+    std::fs::create_dir_all(dir).map_err(io_err)?;
     let mut tmp = tempfile::Builder::new()
         .prefix(".hytrace-")
         .tempfile_in(dir)

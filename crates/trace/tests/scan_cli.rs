@@ -152,7 +152,9 @@ fn scan_answers_match_the_analytic_sphere_and_name_the_instance() {
 fn sweeps_generate_rays_and_the_default_scene_scans() {
     let tmp = tempfile::tempdir().unwrap();
     let rays = tmp.path().join("rays.npy");
-    let hits = tmp.path().join("hits.npy");
+    // Output directories that do not exist yet are created (the README's main command
+    // writes into `out/` on a fresh clone).
+    let hits = tmp.path().join("not/yet/there/hits.npy");
     let o = hytrace(&[
         "scan",
         "default",
