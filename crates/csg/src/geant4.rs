@@ -335,18 +335,78 @@ fn trap_vertices(
     alpha2: f64,
 ) -> [[f64; 3]; 8] {
     let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
-    let (ta1, ta2) = (alpha1.tan(), alpha2.tan());
-    let face = |z: f64, dy: f64, ta: f64, dxa: f64, dxb: f64| {
-        let (cx, cy) = (z * tx, z * ty);
-        [
-            [cx - dy * ta - dxa, cy - dy, z],
-            [cx - dy * ta + dxa, cy - dy, z],
-            [cx + dy * ta - dxb, cy + dy, z],
-            [cx + dy * ta + dxb, cy + dy, z],
-        ]
+    let face = |z: f64, dy: f64, alpha: f64, dxa: f64, dxb: f64| {
+        trapezoid(dy, alpha.tan(), dxa, dxb).map(|p| [p[0] + z * tx, p[1] + z * ty, z])
     };
-    let (b, t) = (face(-dz, dy1, ta1, dx1, dx2), face(dz, dy2, ta2, dx3, dx4));
+    let (b, t) = (
+        face(-dz, dy1, alpha1, dx1, dx2),
+        face(dz, dy2, alpha2, dx3, dx4),
+    );
     [b[0], b[1], b[2], b[3], t[0], t[1], t[2], t[3]]
+}
+
+/// The trapezoid section of G4Trap-like solids in its own plane, in Geant4's vertex order
+/// (-x -y, +x -y, -x +y, +x +y): half height `dy`, half widths `dxa` at -dy and `dxb` at
+/// +dy, sheared by `tan_alpha`.
+fn trapezoid(dy: f64, tan_alpha: f64, dxa: f64, dxb: f64) -> [[f64; 2]; 4] {
+    [
+        [-dy * tan_alpha - dxa, -dy],
+        [-dy * tan_alpha + dxa, -dy],
+        [dy * tan_alpha - dxb, dy],
+        [dy * tan_alpha + dxb, dy],
+    ]
+}
+
+/// The mesh of a G4TwistedTrap (G4TwistedBox and G4TwistedTrd are special cases): at
+/// height z the trapezoid interpolated between its end sections, rotated counter-clockwise
+/// by `twist * z / (2 dz)`, then shifted along the (theta, phi) axis (the geometry the
+/// oracle established against Geant4).
+#[allow(clippy::too_many_arguments)]
+fn twisted_trap_mesh(
+    what: &'static str,
+    twist: f64,
+    dz: f64,
+    theta: f64,
+    phi: f64,
+    dy1: f64,
+    dx1: f64,
+    dx2: f64,
+    dy2: f64,
+    dx3: f64,
+    dx4: f64,
+    alpha: f64,
+    tolerance: f64,
+) -> Result<Vec<Tri>, CsgError> {
+    let lengths = [dz, dy1, dx1, dx2, dy2, dx3, dx4];
+    if !lengths.iter().all(|x| x.is_finite() && *x > 0.0) {
+        return Err(bad(
+            what,
+            format!("lengths must be finite and > 0, got {lengths:?}"),
+        ));
+    }
+    let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
+    let ta = alpha.tan();
+    let section = |z: f64| {
+        let f = (z + dz) / (2.0 * dz);
+        let t = trapezoid(
+            dy1 + f * (dy2 - dy1),
+            ta,
+            dx1 + f * (dx3 - dx1),
+            dx2 + f * (dx4 - dx2),
+        );
+        let (s, c) = (twist * z / (2.0 * dz)).sin_cos();
+        // Counter-clockwise corner order for the section stack.
+        [t[0], t[1], t[3], t[2]]
+            .map(|p| {
+                [
+                    c * p[0] - s * p[1] + z * tx,
+                    s * p[0] + c * p[1] + z * ty,
+                    z,
+                ]
+            })
+            .to_vec()
+    };
+    ruled_solid(&section, -dz, dz, tolerance)
 }
 
 /// The union of `parts` (at least one).
@@ -733,36 +793,28 @@ impl G4Solid {
     /// The solid as an exact expression, or as a closed mesh within `tolerance` mm of the
     /// true surface for the solids with no analytic form here.
     pub fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError> {
-        let rotated = |p: [f64; 2], angle: f64, z: f64| {
-            let (s, c) = angle.sin_cos();
-            [c * p[0] - s * p[1], s * p[0] + c * p[1], z]
-        };
-        let positive = |what: &'static str, v: &[f64]| {
-            if v.iter().all(|x| x.is_finite() && *x > 0.0) {
-                Ok(())
-            } else {
-                Err(bad(
-                    what,
-                    format!("lengths must be finite and > 0, got {v:?}"),
-                ))
-            }
-        };
+        let mesh = |tris: Vec<Tri>| Ok(G4Geometry::Mesh(tris));
         match self {
             &G4Solid::TwistedBox {
                 twistedangle,
                 dx,
                 dy,
                 dz,
-            } => {
-                positive("twistedBox", &[dx, dy, dz])?;
-                let section = |z: f64| {
-                    let a = twistedangle * z / (2.0 * dz);
-                    [[-dx, -dy], [dx, -dy], [dx, dy], [-dx, dy]]
-                        .map(|p| rotated(p, a, z))
-                        .to_vec()
-                };
-                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
-            }
+            } => mesh(twisted_trap_mesh(
+                "twistedBox",
+                twistedangle,
+                dz,
+                0.0,
+                0.0,
+                dy,
+                dx,
+                dx,
+                dy,
+                dx,
+                dx,
+                0.0,
+                tolerance,
+            )?),
             &G4Solid::TwistedTrd {
                 dx1,
                 dx2,
@@ -770,18 +822,21 @@ impl G4Solid {
                 dy2,
                 dz,
                 twistedangle,
-            } => {
-                positive("twistedTrd", &[dx1, dx2, dy1, dy2, dz])?;
-                let section = |z: f64| {
-                    let f = (z + dz) / (2.0 * dz);
-                    let (hx, hy) = (dx1 + f * (dx2 - dx1), dy1 + f * (dy2 - dy1));
-                    let a = twistedangle * z / (2.0 * dz);
-                    [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]
-                        .map(|p| rotated(p, a, z))
-                        .to_vec()
-                };
-                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
-            }
+            } => mesh(twisted_trap_mesh(
+                "twistedTrd",
+                twistedangle,
+                dz,
+                0.0,
+                0.0,
+                dy1,
+                dx1,
+                dx1,
+                dy2,
+                dx2,
+                dx2,
+                0.0,
+                tolerance,
+            )?),
             &G4Solid::TwistedTrap {
                 twistedangle,
                 dz,
@@ -794,34 +849,29 @@ impl G4Solid {
                 dx3,
                 dx4,
                 alpha,
-            } => {
-                positive("twistedTrap", &[dz, dy1, dx1, dx2, dy2, dx3, dx4])?;
-                let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
-                let ta = alpha.tan();
-                let section = |z: f64| {
-                    let f = (z + dz) / (2.0 * dz);
-                    let dy = dy1 + f * (dy2 - dy1);
-                    let (xa, xb) = (dx1 + f * (dx3 - dx1), dx2 + f * (dx4 - dx2));
-                    let a = twistedangle * z / (2.0 * dz);
-                    // The trapezoid in its own plane, rotated, then shifted along the
-                    // (theta, phi) axis.
-                    [
-                        [-dy * ta - xa, -dy],
-                        [-dy * ta + xa, -dy],
-                        [dy * ta + xb, dy],
-                        [dy * ta - xb, dy],
-                    ]
-                    .map(|p| {
-                        let q = rotated(p, a, z);
-                        [q[0] + z * tx, q[1] + z * ty, z]
-                    })
-                    .to_vec()
-                };
-                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
-            }
+            } => mesh(twisted_trap_mesh(
+                "twistedTrap",
+                twistedangle,
+                dz,
+                theta,
+                phi,
+                dy1,
+                dx1,
+                dx2,
+                dy2,
+                dx3,
+                dx4,
+                alpha,
+                tolerance,
+            )?),
             G4Solid::GenericTrap { dz, vertices } => {
                 let dz = *dz;
-                positive("genericTrap", &[dz])?;
+                if dz.is_nan() || dz <= 0.0 || dz.is_infinite() {
+                    return Err(bad(
+                        "genericTrap",
+                        format!("dz must be finite and > 0, got {dz}"),
+                    ));
+                }
                 if vertices.len() != 8 || !vertices.iter().flatten().all(|v| v.is_finite()) {
                     return Err(bad(
                         "genericTrap",
@@ -846,7 +896,7 @@ impl G4Solid {
                         })
                         .collect()
                 };
-                Ok(G4Geometry::Mesh(ruled_solid(&section, -dz, dz, tolerance)?))
+                mesh(ruled_solid(&section, -dz, dz, tolerance)?)
             }
             G4Solid::Xtru { polygon, sections } => {
                 if sections.len() < 2
@@ -886,7 +936,7 @@ impl G4Solid {
                     })
                     .collect();
                 let corners: Vec<usize> = (0..poly.len()).collect();
-                Ok(G4Geometry::Mesh(section_stack(&levels, &corners)?))
+                mesh(section_stack(&levels, &corners)?)
             }
             G4Solid::Tessellated { facets } => {
                 let mut tris: Vec<Tri> = Vec::with_capacity(facets.len());
@@ -903,7 +953,7 @@ impl G4Solid {
                         tris.push([f[0], f[2], f[3]]);
                     }
                 }
-                Ok(G4Geometry::Mesh(tris))
+                mesh(tris)
             }
             other => other.to_shape().map(G4Geometry::Csg),
         }

@@ -16,7 +16,7 @@ use obvhs::triangle::Triangle as BvhTriangle;
 use obvhs::BvhBuildParams;
 
 use crate::kernel::Step;
-use crate::prim_tree::{ray_meets_bounds, Bounds};
+use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
@@ -36,6 +36,26 @@ struct MeshNode<T> {
     bounds: Bounds<T>,
     first: u32,
     count: u32,
+}
+
+/// Deepest mesh BVH the traversal's fixed stack accepts (PLOC trees over a million
+/// triangles stay far below it).
+const MAX_BVH_DEPTH: usize = 64;
+
+/// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree).
+fn bvh_depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
+    let mut deepest = 0;
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((index, depth)) = stack.pop() {
+        let Some(n) = nodes.get(index) else { continue };
+        deepest = deepest.max(depth);
+        if n.prim_count == 0 {
+            let first = n.first_index as usize;
+            stack.push((first, depth + 1));
+            stack.push((first + 1, depth + 1));
+        }
+    }
+    deepest
 }
 
 /// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
@@ -89,6 +109,16 @@ impl<T: Real> MeshPrim<T> {
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
         let padded =
             |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
+        let depth = bvh_depth(&bvh.nodes);
+        if depth > MAX_BVH_DEPTH {
+            return Err(CsgError {
+                primitive: "mesh",
+                problem: format!(
+                    "BVH over {} triangles is {depth} levels deep, more than {MAX_BVH_DEPTH}",
+                    triangles.len()
+                ),
+            });
+        }
         let nodes = bvh
             .nodes
             .iter()
@@ -166,19 +196,21 @@ impl<T: Real> MeshPrim<T> {
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
         let (o, d) = (ray.origin, ray.direction);
         let mut best: Option<(T, V3<T>)> = None;
-        let mut stack = Vec::with_capacity(64);
-        if !self.nodes.is_empty() {
-            stack.push(0u32);
-        }
-        while let Some(index) = stack.pop() {
-            let node = &self.nodes[index as usize];
+        // A fixed stack (no allocation per ray): depth was bounded when the mesh was built,
+        // and visiting pushes two children for each node popped.
+        let mut stack = [0u32; MAX_BVH_DEPTH + 1];
+        let mut top = usize::from(!self.nodes.is_empty());
+        while top > 0 {
+            top -= 1;
+            let node = &self.nodes[stack[top] as usize];
             let limit = best.map_or(T::INFINITY, |(b, _)| b);
             if !ray_meets_bounds(ray, &node.bounds, after, limit) {
                 continue;
             }
             if node.count == 0 {
-                stack.push(node.first);
-                stack.push(node.first + 1);
+                stack[top] = node.first;
+                stack[top + 1] = node.first + 1;
+                top += 2;
                 continue;
             }
             let leaf = node.first as usize..(node.first + node.count) as usize;
@@ -232,7 +264,7 @@ impl<T: Real> MeshPrim<T> {
         if !ray_meets_bounds(ray, &self.bounds, tmin, T::INFINITY) {
             return Step::miss(false);
         }
-        let after = tmin + T::SURFACE_TOLERANCE * (self.scale + tmin.abs());
+        let after = tmin + tolerance(self.scale, tmin);
         let (moved, shift) = self.recentred(ray);
         match self.nearest(&moved, after - shift) {
             Some((t, normal)) => Step {

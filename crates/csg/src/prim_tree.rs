@@ -53,7 +53,7 @@ pub struct PrimTree<T> {
 
 /// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
 /// the same surface are at least this far apart, coincident faces within it.
-fn tolerance<T: Real>(scale: T, t: T) -> T {
+pub(crate) fn tolerance<T: Real>(scale: T, t: T) -> T {
     T::SURFACE_TOLERANCE * (scale + t.abs())
 }
 

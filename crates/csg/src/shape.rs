@@ -480,18 +480,7 @@ impl Shape {
 
     /// This shape rotated by `angle` radians about the unit `axis` (right-handed).
     pub fn rotate(self, axis: [f64; 3], angle: f64) -> Shape {
-        let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-        let [x, y, z] = axis.map(|a| a / n);
-        let (s, c) = angle.sin_cos();
-        let t = 1.0 - c;
-        self.placed(Transform64 {
-            rows: [
-                [t * x * x + c, t * x * y - s * z, t * x * z + s * y, 0.0],
-                [t * x * y + s * z, t * y * y + c, t * y * z - s * x, 0.0],
-                [t * x * z - s * y, t * y * z + s * x, t * z * z + c, 0.0],
-                [0.0, 0.0, 0.0, 1.0],
-            ],
-        })
+        self.placed(Transform64::rotation(axis, angle))
     }
 
     /// This shape scaled by `(x, y, z)` (an ellipsoid is a scaled sphere).

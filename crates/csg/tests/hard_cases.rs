@@ -8,33 +8,8 @@ use hytrace_csg::{
     Shape, V3,
 };
 
-/// A deterministic generator (xorshift64*), so failures reproduce.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-    fn unit(&mut self) -> [f64; 3] {
-        loop {
-            let v = [
-                self.range(-1., 1.),
-                self.range(-1., 1.),
-                self.range(-1., 1.),
-            ];
-            let l = dot(v, v).sqrt();
-            if l > 0.1 && l <= 1.0 {
-                return v.map(|c| c / l);
-            }
-        }
-    }
-}
+mod common;
+use common::Rng;
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

@@ -5,19 +5,8 @@
 use hytrace_csg::{sphere, to_tree, PrimTree, Ray, Shape, V3};
 use hytrace_foundry::TypeCode;
 
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
+mod common;
+use common::Rng;
 
 /// The interval of a ray (unit direction) inside a sphere, if any.
 fn sphere_span(c: [f64; 3], r: f64, o: [f64; 3], d: [f64; 3]) -> Option<(f64, f64)> {
@@ -65,19 +54,7 @@ fn check(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64) {
     let prim = PrimTree::<f64>::from_shape(&shape).unwrap();
     let mut rng = Rng(seed);
     for _ in 0..2000 {
-        let o = [
-            rng.range(-60., 60.),
-            rng.range(-60., 60.),
-            rng.range(-60., 60.),
-        ];
-        let t = [
-            rng.range(-20., 20.),
-            rng.range(-20., 20.),
-            rng.range(-20., 20.),
-        ];
-        let d = [t[0] - o[0], t[1] - o[1], t[2] - o[2]];
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let d = d.map(|c| c / l);
+        let (o, d) = rng.aimed(60.0, 20.0);
         let spans: Vec<(f64, f64)> = centres
             .iter()
             .zip(radii)

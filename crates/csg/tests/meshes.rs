@@ -5,26 +5,8 @@
 use hytrace_csg::geant4::{G4Geometry, G4Solid, XtruSection};
 use hytrace_csg::{box3, MeshPrim, PrimTree, Ray, Real, V3};
 
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-    fn ray_into(&mut self, half: f64) -> ([f64; 3], [f64; 3]) {
-        let o = [0, 1, 2].map(|_| self.range(-2.0 * half, 2.0 * half));
-        let t = [0, 1, 2].map(|_| self.range(-0.8 * half, 0.8 * half));
-        let d = [t[0] - o[0], t[1] - o[1], t[2] - o[2]];
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        (o, d.map(|c| c / l))
-    }
-}
+mod common;
+use common::Rng;
 
 fn mesh_of(solid: &G4Solid, tol: f64) -> Vec<[[f64; 3]; 3]> {
     match solid.to_geometry(tol).unwrap() {
@@ -74,7 +56,7 @@ fn l_shape_case<T: Real>() {
     let tol = if T::NAME == "f32" { 1e-4 } else { 1e-9 };
     let mut compared = 0;
     for _ in 0..5000 {
-        let (o, d) = rng.ray_into(12.0);
+        let (o, d) = rng.aimed(24.0, 9.6);
         let o = [o[0] + 8.0, o[1] + 8.0, o[2]];
         let r = ray::<T>(o, d);
         // Skip origins within the tolerance of the shared internal face x <= 10, y = 10.
@@ -159,7 +141,7 @@ fn twisted_box_mesh_is_within_its_tolerance_of_the_exact_surface() {
     let mut rng = Rng(5);
     let (mut checked, mut worst) = (0, 0.0f64);
     for _ in 0..300 {
-        let (o, d) = rng.ray_into(7.0);
+        let (o, d) = rng.aimed(14.0, 5.6);
         let reference = marched(o, d, &inside, 40.0);
         let step = mesh.first_crossing(&ray::<f64>(o, d), 0.0);
         if reference.is_infinite() {

@@ -196,6 +196,23 @@ impl Transform64 {
         m
     }
 
+    /// A right-handed rotation by `angle` radians about `axis` (any non-zero length;
+    /// Rodrigues' formula).
+    pub fn rotation(axis: [f64; 3], angle: f64) -> Transform64 {
+        let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+        let [x, y, z] = axis.map(|a| a / n);
+        let (s, c) = angle.sin_cos();
+        let t = 1.0 - c;
+        Transform64 {
+            rows: [
+                [t * x * x + c, t * x * y - s * z, t * x * z + s * y, 0.0],
+                [t * x * y + s * z, t * y * y + c, t * y * z - s * x, 0.0],
+                [t * x * z - s * y, t * y * z + s * x, t * z * z + c, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+        }
+    }
+
     /// Applies the transform to a point.
     pub fn apply_point(&self, p: [f64; 3]) -> [f64; 3] {
         let r = &self.rows;

@@ -158,73 +158,61 @@ impl SolidBuilder<'_> {
             if local > 0 {
                 node.transform += tran_offset;
             }
-            if node.typecode == TypeCode::ConvexPolyhedron as u32 {
-                let first = node.param[0].to_bits();
-                let count = node.param[1].to_bits();
-                if first as usize + count as usize > tree.planes.len() {
-                    return Err(FoundryError::Build(format!(
-                        "solid `{}`: node {i} uses planes {first}..{} of {}",
-                        self.name,
-                        first as usize + count as usize,
-                        tree.planes.len()
-                    )));
-                }
-                node.param[0] = f32::from_bits(first + plan_offset);
-            }
+            // Convex polyhedra index the tree's planes, lists its members (lists only in
+            // the tree itself): check the range, then make it absolute.
             let code = TypeCode::from_u32(node.typecode);
-            if code.is_some_and(TypeCode::is_list) {
-                let first = node.param[0].to_bits();
-                let count = node.param[1].to_bits();
-                if i >= n || first as usize + count as usize > tree.members.len() {
+            let range = match code {
+                Some(TypeCode::ConvexPolyhedron) => {
+                    Some(("planes", tree.planes.len(), plan_offset))
+                }
+                Some(c) if c.is_list() && i < n => {
+                    Some(("members", tree.members.len(), members_offset))
+                }
+                Some(c) if c.is_list() => {
                     return Err(FoundryError::Build(format!(
-                        "solid `{}`: list node {i} uses members {first}..{} of {}",
-                        self.name,
-                        first as usize + count as usize,
-                        tree.members.len()
+                        "solid `{}`: list member {i} is itself a list",
+                        self.name
                     )));
                 }
-                node.param[0] = f32::from_bits(first + members_offset);
+                _ => None,
+            };
+            if let Some((what, available, offset)) = range {
+                let first = node.param[0].to_bits();
+                let end = first as usize + node.param[1].to_bits() as usize;
+                if end > available {
+                    return Err(FoundryError::Build(format!(
+                        "solid `{}`: node {i} uses {what} {first}..{end} of {available}",
+                        self.name
+                    )));
+                }
+                node.param[0] = f32::from_bits(first + offset);
             }
         }
-        let node64 = if tree.node64.is_empty() {
-            nodes.iter().map(NodeParam64::widened).collect()
-        } else if tree.node64.len() == nodes.len() {
-            // Index-carrying nodes were relocated: their f64 copies follow the f32 values.
-            let mut p = tree.node64;
-            for (p, n) in p.iter_mut().zip(&nodes) {
-                let code = TypeCode::from_u32(n.typecode);
-                if !code.is_some_and(TypeCode::is_primitive)
-                    || code == Some(TypeCode::ConvexPolyhedron)
-                {
-                    *p = NodeParam64::widened(n);
-                }
+        let mut node64 = double_copies(
+            tree.node64,
+            &nodes,
+            NodeParam64::widened,
+            &self.name,
+            "node",
+        )?;
+        // Index-carrying nodes were relocated: their f64 copies follow the f32 values.
+        for (p, n) in node64.iter_mut().zip(&nodes) {
+            let code = TypeCode::from_u32(n.typecode);
+            if !code.is_some_and(TypeCode::is_primitive) || code == Some(TypeCode::ConvexPolyhedron)
+            {
+                *p = NodeParam64::widened(n);
             }
-            p
-        } else {
-            return Err(FoundryError::Build(format!(
-                "solid `{}`: {} double-precision parameter rows for {} nodes",
-                self.name,
-                tree.node64.len(),
-                nodes.len()
-            )));
+        }
+        let widen_plane = |p: &Plane| Plane64 {
+            plane: p.plane.map(f64::from),
         };
-        let planes64 = if tree.planes64.is_empty() {
-            tree.planes
-                .iter()
-                .map(|p| Plane64 {
-                    plane: p.plane.map(f64::from),
-                })
-                .collect()
-        } else if tree.planes64.len() == tree.planes.len() {
-            tree.planes64
-        } else {
-            return Err(FoundryError::Build(format!(
-                "solid `{}`: {} double-precision planes for {} planes",
-                self.name,
-                tree.planes64.len(),
-                tree.planes.len()
-            )));
-        };
+        let planes64 = double_copies(
+            tree.planes64,
+            &tree.planes,
+            widen_plane,
+            &self.name,
+            "plane",
+        )?;
         for t in tree.transforms {
             f.add_transform(t)?;
         }
@@ -371,6 +359,28 @@ impl SolidBuilder<'_> {
         });
         f.solid_names.push(self.name);
         index_u32(f.solid.len() - 1, "solids")
+    }
+}
+
+/// The double-precision copies of `narrow` records: `given` when it has one per record,
+/// the f32 values widened when it is empty.
+fn double_copies<W, N>(
+    given: Vec<W>,
+    narrow: &[N],
+    widen: impl Fn(&N) -> W,
+    solid: &str,
+    what: &str,
+) -> Result<Vec<W>> {
+    if given.is_empty() {
+        Ok(narrow.iter().map(widen).collect())
+    } else if given.len() == narrow.len() {
+        Ok(given)
+    } else {
+        Err(FoundryError::Build(format!(
+            "solid `{solid}`: {} double-precision {what} rows for {} {what}s",
+            given.len(),
+            narrow.len()
+        )))
     }
 }
 

@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{bail, Context};
-use hytrace_csg::{parse_shape, to_tree, Shape};
+use hytrace_csg::{parse_shape, to_tree};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
 use serde::Deserialize;
 
@@ -50,20 +50,16 @@ struct Placement {
 }
 
 fn placement_transform(p: &Placement) -> anyhow::Result<Transform64> {
-    let mut shape = Shape::Leaf(hytrace_csg::Primitive::Sphere { radius: 1.0 });
+    let mut t = Transform64::IDENTITY;
     if let Some([x, y, z, deg]) = p.rotate {
-        if !(x != 0.0 || y != 0.0 || z != 0.0) || ![x, y, z, deg].iter().all(|v| v.is_finite()) {
+        if [x, y, z] == [0.0; 3] || ![x, y, z, deg].iter().all(|v| v.is_finite()) {
             bail!(
                 "rotate needs a finite non-zero axis and angle, got {:?}",
                 p.rotate
             );
         }
-        shape = shape.rotate([x, y, z], deg.to_radians());
+        t = Transform64::rotation([x, y, z], deg.to_radians());
     }
-    let mut t = match shape {
-        Shape::Placed(t, _) => t,
-        _ => Transform64::IDENTITY,
-    };
     if let Some(v) = p.translate {
         if !v.iter().all(|c| c.is_finite()) {
             bail!("translate must be finite, got {v:?}");
