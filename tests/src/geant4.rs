@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use hytrace_csg::geant4::{G4Geometry, G4Solid};
+use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid};
 use hytrace_csg::{to_tree, PreparedPrim, Ray, Real, V3};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;

@@ -27,8 +27,6 @@
 
 use std::f64::consts::PI;
 
-use serde::Deserialize;
-
 use crate::shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Shape,
@@ -36,205 +34,7 @@ use crate::shape::{
 use crate::tessellate::{ruled_solid, section_stack, signed_area2, Tri};
 use hytrace_foundry::Transform64;
 
-/// A Geant4 solid with its constructor's parameters (mm, rad, half-lengths).
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(tag = "type", rename_all = "camelCase", deny_unknown_fields)]
-#[allow(missing_docs)]
-pub enum G4Solid {
-    /// G4Box(dx, dy, dz).
-    Box { dx: f64, dy: f64, dz: f64 },
-    /// G4Orb(r).
-    Orb { r: f64 },
-    /// G4Sphere(rmin, rmax, sphi, dphi, stheta, dtheta).
-    Sphere {
-        rmin: f64,
-        rmax: f64,
-        sphi: f64,
-        dphi: f64,
-        stheta: f64,
-        dtheta: f64,
-    },
-    /// G4Tubs(rmin, rmax, dz, sphi, dphi).
-    Tubs {
-        rmin: f64,
-        rmax: f64,
-        dz: f64,
-        sphi: f64,
-        dphi: f64,
-    },
-    /// G4CutTubs(rmin, rmax, dz, sphi, dphi, low normal, high normal).
-    CutTubs {
-        rmin: f64,
-        rmax: f64,
-        dz: f64,
-        sphi: f64,
-        dphi: f64,
-        low: [f64; 3],
-        high: [f64; 3],
-    },
-    /// G4Cons(rmin1, rmax1, rmin2, rmax2, dz, sphi, dphi).
-    Cons {
-        rmin1: f64,
-        rmax1: f64,
-        rmin2: f64,
-        rmax2: f64,
-        dz: f64,
-        sphi: f64,
-        dphi: f64,
-    },
-    /// G4Torus(rmin, rmax, rtor, sphi, dphi).
-    Torus {
-        rmin: f64,
-        rmax: f64,
-        rtor: f64,
-        sphi: f64,
-        dphi: f64,
-    },
-    /// G4Trd(dx1, dx2, dy1, dy2, dz).
-    Trd {
-        dx1: f64,
-        dx2: f64,
-        dy1: f64,
-        dy2: f64,
-        dz: f64,
-    },
-    /// G4Trap(dz, theta, phi, dy1, dx1, dx2, alpha1, dy2, dx3, dx4, alpha2).
-    Trap {
-        dz: f64,
-        theta: f64,
-        phi: f64,
-        dy1: f64,
-        dx1: f64,
-        dx2: f64,
-        alpha1: f64,
-        dy2: f64,
-        dx3: f64,
-        dx4: f64,
-        alpha2: f64,
-    },
-    /// G4Para(dx, dy, dz, alpha, theta, phi).
-    Para {
-        dx: f64,
-        dy: f64,
-        dz: f64,
-        alpha: f64,
-        theta: f64,
-        phi: f64,
-    },
-    /// G4Polycone(sphi, dphi, z planes, inner radii, outer radii).
-    Polycone {
-        sphi: f64,
-        dphi: f64,
-        z: Vec<f64>,
-        rmin: Vec<f64>,
-        rmax: Vec<f64>,
-    },
-    /// G4Polyhedra(sphi, dphi, numside, z planes, inner, outer) with radii to the side
-    /// planes (the z-plane constructor's convention).
-    Polyhedra {
-        sphi: f64,
-        dphi: f64,
-        numside: u32,
-        z: Vec<f64>,
-        rmin: Vec<f64>,
-        rmax: Vec<f64>,
-    },
-    /// G4Hype(rmin, rmax, stereo_in, stereo_out, dz).
-    Hype {
-        rmin: f64,
-        rmax: f64,
-        stereo_in: f64,
-        stereo_out: f64,
-        dz: f64,
-    },
-    /// G4Paraboloid(dz, rlo, rhi).
-    Paraboloid { dz: f64, rlo: f64, rhi: f64 },
-    /// G4Ellipsoid(ax, by, cz, zbottom, ztop).
-    Ellipsoid {
-        ax: f64,
-        by: f64,
-        cz: f64,
-        zbottom: f64,
-        ztop: f64,
-    },
-    /// G4EllipticalTube(dx, dy, dz).
-    Eltube { dx: f64, dy: f64, dz: f64 },
-    /// G4EllipticalCone(xsemi, ysemi, zheight, zcut).
-    Elcone {
-        xsemi: f64,
-        ysemi: f64,
-        zheight: f64,
-        zcut: f64,
-    },
-    /// G4Tet(anchor, p2, p3, p4).
-    Tet {
-        anchor: [f64; 3],
-        p2: [f64; 3],
-        p3: [f64; 3],
-        p4: [f64; 3],
-    },
-    /// G4TwistedBox(twistedangle, dx, dy, dz): a box twisted about z (mesh).
-    TwistedBox {
-        twistedangle: f64,
-        dx: f64,
-        dy: f64,
-        dz: f64,
-    },
-    /// G4TwistedTrd(dx1, dx2, dy1, dy2, dz, twistedangle) (mesh).
-    TwistedTrd {
-        dx1: f64,
-        dx2: f64,
-        dy1: f64,
-        dy2: f64,
-        dz: f64,
-        twistedangle: f64,
-    },
-    /// G4TwistedTrap(twistedangle, dz, theta, phi, dy1, dx1, dx2, dy2, dx3, dx4, alpha)
-    /// (mesh).
-    TwistedTrap {
-        twistedangle: f64,
-        dz: f64,
-        theta: f64,
-        phi: f64,
-        dy1: f64,
-        dx1: f64,
-        dx2: f64,
-        dy2: f64,
-        dx3: f64,
-        dx4: f64,
-        alpha: f64,
-    },
-    /// G4GenericTrap(dz, 8 xy vertices: four at -dz, four at +dz) (mesh; exact when
-    /// untwisted).
-    GenericTrap { dz: f64, vertices: Vec<[f64; 2]> },
-    /// G4ExtrudedSolid(polygon, z sections) (exact mesh).
-    Xtru {
-        polygon: Vec<[f64; 2]>,
-        sections: Vec<XtruSection>,
-    },
-    /// G4TessellatedSolid of triangular or quadrangular facets (absolute vertices,
-    /// counter-clockwise seen from outside) (exact mesh).
-    Tessellated { facets: Vec<Vec<[f64; 3]>> },
-    /// G4UnionSolid(a, b, transform).
-    Union(Boolean),
-    /// G4SubtractionSolid(a, b, transform).
-    Subtraction(Boolean),
-    /// G4IntersectionSolid(a, b, transform).
-    Intersection(Boolean),
-}
-
-/// One z section of a G4ExtrudedSolid: the polygon scaled by `scale` and moved by
-/// `offset` at height `z`.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct XtruSection {
-    /// Height.
-    pub z: f64,
-    /// xy offset of the polygon.
-    pub offset: [f64; 2],
-    /// Scale of the polygon.
-    pub scale: f64,
-}
+pub use hytrace_foundry::g4solid::{Boolean, G4Solid, PlacedSolid, XtruSection};
 
 /// What a Geant4 solid becomes: an exact CSG expression, or a closed triangle mesh where
 /// no analytic form exists here (twisted solids, extrusions, tessellated solids).
@@ -244,21 +44,6 @@ pub enum G4Geometry {
     Csg(Shape),
     /// Triangles counter-clockwise seen from outside, in the solid's frame.
     Mesh(Vec<Tri>),
-}
-
-/// The operands of a Geant4 boolean solid: `b` is placed in `a`'s frame by
-/// `p_a = rotation * p_b + translation`.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Boolean {
-    /// First operand.
-    pub a: Box<G4Solid>,
-    /// Second operand.
-    pub b: Box<G4Solid>,
-    /// Rotation matrix, row-major.
-    pub rotation: [[f64; 3]; 3],
-    /// Translation.
-    pub translation: [f64; 3],
 }
 
 fn bad(primitive: &'static str, problem: String) -> CsgError {
@@ -470,9 +255,17 @@ fn polygon_section(
     polyhedron(&planes)
 }
 
-impl G4Solid {
+/// How a [`G4Solid`] becomes hytrace geometry.
+pub trait G4Mapping {
     /// The equivalent CSG expression; impossible parameters give an error naming the solid.
-    pub fn to_shape(&self) -> Result<Shape, CsgError> {
+    fn to_shape(&self) -> Result<Shape, CsgError>;
+    /// The solid as an exact expression, or as a closed mesh within `tolerance` mm of the
+    /// true surface for the solids with no analytic form here.
+    fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError>;
+}
+
+impl G4Mapping for G4Solid {
+    fn to_shape(&self) -> Result<Shape, CsgError> {
         match self {
             &G4Solid::Box { dx, dy, dz } => box3(2.0 * dx, 2.0 * dy, 2.0 * dz),
             &G4Solid::Orb { r } => sphere(r),
@@ -742,57 +535,33 @@ impl G4Solid {
             | G4Solid::TwistedTrap { .. }
             | G4Solid::GenericTrap { .. }
             | G4Solid::Xtru { .. }
-            | G4Solid::Tessellated { .. } => Err(bad(
+            | G4Solid::Tessellated { .. }
+            | G4Solid::TwistedTubs { .. } => Err(bad(
                 "geant4",
                 format!(
                     "{} has no analytic form: it is a mesh (see to_geometry)",
                     self.kind()
                 ),
             )),
-            G4Solid::Union(b) => Ok(b.a.to_shape()? + b.placed_b()?),
-            G4Solid::Subtraction(b) => Ok(b.a.to_shape()? - b.placed_b()?),
-            G4Solid::Intersection(b) => Ok(b.a.to_shape()? * b.placed_b()?),
-        }
-    }
-}
-
-impl G4Solid {
-    /// The solid's JSON `type` name.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            G4Solid::Box { .. } => "box",
-            G4Solid::Orb { .. } => "orb",
-            G4Solid::Sphere { .. } => "sphere",
-            G4Solid::Tubs { .. } => "tubs",
-            G4Solid::CutTubs { .. } => "cutTubs",
-            G4Solid::Cons { .. } => "cons",
-            G4Solid::Torus { .. } => "torus",
-            G4Solid::Trd { .. } => "trd",
-            G4Solid::Trap { .. } => "trap",
-            G4Solid::Para { .. } => "para",
-            G4Solid::Polycone { .. } => "polycone",
-            G4Solid::Polyhedra { .. } => "polyhedra",
-            G4Solid::Hype { .. } => "hype",
-            G4Solid::Paraboloid { .. } => "paraboloid",
-            G4Solid::Ellipsoid { .. } => "ellipsoid",
-            G4Solid::Eltube { .. } => "eltube",
-            G4Solid::Elcone { .. } => "elcone",
-            G4Solid::Tet { .. } => "tet",
-            G4Solid::TwistedBox { .. } => "twistedBox",
-            G4Solid::TwistedTrd { .. } => "twistedTrd",
-            G4Solid::TwistedTrap { .. } => "twistedTrap",
-            G4Solid::GenericTrap { .. } => "genericTrap",
-            G4Solid::Xtru { .. } => "xtru",
-            G4Solid::Tessellated { .. } => "tessellated",
-            G4Solid::Union(_) => "union",
-            G4Solid::Subtraction(_) => "subtraction",
-            G4Solid::Intersection(_) => "intersection",
+            G4Solid::GenericPolycone { .. } | G4Solid::GenericPolyhedra { .. } => Err(bad(
+                "geant4",
+                format!("{} is not mapped yet", self.kind()),
+            )),
+            G4Solid::MultiUnion { parts } => {
+                if parts.is_empty() {
+                    return Err(bad("multiUnion", "has no solids".into()));
+                }
+                let shapes = parts.iter().map(placed_shape).collect::<Result<Vec<_>, _>>()?;
+                Ok(union_of(shapes))
+            }
+            G4Solid::Displaced(p) => placed_shape(p),
+            G4Solid::Union(b) => Ok(b.a.to_shape()? + boolean_b(b)?),
+            G4Solid::Subtraction(b) => Ok(b.a.to_shape()? - boolean_b(b)?),
+            G4Solid::Intersection(b) => Ok(b.a.to_shape()? * boolean_b(b)?),
         }
     }
 
-    /// The solid as an exact expression, or as a closed mesh within `tolerance` mm of the
-    /// true surface for the solids with no analytic form here.
-    pub fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError> {
+    fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError> {
         let mesh = |tris: Vec<Tri>| Ok(G4Geometry::Mesh(tris));
         match self {
             &G4Solid::TwistedBox {
@@ -955,31 +724,62 @@ impl G4Solid {
                 }
                 mesh(tris)
             }
+            G4Solid::Displaced(p) => match p.solid.to_geometry(tolerance)? {
+                G4Geometry::Csg(_) => self.to_shape().map(G4Geometry::Csg),
+                G4Geometry::Mesh(tris) => {
+                    let m = affine(&p.matrix, &p.translation, "displaced")?;
+                    let mirrored = m.linear_determinant() < 0.0;
+                    mesh(
+                        tris.iter()
+                            .map(|t| {
+                                let mut v = t.map(|q| m.apply_point(q));
+                                // A reflection turns counter-clockwise faces clockwise.
+                                if mirrored {
+                                    v.swap(1, 2);
+                                }
+                                v
+                            })
+                            .collect(),
+                    )
+                }
+            },
             other => other.to_shape().map(G4Geometry::Csg),
         }
     }
 }
 
-impl Boolean {
-    fn placed_b(&self) -> Result<Shape, CsgError> {
-        let r = &self.rotation;
-        let t = &self.translation;
-        let m = Transform64 {
-            rows: [
-                [r[0][0], r[0][1], r[0][2], t[0]],
-                [r[1][0], r[1][1], r[1][2], t[1]],
-                [r[2][0], r[2][1], r[2][2], t[2]],
-                [0.0, 0.0, 0.0, 1.0],
-            ],
-        };
-        if !m.is_affine() || m.inverse().is_none() {
-            return Err(bad(
-                "boolean",
-                format!("singular or non-finite placement {r:?} {t:?}"),
-            ));
-        }
-        Ok(self.b.to_shape()?.placed(m))
+/// The affine map `p -> matrix * p + translation`, checked to be finite and invertible.
+fn affine(
+    matrix: &[[f64; 3]; 3],
+    translation: &[f64; 3],
+    what: &'static str,
+) -> Result<Transform64, CsgError> {
+    let (r, t) = (matrix, translation);
+    let m = Transform64 {
+        rows: [
+            [r[0][0], r[0][1], r[0][2], t[0]],
+            [r[1][0], r[1][1], r[1][2], t[1]],
+            [r[2][0], r[2][1], r[2][2], t[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    };
+    if !m.is_affine() || m.inverse().is_none() {
+        return Err(bad(
+            what,
+            format!("singular or non-finite placement {r:?} {t:?}"),
+        ));
     }
+    Ok(m)
+}
+
+/// A boolean's second operand in the first one's frame.
+fn boolean_b(b: &Boolean) -> Result<Shape, CsgError> {
+    Ok(b.b.to_shape()?.placed(affine(&b.rotation, &b.translation, "boolean")?))
+}
+
+/// A placed solid's expression in the outer frame.
+fn placed_shape(p: &PlacedSolid) -> Result<Shape, CsgError> {
+    Ok(p.solid.to_shape()?.placed(affine(&p.matrix, &p.translation, "displaced")?))
 }
 
 #[cfg(test)]

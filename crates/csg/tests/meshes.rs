@@ -2,7 +2,7 @@
 //! CSG union of two boxes, and a twisted box against its exact inside test marched along
 //! each ray in f64.
 
-use hytrace_csg::geant4::{G4Geometry, G4Solid, XtruSection};
+use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid, XtruSection};
 use hytrace_csg::{box3, MeshPrim, PrimTree, Ray, Real, V3};
 
 mod common;

@@ -7,6 +7,7 @@
 //! between arrays is validated before anything reads through it ([`Foundry::validate`]).
 
 pub mod error;
+pub mod g4solid;
 pub mod layout;
 pub mod npy;
 mod persist;

@@ -229,6 +229,14 @@ impl Transform64 {
         }
     }
 
+    /// Determinant of the linear 3x3 part (negative for a reflection).
+    pub fn linear_determinant(&self) -> f64 {
+        let m = &self.rows;
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    }
+
     /// Whether the last row is (0, 0, 0, 1) and every element finite.
     pub fn is_affine(&self) -> bool {
         self.rows.iter().flatten().all(|v| v.is_finite()) && self.rows[3] == [0.0, 0.0, 0.0, 1.0]
