@@ -112,8 +112,14 @@ pub const TESSELLATION_TOLERANCE: f64 = 1e-2;
 
 /// Kinds whose mesh approximates a curved (twisted) surface: distances agree within the
 /// tessellation tolerance over the cosine of incidence rather than the analytic tolerance.
-pub const APPROXIMATED_KINDS: [&str; 4] =
-    ["twistedBox", "twistedTrd", "twistedTrap", "genericTrap"];
+/// (G4TwistedTubs: hyperboloids and twisted sides, meshed within the tolerance.)
+pub const APPROXIMATED_KINDS: [&str; 5] = [
+    "twistedBox",
+    "twistedTrd",
+    "twistedTrap",
+    "genericTrap",
+    "twistedTubs",
+];
 
 /// Builds one Foundry solid per Geant4 solid (CSG, or a mesh within
 /// [`TESSELLATION_TOLERANCE`]) and prepares each for tracing in `T`.

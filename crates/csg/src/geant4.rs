@@ -12,12 +12,22 @@
 //! | G4Cons | (cone - inner cone) * phi cut |
 //! | G4Torus | torus * phi cut |
 //! | G4Trd, G4Trap, G4Para, G4Tet | convex polyhedron |
-//! | G4Polycone | (union of cones - union of inner cones) * phi cut |
-//! | G4Polyhedra | union of convex polyhedra (one per z section and phi half) minus the inner ones |
+//! | G4Polycone, G4GenericPolycone | union over z slabs of (cone - inner cone), * phi cut |
+//! | G4Polyhedra (both constructors) | union over z slabs of (convex polyhedron - inner one), one per run of sides spanning <= pi |
 //! | G4Hype | hyperboloid - inner hyperboloid (or inner double cone) |
 //! | G4Paraboloid | paraboloid |
 //! | G4Ellipsoid, G4EllipticalTube, G4EllipticalCone | scaled z-cut sphere, cylinder, cone |
 //! | G4UnionSolid, G4SubtractionSolid, G4IntersectionSolid | `+`, `-`, `*` |
+//!
+//! G4Polycone and G4Polyhedra share one construction with their generic (r, z) corner forms:
+//! the z-plane form becomes the corner polygon up the outer radii and back down the inner
+//! ones; the polygon is cut into slabs at every corner z, where the edges spanning a slab
+//! pair up into (inner, outer) boundaries. The rz-corner G4Polyhedra constructor measures
+//! radii to the polygon's corners, the z-plane one to its sides (Geant4 scales the latter by
+//! 1 / cos(dphi / numside / 2)).
+//!
+//! The twisted solids, G4GenericTrap, G4ExtrudedSolid, G4TessellatedSolid and G4TwistedTubs
+//! have no expression here: [`G4Mapping::to_geometry`] meshes them.
 //!
 //! Booleans place their second operand by `p_first = rotation * p_second + translation`
 //! (the `G4Transform3D` form: the rotation applies to the solid, not the frame).
@@ -255,6 +265,409 @@ fn polygon_section(
     polyhedron(&planes)
 }
 
+/// The (r, z) corner polygon of a z-plane solid: up the outer radii, back down the inner
+/// ones.
+fn zplanes_to_rz(z: &[f64], rmin: &[f64], rmax: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let r = rmax.iter().chain(rmin.iter().rev()).copied().collect();
+    let z = z.iter().chain(z.iter().rev()).copied().collect();
+    (r, z)
+}
+
+/// One piece of a revolved (r, z) polygon: the region between the `inner` and `outer`
+/// boundary edges over the slab `z1 < z < z2`, with their radii at `z1` and `z2` (an inner
+/// boundary on the axis has radii `[0, 0]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SlabPiece {
+    z1: f64,
+    z2: f64,
+    inner: [f64; 2],
+    outer: [f64; 2],
+}
+
+/// Splits a simple (r, z) polygon (corners in either orientation, r >= 0) into slabs at
+/// every distinct corner z. Inside a slab the edges spanning it do not cross; sorted by
+/// radius they alternate between inner and outer boundaries of the polygon's interior, and
+/// each consecutive (inner, outer) pair is one piece.
+fn rz_slabs(what: &'static str, r: &[f64], z: &[f64]) -> Result<Vec<SlabPiece>, CsgError> {
+    let n = r.len();
+    if n != z.len() || n < 3 {
+        return Err(bad(
+            what,
+            format!(
+                "needs 3 or more (r, z) corners, got {} r and {} z",
+                r.len(),
+                z.len()
+            ),
+        ));
+    }
+    if !r.iter().chain(z).all(|v| v.is_finite()) {
+        return Err(bad(what, "corners must be finite".into()));
+    }
+    if r.iter().any(|&v| v < 0.0) {
+        return Err(bad(what, format!("radii must be >= 0, got {r:?}")));
+    }
+    let extent = r
+        .iter()
+        .chain(z)
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max(f64::MIN_POSITIVE);
+    let area2: f64 = (0..n)
+        .map(|i| {
+            let j = (i + 1) % n;
+            r[i] * z[j] - r[j] * z[i]
+        })
+        .sum();
+    if area2.abs() <= 1e-12 * extent * extent {
+        return Err(bad(what, "the (r, z) polygon has no area".into()));
+    }
+    let mut levels = z.to_vec();
+    levels.sort_by(f64::total_cmp);
+    levels.dedup();
+    // Radius of the edge from corner lo to corner hi (z[lo] < z[hi]) at height h, exact at
+    // the corners.
+    let r_at = |lo: usize, hi: usize, h: f64| {
+        if h == z[lo] {
+            r[lo]
+        } else if h == z[hi] {
+            r[hi]
+        } else {
+            r[lo] + (r[hi] - r[lo]) * ((h - z[lo]) / (z[hi] - z[lo]))
+        }
+    };
+    let mut pieces = Vec::new();
+    for w in levels.windows(2) {
+        let (za, zb) = (w[0], w[1]);
+        let mut cuts: Vec<[f64; 2]> = Vec::new();
+        for i in 0..n {
+            let j = (i + 1) % n;
+            let (lo, hi) = match z[i].total_cmp(&z[j]) {
+                std::cmp::Ordering::Less => (i, j),
+                std::cmp::Ordering::Greater => (j, i),
+                std::cmp::Ordering::Equal => continue,
+            };
+            if z[lo] <= za && z[hi] >= zb {
+                cuts.push([r_at(lo, hi, za), r_at(lo, hi, zb)]);
+            }
+        }
+        cuts.sort_by(|a, b| (a[0] + a[1]).total_cmp(&(b[0] + b[1])));
+        let crossing = cuts
+            .windows(2)
+            .any(|p| p[1][0] < p[0][0] || p[1][1] < p[0][1]);
+        if crossing || cuts.len() % 2 != 0 {
+            return Err(bad(
+                what,
+                format!("the (r, z) polygon crosses itself between z = {za} and {zb}"),
+            ));
+        }
+        for pair in cuts.chunks_exact(2) {
+            let (inner, outer) = (pair[0], pair[1]);
+            if outer[0] + outer[1] <= inner[0] + inner[1] {
+                return Err(bad(
+                    what,
+                    format!("the (r, z) polygon has overlapping edges between z = {za} and {zb}"),
+                ));
+            }
+            pieces.push(SlabPiece {
+                z1: za,
+                z2: zb,
+                inner,
+                outer,
+            });
+        }
+    }
+    Ok(pieces)
+}
+
+/// The (r, z) polygon revolved about z over `[sphi, sphi + dphi]` (G4Polycone,
+/// G4GenericPolycone): the union over its slab pieces of `cone(outer) - cone(inner)`, cut
+/// in phi.
+fn revolved_polygon(
+    what: &'static str,
+    r: &[f64],
+    z: &[f64],
+    sphi: f64,
+    dphi: f64,
+) -> Result<Shape, CsgError> {
+    let mut parts = Vec::new();
+    for p in rz_slabs(what, r, z)? {
+        let mut s = cone(p.outer[0], p.z1, p.outer[1], p.z2)?;
+        if p.inner[0] > 0.0 || p.inner[1] > 0.0 {
+            s = s - cone(p.inner[0], p.z1, p.inner[1], p.z2)?;
+        }
+        parts.push(s);
+    }
+    with_phi(union_of(parts), sphi, dphi)
+}
+
+/// The (r, z) polygon swept around a regular polygon of `numside` sides over
+/// `[sphi, sphi + dphi]` (G4Polyhedra); a corner's radius times `apothem` is the distance
+/// of the sides from the axis there. Each slab piece becomes convex polyhedra (one per run
+/// of sides spanning at most pi when the range is partial), minus the inner ones.
+fn swept_polygon(
+    what: &'static str,
+    r: &[f64],
+    z: &[f64],
+    sphi: f64,
+    dphi: f64,
+    numside: u32,
+    apothem: f64,
+) -> Result<Shape, CsgError> {
+    if numside == 0 || (numside < 3 && dphi >= 2.0 * PI) {
+        return Err(bad(
+            what,
+            format!("needs 3 or more sides (1 or more for a partial phi range), got {numside}"),
+        ));
+    }
+    if !(sphi.is_finite() && dphi > 0.0 && dphi.is_finite()) {
+        return Err(bad(
+            what,
+            format!("needs a finite phi range with dphi > 0, got {sphi} {dphi}"),
+        ));
+    }
+    if !(apothem > 0.0) {
+        return Err(bad(
+            what,
+            format!("sides of {numside} over {dphi} rad must each span less than pi"),
+        ));
+    }
+    let full = dphi >= 2.0 * PI;
+    let dphi = dphi.min(2.0 * PI);
+    let step = dphi / f64::from(numside);
+    // A partial range is cut into runs of sides spanning at most pi each, so every piece
+    // (closed by its radial planes) is convex.
+    let per = if full {
+        numside
+    } else {
+        ((PI / step).floor() as u32).clamp(1, numside)
+    };
+    let runs: Vec<std::ops::Range<u32>> = (0..numside)
+        .step_by(per as usize)
+        .map(|a| a..(a + per).min(numside))
+        .collect();
+    let scaled: Vec<f64> = r.iter().map(|v| v * apothem).collect();
+    let mut parts = Vec::new();
+    for p in rz_slabs(what, &scaled, z)? {
+        for h in &runs {
+            let section = |radii: [f64; 2]| {
+                polygon_section(sphi, step, h.clone(), full, p.z1, p.z2, radii[0], radii[1])
+            };
+            let mut s = section(p.outer)?;
+            if p.inner[0] > 0.0 || p.inner[1] > 0.0 {
+                s = s - section(p.inner)?;
+            }
+            parts.push(s);
+        }
+    }
+    Ok(union_of(parts))
+}
+
+/// The mesh of a G4TwistedTubs (twist angle `twist` from -dz to +dz, end radii `end_inner`
+/// and `end_outer`, half length `dz`, opening `dphi`), the geometry the oracle established
+/// against Geant4: with `kappa = tan(twist / 2) / dz`, the solid is the image of the box
+/// `|a| <= dphi / 2`, `r_in <= x <= r_out`, `|z| <= dz` under
+/// `(a, x, z) -> R_z(a) (x, kappa x z, z)`, where `r_in, r_out` are the end radii times
+/// `cos(twist / 2)` (the waists). Its cross-section at height z is the annular sector
+/// between the hyperboloids `r = r_in/out sqrt(1 + (kappa z)^2)` over the phi range
+/// `atan(kappa z) +- dphi / 2`; every line `a, x = const` is straight (a ruling of the
+/// hyperboloids at `x = r_in, r_out`, an edge of the side faces), and the side faces
+/// `a = +-dphi / 2` are hyperbolic paraboloids.
+///
+/// The box faces are meshed on a grid of `m` phi steps, `k` radial and `nz` z steps: `m`
+/// keeps the arc chords within half the tolerance at the end radius, then `nz` and `k` are
+/// doubled until the true surface at every grid cell's centre is within `tolerance` of both
+/// triangles of the cell, whichever diagonal.
+fn twisted_tubs_mesh(
+    twist: f64,
+    end_inner: f64,
+    end_outer: f64,
+    dz: f64,
+    dphi: f64,
+    tolerance: f64,
+) -> Result<Vec<Tri>, CsgError> {
+    let what = "twistedTubs";
+    if ![twist, end_inner, end_outer, dz, dphi]
+        .iter()
+        .all(|v| v.is_finite())
+    {
+        return Err(bad(what, "parameters must be finite".into()));
+    }
+    if !(end_inner > 0.0 && end_inner < end_outer && dz > 0.0) {
+        return Err(bad(
+            what,
+            format!("needs 0 < endinnerrad < endouterrad and halfzlen > 0, got {end_inner} {end_outer} {dz}"),
+        ));
+    }
+    // Geant4 (11.4) classifies points by both side surfaces at once, so a wider segment
+    // behaves as the 2 pi - dphi one: only dphi <= pi is a solid of opening dphi.
+    if !(dphi > 0.0 && dphi <= PI && twist.abs() < PI) {
+        return Err(bad(
+            what,
+            format!("needs 0 < dphi <= pi and |twistedangle| < pi, got {dphi} {twist}"),
+        ));
+    }
+    if !(tolerance > 0.0 && tolerance.is_finite()) {
+        return Err(bad(what, format!("needs a tolerance > 0, got {tolerance}")));
+    }
+    let half_twist = 0.5 * twist;
+    let (r_in, r_out) = (end_inner * half_twist.cos(), end_outer * half_twist.cos());
+    let kappa = half_twist.tan() / dz;
+    let point = |a: f64, x: f64, z: f64| {
+        let (s, c) = a.sin_cos();
+        let y = kappa * x * z;
+        [c * x - s * y, s * x + c * y, z]
+    };
+    // Largest distance from the true point `p` to the planes of the two triangles of the
+    // cell (p00, p10, p11, p01), for either diagonal.
+    let cell_dev = |q: [[f64; 3]; 4], p: [f64; 3]| {
+        let plane = |a: [f64; 3], b: [f64; 3], c: [f64; 3]| {
+            let (u, v) = (sub(b, a), sub(c, a));
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let w = sub(p, a);
+            if l > 0.0 {
+                (w[0] * n[0] + w[1] * n[1] + w[2] * n[2]).abs() / l
+            } else {
+                (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt()
+            }
+        };
+        [
+            plane(q[0], q[1], q[2]),
+            plane(q[0], q[2], q[3]),
+            plane(q[0], q[1], q[3]),
+            plane(q[1], q[2], q[3]),
+        ]
+        .into_iter()
+        .fold(0.0f64, f64::max)
+    };
+    // Phi steps: chord sagitta at the end radius within half the tolerance.
+    let max_step = 2.0 * (1.0 - 0.5 * tolerance / end_outer).max(-1.0).acos();
+    let m = ((dphi / max_step).ceil() as usize).max(1);
+    let da = dphi / m as f64;
+    let (mut k, mut nz) = (1usize, 1usize);
+    loop {
+        let z_at = |i: usize| -dz + 2.0 * dz * (i as f64 / nz as f64);
+        let x_at = |j: usize| r_in + (r_out - r_in) * (j as f64 / k as f64);
+        let (mut dev_hyp, mut dev_side) = (0.0f64, 0.0f64);
+        for i in 0..nz {
+            let (z0, z1) = (z_at(i), z_at(i + 1));
+            let zm = 0.5 * (z0 + z1);
+            for x in [r_in, r_out] {
+                let q = [
+                    point(0.0, x, z0),
+                    point(da, x, z0),
+                    point(da, x, z1),
+                    point(0.0, x, z1),
+                ];
+                dev_hyp = dev_hyp.max(cell_dev(q, point(0.5 * da, x, zm)));
+            }
+            for j in 0..k {
+                let (x0, x1) = (x_at(j), x_at(j + 1));
+                let q = [
+                    point(0.0, x0, z0),
+                    point(0.0, x1, z0),
+                    point(0.0, x1, z1),
+                    point(0.0, x0, z1),
+                ];
+                dev_side = dev_side.max(cell_dev(q, point(0.0, 0.5 * (x0 + x1), zm)));
+            }
+        }
+        if dev_hyp <= tolerance && dev_side <= tolerance {
+            break;
+        }
+        if dev_hyp > tolerance || (r_out - r_in) / (k as f64) < 2.0 * dz / (nz as f64) {
+            nz *= 2;
+        } else {
+            k *= 2;
+        }
+        if 4 * (m * k + m * nz + k * nz) > 1 << 21 {
+            return Err(bad(
+                what,
+                format!("more than 2^21 triangles needed for tolerance {tolerance} mm"),
+            ));
+        }
+    }
+    // The grid: a_j over [-dphi/2, dphi/2], x_j over [r_in, r_out], z_i over [-dz, dz].
+    let a_at = |j: usize| -0.5 * dphi + dphi * (j as f64 / m as f64);
+    let x_at = |j: usize| r_in + (r_out - r_in) * (j as f64 / k as f64);
+    let z_at = |i: usize| -dz + 2.0 * dz * (i as f64 / nz as f64);
+    let mut tris = Vec::with_capacity(4 * (m * k + m * nz + k * nz));
+    // (x, a, z) -> position preserves orientation, so a quad counter-clockwise seen from
+    // outside the parameter box stays counter-clockwise seen from outside the solid.
+    let mut quad = |p: [[f64; 3]; 4]| {
+        tris.push([p[0], p[1], p[2]]);
+        tris.push([p[0], p[2], p[3]]);
+    };
+    for i in 0..nz {
+        let (z0, z1) = (z_at(i), z_at(i + 1));
+        for j in 0..m {
+            let (a0, a1) = (a_at(j), a_at(j + 1));
+            // Outer (+x): counter-clockwise in (a, z); inner (-x): the reverse.
+            let x = r_out;
+            quad([
+                point(a0, x, z0),
+                point(a1, x, z0),
+                point(a1, x, z1),
+                point(a0, x, z1),
+            ]);
+            let x = r_in;
+            quad([
+                point(a0, x, z0),
+                point(a0, x, z1),
+                point(a1, x, z1),
+                point(a1, x, z0),
+            ]);
+        }
+        for j in 0..k {
+            let (x0, x1) = (x_at(j), x_at(j + 1));
+            // End side (+a): counter-clockwise in (z, x); start side (-a): the reverse.
+            let a = a_at(m);
+            quad([
+                point(a, x0, z0),
+                point(a, x0, z1),
+                point(a, x1, z1),
+                point(a, x1, z0),
+            ]);
+            let a = a_at(0);
+            quad([
+                point(a, x0, z0),
+                point(a, x1, z0),
+                point(a, x1, z1),
+                point(a, x0, z1),
+            ]);
+        }
+    }
+    for j in 0..m {
+        let (a0, a1) = (a_at(j), a_at(j + 1));
+        for l in 0..k {
+            let (x0, x1) = (x_at(l), x_at(l + 1));
+            // Top (+z): counter-clockwise in (x, a); bottom (-z): the reverse.
+            let z = z_at(nz);
+            quad([
+                point(a0, x0, z),
+                point(a0, x1, z),
+                point(a1, x1, z),
+                point(a1, x0, z),
+            ]);
+            let z = z_at(0);
+            quad([
+                point(a0, x0, z),
+                point(a1, x0, z),
+                point(a1, x1, z),
+                point(a0, x1, z),
+            ]);
+        }
+    }
+    Ok(tris)
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
 /// How a [`G4Solid`] becomes hytrace geometry.
 pub trait G4Mapping {
     /// The equivalent CSG expression; impossible parameters give an error naming the solid.
@@ -385,24 +798,11 @@ impl G4Mapping for G4Solid {
                 rmax,
             } => {
                 check_planes("polycone", z, rmin, rmax)?;
-                let (mut outer, mut inner) = (Vec::new(), Vec::new());
-                for i in 0..z.len() - 1 {
-                    if z[i + 1] == z[i] {
-                        continue;
-                    }
-                    outer.push(cone(rmax[i], z[i], rmax[i + 1], z[i + 1])?);
-                    if rmin[i] > 0.0 || rmin[i + 1] > 0.0 {
-                        inner.push(cone(rmin[i], z[i], rmin[i + 1], z[i + 1])?);
-                    }
-                }
-                if outer.is_empty() {
-                    return Err(bad("polycone", "all sections have zero height".into()));
-                }
-                let mut s = union_of(outer);
-                if !inner.is_empty() {
-                    s = s - union_of(inner);
-                }
-                with_phi(s, *sphi, *dphi)
+                let (r, z) = zplanes_to_rz(z, rmin, rmax);
+                revolved_polygon("polycone", &r, &z, *sphi, *dphi)
+            }
+            G4Solid::GenericPolycone { sphi, dphi, r, z } => {
+                revolved_polygon("genericPolycone", r, z, *sphi, *dphi)
             }
             G4Solid::Polyhedra {
                 sphi,
@@ -413,68 +813,28 @@ impl G4Mapping for G4Solid {
                 rmax,
             } => {
                 check_planes("polyhedra", z, rmin, rmax)?;
-                if *numside < 3 && *dphi >= 2.0 * PI {
-                    return Err(bad(
-                        "polyhedra",
-                        format!("needs 3 or more sides, got {numside}"),
-                    ));
-                }
-                if *numside == 0 {
-                    return Err(bad("polyhedra", "needs at least one side".into()));
-                }
-                let full = *dphi >= 2.0 * PI;
-                let dphi = dphi.min(2.0 * PI);
-                let step = dphi / *numside as f64;
-                // Partial ranges wider than pi are split so every piece is convex.
-                let split = if full || dphi <= PI || *numside < 2 {
-                    *numside
-                } else {
-                    numside / 2
-                };
-                let halves: Vec<std::ops::Range<u32>> = [0..split, split..*numside]
-                    .into_iter()
-                    .filter(|r| !r.is_empty())
-                    .collect();
-                let (mut outer, mut inner) = (Vec::new(), Vec::new());
-                for i in 0..z.len() - 1 {
-                    if z[i + 1] == z[i] {
-                        continue;
-                    }
-                    for h in &halves {
-                        let (z1, z2) = (z[i], z[i + 1]);
-                        outer.push(polygon_section(
-                            *sphi,
-                            step,
-                            h.clone(),
-                            full,
-                            z1,
-                            z2,
-                            rmax[i],
-                            rmax[i + 1],
-                        )?);
-                        if rmin[i] > 0.0 || rmin[i + 1] > 0.0 {
-                            inner.push(polygon_section(
-                                *sphi,
-                                step,
-                                h.clone(),
-                                full,
-                                z1,
-                                z2,
-                                rmin[i],
-                                rmin[i + 1],
-                            )?);
-                        }
-                    }
-                }
-                if outer.is_empty() {
-                    return Err(bad("polyhedra", "all sections have zero height".into()));
-                }
-                let s = union_of(outer);
-                Ok(if inner.is_empty() {
-                    s
-                } else {
-                    s - union_of(inner)
-                })
+                let (r, z) = zplanes_to_rz(z, rmin, rmax);
+                swept_polygon("polyhedra", &r, &z, *sphi, *dphi, *numside, 1.0)
+            }
+            G4Solid::GenericPolyhedra {
+                sphi,
+                dphi,
+                numside,
+                r,
+                z,
+            } => {
+                // The rz-corner constructor's radii reach the polygon's corners (the z-plane
+                // one's reach its sides): the sides lie at r cos(step / 2).
+                let step = dphi.min(2.0 * PI) / f64::from(*numside);
+                swept_polygon(
+                    "genericPolyhedra",
+                    r,
+                    z,
+                    *sphi,
+                    *dphi,
+                    *numside,
+                    (0.5 * step).cos(),
+                )
             }
             &G4Solid::Hype {
                 rmin,
@@ -543,15 +903,14 @@ impl G4Mapping for G4Solid {
                     self.kind()
                 ),
             )),
-            G4Solid::GenericPolycone { .. } | G4Solid::GenericPolyhedra { .. } => Err(bad(
-                "geant4",
-                format!("{} is not mapped yet", self.kind()),
-            )),
             G4Solid::MultiUnion { parts } => {
                 if parts.is_empty() {
                     return Err(bad("multiUnion", "has no solids".into()));
                 }
-                let shapes = parts.iter().map(placed_shape).collect::<Result<Vec<_>, _>>()?;
+                let shapes = parts
+                    .iter()
+                    .map(placed_shape)
+                    .collect::<Result<Vec<_>, _>>()?;
                 Ok(union_of(shapes))
             }
             G4Solid::Displaced(p) => placed_shape(p),
@@ -631,6 +990,20 @@ impl G4Mapping for G4Solid {
                 dx3,
                 dx4,
                 alpha,
+                tolerance,
+            )?),
+            &G4Solid::TwistedTubs {
+                twistedangle,
+                endinnerrad,
+                endouterrad,
+                halfzlen,
+                dphi,
+            } => mesh(twisted_tubs_mesh(
+                twistedangle,
+                endinnerrad,
+                endouterrad,
+                halfzlen,
+                dphi,
                 tolerance,
             )?),
             G4Solid::GenericTrap { dz, vertices } => {
@@ -774,12 +1147,16 @@ fn affine(
 
 /// A boolean's second operand in the first one's frame.
 fn boolean_b(b: &Boolean) -> Result<Shape, CsgError> {
-    Ok(b.b.to_shape()?.placed(affine(&b.rotation, &b.translation, "boolean")?))
+    Ok(b.b
+        .to_shape()?
+        .placed(affine(&b.rotation, &b.translation, "boolean")?))
 }
 
 /// A placed solid's expression in the outer frame.
 fn placed_shape(p: &PlacedSolid) -> Result<Shape, CsgError> {
-    Ok(p.solid.to_shape()?.placed(affine(&p.matrix, &p.translation, "displaced")?))
+    Ok(p.solid
+        .to_shape()?
+        .placed(affine(&p.matrix, &p.translation, "displaced")?))
 }
 
 #[cfg(test)]
@@ -840,5 +1217,260 @@ mod tests {
         for c in cases {
             assert!(c.to_shape().is_err(), "{c:?}");
         }
+    }
+    fn generic_polycone(r: &[f64], z: &[f64]) -> G4Solid {
+        G4Solid::GenericPolycone {
+            sphi: 0.0,
+            dphi: 7.0,
+            r: r.to_vec(),
+            z: z.to_vec(),
+        }
+    }
+
+    fn generic_polyhedra(numside: u32, r: &[f64], z: &[f64]) -> G4Solid {
+        G4Solid::GenericPolyhedra {
+            sphi: 0.0,
+            dphi: 7.0,
+            numside,
+            r: r.to_vec(),
+            z: z.to_vec(),
+        }
+    }
+
+    #[test]
+    fn invalid_rz_polygons_are_errors_not_panics() {
+        let nan = f64::NAN;
+        let cases: [(&[f64], &[f64]); 8] = [
+            // fewer than 3 corners, or mismatched lengths
+            (&[1.0, 2.0], &[0.0, 1.0]),
+            (&[1.0, 2.0, 2.0], &[0.0, 1.0]),
+            // NaN, infinite, negative radius
+            (&[1.0, nan, 2.0], &[0.0, 1.0, 2.0]),
+            (&[1.0, 2.0, 2.0], &[0.0, f64::INFINITY, 2.0]),
+            (&[1.0, -2.0, 2.0], &[0.0, 1.0, 2.0]),
+            // zero area: collinear corners, all at one z
+            (&[0.0, 1.0, 2.0], &[0.0, 1.0, 2.0]),
+            (&[0.0, 1.0, 2.0, 3.0], &[5.0, 5.0, 5.0, 5.0]),
+            // a bow tie: its edges cross
+            (&[1.0, 3.0, 3.0, 1.0], &[0.0, 2.0, 0.0, 2.0]),
+        ];
+        for (r, z) in cases {
+            let e = generic_polycone(r, z).to_shape().unwrap_err();
+            assert_eq!(e.primitive, "genericPolycone", "{r:?} {z:?}: {e}");
+            let e = generic_polyhedra(6, r, z).to_shape().unwrap_err();
+            assert_eq!(e.primitive, "genericPolyhedra", "{r:?} {z:?}: {e}");
+        }
+        // Too few sides, a zero or NaN phi range.
+        let square = ([1.0, 2.0, 2.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+        assert!(generic_polyhedra(2, &square.0, &square.1)
+            .to_shape()
+            .is_err());
+        assert!(generic_polyhedra(0, &square.0, &square.1)
+            .to_shape()
+            .is_err());
+        for dphi in [0.0, -1.0, nan] {
+            let s = G4Solid::GenericPolyhedra {
+                sphi: 0.0,
+                dphi,
+                numside: 4,
+                r: square.0.to_vec(),
+                z: square.1.to_vec(),
+            };
+            assert!(s.to_shape().is_err(), "{dphi}");
+            let s = G4Solid::GenericPolycone {
+                sphi: 0.0,
+                dphi,
+                r: square.0.to_vec(),
+                z: square.1.to_vec(),
+            };
+            assert!(s.to_shape().is_err(), "{dphi}");
+        }
+        // One side spanning more than pi has no convex polyhedron.
+        let wide = G4Solid::GenericPolyhedra {
+            sphi: 0.0,
+            dphi: 4.0,
+            numside: 1,
+            r: square.0.to_vec(),
+            z: square.1.to_vec(),
+        };
+        assert!(wide.to_shape().is_err());
+    }
+
+    #[test]
+    fn twisted_tubs_parameters_are_checked() {
+        let ok = G4Solid::TwistedTubs {
+            twistedangle: 0.6,
+            endinnerrad: 2.0,
+            endouterrad: 5.0,
+            halfzlen: 4.0,
+            dphi: 1.0,
+        };
+        assert!(matches!(ok.to_geometry(1e-2), Ok(G4Geometry::Mesh(_))));
+        assert!(ok.to_shape().is_err());
+        assert!(ok.to_geometry(0.0).is_err());
+        assert!(ok.to_geometry(f64::NAN).is_err());
+        let with = |f: &dyn Fn(&mut [f64; 5])| {
+            let mut p = [0.6, 2.0, 5.0, 4.0, 1.0];
+            f(&mut p);
+            G4Solid::TwistedTubs {
+                twistedangle: p[0],
+                endinnerrad: p[1],
+                endouterrad: p[2],
+                halfzlen: p[3],
+                dphi: p[4],
+            }
+        };
+        let bad_cases: [&dyn Fn(&mut [f64; 5]); 9] = [
+            &|p| p[0] = 3.5,      // twist beyond pi
+            &|p| p[0] = f64::NAN, // NaN twist
+            &|p| p[1] = 0.0,      // no inner radius (Geant4 needs one)
+            &|p| p[1] = 6.0,      // inner beyond outer
+            &|p| p[3] = 0.0,      // no length
+            &|p| p[3] = f64::INFINITY,
+            &|p| p[4] = 0.0, // no opening
+            &|p| p[4] = 4.0, // wider than pi
+            &|p| p[2] = f64::NAN,
+        ];
+        for f in bad_cases {
+            let s = with(f);
+            assert!(s.to_geometry(1e-2).is_err(), "{s:?}");
+        }
+    }
+
+    #[test]
+    fn zplane_and_corner_forms_are_one_construction() {
+        // A z-plane polycone equals its corner polygon (up the outer radii, down the inner).
+        let zp = G4Solid::Polycone {
+            sphi: 0.5,
+            dphi: 2.0,
+            z: vec![-3.0, 0.0, 0.0, 4.0],
+            rmin: vec![0.0, 1.0, 2.0, 1.0],
+            rmax: vec![2.0, 3.0, 4.0, 5.0],
+        };
+        let rz = G4Solid::GenericPolycone {
+            sphi: 0.5,
+            dphi: 2.0,
+            r: vec![2.0, 3.0, 4.0, 5.0, 1.0, 2.0, 1.0, 0.0],
+            z: vec![-3.0, 0.0, 0.0, 4.0, 4.0, 0.0, 0.0, -3.0],
+        };
+        assert_eq!(zp.to_shape().unwrap(), rz.to_shape().unwrap());
+        // Reversed corner order, another starting corner: the same solid.
+        let mut r: Vec<f64> = vec![2.0, 3.0, 4.0, 5.0, 1.0, 2.0, 1.0, 0.0];
+        let mut z: Vec<f64> = vec![-3.0, 0.0, 0.0, 4.0, 4.0, 0.0, 0.0, -3.0];
+        r.reverse();
+        z.reverse();
+        r.rotate_left(3);
+        z.rotate_left(3);
+        let again = G4Solid::GenericPolycone {
+            sphi: 0.5,
+            dphi: 2.0,
+            r,
+            z,
+        };
+        assert_eq!(again.to_shape().unwrap(), rz.to_shape().unwrap());
+        // The rz-corner polyhedra's radii reach the corners: scaled by cos(pi / 6) they
+        // are the z-plane form's side distances.
+        let c = (PI / 6.0).cos();
+        let sides = G4Solid::Polyhedra {
+            sphi: 0.0,
+            dphi: 7.0,
+            numside: 6,
+            z: vec![-1.0, 1.0],
+            rmin: vec![0.0, 0.0],
+            rmax: vec![2.0 * c, 3.0 * c],
+        };
+        let corners = generic_polyhedra(6, &[0.0, 2.0, 3.0, 0.0], &[-1.0, -1.0, 1.0, 1.0]);
+        let (a, b) = (sides.to_shape().unwrap(), corners.to_shape().unwrap());
+        let probe = |s: &Shape, p: [f64; 3]| {
+            crate::PrimTree::<f64>::from_shape(s)
+                .unwrap()
+                .contains(crate::V3::from_f64(p))
+        };
+        // Just inside and just outside a corner (phi = 0) and a side centre (phi = pi/6).
+        for (p, inside) in [
+            ([2.49, 0.0, 0.0], true),
+            ([2.51, 0.0, 0.0], false),
+            ([2.49 * c * c, 2.49 * c * 0.5, 0.0], true),
+            ([2.51 * c * c, 2.51 * c * 0.5, 0.0], false),
+        ] {
+            assert_eq!(probe(&a, p), inside, "{p:?}");
+            assert_eq!(probe(&b, p), inside, "{p:?}");
+        }
+    }
+
+    /// Even-odd point-in-polygon test in the (r, z) half-plane.
+    fn in_rz(r: &[f64], z: &[f64], pr: f64, pz: f64) -> bool {
+        let n = r.len();
+        let mut inside = false;
+        for i in 0..n {
+            let j = (i + 1) % n;
+            if (z[i] > pz) != (z[j] > pz) {
+                let x = r[i] + (r[j] - r[i]) * (pz - z[i]) / (z[j] - z[i]);
+                if pr < x {
+                    inside = !inside;
+                }
+            }
+        }
+        inside
+    }
+
+    #[test]
+    fn non_convex_rz_polygons_revolve_exactly() {
+        // A "C" opening outwards with an overhang (the edge from (2, 1) down to (7, 0)) and
+        // corners on the axis: slabs with two (inner, outer) pairs and pieces without an
+        // inner boundary.
+        let r = [0.0, 6.0, 6.0, 2.0, 2.0, 7.0, 5.0, 0.0, 0.0];
+        let z = [-5.0, -5.0, -3.0, -2.0, 1.0, 0.0, 6.0, 4.0, 1.0];
+        let sphi = -0.4;
+        let dphi = 4.0;
+        let cone_solid = G4Solid::GenericPolycone {
+            sphi,
+            dphi,
+            r: r.to_vec(),
+            z: z.to_vec(),
+        };
+        let numside = 5u32;
+        let poly_solid = G4Solid::GenericPolyhedra {
+            sphi,
+            dphi,
+            numside,
+            r: r.to_vec(),
+            z: z.to_vec(),
+        };
+        let step = dphi / f64::from(numside);
+        let trees = [cone_solid, poly_solid]
+            .map(|s| crate::PrimTree::<f64>::from_shape(&s.to_shape().unwrap()).unwrap());
+        let mut seed = 12345u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut inside_count = [0usize; 2];
+        for _ in 0..20000 {
+            let p = [
+                -8.0 + 16.0 * next(),
+                -8.0 + 16.0 * next(),
+                -6.0 + 13.0 * next(),
+            ];
+            let phi = (p[1].atan2(p[0]) - sphi).rem_euclid(2.0 * PI);
+            let rho = p[0].hypot(p[1]);
+            let in_phi = phi < dphi;
+            // The polygon sweep: the distance to the side plane of the point's sector,
+            // over the apothem factor, is the corner-polygon radius.
+            let side = ((phi / step).floor() + 0.5) * step + sphi;
+            let rho_poly = (p[0] * side.cos() + p[1] * side.sin()) / (0.5 * step).cos();
+            let want = [
+                in_phi && in_rz(&r, &z, rho, p[2]),
+                in_phi && in_rz(&r, &z, rho_poly, p[2]),
+            ];
+            for (k, tree) in trees.iter().enumerate() {
+                let got = tree.contains(crate::V3::from_f64(p));
+                assert_eq!(got, want[k], "solid {k} at {p:?}");
+                inside_count[k] += got as usize;
+            }
+        }
+        assert!(inside_count.iter().all(|&c| c > 1000), "{inside_count:?}");
     }
 }

@@ -17,6 +17,7 @@ mod prepared;
 mod prim_tree;
 mod real;
 mod shape;
+mod solid_store;
 pub mod tessellate;
 mod tree;
 
@@ -30,4 +31,5 @@ pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape,
 };
+pub use solid_store::add_geometry;
 pub use tree::{to_tree, LIST_MIN_MEMBERS};

@@ -1,6 +1,6 @@
 //! Mesh prims and tessellations against independent references: an extruded L against the
-//! CSG union of two boxes, and a twisted box against its exact inside test marched along
-//! each ray in f64.
+//! CSG union of two boxes, and a twisted box and a twisted tube segment against their exact
+//! inside tests marched along each ray in f64.
 
 use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid, XtruSection};
 use hytrace_csg::{box3, MeshPrim, PrimTree, Ray, Real, V3};
@@ -165,6 +165,104 @@ fn twisted_box_mesh_is_within_its_tolerance_of_the_exact_surface() {
     }
     assert!(checked > 100, "{checked}");
     eprintln!("twisted box: {checked} rays, worst surface error {worst:.2e} mm (tolerance {tol})");
+}
+
+/// Exact inside test of a G4TwistedTubs: at height z the annular sector between the
+/// hyperboloids of waist `end * cos(twist / 2)` over `atan(kappa z) +- dphi / 2`.
+fn in_twisted_tubs(p: [f64; 3], twist: f64, ends: [f64; 2], dz: f64, dphi: f64) -> bool {
+    if p[2].abs() > dz {
+        return false;
+    }
+    let kappa = (0.5 * twist).tan() / dz;
+    let grow = (1.0 + (kappa * p[2]).powi(2)).sqrt() * (0.5 * twist).cos();
+    let rho = p[0].hypot(p[1]);
+    let phi = p[1].atan2(p[0]) - (kappa * p[2]).atan();
+    let phi =
+        (phi + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
+    rho >= ends[0] * grow && rho <= ends[1] * grow && phi.abs() <= 0.5 * dphi
+}
+
+/// Signed volume of a closed mesh (divergence theorem): positive when outward-facing.
+fn mesh_volume(mesh: &[[[f64; 3]; 3]]) -> f64 {
+    mesh.iter()
+        .map(|t| {
+            let [a, b, c] = *t;
+            (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                / 6.0
+        })
+        .sum()
+}
+
+#[test]
+fn twisted_tubs_mesh_is_closed_and_within_its_tolerance() {
+    let (twist, ends, dz, dphi) = (-1.1f64, [3.0, 7.5], 5.0, 2.4);
+    let solid = G4Solid::TwistedTubs {
+        twistedangle: twist,
+        endinnerrad: ends[0],
+        endouterrad: ends[1],
+        halfzlen: dz,
+        dphi,
+    };
+    let tol = 1e-3;
+    let tris = mesh_of(&solid, tol);
+    // Watertight: every directed edge is matched by its reverse, vertices bit for bit.
+    let mut edges = std::collections::HashMap::new();
+    for t in &tris {
+        for k in 0..3 {
+            let key = |p: [f64; 3]| p.map(f64::to_bits);
+            let (a, b) = (key(t[k]), key(t[(k + 1) % 3]));
+            *edges.entry((a, b)).or_insert(0i32) += 1;
+            *edges.entry((b, a)).or_insert(0i32) -= 1;
+        }
+    }
+    assert!(edges.values().all(|&v| v == 0), "open or inconsistent mesh");
+    // Volume: the sector area dphi / 2 (r_out^2 - r_in^2) (1 + (kappa z)^2) over z.
+    let kappa = (0.5 * twist).tan() / dz;
+    let c2 = (0.5 * twist).cos().powi(2);
+    let exact = 0.5
+        * dphi
+        * (ends[1] * ends[1] - ends[0] * ends[0])
+        * c2
+        * (2.0 * dz + 2.0 * kappa * kappa * dz.powi(3) / 3.0);
+    let v = mesh_volume(&tris);
+    let area_bound = 2.0 * dphi * ends[1] * 2.0 * dz * 3.0;
+    assert!(
+        (v - exact).abs() <= tol * area_bound,
+        "volume {v}, exact {exact}"
+    );
+    let mesh = MeshPrim::<f64>::new(&tris).unwrap();
+    let inside = |p: [f64; 3]| in_twisted_tubs(p, twist, ends, dz, dphi);
+    let mut rng = Rng(17);
+    let (mut checked, mut worst) = (0, 0.0f64);
+    for _ in 0..400 {
+        let (o, d) = rng.aimed(12.0, 7.0);
+        let reference = marched(o, d, &inside, 40.0);
+        let step = mesh.first_crossing(&ray::<f64>(o, d), 0.0);
+        if reference.is_infinite() {
+            continue;
+        }
+        let n = step.normal.normalized().to_f64();
+        let cos = (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]).abs();
+        if cos < 0.2 {
+            continue;
+        }
+        let err = (step.t - reference).abs() * cos;
+        worst = worst.max(err);
+        checked += 1;
+        assert!(
+            err <= 2.0 * tol,
+            "ray {o:?} {d:?}: mesh {} reference {reference}",
+            step.t
+        );
+        assert_eq!(step.inside_before, inside(o));
+    }
+    assert!(checked > 100, "{checked}");
+    eprintln!(
+        "twisted tubs: {} triangles, {checked} rays, worst surface error {worst:.2e} mm \
+         (tolerance {tol})",
+        tris.len()
+    );
 }
 
 #[test]

@@ -8,8 +8,10 @@
 
 pub mod error;
 pub mod g4solid;
+pub mod gdml;
 pub mod layout;
 pub mod npy;
+pub mod optics;
 mod persist;
 pub mod records;
 mod store;

@@ -12,7 +12,7 @@ use crate::store::Foundry;
 /// Value of `format` in `meta.json`.
 pub const FORMAT_NAME: &str = "hytrace-foundry";
 /// Version of the directory layout; bumped whenever a record changes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -49,6 +49,7 @@ pub fn file_names() -> Vec<String> {
         };
     }
     for_each_array!((), name);
+    names.push("optics.json".to_string());
     names.push("meta.json".to_string());
     names
 }
@@ -97,6 +98,10 @@ impl Foundry {
             };
         }
         for_each_array!(self, save);
+        write_atomically(&staging.path().join("optics.json"), |w| {
+            serde_json::to_writer(&mut *w, &self.optics).map_err(std::io::Error::other)?;
+            w.write_all(b"\n")
+        })?;
         let meta = Meta {
             format: FORMAT_NAME.to_string(),
             version: FORMAT_VERSION,
@@ -153,6 +158,15 @@ impl Foundry {
             };
         }
         for_each_array!(f, load);
+        let optics_path = dir.join("optics.json");
+        let text = std::fs::read_to_string(&optics_path).map_err(|source| FoundryError::Io {
+            path: optics_path.clone(),
+            source,
+        })?;
+        f.optics = serde_json::from_str(&text).map_err(|e| FoundryError::File {
+            path: optics_path.clone(),
+            problem: format!("not a Foundry optics file: {e}"),
+        })?;
         f.validate().map_err(|e| e.in_directory(dir))?;
         Ok(f)
     }

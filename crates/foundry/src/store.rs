@@ -1,6 +1,7 @@
 //! The Foundry: every array of a scene, and the builder that appends solids to it.
 
 use crate::error::{FoundryError, Result};
+use crate::optics::Optics;
 use crate::records::{
     pack_label, Brick, Instance, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
     Transform64, Triangle, COMPLEMENT_BIT,
@@ -44,6 +45,8 @@ pub struct Foundry {
     pub brick: Vec<Brick>,
     /// Full name of every solid.
     pub solid_names: Vec<String>,
+    /// Materials, optical surfaces, boundaries and volume names.
+    pub optics: Optics,
 }
 
 /// One CSG tree ready to be appended as a prim.

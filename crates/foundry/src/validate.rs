@@ -3,7 +3,7 @@
 
 use crate::error::{FoundryError, Result};
 use crate::records::{Prim, Transform, Transform64, COMPLEMENT_BIT};
-use crate::store::{aabb_union, Foundry};
+use crate::store::{aabb_union, Foundry, UNSET};
 use crate::typecode::{PrimKind, TypeCode};
 
 /// Deepest CSG tree the store accepts: the evaluators keep one stack frame per level, so
@@ -582,8 +582,17 @@ impl Foundry {
                 ));
             }
             check_inverse_pair(("inst_tran", "rows"), ("inst", "itra"), i, t, &inst.itra)?;
+            let boundaries = self.optics.boundaries.len();
+            if inst.boundary != UNSET && inst.boundary as usize >= boundaries {
+                return Err(record_error(
+                    "inst",
+                    i,
+                    "boundary",
+                    format!("boundary {} of {boundaries} in optics.json", inst.boundary),
+                ));
+            }
         }
-        Ok(())
+        self.optics.validate()
     }
 
     fn validate_items(&self) -> Result<()> {

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scan::{self, Precision};
 use hytrace_trace::sweep::{self, Sweep};
@@ -16,13 +17,16 @@ use hytrace_trace::{report, scene};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Skip GDML elements this build does not support (with a warning) instead of failing.
+    #[arg(long, global = true)]
+    lenient: bool,
 }
 
 #[derive(Subcommand)]
 enum Command {
     /// Print a summary of a scene (the embedded default scene when SCENE is omitted).
     Info {
-        /// `default` or a Foundry directory.
+        /// `default`, a Foundry directory, a .toml scene file or a .gdml file.
         scene: Option<PathBuf>,
         /// Print JSON instead of text.
         #[arg(long)]
@@ -30,7 +34,7 @@ enum Command {
     },
     /// Write a scene's Foundry store as one .npy file per array (plus meta.json) into DIR.
     Foundry {
-        /// `default` or a Foundry directory.
+        /// `default`, a Foundry directory, a .toml scene file or a .gdml file.
         scene: Option<PathBuf>,
         /// Output directory (created or replaced as a whole).
         #[arg(short, long)]
@@ -39,7 +43,7 @@ enum Command {
     /// Trace rays against the scene's CSG solids on the CPU: the first boundary crossing of
     /// each ray (Geant4's distance to the next boundary), written as NumPy arrays.
     Scan {
-        /// `default`, a Foundry directory or a .toml scene file.
+        /// `default`, a Foundry directory, a .toml scene file or a .gdml file.
         scene: Option<PathBuf>,
         /// Rays, (N, 8) float32/float64: ox oy oz tmin dx dy dz tmax. With --sweep, the
         /// generated rays are written here instead (optional).
@@ -54,7 +58,8 @@ enum Command {
         /// Hits, (N, 4): nx ny nz t (t = inf on a miss).
         #[arg(long)]
         out: PathBuf,
-        /// Instance crossed by each ray, int32 (N,), -1 on a miss.
+        /// Identity of each crossing, int32 (N, 3): instance, boundary (index into the
+        /// boundary table of `hytrace info`), copy number; -1 on a miss.
         #[arg(long)]
         ids: Option<PathBuf>,
         /// Arithmetic precision (and dtype of the hits).
@@ -69,9 +74,12 @@ enum Command {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    let options = GdmlOptions {
+        lenient: cli.lenient,
+    };
     match cli.command {
         Command::Info { scene, json } => {
-            let f = scene::load_scene(scene.as_deref())?;
+            let f = scene::load_scene(scene.as_deref(), &options)?;
             if json {
                 println!("{}", report::summary(&f));
             } else {
@@ -79,7 +87,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Foundry { scene, out } => {
-            let f = scene::load_scene(scene.as_deref())?;
+            let f = scene::load_scene(scene.as_deref(), &options)?;
             f.save(&out)
                 .with_context(|| format!("writing {}", out.display()))?;
             print!("{}", report::summary_text(&f));
@@ -100,7 +108,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             stats,
         } => {
             let t0 = std::time::Instant::now();
-            let f = scene::load_scene(scene.as_deref())?;
+            let f = scene::load_scene(scene.as_deref(), &options)?;
             let ray_rows = match (sweep_kind, &rays) {
                 (Some(kind), _) => {
                     let bounds =
@@ -119,7 +127,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let (result, times) = scan::scan(&f, &ray_rows, precision)?;
             scan::write_hits(&result, precision, &out, ids.as_deref())
                 .with_context(|| format!("writing {}", out.display()))?;
-            let hits = result.ids.iter().filter(|&&i| i >= 0).count();
+            let hits = result.ids.iter().filter(|i| i[0] >= 0).count();
             if stats {
                 println!("{}", scan::stats_json(ray_rows.len(), load_s, &times, hits));
             } else {

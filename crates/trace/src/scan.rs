@@ -3,7 +3,11 @@
 //! Rays are `(N, 8)` float32 or float64 rows `ox oy oz tmin dx dy dz tmax`. Directions are
 //! normalized, so `t` is a distance. Hits are `(N, 4)` rows `nx ny nz t`: the unit outward
 //! normal of the surface crossed and `t`, `+inf` on a miss, in float32 (`f32` precision)
-//! or float64 (`f64`). Ids are int32: the instance crossed, or -1.
+//! or float64 (`f64`). Ids are `(N, 3)` int32 rows `instance boundary copy`: the instance
+//! crossed, its boundary (index into the Foundry's `optics.json` boundary table: outer
+//! material, outer surface, inner surface, inner material; -1 when unset) and its copy
+//! number (Geant4's copyNo, the sensor identity); `-1 -1 -1` on a miss. Whether the ray
+//! enters or leaves the instance follows from the sign of the direction against the normal.
 
 use std::path::Path;
 use std::time::Instant;
@@ -114,16 +118,19 @@ pub fn write_rays(path: &Path, rays: &[RayRow]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The answers of a scan in f64: `nx ny nz t` per ray and the instance (or -1).
+/// The answers of a scan in f64: `nx ny nz t` per ray and the identity of the crossing.
 #[derive(Clone, Debug, Default)]
 pub struct ScanResult {
     /// `(N, 4)` rows.
     pub hits: Vec<[f64; 4]>,
-    /// Instance crossed, or -1.
-    pub ids: Vec<i32>,
+    /// `instance boundary copy` per ray, -1 where there is none.
+    pub ids: Vec<[i32; 3]>,
 }
 
-fn trace_all<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> ScanResult {
+/// Number of columns of the ids array.
+pub const ID_COLUMNS: usize = 3;
+
+fn trace_all<T: Real>(f: &Foundry, scene: &CpuScene<T>, rays: &[RayRow]) -> ScanResult {
     let answers: Vec<([f64; 4], i32)> = rays
         .par_iter()
         .map(|r| {
@@ -145,9 +152,15 @@ fn trace_all<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> ScanResult {
             }
         })
         .collect();
+    let identity = |instance: i32| -> [i32; 3] {
+        match f.inst.get(instance as usize) {
+            Some(inst) if instance >= 0 => [instance, inst.boundary as i32, inst.copy_number],
+            _ => [-1; 3],
+        }
+    };
     ScanResult {
         hits: answers.iter().map(|a| a.0).collect(),
-        ids: answers.iter().map(|a| a.1).collect(),
+        ids: answers.iter().map(|a| identity(a.1)).collect(),
     }
 }
 
@@ -171,7 +184,7 @@ pub fn scan(
         let scene = CpuScene::<T>::new(f)?;
         let build_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let result = trace_all(&scene, rays);
+        let result = trace_all(f, &scene, rays);
         let trace_s = t1.elapsed().as_secs_f64();
         Ok((result, ScanTimes { build_s, trace_s }))
     }
@@ -203,7 +216,7 @@ pub fn write_hits(
         write_array(
             p,
             Scalar::I32,
-            &[result.ids.len() as u64],
+            &[result.ids.len() as u64, ID_COLUMNS as u64],
             bytemuck::cast_slice(&result.ids),
         )
         .with_context(|| format!("writing {}", p.display()))?;

@@ -1,28 +1,35 @@
 //! Scenes: the embedded default scene and loading a scene argument.
 
 mod default;
+mod gdml_scene;
 mod toml_scene;
 
 use std::path::Path;
 
 use anyhow::{bail, Context};
+use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 
 pub use default::default_scene;
+pub use gdml_scene::{gdml_to_foundry, load_gdml_scene, GDML_MESH_TOLERANCE};
 pub use toml_scene::{load_toml_scene, scene_from_toml};
 
 /// Loads the scene named on the command line: none or `default` gives the embedded default
 /// scene; a directory is read as a Foundry written by `hytrace foundry`; a `.toml` file is a
-/// scene file of CSG expressions (see [`scene_from_toml`]).
-pub fn load_scene(arg: Option<&Path>) -> anyhow::Result<Foundry> {
+/// scene file of CSG expressions (see [`scene_from_toml`]); a `.gdml` file is read with
+/// Geant4's semantics (see [`load_gdml_scene`]).
+pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<Foundry> {
     match arg {
         None => default_scene(),
         Some(p) if p.as_os_str() == "default" => default_scene(),
         Some(p) if p.is_dir() => Foundry::load(p).with_context(|| format!("loading Foundry directory {}", p.display())),
         Some(p) if p.extension().is_some_and(|e| e == "toml") => load_toml_scene(p),
+        Some(p) if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("gdml")) => {
+            load_gdml_scene(p, options)
+        }
         Some(p) if !p.exists() => bail!("{}: no such file or directory", p.display()),
         Some(p) => bail!(
-            "{}: not a scene this build reads (expected `default`, a Foundry directory with meta.json or a .toml scene file)",
+            "{}: not a scene this build reads (expected `default`, a Foundry directory with meta.json, a .toml scene file or a .gdml file)",
             p.display()
         ),
     }

@@ -1,0 +1,101 @@
+//! What a hit needs to know beyond geometry: materials with their optical property tables,
+//! optical surfaces, the boundary table and the names of the placed volumes.
+//!
+//! Every instance has a boundary (index into [`Optics::boundaries`]): the materials on the
+//! two sides of its surface and the optical surfaces that apply when it is crossed, as
+//! Opticks' `(omat, osur, isur, imat)` quadruplets. Saved as `optics.json` beside the
+//! arrays.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{FoundryError, Result};
+use crate::store::UNSET;
+
+/// A property table: rows of `columns` numbers (e.g. photon energy, value).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Table {
+    /// Number of columns.
+    pub columns: usize,
+    /// Values, row-major.
+    pub values: Vec<f64>,
+}
+
+/// A material and its optical property tables (RINDEX, ABSLENGTH, RAYLEIGH, ...).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// Name.
+    pub name: String,
+    /// `(property name, table)`.
+    pub properties: Vec<(String, Table)>,
+}
+
+/// An optical surface (Geant4's G4OpticalSurface).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpticalSurface {
+    /// Name.
+    pub name: String,
+    /// Model (`glisur`, `unified`, ...).
+    pub model: String,
+    /// Finish (`polished`, `ground`, ...).
+    pub finish: String,
+    /// Type (`dielectric_metal`, `dielectric_dielectric`, ...).
+    pub kind: String,
+    /// Roughness parameter.
+    pub value: f64,
+    /// Property tables (REFLECTIVITY, EFFICIENCY, ...).
+    pub properties: Vec<(String, Table)>,
+}
+
+/// One boundary: indices into materials and surfaces, [`UNSET`] for none.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Boundary {
+    /// Material outside the instance's surface (its mother's).
+    pub outer_material: u32,
+    /// Surface applying to crossings from inside to outside.
+    pub outer_surface: u32,
+    /// Surface applying to crossings from outside to inside.
+    pub inner_surface: u32,
+    /// Material inside the instance's surface.
+    pub inner_material: u32,
+}
+
+/// Materials, surfaces, boundaries and volume names of a Foundry.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Optics {
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Optical surfaces.
+    pub surfaces: Vec<OpticalSurface>,
+    /// Boundaries; [`crate::Instance::boundary`] indexes them.
+    pub boundaries: Vec<Boundary>,
+    /// Names of placed volumes; [`crate::Instance::identity`] indexes them when set.
+    pub volumes: Vec<String>,
+}
+
+impl Optics {
+    /// Checks every index of the boundary table.
+    pub fn validate(&self) -> Result<()> {
+        for (i, b) in self.boundaries.iter().enumerate() {
+            let check = |field: &str, v: u32, n: usize| {
+                if v != UNSET && v as usize >= n {
+                    Err(FoundryError::File {
+                        path: "optics.json".into(),
+                        problem: format!("boundary {i}: {field} {v} of {n}"),
+                    })
+                } else {
+                    Ok(())
+                }
+            };
+            check("outer_material", b.outer_material, self.materials.len())?;
+            check("inner_material", b.inner_material, self.materials.len())?;
+            check("outer_surface", b.outer_surface, self.surfaces.len())?;
+            check("inner_surface", b.inner_surface, self.surfaces.len())?;
+        }
+        Ok(())
+    }
+}

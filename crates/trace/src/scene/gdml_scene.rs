@@ -1,0 +1,175 @@
+//! GDML files as scenes: every physical volume of the Geant4 hierarchy becomes an instance
+//! of its logical volume's solid, with its boundary and copy number.
+//!
+//! A logical volume placed many times is one Foundry solid and many instances. Every
+//! instance's surface separates its material from its mother's: its boundary records both
+//! materials and the optical surfaces Geant4's boundary process would find there (a border
+//! surface of the ordered pair of physical volumes, else a skin surface of the daughter's,
+//! else of the mother's logical volume). The world is an instance too: a ray that meets
+//! nothing else reports where it leaves the world, as Geant4's navigator does.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use anyhow::{bail, Context};
+use hytrace_csg::add_geometry;
+use hytrace_csg::geant4::G4Mapping;
+use hytrace_foundry::gdml::{read_gdml, strip_name, Gdml, GdmlOptions, SurfaceLink};
+use hytrace_foundry::optics::{Boundary, Optics};
+use hytrace_foundry::{Foundry, Transform64, UNSET};
+
+/// Distance within which meshes of solids with no analytic form (twisted solids) follow
+/// the true surface, in mm.
+pub const GDML_MESH_TOLERANCE: f64 = 1e-3;
+
+/// Most instances a file may expand into.
+const MAX_INSTANCES: usize = 20_000_000;
+
+/// Reads a GDML file into a Foundry.
+pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
+    let gdml = read_gdml(path, options)?;
+    for w in &gdml.warnings {
+        eprintln!("warning: skipped {w}");
+    }
+    gdml_to_foundry(&gdml).with_context(|| format!("{}: building the scene", path.display()))
+}
+
+/// The optical surface indices for crossings out of and into the placement `pv` of
+/// logical volume `lv` inside the placement `mother_pv` of `mother_lv`.
+struct SurfaceRules {
+    border: HashMap<(String, String), u32>,
+    skin: HashMap<usize, u32>,
+}
+
+impl SurfaceRules {
+    fn new(g: &Gdml) -> Self {
+        let (mut border, mut skin) = (HashMap::new(), HashMap::new());
+        for s in &g.logical_surfaces {
+            match &s.link {
+                SurfaceLink::Border(a, b) => {
+                    border.insert((a.clone(), b.clone()), s.surface as u32);
+                }
+                SurfaceLink::Skin(v) => {
+                    skin.insert(*v, s.surface as u32);
+                }
+            }
+        }
+        SurfaceRules { border, skin }
+    }
+
+    /// G4OpBoundaryProcess's lookup: the border surface of (leaving, entering), else the
+    /// skin of the daughter, else the skin of the mother.
+    fn find(&self, leaving: &str, entering: &str, lv: usize, mother_lv: Option<usize>) -> u32 {
+        if let Some(&s) = self
+            .border
+            .get(&(leaving.to_string(), entering.to_string()))
+        {
+            return s;
+        }
+        self.skin
+            .get(&lv)
+            .or_else(|| mother_lv.and_then(|m| self.skin.get(&m)))
+            .copied()
+            .unwrap_or(UNSET)
+    }
+}
+
+/// Interns boundaries and volume names.
+#[derive(Default)]
+struct Tables {
+    boundaries: HashMap<Boundary, u32>,
+    names: HashMap<String, u32>,
+    optics: Optics,
+}
+
+impl Tables {
+    fn boundary(&mut self, b: Boundary) -> u32 {
+        let list = &mut self.optics.boundaries;
+        *self.boundaries.entry(b).or_insert_with(|| {
+            list.push(b);
+            (list.len() - 1) as u32
+        })
+    }
+    fn name(&mut self, n: &str) -> u32 {
+        if let Some(&i) = self.names.get(n) {
+            return i;
+        }
+        let i = self.optics.volumes.len() as u32;
+        self.optics.volumes.push(n.to_string());
+        self.names.insert(n.to_string(), i);
+        i
+    }
+}
+
+fn material_index(m: Option<usize>) -> u32 {
+    m.map_or(UNSET, |m| m as u32)
+}
+
+/// Builds the Foundry of a read GDML file.
+pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
+    let mut f = Foundry::new();
+    // One Foundry solid per GDML solid that a placed volume uses, built on first use.
+    let mut solid_of: HashMap<usize, u32> = HashMap::new();
+    let mut foundry_solid = |f: &mut Foundry, solid: usize| -> anyhow::Result<u32> {
+        if let Some(&s) = solid_of.get(&solid) {
+            return Ok(s);
+        }
+        let gs = &g.solids[solid];
+        let geometry = gs
+            .solid
+            .to_geometry(GDML_MESH_TOLERANCE)
+            .with_context(|| format!("{}: solid `{}`", gs.origin, gs.name))?;
+        let s = add_geometry(f, &gs.name, &geometry, solid as u32)
+            .with_context(|| format!("{}: solid `{}`", gs.origin, gs.name))?;
+        solid_of.insert(solid, s);
+        Ok(s)
+    };
+    let rules = SurfaceRules::new(g);
+    let mut tables = Tables::default();
+    tables.optics.materials = g.materials.clone();
+    tables.optics.surfaces = g.surfaces.clone();
+
+    let world = &g.volumes[g.world];
+    let world_name = format!("{}_PV", world.name);
+    let solid = foundry_solid(&mut f, world.solid)?;
+    let boundary = tables.boundary(Boundary {
+        outer_material: UNSET,
+        outer_surface: UNSET,
+        inner_surface: UNSET,
+        inner_material: material_index(world.material),
+    });
+    let identity = tables.name(&world_name);
+    let i = f.add_instance(solid, Transform64::IDENTITY, identity, 0)?;
+    f.inst[i].boundary = boundary;
+
+    // Depth-first walk: (logical volume, its placement name, world transform).
+    let mut stack: Vec<(usize, String, Transform64)> =
+        vec![(g.world, world_name, Transform64::IDENTITY)];
+    while let Some((mother, mother_pv, to_world)) = stack.pop() {
+        for d in &g.volumes[mother].daughters {
+            let lv = &g.volumes[d.volume];
+            let transform = to_world.compose(&d.transform);
+            let solid = foundry_solid(&mut f, lv.solid)?;
+            let boundary = tables.boundary(Boundary {
+                outer_material: material_index(g.volumes[mother].material),
+                outer_surface: rules.find(&d.name, &mother_pv, d.volume, Some(mother)),
+                inner_surface: rules.find(&mother_pv, &d.name, d.volume, Some(mother)),
+                inner_material: material_index(lv.material),
+            });
+            let identity = tables.name(strip_name(&d.name));
+            let i = f
+                .add_instance(solid, transform, identity, d.copy_number)
+                .with_context(|| format!("placing `{}` in `{}`", d.name, g.volumes[mother].name))?;
+            f.inst[i].boundary = boundary;
+            if f.inst.len() > MAX_INSTANCES {
+                bail!("the hierarchy expands into more than {MAX_INSTANCES} placements");
+            }
+            if !lv.daughters.is_empty() {
+                stack.push((d.volume, d.name.clone(), transform));
+            }
+        }
+    }
+    f.optics = tables.optics;
+    f.validate().context("built an invalid Foundry")?;
+    Ok(f)
+}
