@@ -17,6 +17,7 @@ Command line::
     gdml_navigator.py sample GDML --out DIR [--rays N] [--seed S]
     gdml_navigator.py placements GDML [--check-overlaps RES]
     gdml_navigator.py roundtrip OUTDIR
+    gdml_navigator.py adjudicate GDML --rays R.npy --answers T.npy --steps S.npy
 
 Run it with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
 directory; when it is unset the script points it to an empty temporary one,
@@ -336,6 +337,7 @@ class Session:
             self.closed = False
         sys.stdout.flush()
         sys.stdout, sys.stderr = self.real_out, self.real_err
+        self.tmp.cleanup()
 
 
 # ---------------------------------------------------------------------------
@@ -493,7 +495,6 @@ class Walker:
     def __init__(self, g4, tree):
         self.g4 = g4
         self.tree = tree
-        self.cache = {}
         wl = tree.world.GetLogicalVolume()
         self.world_box = bounding_limits(g4, wl.GetSolid())
         self._frame_of = {(): (np.eye(3), np.zeros(3), wl,
@@ -1192,6 +1193,47 @@ def cmd_roundtrip(args):
 # main
 # ---------------------------------------------------------------------------
 
+def cmd_adjudicate(args):
+    """For each ray with hytrace's distance ``t``: whether Geant4's own point
+    location (``LocateGlobalPointAndSetup``) sees the located touchable change
+    across ``t`` (a real boundary there) and across Geant4's step ``step``.
+    Rays where the two navigator answers differ are judged with it: Geant4's
+    ComputeStep contradicts its own point location when it steps over a
+    boundary that location sees, or stops at one that location does not."""
+    ses = Session(sys.stderr)
+    try:
+        g4 = ses.g4
+        world = ses.read(args.gdml)
+        ses.close_geometry()
+        tree = Tree(g4, world)
+        loc = Locator(g4, tree)
+        rays = np.load(args.rays)
+        ts = np.load(args.answers)
+        steps = np.load(args.steps)
+
+        def where(p):
+            pv = loc.nav.LocateGlobalPointAndSetup(
+                g4.G4ThreeVector(*[float(v) for v in p]), None, False, False)
+            if pv is None:
+                return None
+            return loc._key()[2]
+
+        def changes(o, d, t):
+            if not np.isfinite(t):
+                return False
+            delta = max(1e-3, 1e-7 * (np.linalg.norm(o) + t))
+            return where(o + (t - delta) * d) != where(o + (t + delta) * d)
+
+        out = []
+        for row, t, step in zip(rays, ts, steps):
+            o, d = row[:3], row[4:7]
+            out.append({"boundary_at_hytrace": bool(changes(o, d, t)),
+                        "boundary_at_geant4": bool(changes(o, d, step))})
+        return {"rays": out}
+    finally:
+        ses.end()
+
+
 def parse_args(argv):
     ap = argparse.ArgumentParser(
         description="Geant4 navigation oracle for the hytrace GDML importer.")
@@ -1211,10 +1253,17 @@ def parse_args(argv):
     r = sub.add_parser("roundtrip", help="write a Python-built geometry to "
                        "OUTDIR/roundtrip.gdml and check it reads back")
     r.add_argument("outdir")
+    a = sub.add_parser("adjudicate", help="check with Geant4's point "
+                       "location whether boundaries exist at given distances")
+    a.add_argument("gdml")
+    a.add_argument("--rays", required=True, help="(N, 8) float64 rays")
+    a.add_argument("--answers", required=True, help="(N,) hytrace distances")
+    a.add_argument("--steps", required=True, help="(N,) Geant4 steps")
     args = ap.parse_args(argv)
     if args.cmd == "sample" and args.rays < 0:
         ap.error("--rays must be >= 0")
-    if args.cmd in ("sample", "placements") and not os.path.isfile(args.gdml):
+    if args.cmd in ("sample", "placements", "adjudicate") and \
+            not os.path.isfile(args.gdml):
         ap.error("no such file: %s" % args.gdml)
     return args
 
@@ -1225,6 +1274,9 @@ def main(argv=None):
     try:
         if args.cmd == "sample":
             doc = cmd_sample(args)
+            text = json.dumps(doc)
+        elif args.cmd == "adjudicate":
+            doc = cmd_adjudicate(args)
             text = json.dumps(doc)
         elif args.cmd == "placements":
             doc = cmd_placements(args)

@@ -196,10 +196,17 @@ Boolean specs (kind ``boolean``, trees of depth 1..4)::
      "translation": [x, y, z]}
 
 Leaves are box, orb, tubs, cons, sphere, torus or trd (sphere leaves never
-have pi < dphi < 2 pi, see gen_leaf); the twisted, genericTrap, xtru and
+have pi < dphi < 2 pi, see gen_leaf); the twisted, genericTrap and
 tessellated kinds are never boolean operands.  Rotation entries are
 f64 (identity, signed axis permutations, or arbitrary); translations are
 float32-representable.
+
+Kind ``xtruBoolean``: one boolean node (same spec form) with extruded
+solids as operands (gen_xtru_boolean), by solid index i % 4: the union of
+two xtru solids, an xtru minus a box, the intersection of two xtru solids,
+and a box minus an xtru.  The second operand is placed like a boolean's
+(random rotation, translated near the middle of the first one's bounding
+box); solids with less than 2% of their bounding box inside are redrawn.
 
 ``rays.npy``       float64 (N, 8): ox oy oz tmin dx dy dz tmax (tmin = 0,
                    tmax = inf).
@@ -484,6 +491,7 @@ KINDS = [
     "ellipsoid", "eltube", "elcone", "tet", "boolean",
     "twistedBox", "twistedTrd", "twistedTrap", "genericTrap", "xtru",
     "tessellated", "genericPolycone", "genericPolyhedra", "twistedTubs",
+    "xtruBoolean",
 ]
 LEAF_KINDS = ["box", "orb", "tubs", "cons", "sphere", "torus", "trd"]
 
@@ -507,7 +515,7 @@ FORMULA_SAMPLES = 256
 # some rays and G4IntersectionSolid::DistanceToIn can skip a valid range (see
 # the module doc), so those kinds are always checked; --march N extends the
 # check to every kind.
-MARCH_SAMPLES = {"hype": 32, "boolean": 32, "torus": 32}
+MARCH_SAMPLES = {"hype": 32, "boolean": 32, "torus": 32, "xtruBoolean": 32}
 # Every other kind gets this many samples: G4Torus (11.4) with a phi range over
 # pi answers kSurface deep inside the solid, so no kind is trusted unchecked.
 MARCH_DEFAULT = 16
@@ -1697,6 +1705,32 @@ def gen_boolean(rng, i, s, builder):
     raise RuntimeError("could not generate a non-empty boolean")
 
 
+def gen_xtru_boolean(rng, i, s, builder):
+    """One boolean node with extruded operands (kind xtruBoolean, see the
+    module doc): i % 4 picks xtru + xtru, xtru - box, xtru * xtru or
+    box - xtru."""
+    op = ["union", "subtraction", "intersection", "subtraction"][i % 4]
+    for _ in range(200):
+        xa = gen_xtru(rng, int(rng.integers(0, 1000)), s)
+        if i % 4 == 1:
+            a, b = xa, gen_box(rng, 0, 0.5 * s)
+        elif i % 4 == 3:
+            a, b = gen_box(rng, 0, s), gen_xtru(rng, int(rng.integers(0, 1000)),
+                                                0.7 * s)
+        else:
+            a, b = xa, gen_xtru(rng, int(rng.integers(0, 1000)), s)
+        rot = random_rotation(rng, int(rng.integers(3)))
+        lo, hi = bounding_box(builder.g4, builder.build(a))
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        tr = [f32(c) for c in centre + rng.uniform(-0.5, 0.5, 3) * half]
+        spec = {"type": op, "a": a, "b": b, "rotation": rot,
+                "translation": tr}
+        solid = builder.build(spec)
+        if inside_fraction(builder.g4, solid, rng, 400) >= 0.02:
+            return spec, solid
+    raise RuntimeError("could not generate a non-empty xtru boolean")
+
+
 # ---------------------------------------------------------------------------
 # Rays
 # ---------------------------------------------------------------------------
@@ -2735,10 +2769,10 @@ def run(g4, args, tmpdir, real_err, counter):
         rng = np.random.default_rng([args.seed, KINDS.index(kind)])
         specs = []
         solids = []
-        if kind == "boolean":
+        if kind in ("boolean", "xtruBoolean"):
+            gen = gen_boolean if kind == "boolean" else gen_xtru_boolean
             for i in range(K):
-                spec, solid = gen_boolean(rng, i, log_uniform(rng, 10, 100),
-                                          builder)
+                spec, solid = gen(rng, i, log_uniform(rng, 10, 100), builder)
                 specs.append(spec)
                 solids.append(solid)
         else:

@@ -201,6 +201,50 @@ pub struct KindStats {
 /// Compares hytrace in precision `T` with the oracle's answers, per kind.
 pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
     let trees = prepare::<T>(&data.solids);
+    compare_rays(data, &|solid| Some(&trees[solid]), "")
+}
+
+/// Like [`compare`] for the solids of `kinds` only, each built from its exact CSG
+/// expression ([`G4Mapping::to_shape`]) even where [`G4Mapping::to_geometry`] meshes it
+/// (G4ExtrudedSolid); the kinds are reported as `KIND (csg)`.
+pub fn compare_csg<T: Real>(data: &OracleData, kinds: &[&str]) -> BTreeMap<String, KindStats> {
+    let mut f = Foundry::new();
+    let mut index = vec![None; data.solids.len()];
+    for (i, s) in data.solids.iter().enumerate() {
+        if !kinds.contains(&data.kinds[i].as_str()) {
+            continue;
+        }
+        let shape = s
+            .to_shape()
+            .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
+        let tree = to_tree(&shape).unwrap_or_else(|e| panic!("solid {i}: {e}"));
+        let k = f.prim.len() as u32;
+        let mut b = f.begin_solid(&format!("oracle{i}"));
+        b.add_csg(tree, k, UNSET).unwrap();
+        b.finish(k).unwrap();
+        index[i] = Some(k as usize);
+    }
+    f.validate().unwrap();
+    let trees: Vec<Option<PreparedPrim<T>>> = index
+        .iter()
+        .map(|k| {
+            k.map(|k| {
+                PreparedPrim::from_foundry(&f, k)
+                    .unwrap()
+                    .expect("a CSG prim")
+            })
+        })
+        .collect();
+    compare_rays(data, &|solid| trees[solid].as_ref(), " (csg)")
+}
+
+/// Compares the rays of the solids that `prim` prepares (`None`: skipped), per kind
+/// (the kind's name followed by `suffix`).
+fn compare_rays<'a, T: Real>(
+    data: &OracleData,
+    prim: &dyn Fn(usize) -> Option<&'a PreparedPrim<T>>,
+    suffix: &str,
+) -> BTreeMap<String, KindStats> {
     let mut stats: BTreeMap<String, KindStats> = BTreeMap::new();
     for (i, r) in data.rays.iter().enumerate() {
         let [want, code] = data.expected[i];
@@ -208,7 +252,12 @@ pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
             continue;
         }
         let solid = data.ray_solid[i] as usize;
-        let s = stats.entry(data.kinds[solid].clone()).or_default();
+        let Some(tree) = prim(solid) else {
+            continue;
+        };
+        let s = stats
+            .entry(format!("{}{suffix}", data.kinds[solid]))
+            .or_default();
         if data.ray_flags[i] != 0 {
             s.flagged += 1;
             continue;
@@ -218,7 +267,7 @@ pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
             s.in_band += 1;
             continue;
         }
-        let (got, cos, inside) = answer(&trees[solid], r);
+        let (got, cos, inside) = answer(tree, r);
         s.rays += 1;
         let ok = if want.is_infinite() {
             got.is_infinite()
@@ -234,7 +283,8 @@ pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
         s.inside_ok += (inside == (code == 2.0)) as usize;
         if !ok && s.examples.len() < 5 {
             s.examples.push(format!(
-                "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {} {got}; ray {r:?}",
+                "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {} {got} \
+                 (cosine of incidence {cos:.2e}); ray {r:?}",
                 data.ray_family[i],
                 if code == 2.0 { "inside" } else { "outside" },
                 T::NAME,

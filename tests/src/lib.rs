@@ -1,6 +1,7 @@
 //! Helpers for the cross-crate and oracle tests: finding the Python oracle environment and
 //! running the Geant4 oracle.
 
+pub mod gdml;
 pub mod geant4;
 
 use std::path::PathBuf;
@@ -67,4 +68,12 @@ pub fn run_python(python: &PathBuf, script: &str, args: &[&str]) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout).unwrap()
+}
+
+/// A float64 `.npy` array: shape and values.
+pub fn f64_array(path: &std::path::Path) -> (Vec<u64>, Vec<f64>) {
+    use hytrace_foundry::layout::Scalar;
+    let a = hytrace_foundry::npy::read_array(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(a.scalar, Scalar::F64, "{}", path.display());
+    (a.shape, bytemuck::pod_collect_to_vec(&a.bytes))
 }

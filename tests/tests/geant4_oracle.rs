@@ -2,14 +2,18 @@
 //! lists and boolean trees of depth 1-4, shot with random, aimed, axis-aligned and inside
 //! rays. Geant4's `DistanceToIn` (outside) or `DistanceToOut` (inside) is the reference for
 //! the first boundary crossing; `Inside` for the inside test. Solids with no analytic form
-//! (twisted, extruded, tessellated) are compared as meshes within their stated tolerance.
+//! (twisted, tessellated) are compared as meshes within their stated tolerance. Extruded
+//! solids are compared twice: as their exact mesh and as their exact CSG expression (a union
+//! of convex polyhedra), which the `xtruBoolean` kind also checks as boolean operands.
 //! `HYTRACE_ORACLE_KINDS=kind,kind` runs only those kinds, `HYTRACE_ORACLE_SEED=n` another
 //! seed.
 
 use std::collections::BTreeMap;
 
 use hytrace_csg::Real;
-use hytrace_tests::geant4::{compare, run_oracle, KindStats, OracleData, APPROXIMATED_KINDS};
+use hytrace_tests::geant4::{
+    compare, compare_csg, run_oracle, KindStats, OracleData, APPROXIMATED_KINDS,
+};
 use hytrace_tests::oracle_python;
 
 /// Per kind: 20 solids x 500 rays = 10^4 rays, so 99.99% allows one disagreement.
@@ -64,6 +68,9 @@ fn check<T: Real>(stats: &BTreeMap<String, KindStats>) -> Vec<String> {
             distance,
             inside
         );
+        for e in &s.examples {
+            eprintln!("    {e}");
+        }
         let required = if APPROXIMATED_KINDS.contains(&kind.as_str()) {
             REQUIRED_AGREEMENT_APPROXIMATED
         } else {
@@ -87,7 +94,8 @@ fn check<T: Real>(stats: &BTreeMap<String, KindStats>) -> Vec<String> {
 fn every_solid_kind_agrees_with_geant4_in_f32_and_f64() {
     let Some((_dir, data)) = oracle() else { return };
     // Every kind the oracle knows is present, with enough rays for the 99.99% criterion.
-    let f64_stats = compare::<f64>(&data);
+    let mut f64_stats = compare::<f64>(&data);
+    f64_stats.extend(compare_csg::<f64>(&data, &["xtru"]));
     for (kind, s) in &f64_stats {
         assert!(
             s.rays >= 9000,
@@ -98,9 +106,11 @@ fn every_solid_kind_agrees_with_geant4_in_f32_and_f64() {
         );
     }
     if selected_kinds().is_none() {
-        assert!(f64_stats.len() >= 28, "kinds: {:?}", f64_stats.keys());
+        // 29 kinds and the extruded solids' CSG form.
+        assert!(f64_stats.len() >= 30, "kinds: {:?}", f64_stats.keys());
     }
-    let f32_stats = compare::<f32>(&data);
+    let mut f32_stats = compare::<f32>(&data);
+    f32_stats.extend(compare_csg::<f32>(&data, &["xtru"]));
     let mut failures = check::<f64>(&f64_stats);
     failures.extend(check::<f32>(&f32_stats));
     assert!(

@@ -17,6 +17,7 @@
 //! | G4Hype | hyperboloid - inner hyperboloid (or inner double cone) |
 //! | G4Paraboloid | paraboloid |
 //! | G4Ellipsoid, G4EllipticalTube, G4EllipticalCone | scaled z-cut sphere, cylinder, cone |
+//! | G4ExtrudedSolid | union over section pairs and convex pieces of the polygon of convex polyhedra |
 //! | G4UnionSolid, G4SubtractionSolid, G4IntersectionSolid | `+`, `-`, `*` |
 //!
 //! G4Polycone and G4Polyhedra share one construction with their generic (r, z) corner forms:
@@ -26,8 +27,17 @@
 //! radii to the polygon's corners, the z-plane one to its sides (Geant4 scales the latter by
 //! 1 / cos(dphi / numside / 2)).
 //!
-//! The twisted solids, G4GenericTrap, G4ExtrudedSolid, G4TessellatedSolid and G4TwistedTubs
-//! have no expression here: [`G4Mapping::to_geometry`] meshes them.
+//! G4ExtrudedSolid: between two consecutive sections the cross-section is the polygon
+//! scaled and moved linearly in z, so each side face is a planar trapezoid and each convex
+//! piece of the polygon sweeps a convex polyhedron. The pieces (Hertel-Mehlhorn merging of
+//! an ear-clipping triangulation, see [`crate::tessellate::convex_pieces`]) share whole
+//! faces, whose planes are computed once and negated for the other side, so that the
+//! union's coincident crossings merge. Standing alone it is still meshed by
+//! [`G4Mapping::to_geometry`] (the mesh is exact too, and traces faster); the expression
+//! makes it a boolean operand.
+//!
+//! The twisted solids, G4GenericTrap, G4TessellatedSolid and G4TwistedTubs have no
+//! expression here: [`G4Mapping::to_geometry`] meshes them.
 //!
 //! Booleans place their second operand by `p_first = rotation * p_second + translation`
 //! (the `G4Transform3D` form: the rotation applies to the solid, not the frame).
@@ -41,7 +51,9 @@ use crate::shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Shape,
 };
-use crate::tessellate::{ruled_solid, section_stack, signed_area2, Tri};
+use crate::tessellate::{
+    convex_pieces, ruled_solid, section_stack, signed_area2, simple_polygon, Tri,
+};
 use hytrace_foundry::Transform64;
 
 pub use hytrace_foundry::g4solid::{Boolean, G4Solid, PlacedSolid, XtruSection};
@@ -306,18 +318,23 @@ fn rz_slabs(what: &'static str, r: &[f64], z: &[f64]) -> Result<Vec<SlabPiece>, 
     if r.iter().any(|&v| v < 0.0) {
         return Err(bad(what, format!("radii must be >= 0, got {r:?}")));
     }
-    let extent = r
-        .iter()
-        .chain(z)
-        .fold(0.0f64, |m, v| m.max(v.abs()))
-        .max(f64::MIN_POSITIVE);
+    let span = |v: &[f64]| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
+        hi - lo
+    };
+    let size = span(r).max(span(z));
+    // Twice the area, about the first corner (no cancellation from far-off z).
     let area2: f64 = (0..n)
         .map(|i| {
             let j = (i + 1) % n;
-            r[i] * z[j] - r[j] * z[i]
+            (r[i] - r[0]) * (z[j] - z[0]) - (r[j] - r[0]) * (z[i] - z[0])
         })
         .sum();
-    if area2.abs() <= 1e-12 * extent * extent {
+    if area2.abs() <= 1e-12 * size * size || size == 0.0 {
         return Err(bad(what, "the (r, z) polygon has no area".into()));
     }
     let mut levels = z.to_vec();
@@ -353,7 +370,7 @@ fn rz_slabs(what: &'static str, r: &[f64], z: &[f64]) -> Result<Vec<SlabPiece>, 
         let crossing = cuts
             .windows(2)
             .any(|p| p[1][0] < p[0][0] || p[1][1] < p[0][1]);
-        if crossing || cuts.len() % 2 != 0 {
+        if crossing || !cuts.len().is_multiple_of(2) {
             return Err(bad(
                 what,
                 format!("the (r, z) polygon crosses itself between z = {za} and {zb}"),
@@ -424,7 +441,7 @@ fn swept_polygon(
             format!("needs a finite phi range with dphi > 0, got {sphi} {dphi}"),
         ));
     }
-    if !(apothem > 0.0) {
+    if apothem.is_nan() || apothem <= 0.0 {
         return Err(bad(
             what,
             format!("sides of {numside} over {dphi} rad must each span less than pi"),
@@ -545,7 +562,14 @@ fn twisted_tubs_mesh(
     };
     // Phi steps: chord sagitta at the end radius within half the tolerance.
     let max_step = 2.0 * (1.0 - 0.5 * tolerance / end_outer).max(-1.0).acos();
-    let m = ((dphi / max_step).ceil() as usize).max(1);
+    let steps = (dphi / max_step).ceil().max(1.0);
+    if steps > (1u32 << 19) as f64 {
+        return Err(bad(
+            what,
+            format!("more than 2^21 triangles needed for tolerance {tolerance} mm"),
+        ));
+    }
+    let m = steps as usize;
     let da = dphi / m as f64;
     let (mut k, mut nz) = (1usize, 1usize);
     loop {
@@ -666,6 +690,144 @@ fn twisted_tubs_mesh(
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// Most corners of one convex piece of a G4ExtrudedSolid: bounds the cost of checking the
+/// piece's polyhedron (its vertex enumeration is quartic in the plane count).
+const XTRU_MAX_PIECE_CORNERS: usize = 32;
+
+/// A G4ExtrudedSolid's checked polygon: counter-clockwise, without repeated corners or
+/// corners in line with their neighbours (as Geant4 keeps it); checks the sections too.
+fn xtru_polygon(polygon: &[[f64; 2]], sections: &[XtruSection]) -> Result<Vec<[f64; 2]>, CsgError> {
+    if sections.len() < 2
+        || !sections.iter().all(|s| s.z.is_finite())
+        || sections
+            .windows(2)
+            .any(|w| w[0].z.partial_cmp(&w[1].z) != Some(std::cmp::Ordering::Less))
+    {
+        return Err(bad(
+            "xtru",
+            "needs 2 or more sections with finite, increasing z".into(),
+        ));
+    }
+    if sections
+        .iter()
+        .any(|s| !(s.scale.is_finite() && s.scale > 0.0) || !s.offset.iter().all(|v| v.is_finite()))
+    {
+        return Err(bad(
+            "xtru",
+            "section scales must be finite and > 0, offsets finite".into(),
+        ));
+    }
+    simple_polygon(polygon).map_err(|e| bad("xtru", e.problem))
+}
+
+/// Polygon point `p` in section `s`.
+fn xtru_corner(s: &XtruSection, p: [f64; 2]) -> [f64; 3] {
+    [
+        s.scale * p[0] + s.offset[0],
+        s.scale * p[1] + s.offset[1],
+        s.z,
+    ]
+}
+
+/// The sections that bound the solid's pieces: a section whose scale and offset are the
+/// linear interpolation (in z, within 1e-12 of the solid's size) between its neighbours
+/// kept on either side adds no edge and is dropped.
+fn xtru_kept_sections<'a>(poly: &[[f64; 2]], sections: &'a [XtruSection]) -> Vec<&'a XtruSection> {
+    let radius = poly
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p[0].abs()).max(p[1].abs()));
+    let size = sections.iter().fold(0.0f64, |m, s| {
+        m.max(s.scale * radius + s.offset[0].abs() + s.offset[1].abs())
+    });
+    // Whether section `m` lies on the straight path from `a` to `b`.
+    let between = |a: &XtruSection, m: &XtruSection, b: &XtruSection| {
+        let f = (m.z - a.z) / (b.z - a.z);
+        let lerp = |x: f64, y: f64| x + f * (y - x);
+        (lerp(a.scale, b.scale) - m.scale).abs() * radius
+            + (lerp(a.offset[0], b.offset[0]) - m.offset[0]).abs()
+            + (lerp(a.offset[1], b.offset[1]) - m.offset[1]).abs()
+            <= 1e-12 * size
+    };
+    let mut kept = vec![&sections[0]];
+    let mut last = 0;
+    for k in 1..sections.len() - 1 {
+        // Keep k unless every section from the last kept one up to k lies on the path
+        // from the last kept one to k + 1.
+        let next = &sections[k + 1];
+        if !(last + 1..=k).all(|m| between(&sections[last], &sections[m], next)) {
+            kept.push(&sections[k]);
+            last = k;
+        }
+    }
+    kept.push(&sections[sections.len() - 1]);
+    kept
+}
+
+/// The outer side of the face swept by polygon edge `i -> j` (to its right: outward for a
+/// counter-clockwise piece) from section `a` to section `b`, `dot(n, x) <= d`. Between two
+/// scaled and offset copies of the polygon the face is a planar trapezoid. The plane of
+/// `j -> i` is computed as the exact negation of that of `i -> j`, so that two pieces
+/// sharing a face see one plane from either side.
+fn xtru_side_plane(
+    poly: &[[f64; 2]],
+    i: usize,
+    j: usize,
+    a: &XtruSection,
+    b: &XtruSection,
+) -> [f64; 4] {
+    let (p, q) = (poly[i.min(j)], poly[i.max(j)]);
+    // Outward normal of p -> q in the polygon's plane and its offset: m . x <= c inside.
+    let m = [q[1] - p[1], p[0] - q[0]];
+    let c = 0.5 * (m[0] * (p[0] + q[0]) + m[1] * (p[1] + q[1]));
+    // At height z the section is s(z) poly + o(z), with s and o linear in z: a point x is
+    // inside the edge's half-plane when m . (x - o(z)) <= c s(z), i.e. (times h)
+    // h m . x - k z <= const.
+    let h = b.z - a.z;
+    let k = m[0] * (b.offset[0] - a.offset[0])
+        + m[1] * (b.offset[1] - a.offset[1])
+        + c * (b.scale - a.scale);
+    let n = [h * m[0], h * m[1], -k];
+    let d = [
+        xtru_corner(a, p),
+        xtru_corner(a, q),
+        xtru_corner(b, p),
+        xtru_corner(b, q),
+    ]
+    .iter()
+    .map(|v| n[0] * v[0] + n[1] * v[1] + n[2] * v[2])
+    .sum::<f64>()
+        / 4.0;
+    let plane = [n[0], n[1], n[2], d];
+    if i < j {
+        plane
+    } else {
+        plane.map(|v| -v)
+    }
+}
+
+/// A G4ExtrudedSolid exactly: the polygon cut into convex pieces, each swept between two
+/// consecutive (kept) sections into a convex polyhedron (two caps and one side plane per
+/// piece edge); the solid is their union. Neighbouring pieces share whole faces, whose
+/// planes are exact negations of each other.
+fn xtru_shape(polygon: &[[f64; 2]], sections: &[XtruSection]) -> Result<Shape, CsgError> {
+    let poly = xtru_polygon(polygon, sections)?;
+    let pieces =
+        convex_pieces(&poly, XTRU_MAX_PIECE_CORNERS).map_err(|e| bad("xtru", e.problem))?;
+    let mut parts = Vec::new();
+    for pair in xtru_kept_sections(&poly, sections).windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        for piece in &pieces {
+            let mut planes = vec![[0.0, 0.0, -1.0, -a.z], [0.0, 0.0, 1.0, b.z]];
+            planes.extend(
+                (0..piece.len())
+                    .map(|k| xtru_side_plane(&poly, piece[k], piece[(k + 1) % piece.len()], a, b)),
+            );
+            parts.push(polyhedron(&planes).map_err(|e| bad("xtru", e.problem))?);
+        }
+    }
+    Ok(union_of(parts))
 }
 
 /// How a [`G4Solid`] becomes hytrace geometry.
@@ -894,7 +1056,6 @@ impl G4Mapping for G4Solid {
             | G4Solid::TwistedTrd { .. }
             | G4Solid::TwistedTrap { .. }
             | G4Solid::GenericTrap { .. }
-            | G4Solid::Xtru { .. }
             | G4Solid::Tessellated { .. }
             | G4Solid::TwistedTubs { .. } => Err(bad(
                 "geant4",
@@ -903,6 +1064,7 @@ impl G4Mapping for G4Solid {
                     self.kind()
                 ),
             )),
+            G4Solid::Xtru { polygon, sections } => xtru_shape(polygon, sections),
             G4Solid::MultiUnion { parts } => {
                 if parts.is_empty() {
                     return Err(bad("multiUnion", "has no solids".into()));
@@ -1041,41 +1203,10 @@ impl G4Mapping for G4Solid {
                 mesh(ruled_solid(&section, -dz, dz, tolerance)?)
             }
             G4Solid::Xtru { polygon, sections } => {
-                if sections.len() < 2
-                    || sections
-                        .windows(2)
-                        .any(|w| w[0].z.partial_cmp(&w[1].z) != Some(std::cmp::Ordering::Less))
-                {
-                    return Err(bad(
-                        "xtru",
-                        "needs 2 or more sections with increasing z".into(),
-                    ));
-                }
-                if sections.iter().any(|s| {
-                    s.scale.is_nan() || s.scale <= 0.0 || !s.offset.iter().all(|v| v.is_finite())
-                }) {
-                    return Err(bad(
-                        "xtru",
-                        "section scales must be > 0 and offsets finite".into(),
-                    ));
-                }
-                let mut poly = polygon.clone();
-                if signed_area2(&poly) < 0.0 {
-                    poly.reverse();
-                }
+                let poly = xtru_polygon(polygon, sections)?;
                 let levels: Vec<Vec<[f64; 3]>> = sections
                     .iter()
-                    .map(|s| {
-                        poly.iter()
-                            .map(|p| {
-                                [
-                                    s.scale * p[0] + s.offset[0],
-                                    s.scale * p[1] + s.offset[1],
-                                    s.z,
-                                ]
-                            })
-                            .collect()
-                    })
+                    .map(|s| poly.iter().map(|&p| xtru_corner(s, p)).collect())
                     .collect();
                 let corners: Vec<usize> = (0..poly.len()).collect();
                 mesh(section_stack(&levels, &corners)?)
@@ -1162,6 +1293,7 @@ fn placed_shape(p: &PlacedSolid) -> Result<Shape, CsgError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shape::Primitive;
 
     #[test]
     fn json_round_trip_of_a_boolean() {
@@ -1309,30 +1441,32 @@ mod tests {
         assert!(ok.to_shape().is_err());
         assert!(ok.to_geometry(0.0).is_err());
         assert!(ok.to_geometry(f64::NAN).is_err());
-        let with = |f: &dyn Fn(&mut [f64; 5])| {
+        assert!(ok.to_geometry(1e-300).is_err());
+        assert!(ok.to_geometry(1e-9).is_err());
+        assert!(matches!(ok.to_geometry(1e3), Ok(G4Geometry::Mesh(_))));
+        // (parameter index, bad value) in (twistedangle, endinnerrad, endouterrad,
+        // halfzlen, dphi).
+        let bad_cases = [
+            (0, 3.5),      // twist beyond pi
+            (0, f64::NAN), // NaN twist
+            (1, 0.0),      // no inner radius (Geant4 needs one)
+            (1, 6.0),      // inner beyond outer
+            (2, f64::NAN),
+            (3, 0.0), // no length
+            (3, f64::INFINITY),
+            (4, 0.0), // no opening
+            (4, 4.0), // wider than pi
+        ];
+        for (i, v) in bad_cases {
             let mut p = [0.6, 2.0, 5.0, 4.0, 1.0];
-            f(&mut p);
-            G4Solid::TwistedTubs {
+            p[i] = v;
+            let s = G4Solid::TwistedTubs {
                 twistedangle: p[0],
                 endinnerrad: p[1],
                 endouterrad: p[2],
                 halfzlen: p[3],
                 dphi: p[4],
-            }
-        };
-        let bad_cases: [&dyn Fn(&mut [f64; 5]); 9] = [
-            &|p| p[0] = 3.5,      // twist beyond pi
-            &|p| p[0] = f64::NAN, // NaN twist
-            &|p| p[1] = 0.0,      // no inner radius (Geant4 needs one)
-            &|p| p[1] = 6.0,      // inner beyond outer
-            &|p| p[3] = 0.0,      // no length
-            &|p| p[3] = f64::INFINITY,
-            &|p| p[4] = 0.0, // no opening
-            &|p| p[4] = 4.0, // wider than pi
-            &|p| p[2] = f64::NAN,
-        ];
-        for f in bad_cases {
-            let s = with(f);
+            };
             assert!(s.to_geometry(1e-2).is_err(), "{s:?}");
         }
     }
@@ -1395,6 +1529,201 @@ mod tests {
         ] {
             assert_eq!(probe(&a, p), inside, "{p:?}");
             assert_eq!(probe(&b, p), inside, "{p:?}");
+        }
+    }
+
+    fn xtru(polygon: &[[f64; 2]], sections: &[(f64, [f64; 2], f64)]) -> G4Solid {
+        G4Solid::Xtru {
+            polygon: polygon.to_vec(),
+            sections: sections
+                .iter()
+                .map(|&(z, offset, scale)| XtruSection { z, offset, scale })
+                .collect(),
+        }
+    }
+
+    /// The convex polyhedra of an expression.
+    fn polyhedra(s: &Shape) -> usize {
+        match s {
+            Shape::Leaf(Primitive::Polyhedron { .. }) => 1,
+            Shape::Leaf(_) => 0,
+            Shape::Op(_, a, b) => polyhedra(a) + polyhedra(b),
+            Shape::Placed(_, a) | Shape::Complement(a) => polyhedra(a),
+        }
+    }
+
+    const U_SHAPE: [[f64; 2]; 8] = [
+        [-300.0, -300.0],
+        [-300.0, 300.0],
+        [300.0, 300.0],
+        [300.0, -300.0],
+        [150.0, -300.0],
+        [150.0, 150.0],
+        [-150.0, 150.0],
+        [-150.0, -300.0],
+    ];
+
+    #[test]
+    fn xtru_is_a_union_of_convex_polyhedra() {
+        let l = [
+            [0.0, 0.0],
+            [20.0, 0.0],
+            [20.0, 10.0],
+            [10.0, 10.0],
+            [10.0, 20.0],
+            [0.0, 20.0],
+        ];
+        let prism = [(-5.0, [0.0, 0.0], 1.0), (5.0, [0.0, 0.0], 1.0)];
+        assert_eq!(polyhedra(&xtru(&l, &prism).to_shape().unwrap()), 2);
+        // Sections on one straight path (here: identical) add no pieces.
+        let stacked = [
+            (-5.0, [0.0, 0.0], 1.0),
+            (-1.0, [0.0, 0.0], 1.0),
+            (5.0, [0.0, 0.0], 1.0),
+        ];
+        assert_eq!(polyhedra(&xtru(&l, &stacked).to_shape().unwrap()), 2);
+        let tapered = [
+            (-5.0, [0.0, 0.0], 1.0),
+            (0.0, [1.0, -2.0], 0.75),
+            (5.0, [2.0, -4.0], 0.5),
+        ];
+        assert_eq!(polyhedra(&xtru(&l, &tapered).to_shape().unwrap()), 2);
+        // GDML's scaledSolids "Xtru1S": a U, clockwise, three corners on y = -300, four
+        // sections on no straight path: 3 pieces in each of 3 slabs.
+        let u = xtru(
+            &U_SHAPE,
+            &[
+                (-400.0, [-200.0, 100.0], 1.5),
+                (100.0, [0.0, 0.0], 0.5),
+                (150.0, [0.0, 0.0], 0.7),
+                (400.0, [200.0, 200.0], 0.9),
+            ],
+        );
+        let shape = u.to_shape().unwrap();
+        assert_eq!(polyhedra(&shape), 9);
+        // It is a valid operand: a union of two of them builds.
+        let b = Boolean {
+            a: Box::new(u.clone()),
+            b: Box::new(u),
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation: [10.0, 0.0, 0.0],
+        };
+        let union = G4Solid::Union(b);
+        assert!(matches!(union.to_geometry(1e-2), Ok(G4Geometry::Csg(_))));
+        assert!(crate::PrimTree::<f32>::from_shape(&union.to_shape().unwrap()).is_ok());
+        // Standing alone it stays an exact mesh.
+        assert!(matches!(
+            xtru(&l, &prism).to_geometry(1e-2),
+            Ok(G4Geometry::Mesh(_))
+        ));
+    }
+
+    #[test]
+    fn xtru_inside_test_follows_the_sections() {
+        let sections = [
+            (-400.0, [-200.0, 100.0], 1.5),
+            (100.0, [0.0, 0.0], 0.5),
+            (150.0, [0.0, 0.0], 0.7),
+            (400.0, [200.0, 200.0], 0.9),
+        ];
+        let tree =
+            crate::PrimTree::<f64>::from_shape(&xtru(&U_SHAPE, &sections).to_shape().unwrap())
+                .unwrap();
+        // Even-odd test of the section at z.
+        let inside = |p: [f64; 3]| {
+            let Some(k) = sections
+                .windows(2)
+                .position(|w| w[0].0 <= p[2] && p[2] <= w[1].0)
+            else {
+                return false;
+            };
+            let (a, b) = (sections[k], sections[k + 1]);
+            let f = (p[2] - a.0) / (b.0 - a.0);
+            let s = a.2 + f * (b.2 - a.2);
+            let q = [0, 1].map(|i| (p[i] - (a.1[i] + f * (b.1[i] - a.1[i]))) / s);
+            let mut odd = false;
+            for i in 0..U_SHAPE.len() {
+                let (u, v) = (U_SHAPE[i], U_SHAPE[(i + 1) % U_SHAPE.len()]);
+                if (u[1] > q[1]) != (v[1] > q[1])
+                    && q[0] < u[0] + (v[0] - u[0]) * (q[1] - u[1]) / (v[1] - u[1])
+                {
+                    odd = !odd;
+                }
+            }
+            odd
+        };
+        let mut seed = 777u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut count = 0;
+        for _ in 0..20000 {
+            let p = [
+                -700.0 + 1200.0 * next(),
+                -500.0 + 1000.0 * next(),
+                -450.0 + 900.0 * next(),
+            ];
+            let want = inside(p);
+            assert_eq!(tree.contains(crate::V3::from_f64(p)), want, "{p:?}");
+            count += want as usize;
+        }
+        assert!(count > 2000, "{count}");
+    }
+
+    #[test]
+    fn impossible_xtru_parameters_are_errors_not_panics() {
+        let square = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let ok = [(0.0, [0.0, 0.0], 1.0), (1.0, [0.0, 0.0], 1.0)];
+        let nan = f64::NAN;
+        let cases = [
+            // self-crossing (a bow tie), touching itself, no area, too few corners
+            xtru(&[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]], &ok),
+            xtru(
+                &[
+                    [0.0, 0.0],
+                    [4.0, 0.0],
+                    [4.0, 2.0],
+                    [2.0, 2.0],
+                    [3.0, 3.0],
+                    [1.0, 3.0],
+                    [2.0, 2.0],
+                    [0.0, 2.0],
+                ],
+                &ok,
+            ),
+            xtru(&[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]], &ok),
+            xtru(&[[0.0, 0.0], [1.0, 1.0]], &ok),
+            xtru(&[[0.0, 0.0], [1.0, nan], [0.0, 1.0]], &ok),
+            // sections: one, not increasing, repeated, NaN or infinite z, bad scales
+            xtru(&square, &ok[..1]),
+            xtru(&square, &[ok[1], ok[0]]),
+            xtru(&square, &[ok[0], ok[0]]),
+            xtru(&square, &[ok[0], (nan, [0.0, 0.0], 1.0)]),
+            xtru(&square, &[ok[0], (f64::INFINITY, [0.0, 0.0], 1.0)]),
+            xtru(&square, &[ok[0], (1.0, [0.0, 0.0], 0.0)]),
+            xtru(&square, &[ok[0], (1.0, [0.0, 0.0], -1.0)]),
+            xtru(&square, &[ok[0], (1.0, [0.0, 0.0], nan)]),
+            xtru(&square, &[ok[0], (1.0, [nan, 0.0], 1.0)]),
+        ];
+        for c in cases {
+            let e = c.to_shape().unwrap_err();
+            assert_eq!(e.primitive, "xtru", "{c:?}: {e}");
+            assert!(c.to_geometry(1e-2).is_err(), "{c:?}");
+            // As a boolean operand the error comes through.
+            let u = G4Solid::Union(Boolean {
+                a: Box::new(G4Solid::Box {
+                    dx: 1.0,
+                    dy: 1.0,
+                    dz: 1.0,
+                }),
+                b: Box::new(c),
+                rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                translation: [0.0; 3],
+            });
+            assert!(u.to_shape().is_err());
         }
     }
 

@@ -51,6 +51,11 @@ pub fn signed_area2(poly: &[[f64; 2]]) -> f64 {
 /// Triangles (index triples, counter-clockwise) of a simple polygon given counter-clockwise,
 /// by ear clipping.
 pub fn triangulate(poly: &[[f64; 2]]) -> Result<Vec<[usize; 3]>, CsgError> {
+    ear_clip(poly, false)
+}
+
+/// Ear clipping: the first ear found, or (`sharpest`) the ear of smallest angle.
+fn ear_clip(poly: &[[f64; 2]], sharpest: bool) -> Result<Vec<[usize; 3]>, CsgError> {
     let n = poly.len();
     if n < 3 {
         return Err(err(format!("a polygon needs 3 vertices, got {n}")));
@@ -62,14 +67,11 @@ pub fn triangulate(poly: &[[f64; 2]]) -> Result<Vec<[usize; 3]>, CsgError> {
         )));
     }
     let eps = 1e-12 * area.abs();
-    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-    };
     let mut idx: Vec<usize> = (0..n).collect();
     let mut out = Vec::with_capacity(n - 2);
     while idx.len() > 3 {
         let m = idx.len();
-        let ear = (0..m).find(|&k| {
+        let is_ear = |k: usize| {
             let (a, b, c) = (idx[(k + m - 1) % m], idx[k], idx[(k + 1) % m]);
             if orient(poly[a], poly[b], poly[c]) <= eps {
                 return false;
@@ -83,7 +85,24 @@ pub fn triangulate(poly: &[[f64; 2]]) -> Result<Vec<[usize; 3]>, CsgError> {
                     || orient(poly[b], poly[c], poly[p]) < -eps
                     || orient(poly[c], poly[a], poly[p]) < -eps
             })
-        });
+        };
+        let ear = if sharpest {
+            // The cosine of the ear's angle at its tip: largest for the sharpest.
+            let cos = |k: usize| {
+                let (a, b, c) = (
+                    poly[idx[(k + m - 1) % m]],
+                    poly[idx[k]],
+                    poly[idx[(k + 1) % m]],
+                );
+                ((a[0] - b[0]) * (c[0] - b[0]) + (a[1] - b[1]) * (c[1] - b[1]))
+                    / (dist(a, b) * dist(c, b))
+            };
+            (0..m)
+                .filter(|&k| is_ear(k))
+                .max_by(|&x, &y| cos(x).total_cmp(&cos(y)))
+        } else {
+            (0..m).find(|&k| is_ear(k))
+        };
         let Some(k) = ear else {
             return Err(err("the polygon is not simple (no ear to clip)".into()));
         };
@@ -92,6 +111,212 @@ pub fn triangulate(poly: &[[f64; 2]]) -> Result<Vec<[usize; 3]>, CsgError> {
     }
     out.push([idx[0], idx[1], idx[2]]);
     Ok(out)
+}
+
+/// Twice the signed area of the triangle `(a, b, c)`: positive when counter-clockwise.
+fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// Whether the closed segments `[p, q]` and `[r, s]` share a point.
+fn segments_meet(p: [f64; 2], q: [f64; 2], r: [f64; 2], s: [f64; 2]) -> bool {
+    let (d1, d2) = (orient(p, q, r), orient(p, q, s));
+    let (d3, d4) = (orient(r, s, p), orient(r, s, q));
+    let apart = |x: f64, y: f64| (x > 0.0 && y < 0.0) || (x < 0.0 && y > 0.0);
+    if apart(d1, d2) && apart(d3, d4) {
+        return true;
+    }
+    // A collinear endpoint meets the other segment when it lies within its box.
+    let on = |a: [f64; 2], b: [f64; 2], c: [f64; 2], d: f64| {
+        d == 0.0
+            && c[0] >= a[0].min(b[0])
+            && c[0] <= a[0].max(b[0])
+            && c[1] >= a[1].min(b[1])
+            && c[1] <= a[1].max(b[1])
+    };
+    on(p, q, r, d1) || on(p, q, s, d2) || on(r, s, p, d3) || on(r, s, q, d4)
+}
+
+/// A simple polygon (corners in either orientation) counter-clockwise, without repeated
+/// corners and without corners on the line through their neighbours (within `1e-12` of
+/// the polygon's size; G4ExtrudedSolid drops those too). Errors when a corner is not
+/// finite, fewer than three corners remain, the polygon has no area, or two of its edges
+/// cross or touch.
+pub fn simple_polygon(poly: &[[f64; 2]]) -> Result<Vec<[f64; 2]>, CsgError> {
+    if poly.len() < 3 || !poly.iter().flatten().all(|v| v.is_finite()) {
+        return Err(err(format!(
+            "a polygon needs 3 or more finite corners, got {poly:?}"
+        )));
+    }
+    let (lo, hi) = poly.iter().fold(
+        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+        |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        },
+    );
+    let eps = 1e-12 * dist(lo, hi);
+    let mut v = poly.to_vec();
+    // Drop repeated corners, then corners in line with their neighbours (a spike going
+    // straight back is in line too), until none is left.
+    'clean: while v.len() >= 3 {
+        let n = v.len();
+        for k in 0..n {
+            let (a, b, c) = (v[(k + n - 1) % n], v[k], v[(k + 1) % n]);
+            let base = dist(a, c);
+            if dist(a, b) <= eps || base <= eps || orient(a, b, c).abs() <= eps * base {
+                v.remove(k);
+                continue 'clean;
+            }
+        }
+        break;
+    }
+    let area = if v.len() >= 3 { signed_area2(&v) } else { 0.0 };
+    if !(area.abs() > eps * eps) {
+        return Err(err(format!("the polygon {poly:?} has no area")));
+    }
+    if area < 0.0 {
+        v.reverse();
+    }
+    let n = v.len();
+    for i in 0..n {
+        // Non-adjacent edges must not meet (adjacent ones share only their corner: the
+        // corners in line with their neighbours are gone).
+        for j in i + 2..n {
+            if i == 0 && j == n - 1 {
+                continue;
+            }
+            if segments_meet(v[i], v[(i + 1) % n], v[j], v[(j + 1) % n]) {
+                return Err(err(format!(
+                    "the polygon {poly:?} is not simple: edges {i} and {j} meet"
+                )));
+            }
+        }
+    }
+    Ok(v)
+}
+
+/// Convex pieces of a simple counter-clockwise polygon (as from [`simple_polygon`]): each
+/// piece lists polygon corner indices counter-clockwise, every corner strictly convex, at
+/// most `max_corners` (>= 3) of them. The pieces tile the polygon edge to edge: two pieces
+/// share a whole edge (a diagonal between two polygon corners) or at most a corner.
+///
+/// An ear-clipping triangulation is merged across its diagonals while the union stays
+/// convex (Hertel and Mehlhorn: at most four times the fewest convex pieces). The result
+/// depends on the triangulation and on the order of the merges, so a few of each (ear
+/// clipping started at up to 8 corners or clipping the sharpest ears first; longest or
+/// shortest diagonals first) are tried
+/// and the fewest pieces kept.
+pub fn convex_pieces(poly: &[[f64; 2]], max_corners: usize) -> Result<Vec<Vec<usize>>, CsgError> {
+    let n = poly.len();
+    let starts: Vec<usize> = if n > 400 {
+        vec![0]
+    } else {
+        let mut s: Vec<usize> = (0..8).map(|k| k * n / 8).collect();
+        s.dedup();
+        s
+    };
+    let mut best: Option<Vec<Vec<usize>>> = None;
+    let trials = starts
+        .into_iter()
+        .map(|s| (s, false))
+        .chain((n <= 400).then_some((0, true)));
+    for (start, sharpest) in trials {
+        // Ear clipping from another corner: the polygon rotated, indices mapped back.
+        let rotated: Vec<[f64; 2]> = (0..n).map(|i| poly[(i + start) % n]).collect();
+        let tris: Vec<[usize; 3]> = ear_clip(&rotated, sharpest)?
+            .into_iter()
+            .map(|t| t.map(|i| (i + start) % n))
+            .collect();
+        for longest_first in [true, false] {
+            let pieces = merge_convex(poly, &tris, longest_first, max_corners);
+            if best.as_ref().is_none_or(|b| pieces.len() < b.len()) {
+                best = Some(pieces);
+            }
+        }
+    }
+    Ok(best.expect("at least one trial"))
+}
+
+/// Hertel-Mehlhorn: merges the triangles `tris` of `poly` across their diagonals (by
+/// length, longest or shortest first) wherever the union stays strictly convex and has at
+/// most `max_corners` corners.
+fn merge_convex(
+    poly: &[[f64; 2]],
+    tris: &[[usize; 3]],
+    longest_first: bool,
+    max_corners: usize,
+) -> Vec<Vec<usize>> {
+    let n = poly.len();
+    let mut pieces: Vec<Vec<usize>> = tris.iter().map(|t| t.to_vec()).collect();
+    let mut alive = vec![true; pieces.len()];
+    // Which piece holds each directed edge (a diagonal is held in both senses).
+    let mut owner: std::collections::HashMap<(usize, usize), usize> = tris
+        .iter()
+        .enumerate()
+        .flat_map(|(i, t)| (0..3).map(move |k| ((t[k], t[(k + 1) % 3]), i)))
+        .collect();
+    let mut diagonals: Vec<(usize, usize)> = owner
+        .keys()
+        .copied()
+        .filter(|&(a, b)| a < b && b != a + 1 && !(a == 0 && b == n - 1))
+        .collect();
+    diagonals.sort_by(|x, y| {
+        let len = |d: &(usize, usize)| dist(poly[d.0], poly[d.1]);
+        let by_length = if longest_first {
+            len(y).total_cmp(&len(x))
+        } else {
+            len(x).total_cmp(&len(y))
+        };
+        by_length.then(x.cmp(y))
+    });
+    // Strictly convex at corner k: turning left by more than about 1e-9 rad.
+    let convex_at = |p: &[usize], k: usize| {
+        let m = p.len();
+        let (a, b, c) = (poly[p[(k + m - 1) % m]], poly[p[k]], poly[p[(k + 1) % m]]);
+        orient(a, b, c) > 1e-9 * dist(a, b) * dist(b, c)
+    };
+    for (a, b) in diagonals {
+        let (Some(&p), Some(&q)) = (owner.get(&(a, b)), owner.get(&(b, a))) else {
+            continue;
+        };
+        let (pp, qq) = (&pieces[p], &pieces[q]);
+        if pp.len() + qq.len() - 2 > max_corners {
+            continue;
+        }
+        let at = |piece: &[usize], from: usize| {
+            (0..piece.len())
+                .find(|&k| piece[k] == from)
+                .expect("the owner holds the edge")
+        };
+        let (kp, kq) = (at(pp, a), at(qq, b));
+        // p runs ..., a, b, ... and q ..., b, a, ...: p from b round to a, then q strictly
+        // between a and b.
+        let mut merged: Vec<usize> = (0..pp.len()).map(|i| pp[(kp + 1 + i) % pp.len()]).collect();
+        merged.extend((1..qq.len() - 1).map(|i| qq[(kq + 1 + i) % qq.len()]));
+        if convex_at(&merged, 0) && convex_at(&merged, pp.len() - 1) {
+            owner.remove(&(a, b));
+            owner.remove(&(b, a));
+            let m = merged.len();
+            for k in 0..m {
+                owner.insert((merged[k], merged[(k + 1) % m]), p);
+            }
+            pieces[p] = merged;
+            alive[q] = false;
+        }
+    }
+    debug_assert!(alive.iter().any(|&a| a));
+    pieces
+        .into_iter()
+        .zip(alive)
+        .filter_map(|(p, keep)| keep.then_some(p))
+        .collect()
 }
 
 /// The closed mesh of a stack of cross-sections: `levels[i]` are the polygon's vertices at
@@ -252,6 +477,126 @@ mod tests {
         cw.reverse();
         assert!(triangulate(&cw).is_err());
         assert!(triangulate(&[[0.0, 0.0], [1.0, 0.0]]).is_err());
+    }
+
+    /// Checks that `pieces` tile `poly` edge to edge with strictly convex pieces; returns
+    /// their count.
+    fn check_tiling(poly: &[[f64; 2]], pieces: &[Vec<usize>]) -> usize {
+        let n = poly.len();
+        let area: f64 = pieces
+            .iter()
+            .map(|p| signed_area2(&p.iter().map(|&i| poly[i]).collect::<Vec<_>>()))
+            .sum();
+        assert!(
+            (area - signed_area2(poly)).abs() <= 1e-9 * area.abs(),
+            "{area}"
+        );
+        let mut edges = std::collections::HashMap::new();
+        for p in pieces {
+            let m = p.len();
+            for k in 0..m {
+                let (a, b, c) = (poly[p[k]], poly[p[(k + 1) % m]], poly[p[(k + 2) % m]]);
+                assert!(orient(a, b, c) > 0.0, "{p:?} not convex at {b:?}");
+                *edges.entry((p[k], p[(k + 1) % m])).or_insert(0) += 1;
+            }
+        }
+        for (&(a, b), &count) in &edges {
+            assert_eq!(count, 1);
+            // A polygon edge belongs to one piece; a diagonal to two, in opposite senses.
+            let side = b == (a + 1) % n;
+            assert_eq!(edges.contains_key(&(b, a)), !side, "edge {a} {b}");
+        }
+        assert!((0..n).all(|i| edges.contains_key(&(i, (i + 1) % n))));
+        pieces.len()
+    }
+
+    #[test]
+    fn convex_pieces_tile_non_convex_polygons() {
+        let l = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [0.0, 2.0],
+        ];
+        assert_eq!(check_tiling(&l, &convex_pieces(&l, 32).unwrap()), 2);
+        // A comb: four teeth on a base; the corners along the base line are collinear.
+        let mut comb = vec![[0.0, 0.0], [7.0, 0.0]];
+        for t in (0..4).rev() {
+            let x = 2.0 * t as f64;
+            comb.extend([[x + 1.0, 3.0], [x, 3.0], [x, 1.0]]);
+            if t > 0 {
+                comb.push([x - 1.0, 1.0]);
+            }
+        }
+        comb.retain(|p| *p != [0.0, 1.0]);
+        let comb = simple_polygon(&comb).unwrap();
+        let pieces = convex_pieces(&comb, 32).unwrap();
+        // Pieces may not have corners in line: every gap between the corners on y = 1
+        // is its own piece (2 end pieces, 5 gaps, 2 middle teeth).
+        assert_eq!(check_tiling(&comb, &pieces), 9);
+        // A convex polygon stays whole unless it has too many corners.
+        let circle: Vec<[f64; 2]> = (0..100)
+            .map(|k| {
+                let a = k as f64 * 0.0628318;
+                [3.0 * a.cos(), 2.0 * a.sin()]
+            })
+            .collect();
+        assert_eq!(
+            check_tiling(&circle, &convex_pieces(&circle, 200).unwrap()),
+            1
+        );
+        let split = convex_pieces(&circle, 32).unwrap();
+        assert!(split.iter().all(|p| p.len() <= 32));
+        assert!(check_tiling(&circle, &split) <= 5);
+        // Stars: one piece per spike at most, plus the core.
+        let star: Vec<[f64; 2]> = (0..16)
+            .map(|k| {
+                let a = k as f64 * std::f64::consts::PI / 8.0;
+                let r = if k % 2 == 0 { 5.0 } else { 2.0 };
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect();
+        let pieces = convex_pieces(&star, 32).unwrap();
+        eprintln!("star: {} pieces", pieces.len());
+        assert!(check_tiling(&star, &pieces) <= 9);
+    }
+
+    #[test]
+    fn simple_polygon_orients_cleans_and_rejects() {
+        // Clockwise with a repeated corner and a corner in the middle of an edge.
+        let p = simple_polygon(&[
+            [0.0, 0.0],
+            [0.0, 2.0],
+            [0.0, 2.0],
+            [2.0, 2.0],
+            [2.0, 1.0],
+            [2.0, 0.0],
+            [0.0, 0.0],
+        ])
+        .unwrap();
+        assert_eq!(p.len(), 4);
+        assert!(signed_area2(&p) > 0.0);
+        for bad in [
+            vec![[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]], // bow tie
+            vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]],             // no area
+            vec![[0.0, 0.0], [1.0, 0.0]],
+            vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]],
+            // Touching itself: the corner (2, 2) is visited twice.
+            vec![
+                [0.0, 0.0],
+                [4.0, 0.0],
+                [4.0, 2.0],
+                [2.0, 2.0],
+                [3.0, 3.0],
+                [1.0, 3.0],
+                [2.0, 2.0],
+                [0.0, 2.0],
+            ],
+        ] {
+            assert!(simple_polygon(&bad).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

@@ -193,8 +193,8 @@ pub enum G4Solid {
         r: Vec<f64>,
         z: Vec<f64>,
     },
-    /// G4Polyhedra(sphi, dphi, numside, r, z): the (r, z) polygon swept around a regular
-    /// polygon (r measured to the side planes).
+    /// G4Polyhedra(sphi, dphi, numside, r, z): the (r, z) corner polygon swept around a
+    /// regular polygon (r measured to the polygon's corners, unlike the z-plane form).
     GenericPolyhedra {
         sphi: f64,
         dphi: f64,

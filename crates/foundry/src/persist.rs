@@ -35,6 +35,7 @@ macro_rules! for_each_array {
         $apply!($f, itra);
         $apply!($f, inst);
         $apply!($f, inst_tran);
+        $apply!($f, inst_mother);
         $apply!($f, tri);
         $apply!($f, brick);
     }};

@@ -102,6 +102,16 @@ record! {
 }
 
 record! {
+    /// Where an instance sits in a placement hierarchy (CPU only): the instance whose solid
+    /// contains it, as a Geant4 daughter sits in its mother volume.
+    pub struct Mother {
+        /// Index of the mother instance (always lower than the daughter's); `u32::MAX` for
+        /// an instance of a flat scene or the world.
+        pub index: u32,
+    }
+}
+
+record! {
     /// A row-major 4x4 affine transform acting on column vectors (f32, the GPU's copy).
     pub struct Transform {
         /// Matrix rows; the last row is (0, 0, 0, 1).

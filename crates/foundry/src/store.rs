@@ -3,7 +3,7 @@
 use crate::error::{FoundryError, Result};
 use crate::optics::Optics;
 use crate::records::{
-    pack_label, Brick, Instance, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
+    pack_label, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
     Transform64, Triangle, COMPLEMENT_BIT,
 };
 use crate::typecode::{PrimKind, TypeCode};
@@ -39,6 +39,8 @@ pub struct Foundry {
     pub inst: Vec<Instance>,
     /// Local-to-world transforms of `inst`, double precision originals.
     pub inst_tran: Vec<Transform64>,
+    /// Mother instance of each instance (CPU only; hierarchical scenes such as GDML).
+    pub inst_mother: Vec<Mother>,
     /// Triangles of mesh prims.
     pub tri: Vec<Triangle>,
     /// Bricks of volume prims.
@@ -128,6 +130,7 @@ impl Foundry {
             boundary: UNSET,
         });
         self.inst_tran.push(transform);
+        self.inst_mother.push(Mother { index: UNSET });
         Ok(self.inst.len() - 1)
     }
 }

@@ -572,6 +572,26 @@ impl Foundry {
                 ),
             });
         }
+        if self.inst.len() != self.inst_mother.len() {
+            return Err(FoundryError::Array {
+                array: "inst_mother",
+                problem: format!(
+                    "{} records, but `inst` has {}",
+                    self.inst_mother.len(),
+                    self.inst.len()
+                ),
+            });
+        }
+        for (i, m) in self.inst_mother.iter().enumerate() {
+            if m.index != UNSET && m.index as usize >= i {
+                return Err(record_error(
+                    "inst_mother",
+                    i,
+                    "index",
+                    format!("mother {} is not an earlier instance", m.index),
+                ));
+            }
+        }
         for (i, (inst, t)) in self.inst.iter().zip(&self.inst_tran).enumerate() {
             if inst.solid as usize >= self.solid.len() {
                 return Err(record_error(

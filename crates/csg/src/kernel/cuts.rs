@@ -62,7 +62,14 @@ pub fn phicut_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
     if count == 2 && crossings[1].0 < crossings[0].0 {
         crossings.swap(0, 1);
     }
-    Spans::from_toggles(in_wedge(p, -d.x, -d.y), &crossings[..count])
+    // The state before the first crossing follows from that crossing's own normal (the ray
+    // leaves through an outward normal it moves along). Deciding it from the direction
+    // instead can contradict the crossing when the ray runs along a cut plane.
+    let inside_before = match count {
+        0 => in_wedge(p, o.x, o.y),
+        _ => crossings[0].1.dot(d) > T::ZERO,
+    };
+    Spans::from_toggles(inside_before, &crossings[..count])
 }
 
 /// Signed distance bound of a phi wedge (exact sign).

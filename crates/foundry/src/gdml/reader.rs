@@ -453,7 +453,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             }
             "matrix" => {
                 let columns = self.required(node, "coldim")?;
-                if !(columns >= 1.0 && columns <= 1e6) || columns.fract() != 0.0 {
+                if !(1.0..=1e6).contains(&columns) || columns.fract() != 0.0 {
                     return Err(self.error(
                         node,
                         format!("coldim must be a positive integer, got {columns}"),

@@ -181,7 +181,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             ));
         }
         let (position, rotation, scale) = self.placement_parts(node, "")?;
-        if scale.iter().any(|s| *s == 0.0) {
+        if scale.contains(&0.0) {
             return Err(self.error(node, format!("scale {scale:?} is singular")));
         }
         let transform = affine(placement_matrix(rotation, scale), position);
@@ -416,7 +416,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             (false, true) => ((extent / width).floor(), width),
             (false, false) => return Err(self.error(node, "needs a number or a width > 0")),
         };
-        if !(1.0..=1e7).contains(&count) || count.fract() != 0.0 || !(width > 0.0) {
+        if !(1.0..=1e7).contains(&count) || count.fract() != 0.0 || width.is_nan() || width <= 0.0 {
             return Err(self.error(
                 node,
                 format!("impossible division: {count} slices of width {width}"),

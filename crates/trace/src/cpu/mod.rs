@@ -1,15 +1,24 @@
-//! The CPU tracer: the first surface crossing of a ray among all placed CSG solids of a
+//! The CPU tracer: the next boundary along a ray among the placed CSG and mesh solids of a
 //! Foundry, in f32 or f64.
+//!
+//! A flat scene (no instance has a mother) answers the first surface crossing of any
+//! instance. A hierarchical scene (GDML: every physical volume an instance with its
+//! mother) answers as Geant4's navigator does: the ray's origin is located in the deepest
+//! instance containing it (daughters tried last-placed first), and the answer is the
+//! nearer of leaving that instance and entering one of its daughters. The two agree on
+//! well-formed geometry; where a daughter protrudes from its mother, only the navigator
+//! form reproduces Geant4.
 //!
 //! Every instance is tested by its world bounds, then its solid's CSG and mesh prims by
 //! their bounds in the solid's frame, then the prims themselves (see
-//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. A bounding volume hierarchy over the
-//! instances replaces the linear loop in the BVH issue; the answers do not change.
+//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. A bounding volume
+//! hierarchy over the instances replaces the linear loops in the BVH issue; the answers
+//! do not change.
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3};
-use hytrace_foundry::Foundry;
+use hytrace_foundry::{Foundry, UNSET};
 
 /// One placement of a solid.
 #[derive(Clone, Debug)]
@@ -30,11 +39,21 @@ pub struct Hit<T> {
     pub instance: u32,
 }
 
+/// The placement tree of a hierarchical scene.
+#[derive(Clone, Debug)]
+struct Hierarchy {
+    /// Instances without a mother (the world).
+    roots: Vec<u32>,
+    /// Daughters of each instance, in placement order.
+    daughters: Vec<Vec<u32>>,
+}
+
 /// A Foundry's CSG content prepared for tracing in precision `T`.
 #[derive(Clone, Debug)]
 pub struct CpuScene<T> {
     placements: Vec<Placement<T>>,
     solids: Vec<Vec<PreparedPrim<T>>>,
+    hierarchy: Option<Hierarchy>,
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
@@ -72,34 +91,103 @@ impl<T: Real> CpuScene<T> {
                 bounds: world_bounds(aabb, tran),
             });
         }
-        Ok(CpuScene { placements, solids })
+        let hierarchy = f.inst_mother.iter().any(|m| m.index != UNSET).then(|| {
+            let mut h = Hierarchy {
+                roots: Vec::new(),
+                daughters: vec![Vec::new(); f.inst.len()],
+            };
+            for (i, m) in f.inst_mother.iter().enumerate() {
+                match m.index {
+                    UNSET => h.roots.push(i as u32),
+                    mother => h.daughters[mother as usize].push(i as u32),
+                }
+            }
+            h
+        });
+        Ok(CpuScene {
+            placements,
+            solids,
+            hierarchy,
+        })
+    }
+
+    /// The nearer of `best` and the first crossing of instance `index`'s surface.
+    fn cross_instance(
+        &self,
+        index: usize,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        mut best: Option<Hit<T>>,
+    ) -> Option<Hit<T>> {
+        let p = &self.placements[index];
+        if !ray_meets_bounds(ray, &p.bounds, tmin, best.map_or(tmax, |b| b.t)) {
+            return best;
+        }
+        let local = p.frame.ray_to_local(ray);
+        for tree in &self.solids[p.solid] {
+            let limit = best.map_or(tmax, |b| b.t);
+            if !ray_meets_bounds(&local, tree.bounds(), tmin, limit) {
+                continue;
+            }
+            let step = tree.first_crossing(&local, tmin);
+            if step.t < limit && step.t > tmin {
+                best = Some(Hit {
+                    t: step.t,
+                    normal: step.normal,
+                    instance: index as u32,
+                });
+            }
+        }
+        best
+    }
+
+    /// Whether instance `index`'s solid contains the world point `x`.
+    fn contains(&self, index: u32, x: V3<T>) -> bool {
+        let p = &self.placements[index as usize];
+        let [lo, hi] = &p.bounds;
+        let inside_bounds = |v: T, a: T, b: T| v >= a && v <= b;
+        if !(inside_bounds(x.x, lo.x, hi.x)
+            && inside_bounds(x.y, lo.y, hi.y)
+            && inside_bounds(x.z, lo.z, hi.z))
+        {
+            return false;
+        }
+        let local = p.frame.point_to_local(x);
+        self.solids[p.solid].iter().any(|t| t.contains(local))
+    }
+
+    /// Geant4's navigator step: locate the origin, then the nearer of leaving the located
+    /// instance and entering one of its daughters.
+    fn navigate(&self, h: &Hierarchy, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+        let mut current = None;
+        let mut candidates = &h.roots;
+        'descend: loop {
+            for &c in candidates.iter().rev() {
+                if self.contains(c, ray.origin) {
+                    current = Some(c);
+                    candidates = &h.daughters[c as usize];
+                    continue 'descend;
+                }
+            }
+            break;
+        }
+        let mut best = current.and_then(|c| self.cross_instance(c as usize, ray, tmin, tmax, None));
+        for &d in candidates {
+            best = self.cross_instance(d as usize, ray, tmin, tmax, best);
+        }
+        best
     }
 
     /// The first surface crossing with `tmin < t < tmax` of a ray with a unit direction,
     /// wherever it starts (inside or outside any solid).
     pub fn trace(&self, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-        let mut best: Option<Hit<T>> = None;
-        for (index, p) in self.placements.iter().enumerate() {
-            let limit = best.map_or(tmax, |b| b.t);
-            if !ray_meets_bounds(ray, &p.bounds, tmin, limit) {
-                continue;
-            }
-            let local = p.frame.ray_to_local(ray);
-            for tree in &self.solids[p.solid] {
-                let limit = best.map_or(tmax, |b| b.t);
-                if !ray_meets_bounds(&local, tree.bounds(), tmin, limit) {
-                    continue;
-                }
-                let step = tree.first_crossing(&local, tmin);
-                if step.t < limit && step.t > tmin {
-                    best = Some(Hit {
-                        t: step.t,
-                        normal: step.normal,
-                        instance: index as u32,
-                    });
-                }
-            }
-        }
+        let best = match &self.hierarchy {
+            Some(h) => self.navigate(h, ray, tmin, tmax),
+            None => (0..self.placements.len()).fold(None, |best, i| {
+                self.cross_instance(i, ray, tmin, tmax, best)
+            }),
+        };
         best.map(|mut h| {
             let p = &self.placements[h.instance as usize];
             h.normal = p.frame.normal_to_parent(h.normal).normalized();

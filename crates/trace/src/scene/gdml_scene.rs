@@ -139,13 +139,13 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
         inner_material: material_index(world.material),
     });
     let identity = tables.name(&world_name);
-    let i = f.add_instance(solid, Transform64::IDENTITY, identity, 0)?;
-    f.inst[i].boundary = boundary;
+    let world_instance = f.add_instance(solid, Transform64::IDENTITY, identity, 0)?;
+    f.inst[world_instance].boundary = boundary;
 
-    // Depth-first walk: (logical volume, its placement name, world transform).
-    let mut stack: Vec<(usize, String, Transform64)> =
-        vec![(g.world, world_name, Transform64::IDENTITY)];
-    while let Some((mother, mother_pv, to_world)) = stack.pop() {
+    // Depth-first walk: (logical volume, its placement name, world transform, instance).
+    let mut stack: Vec<(usize, String, Transform64, usize)> =
+        vec![(g.world, world_name, Transform64::IDENTITY, world_instance)];
+    while let Some((mother, mother_pv, to_world, mother_instance)) = stack.pop() {
         for d in &g.volumes[mother].daughters {
             let lv = &g.volumes[d.volume];
             let transform = to_world.compose(&d.transform);
@@ -161,11 +161,12 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
                 .add_instance(solid, transform, identity, d.copy_number)
                 .with_context(|| format!("placing `{}` in `{}`", d.name, g.volumes[mother].name))?;
             f.inst[i].boundary = boundary;
+            f.inst_mother[i].index = mother_instance as u32;
             if f.inst.len() > MAX_INSTANCES {
                 bail!("the hierarchy expands into more than {MAX_INSTANCES} placements");
             }
             if !lv.daughters.is_empty() {
-                stack.push((d.volume, d.name.clone(), transform));
+                stack.push((d.volume, d.name.clone(), transform, i));
             }
         }
     }

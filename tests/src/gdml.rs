@@ -1,0 +1,230 @@
+//! The Geant4 navigation oracle for GDML files (`tests/oracle/gdml_navigator.py`): rays
+//! from points spread over every volume, with `G4Navigator::ComputeStep` as the reference.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde::Deserialize;
+
+use crate::f64_array;
+
+/// The shared public GDML files (`HYTRACE_GDML_DIR`, default `../shared/gdml` beside the
+/// repository). Panics when missing: the oracle tests must not pass by finding nothing.
+pub fn gdml_dir() -> PathBuf {
+    let dir = std::env::var_os("HYTRACE_GDML_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/gdml"));
+    assert!(
+        dir.is_dir(),
+        "{}: the shared GDML files are missing (set HYTRACE_GDML_DIR)",
+        dir.display()
+    );
+    dir
+}
+
+/// Every `.gdml` file under [`gdml_dir`], sorted.
+pub fn gdml_files() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "gdml") {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(&gdml_dir(), &mut files);
+    files.sort();
+    files
+}
+
+/// The oracle script.
+pub fn navigator_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/gdml_navigator.py")
+}
+
+#[derive(Deserialize)]
+struct Located {
+    touchables: Vec<Touchable>,
+    ray_touchable: Vec<usize>,
+}
+
+/// A volume instance Geant4 located a ray origin in.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Touchable {
+    /// Physical volume name.
+    pub name: String,
+    /// Geant4 solid name.
+    pub solid: String,
+    /// Geant4 solid class (`G4Box`, ...).
+    pub solid_type: String,
+}
+
+/// What Geant4 answered for one file.
+pub struct NavigatorSample {
+    /// Rays `ox oy oz 0 dx dy dz inf`.
+    pub rays: Vec<[f64; 8]>,
+    /// `ComputeStep` of each ray.
+    pub steps: Vec<f64>,
+    /// The volume each origin lies in.
+    pub located: Vec<Touchable>,
+    /// Solids Geant4 reported defective while reading (its answers near them are not a
+    /// reference).
+    pub defective_solids: Vec<String>,
+}
+
+/// Runs `sample` on `gdml` into `dir`.
+pub fn sample(python: &Path, gdml: &Path, rays: usize, seed: u64, dir: &Path) -> NavigatorSample {
+    let out = Command::new(python)
+        .arg(navigator_script())
+        .arg("sample")
+        .arg(gdml)
+        .args(["--rays", &rays.to_string(), "--seed", &seed.to_string()])
+        .arg("--out")
+        .arg(dir)
+        .env("GEANT4_DATA_DIR", crate::geant4_data_dir())
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "gdml navigator oracle failed on {}:\n{}",
+        gdml.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (shape, flat) = f64_array(&dir.join("rays.npy"));
+    assert_eq!(shape[1], 8);
+    let (_, steps) = f64_array(&dir.join("steps.npy"));
+    let located: Located =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("located.json")).unwrap()).unwrap();
+    let log = std::fs::read_to_string(dir.join("geant4.log")).unwrap_or_default();
+    let defective_solids = log
+        .lines()
+        .filter_map(|l| l.strip_prefix("Defects in solid: "))
+        .filter_map(|l| l.split(" - ").next())
+        .map(|s| s.trim().to_string())
+        .collect();
+    NavigatorSample {
+        rays: flat
+            .chunks_exact(8)
+            .map(|c| std::array::from_fn(|k| c[k]))
+            .collect(),
+        steps,
+        located: located
+            .ray_touchable
+            .iter()
+            .map(|&i| located.touchables[i].clone())
+            .collect(),
+        defective_solids,
+    }
+}
+
+/// A placement as Geant4 reports it.
+#[derive(Clone, Debug, Deserialize)]
+pub struct G4Placement {
+    /// Physical volume name.
+    pub name: String,
+    /// Copy number (absent for replicated kinds).
+    pub copy: Option<i64>,
+    /// `world`, `placement`, `replica`, `division` or `parameterised`.
+    pub kind: String,
+    /// Logical volume name.
+    pub logical: String,
+    /// Global rotation, row-major (absent for replicated kinds).
+    pub rotation: Option<[f64; 9]>,
+    /// Global translation.
+    pub translation: Option<[f64; 3]>,
+    /// Present for reflected placements.
+    pub reflection: Option<serde_json::Value>,
+}
+
+#[derive(Deserialize)]
+struct Placements {
+    placements: Vec<G4Placement>,
+}
+
+/// Runs `placements` on `gdml`.
+pub fn placements(python: &Path, gdml: &Path) -> Vec<G4Placement> {
+    let out = Command::new(python)
+        .arg(navigator_script())
+        .arg("placements")
+        .arg(gdml)
+        .env("GEANT4_DATA_DIR", crate::geant4_data_dir())
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "placements failed on {}:\n{}",
+        gdml.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let p: Placements = serde_json::from_slice(&out.stdout).unwrap();
+    p.placements
+}
+
+/// Geant4's point location across a distance along a ray.
+#[derive(Clone, Copy, Debug, Deserialize)]
+pub struct Verdict {
+    /// The located volume changes across hytrace's distance.
+    pub boundary_at_hytrace: bool,
+    /// The located volume changes across Geant4's step.
+    pub boundary_at_geant4: bool,
+}
+
+impl Verdict {
+    /// Whether Geant4's `ComputeStep` contradicts its own point location in hytrace's
+    /// favour: it stepped over the boundary hytrace found (which location sees), or
+    /// stopped where location sees none before hytrace's.
+    pub fn geant4_contradicts_itself(&self, hytrace: f64, geant4: f64) -> bool {
+        self.boundary_at_hytrace && (hytrace < geant4 || !self.boundary_at_geant4)
+    }
+}
+
+#[derive(Deserialize)]
+struct Verdicts {
+    rays: Vec<Verdict>,
+}
+
+/// Runs `adjudicate` on the given rays, hytrace distances and Geant4 steps.
+pub fn adjudicate(
+    python: &Path,
+    gdml: &Path,
+    rays: &[[f64; 8]],
+    hytrace: &[f64],
+    geant4: &[f64],
+    dir: &Path,
+) -> Vec<Verdict> {
+    use hytrace_foundry::layout::Scalar;
+    use hytrace_foundry::npy::write_array;
+    let write = |name: &str, shape: &[u64], values: &[f64]| {
+        let p = dir.join(name);
+        write_array(&p, Scalar::F64, shape, bytemuck::cast_slice(values)).unwrap();
+        p
+    };
+    let flat: Vec<f64> = rays.iter().flatten().copied().collect();
+    let r = write("adjudicate_rays.npy", &[rays.len() as u64, 8], &flat);
+    let a = write("adjudicate_hytrace.npy", &[hytrace.len() as u64], hytrace);
+    let s = write("adjudicate_geant4.npy", &[geant4.len() as u64], geant4);
+    let out = Command::new(python)
+        .arg(navigator_script())
+        .arg("adjudicate")
+        .arg(gdml)
+        .arg("--rays")
+        .arg(&r)
+        .arg("--answers")
+        .arg(&a)
+        .arg("--steps")
+        .arg(&s)
+        .env("GEANT4_DATA_DIR", crate::geant4_data_dir())
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "adjudicate failed on {}:\n{}",
+        gdml.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Verdicts = serde_json::from_slice(&out.stdout).unwrap();
+    v.rays
+}
