@@ -913,11 +913,35 @@ def list_placements(g4, tree, check_overlaps=0):
         rec["reflection"] = rec.pop("reflection")
     out.append(rec)
 
-    def visit(lv, R0, t0, path, ipath):
+    def optics(pv, lv, mother_pv, mother_lv):
+        """Materials and the optical surfaces Geant4 holds for this
+        placement's surface: border surfaces of (pv, mother) both ways and the
+        skin surfaces of both logical volumes (the names of their optical
+        surface properties, None when absent)."""
+        def name(x):
+            return None if x is None else x.GetSurfaceProperty().GetName()
+
+        def material(v):
+            m = v.GetMaterial()
+            return None if m is None else m.GetName()
+
+        return {
+            "material": material(lv),
+            "mother_material": material(mother_lv),
+            "border_out": name(g4.G4LogicalBorderSurface.GetSurface(
+                pv, mother_pv)),
+            "border_in": name(g4.G4LogicalBorderSurface.GetSurface(
+                mother_pv, pv)),
+            "skin": name(g4.G4LogicalSkinSurface.GetSurface(lv)),
+            "mother_skin": name(g4.G4LogicalSkinSurface.GetSurface(mother_lv)),
+        }
+
+    def visit(lv, R0, t0, path, ipath, mother_pv):
         for d in tree.kids(lv):
             name = d.pv.GetName()
             rec = {"path": path + [name], "index_path": ipath + [d.index],
                    "depth": len(ipath) + 1, "name": name}
+            rec["optics"] = optics(d.pv, d.lv, mother_pv, lv)
             if d.kind == "placement":
                 R = R0 @ d.R
                 t = R0 @ d.t + t0
@@ -940,9 +964,9 @@ def list_placements(g4, tree, check_overlaps=0):
                     int(check_overlaps), 0.0, True, 1))
             out.append(rec)
             if d.kind == "placement":
-                visit(d.lv, R, t, rec["path"], rec["index_path"])
+                visit(d.lv, R, t, rec["path"], rec["index_path"], d.pv)
 
-    visit(wl, np.eye(3), np.zeros(3), [world.GetName()], [])
+    visit(wl, np.eye(3), np.zeros(3), [world.GetName()], [], world)
     return out
 
 

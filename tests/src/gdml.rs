@@ -137,6 +137,27 @@ pub struct G4Placement {
     pub translation: Option<[f64; 3]>,
     /// Present for reflected placements.
     pub reflection: Option<serde_json::Value>,
+    /// Materials and optical surfaces at this placement's surface (absent for the world).
+    pub optics: Option<PlacementOptics>,
+}
+
+/// What Geant4 holds for the surface of a placement: its material, its mother's, and the
+/// optical surface properties of the border surfaces (out: daughter to mother, in: mother
+/// to daughter) and of the skin surfaces of both logical volumes.
+#[derive(Clone, Debug, Deserialize)]
+pub struct PlacementOptics {
+    /// Material of the placed logical volume.
+    pub material: Option<String>,
+    /// Material of the mother.
+    pub mother_material: Option<String>,
+    /// Border surface (daughter, mother).
+    pub border_out: Option<String>,
+    /// Border surface (mother, daughter).
+    pub border_in: Option<String>,
+    /// Skin surface of the daughter's logical volume.
+    pub skin: Option<String>,
+    /// Skin surface of the mother's logical volume.
+    pub mother_skin: Option<String>,
 }
 
 #[derive(Deserialize)]

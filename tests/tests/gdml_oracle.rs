@@ -8,7 +8,9 @@ use std::path::Path;
 
 use hytrace_foundry::gdml::{read_gdml, GdmlOptions};
 use hytrace_foundry::Foundry;
-use hytrace_tests::gdml::{adjudicate, gdml_dir, gdml_files, placements, sample, NavigatorSample};
+use hytrace_tests::gdml::{
+    adjudicate, gdml_dir, gdml_files, placements, sample, G4Placement, NavigatorSample,
+};
 use hytrace_tests::oracle_python;
 use hytrace_trace::scan::{rays_from_rows, scan, Precision};
 use hytrace_trace::scene::{load_gdml_scene, GDML_MESH_TOLERANCE};
@@ -246,55 +248,110 @@ fn every_shared_gdml_file_navigates_like_geant4() {
     }
 }
 
+/// Instances whose world transform is Geant4's global one for placement `p` (several
+/// where placements coincide), those of the same name first.
+fn matching_instances(f: &Foundry, p: &G4Placement) -> Vec<usize> {
+    let (Some(rot), Some(t)) = (p.rotation, p.translation) else {
+        return Vec::new();
+    };
+    let scale = 1.0 + t.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut found: Vec<usize> = (0..f.inst.len())
+        .filter(|&i| {
+            let m = &f.inst_tran[i];
+            (0..3).all(|r| {
+                (m.rows[r][3] - t[r]).abs() <= 1e-9 * scale
+                    && (0..3).all(|c| (m.rows[r][c] - rot[3 * r + c]).abs() <= 1e-12)
+            })
+        })
+        .collect();
+    let named = |i: &usize| f.optics.volumes.get(f.inst[*i].identity as usize) == Some(&p.name);
+    found.sort_by_key(|i| !named(i));
+    found
+}
+
+/// Geant4's plain placements (not replicated kinds, not reflected) of every shared file,
+/// with our scene of it.
+fn placements_of_every_file(python: &Path) -> Vec<(String, Foundry, Vec<G4Placement>)> {
+    gdml_files()
+        .par_iter()
+        .map(|gdml| {
+            let f = load_gdml_scene(gdml, &GdmlOptions::default())
+                .unwrap_or_else(|e| panic!("{}: {e:#}", gdml.display()));
+            let g4 = placements(python, gdml)
+                .into_iter()
+                .filter(|p| {
+                    p.reflection.is_none()
+                        && matches!(p.kind.as_str(), "placement" | "world")
+                        && p.rotation.is_some()
+                })
+                .collect();
+            (gdml.display().to_string(), f, g4)
+        })
+        .collect()
+}
+
 #[test]
-fn every_placement_is_where_geant4_puts_it() {
+fn every_placement_is_where_geant4_puts_it_with_its_materials_and_surfaces() {
     let Some(python) = oracle_python(&["numpy", "geant4_pybind"]) else {
         return;
     };
-    let files = gdml_files();
-    let failures: Vec<String> = files
-        .par_iter()
-        .flat_map(|gdml| {
-            let f = match load_gdml_scene(gdml, &GdmlOptions::default()) {
-                Ok(f) => f,
-                Err(e) => return vec![format!("{}: {e:#}", gdml.display())],
-            };
-            let g4 = placements(&python, gdml);
-            let mut failures = Vec::new();
-            let mut compared = 0;
-            for p in &g4 {
-                let (Some(rot), Some(t)) = (p.rotation, p.translation) else {
-                    continue; // replicated kinds are listed once, not per copy
-                };
-                if p.reflection.is_some() || !matches!(p.kind.as_str(), "placement" | "world") {
-                    continue;
-                }
-                compared += 1;
-                let scale = 1.0 + t.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                let found = f.inst_tran.iter().any(|m| {
-                    (0..3).all(|i| {
-                        (m.rows[i][3] - t[i]).abs() <= 1e-9 * scale
-                            && (0..3).all(|j| (m.rows[i][j] - rot[3 * i + j]).abs() <= 1e-12)
-                    })
-                });
-                if !found {
-                    failures.push(format!(
-                        "{}: `{}` (logical `{}`) at {t:?} rotation {rot:?} has no instance",
-                        gdml.display(),
-                        p.name,
-                        p.logical
-                    ));
-                }
+    let mut failures = Vec::new();
+    let (mut compared, mut with_surface) = (0, 0);
+    for (file, f, g4) in placements_of_every_file(&python) {
+        let material = |m: u32| f.optics.materials.get(m as usize).map(|x| x.name.clone());
+        let surface = |s: u32| f.optics.surfaces.get(s as usize).map(|x| x.name.clone());
+        for p in &g4 {
+            let found = matching_instances(&f, p);
+            if found.is_empty() {
+                failures.push(format!(
+                    "{file}: `{}` (logical `{}`) has no instance",
+                    p.name, p.logical
+                ));
+                continue;
             }
-            assert!(
-                compared > 0 || g4.len() <= 1,
-                "{}: nothing compared",
-                gdml.display()
+            compared += 1;
+            let Some(o) = &p.optics else { continue };
+            // G4OpBoundaryProcess: the border surface of the ordered pair, else the skin
+            // of the daughter, else of the mother.
+            let skin = o.skin.clone().or(o.mother_skin.clone());
+            let expected = (
+                o.mother_material.clone(),
+                o.border_out.clone().or(skin.clone()),
+                o.border_in.clone().or(skin),
+                o.material.clone(),
             );
-            failures
-        })
-        .collect();
+            with_surface += usize::from(expected.1.is_some() || expected.2.is_some());
+            let ok = found.iter().any(|&i| {
+                let b = f.optics.boundaries[f.inst[i].boundary as usize];
+                (
+                    material(b.outer_material),
+                    surface(b.outer_surface),
+                    surface(b.inner_surface),
+                    material(b.inner_material),
+                ) == expected
+            });
+            if !ok {
+                let b = f.optics.boundaries[f.inst[found[0]].boundary as usize];
+                failures.push(format!(
+                    "{file}: `{}`: Geant4 (outer material, out surface, in surface, inner \
+                     material) {expected:?}, hytrace {:?}",
+                    p.name,
+                    (
+                        material(b.outer_material),
+                        surface(b.outer_surface),
+                        surface(b.inner_surface),
+                        material(b.inner_material),
+                    )
+                ));
+            }
+        }
+    }
+    eprintln!("{compared} placements compared, {with_surface} with optical surfaces");
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(
+        compared > 3000 && with_surface > 50,
+        "{compared} {with_surface}"
+    );
 }
 
 #[test]

@@ -543,3 +543,52 @@ fn theta_cut_spheres_match_the_cone_geometry() {
     let x30 = z * 30f64.to_radians().tan();
     assert!((t2 - (200.0 - x30)).abs() < 1e-5, "{t2}");
 }
+
+/// Rays parallel to a phi cut's half-plane at 270 degrees (whose stored cosine is a
+/// rounding residue, so the plane is crossed 10^17 mm away): the wedge's state must follow
+/// from that crossing, not from the ray direction lying on the boundary. From Geant4's
+/// G01 solids (a 270-degree G4Polycone) where a ray along +y used to be lost.
+fn parallel_to_cut_case<T: Real>() {
+    let wedge = |s: Shape| s * phi_cut(0.0, 1.5 * std::f64::consts::PI).unwrap();
+    let ball = prepared::<T>(&wedge(sphere(1000.0).unwrap()));
+    let ring = prepared::<T>(&wedge(
+        cone(250.0, -500.0, 100.0, 0.0).unwrap() - cone(160.0, -500.0, 80.0, 0.0).unwrap(),
+    ));
+    let tol = band::<T>();
+    for (o, d) in [
+        ([-138.3, -204.2, -493.3], [0.0, 1.0, 0.0]),
+        ([-138.3, -204.2, -493.3], [0.0, -1.0, 0.0]),
+        ([-300.0, 50.0, 10.0], [1.0, 0.0, 0.0]),
+        ([-300.0, -50.0, 10.0], [-1.0, 0.0, 0.0]),
+    ] {
+        // Inside the wedge all along (x < 0 or y > 0 never meets the cut): the sphere exit.
+        let want = first_after_zero(sphere_reference([0.0; 3], 1000.0, o, d));
+        let (t, _, inside) = cross(&ball, o, d, 0.0);
+        assert!(
+            inside && (t - want).abs() <= tol * 1000.0,
+            "{} {o:?} {d:?}: {t} vs {want}",
+            T::NAME
+        );
+    }
+    // In the ring at phi 236 degrees moving +y: out through the inner cone at
+    // y = -sqrt(r_in^2 - x^2), r_in = 160 - 80 (z + 500) / 500.
+    let (o, d) = ([-138.3, -204.2, -493.3], [0.0, 1.0, 0.0]);
+    let r_in: f64 = 160.0 - 80.0 * (o[2] + 500.0) / 500.0;
+    let want = o[1].abs() - (r_in * r_in - o[0] * o[0]).sqrt();
+    let (t, _, inside) = cross(&ring, o, d, 0.0);
+    assert!(
+        inside && (t - want).abs() <= tol * 1000.0,
+        "{} ring: {t} vs {want}",
+        T::NAME
+    );
+}
+
+#[test]
+fn rays_parallel_to_a_270_degree_phi_cut_f32() {
+    parallel_to_cut_case::<f32>();
+}
+
+#[test]
+fn rays_parallel_to_a_270_degree_phi_cut_f64() {
+    parallel_to_cut_case::<f64>();
+}

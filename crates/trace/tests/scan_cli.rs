@@ -115,7 +115,13 @@ fn scan_answers_match_the_analytic_sphere_and_name_the_instance() {
         );
         let ids = read_array(&ids).unwrap();
         assert_eq!(ids.scalar, Scalar::I32);
-        let ids: Vec<i32> = bytemuck::pod_collect_to_vec(&ids.bytes);
+        assert_eq!(ids.shape, vec![rows.len() as u64, 3], "instance boundary copy");
+        let rows3: Vec<[i32; 3]> = bytemuck::pod_collect_to_vec(&ids.bytes);
+        // A TOML scene has no boundaries; copy numbers default to the placement index.
+        for r in &rows3 {
+            assert!(r[0] == -1 || (r[1] == -1 && r[2] == r[0]), "{r:?}");
+        }
+        let ids: Vec<i32> = rows3.iter().map(|r| r[0]).collect();
         let tol = if precision == "f32" { 1e-3 } else { 1e-6 };
         for (k, r) in rows[..50].iter().enumerate() {
             let y = r[1] as f64;

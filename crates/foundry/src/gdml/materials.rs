@@ -84,8 +84,9 @@ impl<'a, 'input> Reader<'a, 'input> {
     pub fn read_optical_surface(&mut self, node: Node) -> Result<(), GdmlError> {
         let name = self.name_attr(node)?;
         let text = |attr: &str| node.attribute(attr).unwrap_or("").trim().to_string();
+        // Geant4 strips the names of materials, solids and volumes, not of surfaces.
         let surface = OpticalSurface {
-            name: strip_name(&name).to_string(),
+            name: name.clone(),
             model: text("model"),
             finish: text("finish"),
             kind: text("type"),

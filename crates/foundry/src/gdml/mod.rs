@@ -15,7 +15,9 @@
 //!   z planes are absolute;
 //! - a physvol's rotation angles (x, y, z) place the daughter by the inverse of
 //!   `Rz(z) Ry(y) Rx(x)`; a scale (possibly a reflection) applies before the rotation;
-//! - names lose their `0x...` pointer suffixes (Geant4's name stripping).
+//! - names of materials, solids and volumes lose their `0x...` pointer suffixes (Geant4's
+//!   name stripping, after reading: references use the full names), optical surfaces keep
+//!   theirs; the first definition of a name is the one references find.
 //!
 //! Every error names the file, the line and the element path.
 
@@ -92,7 +94,7 @@ pub enum SurfaceLink {
 /// A border or skin surface.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogicalSurface {
-    /// Name, stripped.
+    /// Name (not stripped, as in Geant4).
     pub name: String,
     /// Index into [`Gdml::surfaces`].
     pub surface: usize,

@@ -39,6 +39,31 @@ pub(crate) fn placement_matrix(rotation: Vector, scale: Vector) -> [[f64; 3]; 3]
     mul(&r, &s)
 }
 
+/// Deepest nesting of booleans, multi-unions and displaced solids accepted.
+const MAX_SOLID_DEPTH: usize = 256;
+/// Most primitive solids one solid may expand into.
+const MAX_SOLID_SIZE: usize = 100_000;
+
+/// Nesting depth and number of solids of a solid (its operands were checked when read, so
+/// the recursion is bounded).
+fn extent(solid: &G4Solid) -> (usize, usize) {
+    let combine = |parts: &mut dyn Iterator<Item = &G4Solid>| {
+        parts.fold((0usize, 0usize), |(d, n), s| {
+            let (sd, sn) = extent(s);
+            (d.max(sd), n.saturating_add(sn))
+        })
+    };
+    let (d, n) = match solid {
+        G4Solid::Union(b) | G4Solid::Subtraction(b) | G4Solid::Intersection(b) => {
+            combine(&mut [&*b.a, &*b.b].into_iter())
+        }
+        G4Solid::MultiUnion { parts } => combine(&mut parts.iter().map(|p| &*p.solid)),
+        G4Solid::Displaced(p) => extent(&p.solid),
+        _ => return (1, 1),
+    };
+    (d + 1, n.saturating_add(1))
+}
+
 impl<'a, 'input> Reader<'a, 'input> {
     /// The solid named by a reference element's `ref`.
     pub fn solid_ref(&self, node: Node) -> Result<usize, GdmlError> {
@@ -80,6 +105,15 @@ impl<'a, 'input> Reader<'a, 'input> {
         let name = self.name_attr(node)?;
         if name.is_empty() {
             return Err(self.error(node, "a solid needs a name"));
+        }
+        let (depth, size) = extent(&solid);
+        if depth > MAX_SOLID_DEPTH || size > MAX_SOLID_SIZE {
+            return Err(self.error(
+                node,
+                format!(
+                    "booleans nest {depth} deep over {size} solids (at most {MAX_SOLID_DEPTH} and {MAX_SOLID_SIZE})"
+                ),
+            ));
         }
         let index = self.out.solids.len();
         self.out.solids.push(GdmlSolid {

@@ -92,7 +92,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             .get(&sp)
             .ok_or_else(|| self.error(node, format!("unknown optical surface `{sp}`")))?;
         self.out.logical_surfaces.push(LogicalSurface {
-            name: strip_name(&name).to_string(),
+            name,
             surface,
             link,
         });

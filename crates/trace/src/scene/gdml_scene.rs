@@ -22,8 +22,21 @@ use hytrace_foundry::{Foundry, Transform64, UNSET};
 /// the true surface, in mm.
 pub const GDML_MESH_TOLERANCE: f64 = 1e-3;
 
-/// Most instances a file may expand into.
-const MAX_INSTANCES: usize = 20_000_000;
+/// Most instances a file may expand into (about 2 GB of Foundry).
+const MAX_INSTANCES: u64 = 10_000_000;
+
+/// How many instances each logical volume expands into with its whole subtree, saturating.
+/// Daughters always refer to volumes defined earlier, so one pass in order suffices.
+fn subtree_sizes(g: &Gdml) -> Vec<u64> {
+    let mut sizes: Vec<u64> = Vec::with_capacity(g.volumes.len());
+    for lv in &g.volumes {
+        let below = lv.daughters.iter().fold(0u64, |n, d| {
+            n.saturating_add(sizes.get(d.volume).copied().unwrap_or(u64::MAX))
+        });
+        sizes.push(below.saturating_add(1));
+    }
+    sizes
+}
 
 /// Reads a GDML file into a Foundry.
 pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
@@ -107,6 +120,10 @@ fn material_index(m: Option<usize>) -> u32 {
 
 /// Builds the Foundry of a read GDML file.
 pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
+    let total = subtree_sizes(g)[g.world];
+    if total > MAX_INSTANCES {
+        bail!("the hierarchy expands into {total} placements, more than {MAX_INSTANCES}");
+    }
     let mut f = Foundry::new();
     // One Foundry solid per GDML solid that a placed volume uses, built on first use.
     let mut solid_of: HashMap<usize, u32> = HashMap::new();
@@ -162,9 +179,6 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
                 .with_context(|| format!("placing `{}` in `{}`", d.name, g.volumes[mother].name))?;
             f.inst[i].boundary = boundary;
             f.inst_mother[i].index = mother_instance as u32;
-            if f.inst.len() > MAX_INSTANCES {
-                bail!("the hierarchy expands into more than {MAX_INSTANCES} placements");
-            }
             if !lv.daughters.is_empty() {
                 stack.push((d.volume, d.name.clone(), transform, i));
             }
