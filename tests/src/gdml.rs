@@ -249,3 +249,70 @@ pub fn adjudicate(
     let v: Verdicts = serde_json::from_slice(&out.stdout).unwrap();
     v.rays
 }
+
+/// The direction from the centre to sensor `i` of [`synthetic_pmt_array`]`(n, _)`.
+pub fn synthetic_pmt_direction(i: usize, n: usize) -> [f64; 3] {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+    let r = (1.0 - z * z).sqrt();
+    let phi = golden * i as f64;
+    [r * phi.cos(), r * phi.sin(), z]
+}
+
+/// A synthetic detector: `n` placements of one PMT-like volume (a glass bulb: a half
+/// sphere on a polycone neck, holding a vacuum volume when `with_inner`) 20 m from the
+/// centre on a Fibonacci sphere, each with its own rotation and copy number `i`, written
+/// out as explicit `<physvol>` elements.
+pub fn synthetic_pmt_array(n: usize, with_inner: bool) -> String {
+    let mut physvols = String::with_capacity(n * 260);
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    for i in 0..n {
+        let [x, y, z] = synthetic_pmt_direction(i, n);
+        let phi = golden * i as f64;
+        let theta = z.acos().to_degrees();
+        physvols.push_str(&format!(
+            "    <physvol name=\"pmt_pv\" copynumber=\"{i}\"><volumeref ref=\"pmt\"/>\
+             <position name=\"p{i}\" unit=\"mm\" x=\"{:.6}\" y=\"{:.6}\" z=\"{:.6}\"/>\
+             <rotation name=\"r{i}\" unit=\"deg\" x=\"0\" y=\"{theta:.6}\" z=\"{:.6}\"/></physvol>\n",
+            20000.0 * x,
+            20000.0 * y,
+            20000.0 * z,
+            phi.to_degrees().rem_euclid(360.0)
+        ));
+    }
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<gdml>
+  <define/>
+  <materials>
+    <material name="Water" Z="1"><D value="1.0"/><atom value="1.01"/></material>
+    <material name="Glass" Z="14"><D value="2.2"/><atom value="28.09"/></material>
+    <material name="Vacuum" Z="1"><D value="1e-25"/><atom value="1.01"/></material>
+  </materials>
+  <solids>
+    <box name="world_box" x="50" y="50" z="50" lunit="m"/>
+    <sphere name="bulb" rmax="101.6" starttheta="0" deltatheta="90" deltaphi="360" aunit="deg"/>
+    <polycone name="neck" startphi="0" deltaphi="360" aunit="deg">
+      <zplane z="-120" rmin="0" rmax="42"/><zplane z="-40" rmin="0" rmax="42"/><zplane z="0" rmin="0" rmax="101.6"/>
+    </polycone>
+    <union name="pmt_solid"><first ref="bulb"/><second ref="neck"/></union>
+    <sphere name="inner" rmax="98" starttheta="0" deltatheta="90" deltaphi="360" aunit="deg"/>
+  </solids>
+  <structure>
+    <volume name="vacuum"><materialref ref="Vacuum"/><solidref ref="inner"/></volume>
+    <volume name="pmt"><materialref ref="Glass"/><solidref ref="pmt_solid"/>
+      {inner}
+    </volume>
+    <volume name="world"><materialref ref="Water"/><solidref ref="world_box"/>
+{physvols}    </volume>
+  </structure>
+  <setup name="Default" version="1.0"><world ref="world"/></setup>
+</gdml>
+"#,
+        inner = if with_inner {
+            r#"<physvol name="vacuum_pv"><volumeref ref="vacuum"/></physvol>"#
+        } else {
+            ""
+        }
+    )
+}

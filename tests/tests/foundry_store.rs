@@ -87,6 +87,7 @@ import numpy as np
 src, dst = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
 dst.mkdir()
 shutil.copy(src / "meta.json", dst / "meta.json")
+shutil.copy(src / "optics.json", dst / "optics.json")
 out = {}
 for p in sorted(src.glob("*.npy")):
     a = np.load(p, allow_pickle=False)

@@ -713,7 +713,7 @@ fn xtru_polygon(polygon: &[[f64; 2]], sections: &[XtruSection]) -> Result<Vec<[f
     }
     if sections
         .iter()
-        .any(|s| !(s.scale.is_finite() && s.scale > 0.0) || !s.offset.iter().all(|v| v.is_finite()))
+        .any(|s| !(s.scale.is_finite() && s.scale > 0.0 && s.offset.iter().all(|v| v.is_finite())))
     {
         return Err(bad(
             "xtru",

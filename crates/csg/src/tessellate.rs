@@ -178,7 +178,8 @@ pub fn simple_polygon(poly: &[[f64; 2]]) -> Result<Vec<[f64; 2]>, CsgError> {
         break;
     }
     let area = if v.len() >= 3 { signed_area2(&v) } else { 0.0 };
-    if !(area.abs() > eps * eps) {
+    // (NaN cannot remain: the corners are finite.)
+    if area.abs() <= eps * eps {
         return Err(err(format!("the polygon {poly:?} has no area")));
     }
     if area < 0.0 {

@@ -1,6 +1,8 @@
 //! Mesh prims and tessellations against independent references: an extruded L against the
 //! CSG union of two boxes, and a twisted box and a twisted tube segment against their exact
-//! inside tests marched along each ray in f64.
+//! inside tests marched along each ray in f64. Extruded solids' exact CSG form (a union of
+//! convex polyhedra) against their exact mesh and their marched inside test, on rays across,
+//! along and through the faces and edges the convex pieces share.
 
 use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid, XtruSection};
 use hytrace_csg::tessellate::{convex_pieces, simple_polygon};

@@ -22,8 +22,8 @@ pub mod wgsl;
 pub use error::{FoundryError, Result};
 pub use persist::{file_names, gpu_arrays, FORMAT_NAME, FORMAT_VERSION};
 pub use records::{
-    pack_label, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
-    Transform64, Triangle, COMPLEMENT_BIT,
+    pack_label, Affine64, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid,
+    Transform, Transform64, Triangle, COMPLEMENT_BIT,
 };
 pub use store::{aabb_to_f32_outward, aabb_union, CsgTree, Foundry, SolidBuilder, UNSET};
 pub use typecode::{PrimKind, TypeCode};

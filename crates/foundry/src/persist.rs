@@ -172,6 +172,20 @@ impl Foundry {
         Ok(f)
     }
 
+    /// Bytes of what only the CPU keeps: the double-precision originals, the placement
+    /// hierarchy and `optics.json`.
+    pub fn cpu_only_bytes(&self) -> usize {
+        let arrays: [&[u8]; 5] = [
+            bytemuck::cast_slice(&self.node64),
+            bytemuck::cast_slice(&self.plan64),
+            bytemuck::cast_slice(&self.tran),
+            bytemuck::cast_slice(&self.inst_tran),
+            bytemuck::cast_slice(&self.inst_mother),
+        ];
+        let optics = serde_json::to_vec(&self.optics).map_or(0, |v| v.len());
+        arrays.iter().map(|a| a.len()).sum::<usize>() + optics
+    }
+
     /// Bytes of each GPU-visible array, in binding order (see [`gpu_arrays`]).
     pub fn gpu_array_bytes(&self) -> [&[u8]; 8] {
         [

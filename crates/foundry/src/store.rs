@@ -3,8 +3,8 @@
 use crate::error::{FoundryError, Result};
 use crate::optics::Optics;
 use crate::records::{
-    pack_label, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid, Transform,
-    Transform64, Triangle, COMPLEMENT_BIT,
+    pack_label, Affine64, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid,
+    Transform, Transform64, Triangle, COMPLEMENT_BIT,
 };
 use crate::typecode::{PrimKind, TypeCode};
 
@@ -38,7 +38,7 @@ pub struct Foundry {
     /// Placements of solids in the world.
     pub inst: Vec<Instance>,
     /// Local-to-world transforms of `inst`, double precision originals.
-    pub inst_tran: Vec<Transform64>,
+    pub inst_tran: Vec<Affine64>,
     /// Mother instance of each instance (CPU only; hierarchical scenes such as GDML).
     pub inst_mother: Vec<Mother>,
     /// Triangles of mesh prims.
@@ -129,7 +129,7 @@ impl Foundry {
             copy_number,
             boundary: UNSET,
         });
-        self.inst_tran.push(transform);
+        self.inst_tran.push(Affine64::from_transform(&transform));
         self.inst_mother.push(Mother { index: UNSET });
         Ok(self.inst.len() - 1)
     }

@@ -601,7 +601,13 @@ impl Foundry {
                     format!("solid {} of {}", inst.solid, self.solid.len()),
                 ));
             }
-            check_inverse_pair(("inst_tran", "rows"), ("inst", "itra"), i, t, &inst.itra)?;
+            check_inverse_pair(
+                ("inst_tran", "rows"),
+                ("inst", "itra"),
+                i,
+                &t.to_transform(),
+                &inst.itra,
+            )?;
             let boundaries = self.optics.boundaries.len();
             if inst.boundary != UNSET && inst.boundary as usize >= boundaries {
                 return Err(record_error(

@@ -7,8 +7,7 @@ use serde_json::json;
 pub fn summary(f: &Foundry) -> serde_json::Value {
     let count = |k: PrimKind| f.prim.iter().filter(|p| p.kind == k as u32).count();
     let gpu_bytes: usize = f.gpu_array_bytes().iter().map(|b| b.len()).sum();
-    let cpu_only_bytes =
-        (f.tran.len() + f.inst_tran.len()) * size_of::<hytrace_foundry::Transform64>();
+    let cpu_only_bytes = f.cpu_only_bytes();
     let solids: Vec<_> = f
         .solid
         .iter()
@@ -36,6 +35,9 @@ pub fn summary(f: &Foundry) -> serde_json::Value {
         "bricks": f.brick.len(),
         "gpu_bytes": gpu_bytes,
         "cpu_only_bytes": cpu_only_bytes,
+        "materials": f.optics.materials.len(),
+        "optical_surfaces": f.optics.surfaces.len(),
+        "boundaries": f.optics.boundaries.len(),
         "files": file_names(),
         "solid_list": solids,
         "placements": placements(f),
@@ -80,10 +82,12 @@ pub fn summary_text(f: &Foundry) -> String {
     let mut out =
         format!(
         "solids {}  prims {} (csg {}, mesh {}, volume {})  nodes {}  planes {}  transforms {}\n\
-         instances {}  triangles {}  bricks {}  GPU bytes {}  CPU-only bytes {}\n",
+         instances {}  triangles {}  bricks {}  GPU bytes {}  CPU-only bytes {}\n\
+         materials {}  optical surfaces {}  boundaries {}\n",
         s["solids"], f.prim.len(), s["prims"]["csg"], s["prims"]["mesh"], s["prims"]["volume"],
         s["nodes"], s["planes"], s["transforms"], s["instances"], s["triangles"], s["bricks"],
-        s["gpu_bytes"], s["cpu_only_bytes"],
+        s["gpu_bytes"], s["cpu_only_bytes"], s["materials"], s["optical_surfaces"],
+        s["boundaries"],
     );
     out.push_str(&format!(
         "{:>5}  {:<20} {:>5} {:>6} {:>9}  bounds (solid frame, mm)\n",

@@ -23,7 +23,7 @@ pub fn scene_bounds(f: &Foundry) -> Option<[f64; 6]> {
     let mut b = EMPTY_AABB;
     for (inst, tran) in f.inst.iter().zip(&f.inst_tran) {
         let a = f.solid[inst.solid as usize].aabb.map(f64::from);
-        let w = transform_bounds(&a, tran);
+        let w = transform_bounds(&a, &tran.to_transform());
         for k in 0..3 {
             b[k] = b[k].min(w[k]);
             b[k + 3] = b[k + 3].max(w[k + 3]);

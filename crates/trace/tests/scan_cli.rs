@@ -115,7 +115,11 @@ fn scan_answers_match_the_analytic_sphere_and_name_the_instance() {
         );
         let ids = read_array(&ids).unwrap();
         assert_eq!(ids.scalar, Scalar::I32);
-        assert_eq!(ids.shape, vec![rows.len() as u64, 3], "instance boundary copy");
+        assert_eq!(
+            ids.shape,
+            vec![rows.len() as u64, 3],
+            "instance boundary copy"
+        );
         let rows3: Vec<[i32; 3]> = bytemuck::pod_collect_to_vec(&ids.bytes);
         // A TOML scene has no boundaries; copy numbers default to the placement index.
         for r in &rows3 {

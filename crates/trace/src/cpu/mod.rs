@@ -82,6 +82,7 @@ impl<T: Real> CpuScene<T> {
         }
         let mut placements = Vec::with_capacity(f.inst.len());
         for (i, (inst, tran)) in f.inst.iter().zip(&f.inst_tran).enumerate() {
+            let tran = &tran.to_transform();
             let frame = Frame::from_transform(tran)
                 .with_context(|| format!("instance {i}: singular transform"))?;
             let aabb = &f.solid[inst.solid as usize].aabb;
