@@ -2,7 +2,9 @@
 //! PMT-like volume (alone, and holding an inner volume: 100 001 instances), and the
 //! largest shared file (DUNE's protodune, 2864 volumes).
 //!
-//! `cargo bench -p hytrace-tests --bench gdml` (reads ../shared/gdml for protodune).
+//! `cargo bench -p hytrace-tests --bench gdml` (reads ../shared/gdml for protodune). With
+//! `HYTRACE_BENCH_OUT=DIR` the synthetic files are kept in DIR (to measure the peak memory
+//! of `hytrace info` on them, say).
 
 use std::path::Path;
 use std::time::Instant;
@@ -45,10 +47,13 @@ fn measure(name: &str, path: &Path, runs: usize) {
 }
 
 fn main() {
-    let dir = tempfile::tempdir().unwrap();
-    let pmts = dir.path().join("pmt50k.gdml");
+    let scratch = tempfile::tempdir().unwrap();
+    let out = std::env::var_os("HYTRACE_BENCH_OUT").map(std::path::PathBuf::from);
+    let dir = out.as_deref().unwrap_or(scratch.path());
+    std::fs::create_dir_all(dir).unwrap();
+    let pmts = dir.join("pmt50k.gdml");
     std::fs::write(&pmts, synthetic_pmt_array(50_000, false)).unwrap();
-    let nested = dir.path().join("pmt50k_nested.gdml");
+    let nested = dir.join("pmt50k_nested.gdml");
     std::fs::write(&nested, synthetic_pmt_array(50_000, true)).unwrap();
     println!(
         "threads: {} (import is single-threaded)",

@@ -5,12 +5,14 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid};
-use hytrace_csg::{to_tree, PreparedPrim, Ray, Real, V3};
+use hytrace_csg::geant4::{G4Mapping, G4Solid};
+use hytrace_csg::{add_geometry, to_tree, PreparedPrim, Ray, Real, V3};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
-use hytrace_foundry::{Foundry, Triangle, UNSET};
+use hytrace_foundry::{Foundry, UNSET};
 use serde::Deserialize;
+
+use crate::f64_array;
 
 /// One oracle run: the solids, rays and Geant4's answers.
 pub struct OracleData {
@@ -51,12 +53,6 @@ struct SolidEntry {
 /// The oracle script's path.
 pub fn oracle_script() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/geant4_oracle.py")
-}
-
-fn f64_array(path: &Path) -> (Vec<u64>, Vec<f64>) {
-    let a = read_array(path).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(a.scalar, Scalar::F64, "{}", path.display());
-    (a.shape, bytemuck::pod_collect_to_vec(&a.bytes))
 }
 
 fn i32_array(path: &Path) -> Vec<i32> {
@@ -129,23 +125,8 @@ pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PreparedPrim<T>> {
         let geometry = s
             .to_geometry(TESSELLATION_TOLERANCE)
             .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
-        let mut b = f.begin_solid(&format!("oracle{i}"));
-        match geometry {
-            G4Geometry::Csg(shape) => {
-                let tree = to_tree(&shape).unwrap_or_else(|e| panic!("solid {i}: {e}"));
-                b.add_csg(tree, i as u32, UNSET).unwrap();
-            }
-            G4Geometry::Mesh(tris) => {
-                let tris: Vec<Triangle> = tris
-                    .iter()
-                    .map(|t| Triangle {
-                        v: t.map(|v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0]),
-                    })
-                    .collect();
-                b.add_mesh(&tris, None, i as u32, UNSET).unwrap();
-            }
-        }
-        b.finish(i as u32).unwrap();
+        add_geometry(&mut f, &format!("oracle{i}"), &geometry, i as u32)
+            .unwrap_or_else(|e| panic!("solid {i}: {e}"));
     }
     f.validate().unwrap();
     (0..solids.len())

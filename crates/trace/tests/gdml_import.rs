@@ -523,3 +523,139 @@ fn mutated_files_give_errors_never_panics_or_hangs() {
     eprintln!("{ok} read, {failed} rejected in {:?}", started.elapsed());
     assert!(ok > 50 && failed > 300);
 }
+
+#[test]
+fn a_saved_gdml_foundry_loads_with_its_hierarchy_and_optics_and_scans_the_same() {
+    use hytrace_foundry::Foundry;
+    use hytrace_trace::scan::{rays_from_rows, scan, Precision};
+    let f = gdml_to_foundry(&read(&fuzz_seed())).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    f.save(&dir.path().join("store")).unwrap();
+    let back = Foundry::load(&dir.path().join("store")).unwrap();
+    assert_eq!(back, f);
+    assert!(back.inst_mother.iter().any(|m| m.index != u32::MAX));
+    assert_eq!(back.optics.surfaces[0].name, "surf");
+    // Rays from inside the world in every axis direction and a few oblique ones.
+    let mut rows = Vec::new();
+    for k in 0..60 {
+        let a = k as f64 * 0.37;
+        let d = [
+            a.cos() * (0.3 * a).sin(),
+            a.sin() * (0.3 * a).sin(),
+            (0.3 * a).cos(),
+        ];
+        rows.push([
+            10.0 * k as f64,
+            -5.0 * k as f64,
+            3.0,
+            0.0,
+            d[0],
+            d[1],
+            d[2],
+            f64::INFINITY,
+        ]);
+    }
+    let rays = rays_from_rows(&rows, "rays").unwrap();
+    let (a, _) = scan(&f, &rays, Precision::F64).unwrap();
+    let (b, _) = scan(&back, &rays, Precision::F64).unwrap();
+    assert_eq!(a.hits, b.hits);
+    assert_eq!(a.ids, b.ids);
+    assert!(
+        a.hits.iter().all(|h| h[3].is_finite()),
+        "every ray leaves the world at least"
+    );
+}
+
+#[test]
+fn file_includes_place_another_files_world_with_its_own_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let sub = gdml(
+        r#"<constant name="size" value="40"/>"#,
+        r#"<box name="cell" x="size" y="size" z="size"/><orb name="core" r="5"/>"#,
+        r#"<volume name="Core"><materialref ref="Glass"/><solidref ref="core"/></volume>
+           <volume name="Cell"><materialref ref="Air"/><solidref ref="cell"/>
+             <physvol name="core_pv"><volumeref ref="Core"/><position name="c" x="10"/></physvol>
+           </volume>
+           <volume name="World"><materialref ref="Air"/><solidref ref="WorldBox"/></volume>"#,
+    )
+    .replace(r#"<world ref="World"/>"#, r#"<world ref="Cell"/>"#);
+    std::fs::write(dir.path().join("sub.gdml"), sub).unwrap();
+    let main = gdml(
+        "",
+        "",
+        &world(
+            r#"<physvol name="a"><file name="sub.gdml"/><position name="pa" z="100"/></physvol>
+               <physvol name="b"><file name="sub.gdml" volname="Core"/><position name="pb" z="-100"/></physvol>"#,
+        ),
+    );
+    let path = dir.path().join("main.gdml");
+    std::fs::write(&path, main).unwrap();
+    let f = load_gdml_scene(&path, &GdmlOptions::default()).unwrap();
+    // World, the included cell with its core, and a second core on its own.
+    assert_eq!(f.inst.len(), 4);
+    let mut origins: Vec<[f64; 3]> = f
+        .inst_tran
+        .iter()
+        .map(|t| t.apply_point([0.0; 3]))
+        .collect();
+    origins.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(
+        origins,
+        vec![
+            [0.0, 0.0, -100.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 100.0],
+            [10.0, 0.0, 100.0]
+        ]
+    );
+    // A missing include names the file.
+    let bad = gdml(
+        "",
+        "",
+        &world(r#"<physvol><file name="missing.gdml"/></physvol>"#),
+    );
+    let e = parse_gdml(&bad, &path.display().to_string(), &GdmlOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("missing.gdml"), "{e}");
+}
+
+/// Numerical hard case of the navigator: an origin a micrometre inside a 7 m volume's face
+/// 5 m from the world's origin, moving out. In f32 the exit lies within the surface
+/// tolerance of the start and is suppressed like a surface the ray starts on; the answer
+/// must still be that exit (Geant4's step), not the next boundary or a miss.
+#[test]
+fn origin_a_micrometre_inside_a_far_face_moving_out_exits_there() {
+    use hytrace_trace::scan::{rays_from_rows, scan, Precision};
+    let text = gdml(
+        "",
+        r#"<box name="hall" x="7" y="7" z="7" lunit="m"/>"#,
+        &format!(
+            r#"<volume name="Hall"><materialref ref="Glass"/><solidref ref="hall"/></volume>{}"#,
+            world(
+                r#"<physvol name="h"><volumeref ref="Hall"/><position name="p" x="1.5" unit="m"/></physvol>"#
+            )
+        ),
+    );
+    let f = gdml_to_foundry(&read(&text)).unwrap();
+    // The face at x = 5000 mm; start 1e-3 mm inside it.
+    let rows = vec![
+        [4999.999, 10.0, -20.0, 0.0, 1.0, 0.0, 0.0, f64::INFINITY],
+        [4999.999, 10.0, -20.0, 0.0, 0.6, 0.8, 0.0, f64::INFINITY],
+    ];
+    let rays = rays_from_rows(&rows, "rays").unwrap();
+    for precision in [Precision::F32, Precision::F64] {
+        let (r, _) = scan(&f, &rays, precision).unwrap();
+        for (k, want) in [0.001, 0.001 / 0.6].into_iter().enumerate() {
+            let t = r.hits[k][3];
+            let band = if precision == Precision::F32 {
+                0.05
+            } else {
+                1e-9
+            };
+            assert!(
+                (t - want).abs() <= band,
+                "{precision:?} ray {k}: t {t}, want {want}"
+            );
+            assert_eq!(r.ids[k][0], 1, "the hall's own surface");
+        }
+    }
+}

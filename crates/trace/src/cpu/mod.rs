@@ -173,11 +173,31 @@ impl<T: Real> CpuScene<T> {
             }
             break;
         }
-        let mut best = current.and_then(|c| self.cross_instance(c as usize, ray, tmin, tmax, None));
+        let mut best = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax));
         for &d in candidates {
             best = self.cross_instance(d as usize, ray, tmin, tmax, best);
         }
         best
+    }
+
+    /// Where the ray leaves the instance its origin was located in. An origin within the
+    /// surface tolerance of that instance's surface, moving out, has its exit suppressed as
+    /// the surface it starts on; the navigator's answer is then that surface, found again
+    /// with the start moved back by the tolerance band.
+    fn exit(&self, index: usize, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+        self.cross_instance(index, ray, tmin, tmax, None)
+            .or_else(|| {
+                let [lo, hi] = &self.placements[index].bounds;
+                let size = (hi.x - lo.x).max(hi.y - lo.y).max(hi.z - lo.z);
+                let o = ray.origin;
+                let scale = size + o.x.abs().max(o.y.abs()).max(o.z.abs());
+                let band = T::from_f64(4.0) * T::SURFACE_TOLERANCE * scale;
+                self.cross_instance(index, ray, tmin - band, tmax, None)
+                    .map(|h| Hit {
+                        t: h.t.max(tmin),
+                        ..h
+                    })
+            })
     }
 
     /// The first surface crossing with `tmin < t < tmax` of a ray with a unit direction,

@@ -25,15 +25,35 @@ pub const GDML_MESH_TOLERANCE: f64 = 1e-3;
 /// Most instances a file may expand into (about 2 GB of Foundry).
 const MAX_INSTANCES: u64 = 10_000_000;
 
-/// How many instances each logical volume expands into with its whole subtree, saturating.
-/// Daughters always refer to volumes defined earlier, so one pass in order suffices.
+/// How many instances each logical volume expands into with its whole subtree, saturating
+/// (an iterative post-order walk; the volume graph has no cycles, since a volume can only
+/// place volumes defined before it or in other files).
 fn subtree_sizes(g: &Gdml) -> Vec<u64> {
-    let mut sizes: Vec<u64> = Vec::with_capacity(g.volumes.len());
-    for lv in &g.volumes {
-        let below = lv.daughters.iter().fold(0u64, |n, d| {
-            n.saturating_add(sizes.get(d.volume).copied().unwrap_or(u64::MAX))
-        });
-        sizes.push(below.saturating_add(1));
+    const UNKNOWN: u64 = 0;
+    let mut sizes = vec![UNKNOWN; g.volumes.len()];
+    for root in 0..g.volumes.len() {
+        let mut stack = vec![root];
+        while let Some(&v) = stack.last() {
+            if sizes[v] != UNKNOWN {
+                stack.pop();
+                continue;
+            }
+            let pending: Vec<usize> = g.volumes[v]
+                .daughters
+                .iter()
+                .map(|d| d.volume)
+                .filter(|&d| sizes[d] == UNKNOWN)
+                .collect();
+            if pending.is_empty() {
+                sizes[v] = g.volumes[v]
+                    .daughters
+                    .iter()
+                    .fold(1u64, |n, d| n.saturating_add(sizes[d.volume]));
+                stack.pop();
+            } else {
+                stack.extend(pending);
+            }
+        }
     }
     sizes
 }
