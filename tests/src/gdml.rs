@@ -22,7 +22,8 @@ pub fn gdml_dir() -> PathBuf {
     dir
 }
 
-/// Every `.gdml` file under [`gdml_dir`], sorted.
+/// Every `.gdml` file under [`gdml_dir`], sorted, then the project's own files of
+/// `tests/data/gdml` (features the public files do not use).
 pub fn gdml_files() -> Vec<PathBuf> {
     fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
         for e in std::fs::read_dir(dir).unwrap().flatten() {
@@ -37,6 +38,13 @@ pub fn gdml_files() -> Vec<PathBuf> {
     let mut files = Vec::new();
     walk(&gdml_dir(), &mut files);
     files.sort();
+    let mut own = Vec::new();
+    walk(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("data/gdml"),
+        &mut own,
+    );
+    own.sort();
+    files.extend(own);
     files
 }
 

@@ -473,10 +473,27 @@ impl<'a, 'input> Reader<'a, 'input> {
                 ];
                 let rotation = [ang("rx")?, ang("ry")?, ang("rz")?];
                 let translation = [len("dx")?, len("dy")?, len("dz")?];
+                // G4ReflectedSolid(solid, T) with T = G4Transform3D(rot, d) * G4Scale3D(s)
+                // maps the reflected solid's points into the constituent's frame
+                // (its Inside(p) asks the constituent about T p), so the constituent is
+                // placed by the inverse of T.
+                let s = [
+                    [scale[0], 0.0, 0.0],
+                    [0.0, scale[1], 0.0],
+                    [0.0, 0.0, scale[2]],
+                ];
+                let t = crate::gdml::structure::affine(
+                    mul(&rotation_matrix(rotation), &s),
+                    translation,
+                );
+                let inverse = t
+                    .inverse()
+                    .ok_or_else(|| self.error(n, format!("singular reflection scale {scale:?}")))?;
+                let r = &inverse.rows;
                 G4Solid::Displaced(PlacedSolid {
                     solid: Box::new(solid),
-                    matrix: placement_matrix(rotation, scale),
-                    translation,
+                    matrix: std::array::from_fn(|i| [r[i][0], r[i][1], r[i][2]]),
+                    translation: [r[0][3], r[1][3], r[2][3]],
                 })
             }
             _ => return Ok(None),
