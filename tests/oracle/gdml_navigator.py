@@ -612,7 +612,6 @@ class Walker:
         outwards, at a log-uniform distance in 10^NEAR_SURFACE_LOG10 mm
         (GetPointOnSurface draws from Geant4's own random engine, which
         starts from the same state in every process)."""
-        g4 = self.g4
         try:
             p = solid.GetPointOnSurface()
             n = np3(solid.SurfaceNormal(p))

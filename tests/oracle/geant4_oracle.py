@@ -2272,6 +2272,60 @@ _TUBS_ALTERNATIVES = ["linear", "rot_sign", "from_zero", "end_radii",
                       "cylinders"]
 
 
+def _check_formula(st, g4, solid, spec, pts, signed_distance, alternatives,
+                   rng, n_rays, box):
+    """Steps 1 and 2 of describe_twisted for one solid: the classification of
+    pts by the formula signed_distance(spec, pts) and by each wrong
+    candidate alternatives[a](spec, pts) against Inside, then the formula at
+    the boundary found by bisecting Inside and at the hit points of
+    DistanceToOut (from inside points) and DistanceToIn (from outside points
+    aimed into box = (centre, half, size)); counts go into st."""
+    V = g4.G4ThreeVector
+    k_in, k_out = g4.EInside.kInside, g4.EInside.kOutside
+    k_surf = g4.EInside.kSurface
+    inside = solid.Inside
+    dto = distance_to_out(g4, solid)
+    centre, half, size = box
+    sd = signed_distance(spec, pts)
+    g = [inside(V(*p)) for p in pts.tolist()]
+    g_in = np.array([c == k_in for c in g])
+    g_out = np.array([c == k_out for c in g])
+    far = np.abs(sd) > 1e-6
+    st["points"] += len(pts)
+    st["skipped_near_surface"] += int(np.count_nonzero(~far))
+    bad = far & (((sd < 0) & ~g_in) | ((sd > 0) & ~g_out))
+    st["disagree"] += int(np.count_nonzero(bad))
+    for a, formula in alternatives.items():
+        sa = formula(spec, pts)
+        fa = np.abs(sa) > 1e-6
+        st["alternatives_disagree"][a] += int(np.count_nonzero(
+            fa & (((sa < 0) & ~g_in) | ((sa > 0) & ~g_out))))
+    starts = pts[g_in][:n_rays]
+    dirs = snap_directions(_isotropic_batch(rng, len(starts)))
+    for o, v in zip(starts.tolist(), dirs.tolist()):
+        o, v = np.array(o), np.array(v)
+        a, b = 0.0, 4.0 * size
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            if inside(V(*(o + m * v))) == k_in:
+                a = m
+            else:
+                b = m
+        q = o + 0.5 * (a + b) * v
+        e = abs(float(signed_distance(spec, q[None])[0]))
+        st["bisect_points"] += 1
+        st["bisect_max_abs_sd"] = max(st["bisect_max_abs_sd"], e)
+        _check_hit(st, spec, inside, V, k_surf, o, v, dto(V(*o), V(*v)),
+                   "dist_out_misses")
+    outs = pts[g_out][:n_rays]
+    tgt = _round_f32(centre + rng.uniform(-0.8, 0.8, (len(outs), 3)) * half)
+    dirs = snap_directions(tgt - outs)
+    for o, v in zip(outs.tolist(), dirs.tolist()):
+        o, v = np.array(o), np.array(v)
+        _check_hit(st, spec, inside, V, k_surf, o, v,
+                   solid.DistanceToIn(V(*o), V(*v)), "dist_in_misses")
+
+
 def describe_twisted_tubs(g4, builder, solids=8, n_points=2000, n_rays=200,
                           seed=20240611):
     """The checks of describe_twisted for twistedTubs and its formula
@@ -2301,7 +2355,6 @@ def describe_twisted_tubs(g4, builder, solids=8, n_points=2000, n_rays=200,
         spec = gen_twisted_tubs(rng, i, log_uniform(rng, 3, 200))
         solid = builder.build(spec)
         inside = solid.Inside
-        dto = distance_to_out(g4, solid)
         lo, hi = bounding_box(g4, solid)
         size = float(np.max(hi - lo))
         centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -2312,45 +2365,11 @@ def describe_twisted_tubs(g4, builder, solids=8, n_points=2000, n_rays=200,
         off = rng.uniform(-0.02, 0.02, n_points - n_box) * size
         pts[n_box:] = on + off[:, None] * nrm
         pts = _round_f32(pts)
-        sd = twisted_tubs_signed_distance(spec, pts)
-        g = [inside(V(*p)) for p in pts.tolist()]
-        g_in = np.array([c == k_in for c in g])
-        g_out = np.array([c == k_out for c in g])
-        far = np.abs(sd) > 1e-6
-        st["points"] += n_points
-        st["skipped_near_surface"] += int(np.count_nonzero(~far))
-        bad = far & (((sd < 0) & ~g_in) | ((sd > 0) & ~g_out))
-        st["disagree"] += int(np.count_nonzero(bad))
-        for a in _TUBS_ALTERNATIVES:
-            sa = twisted_tubs_signed_distance(spec, pts, a)
-            fa = np.abs(sa) > 1e-6
-            st["alternatives_disagree"][a] += int(np.count_nonzero(
-                fa & (((sa < 0) & ~g_in) | ((sa > 0) & ~g_out))))
-        starts = pts[g_in][:n_rays]
-        dirs = snap_directions(_isotropic_batch(rng, len(starts)))
-        for o, v in zip(starts.tolist(), dirs.tolist()):
-            o, v = np.array(o), np.array(v)
-            a, b = 0.0, 4.0 * size
-            for _ in range(60):
-                m = 0.5 * (a + b)
-                if inside(V(*(o + m * v))) == k_in:
-                    a = m
-                else:
-                    b = m
-            q = o + 0.5 * (a + b) * v
-            e = abs(float(twisted_tubs_signed_distance(spec, q[None])[0]))
-            st["bisect_points"] += 1
-            st["bisect_max_abs_sd"] = max(st["bisect_max_abs_sd"], e)
-            _check_hit(st, spec, inside, V, k_surf, o, v, dto(V(*o), V(*v)),
-                       "dist_out_misses")
-        outs = pts[g_out][:n_rays]
-        tgt = _round_f32(centre + rng.uniform(-0.8, 0.8, (len(outs), 3))
-                         * half)
-        dirs = snap_directions(tgt - outs)
-        for o, v in zip(outs.tolist(), dirs.tolist()):
-            o, v = np.array(o), np.array(v)
-            _check_hit(st, spec, inside, V, k_surf, o, v,
-                       solid.DistanceToIn(V(*o), V(*v)), "dist_in_misses")
+        alternatives = {
+            a: (lambda sp, p, a=a: twisted_tubs_signed_distance(sp, p, a))
+            for a in _TUBS_ALTERNATIVES}
+        _check_formula(st, g4, solid, spec, pts, twisted_tubs_signed_distance,
+                       alternatives, rng, n_rays, (centre, half, size))
         on, nrm, edge = _tubs_ruled_points(spec, rng, n_rays)
         eps = 1e-6 * (1.0 + size)
         for j in range(n_rays):
@@ -2439,7 +2458,6 @@ def describe_twisted(g4, builder, solids_per_kind=8, n_points=2000,
             spec = GENERATORS[kind](rng, i, log_uniform(rng, 3, 200))
             solid = builder.build(spec)
             inside = solid.Inside
-            dto = distance_to_out(g4, solid)
             lo, hi = bounding_box(g4, solid)
             size = float(np.max(hi - lo))
             centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -2455,46 +2473,12 @@ def describe_twisted(g4, builder, solids_per_kind=8, n_points=2000,
             pts[n_box:, :2] = shell[0] + off[:, None] * shell[1]
             pts[n_box:, 2] = shell[2]
             pts = _round_f32(pts)
-            sd = twisted_signed_distance(spec, pts)
-            g = [inside(V(*p)) for p in pts.tolist()]
-            g_in = np.array([c == k_in for c in g])
-            g_out = np.array([c == k_out for c in g])
-            far = np.abs(sd) > 1e-6
-            st["points"] += n_points
-            st["skipped_near_surface"] += int(np.count_nonzero(~far))
-            bad = far & (((sd < 0) & ~g_in) | ((sd > 0) & ~g_out))
-            st["disagree"] += int(np.count_nonzero(bad))
-            for a in alts:
-                sa = _candidate_distance(spec, pts, a)
-                fa = np.abs(sa) > 1e-6
-                st["alternatives_disagree"][a] += int(np.count_nonzero(
-                    fa & (((sa < 0) & ~g_in) | ((sa > 0) & ~g_out))))
             # 2. surface points: bisection of Inside, Geant4's distances
-            starts = pts[g_in][:n_rays]
-            dirs = snap_directions(_isotropic_batch(rng, len(starts)))
-            for o, v in zip(starts.tolist(), dirs.tolist()):
-                o, v = np.array(o), np.array(v)
-                a, b = 0.0, 4.0 * size
-                for _ in range(60):
-                    m = 0.5 * (a + b)
-                    if inside(V(*(o + m * v))) == k_in:
-                        a = m
-                    else:
-                        b = m
-                q = o + 0.5 * (a + b) * v
-                e = abs(float(twisted_signed_distance(spec, q[None])[0]))
-                st["bisect_points"] += 1
-                st["bisect_max_abs_sd"] = max(st["bisect_max_abs_sd"], e)
-                _check_hit(st, spec, inside, V, k_surf, o, v,
-                           dto(V(*o), V(*v)), "dist_out_misses")
-            outs = pts[g_out][:n_rays]
-            tgt = _round_f32(centre + rng.uniform(-0.8, 0.8, (len(outs), 3))
-                             * half)
-            dirs = snap_directions(tgt - outs)
-            for o, v in zip(outs.tolist(), dirs.tolist()):
-                o, v = np.array(o), np.array(v)
-                _check_hit(st, spec, inside, V, k_surf, o, v,
-                           solid.DistanceToIn(V(*o), V(*v)), "dist_in_misses")
+            alternatives = {
+                a: (lambda sp, p, a=a: _candidate_distance(sp, p, a))
+                for a in alts}
+            _check_formula(st, g4, solid, spec, pts, twisted_signed_distance,
+                           alternatives, rng, n_rays, (centre, half, size))
             # 3. ruled sides
             on, nrm, zs, us = _ruled_points(spec, rng, n_rays)
             eps = 1e-6 * (1.0 + size)
