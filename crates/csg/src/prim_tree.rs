@@ -10,7 +10,9 @@
 //! skipped by querying that child again after it.
 //!
 //! Signed distances (and so inside tests) walk the tree in postorder with the same index
-//! arithmetic and a value stack.
+//! arithmetic and a value stack. Points where the distance is about 0 on faces that members
+//! of a union share (inside the union, though on its members' surfaces) are told from
+//! points of the surface by rays from them (see [`PrimTree::contains`]).
 
 use std::ops::Range;
 
@@ -49,6 +51,9 @@ pub struct PrimTree<T> {
     height: u32,
     bounds: Bounds<T>,
     scale: T,
+    /// The surface tolerance at the farthest point of `bounds`: the most it is at a point
+    /// near the surface.
+    near_max: T,
 }
 
 /// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
@@ -86,6 +91,46 @@ pub fn ray_meets_bounds<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax
             continue;
         }
         let (ta, tb) = ((a - o) / d, (b - o) / d);
+        lo = lo.max(ta.min(tb));
+        hi = hi.min(ta.max(tb));
+    }
+    lo <= hi
+}
+
+/// A ray set up for slab tests against boxes widened by `pad` on every side: its origin
+/// moved by `+pad` and `-pad` (testing the lower and upper faces a widened box moves by
+/// `-pad` and `+pad`), so that each test costs what an exact one does.
+struct Widened<T> {
+    up: V3<T>,
+    down: V3<T>,
+    direction: V3<T>,
+}
+
+impl<T: Real> Widened<T> {
+    fn new(ray: &Ray<T>, pad: T) -> Self {
+        let pad = V3::new(pad, pad, pad);
+        Widened {
+            up: ray.origin + pad,
+            down: ray.origin - pad,
+            direction: ray.direction,
+        }
+    }
+}
+
+/// Whether `ray` meets `bounds` widened by its pad at some parameter in `[tmin, tmax]`.
+fn meets_widened<T: Real>(ray: &Widened<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> bool {
+    let (mut lo, mut hi) = (tmin, tmax);
+    for k in 0..3 {
+        let d = ray.direction.get(k);
+        let (a, b) = (bounds[0].get(k), bounds[1].get(k));
+        let (up, down) = (ray.up.get(k), ray.down.get(k));
+        if d == T::ZERO {
+            if up < a || down > b {
+                return false;
+            }
+            continue;
+        }
+        let (ta, tb) = ((a - up) / d, (b - down) / d);
         lo = lo.max(ta.min(tb));
         hi = hi.min(ta.max(tb));
     }
@@ -228,16 +273,23 @@ impl<T: Real> PrimTree<T> {
                 _ => Slot::Leaf(make_leaf(foundry, index, &mut planes).map_err(err)?),
             });
         }
-        let bounds = bounds_of(&p.aabb);
-        let size = bounds[1] - bounds[0];
-        let scale = T::HALF * size.max_abs();
+        let [lo, hi] = bounds_of(&p.aabb);
+        let scale = T::HALF * (hi - lo).max_abs();
+        let scale = if scale.is_finite() { scale } else { T::ONE };
+        // Widened like list members' boxes (see `list_step`): culling the prim by them must
+        // never drop a crossing of a ray grazing a face its box shares.
+        let pad = tolerance(scale, lo.max_abs().max(hi.max_abs()));
+        let pad = if pad.is_finite() { pad } else { T::ZERO };
+        let pad = V3::new(pad, pad, pad);
+        let bounds = [lo - pad, hi + pad];
         Ok(PrimTree {
             slots,
             members,
             planes,
             height,
+            near_max: tolerance(scale, bounds[0].max_abs().max(bounds[1].max_abs())),
             bounds,
-            scale: if scale.is_finite() { scale } else { T::ONE },
+            scale,
         })
     }
 
@@ -257,7 +309,8 @@ impl<T: Real> PrimTree<T> {
         Self::from_foundry(&f, 0)
     }
 
-    /// Bounds of the prim in its solid's frame.
+    /// Bounds of the prim in its solid's frame, widened by the surface tolerance (so that a
+    /// ray the prim's surfaces hold is never culled by them).
     pub fn bounds(&self) -> &Bounds<T> {
         &self.bounds
     }
@@ -373,7 +426,7 @@ impl<T: Real> PrimTree<T> {
     /// First crossing of an n-ary union or intersection: walks the members' crossings in
     /// order, counting how many members the ray is inside, until the count crosses the
     /// operator's threshold (more than zero for unions, all for intersections). Members
-    /// whose bounds the ray misses are skipped without intersecting them.
+    /// whose bounds the ray misses by more than the tolerance are skipped unintersected.
     fn list_step(
         &self,
         code: TypeCode,
@@ -387,7 +440,16 @@ impl<T: Real> PrimTree<T> {
             TypeCode::ListOverlap => count == all,
             _ => count > 0,
         };
-        if !ray_meets_bounds(ray, bounds, tmin, T::INFINITY) {
+        // The bounds are exact (rounded outward) boxes of the true members, but a member's
+        // own surfaces, evaluated in `T`, may hold a ray that grazes one of its faces a
+        // rounding error outside its box (a ray along a face two members share, say): the
+        // boxes are widened by the tolerance of crossings as far out as the list's box, so
+        // that culling never changes the answer.
+        let reach = (ray.origin - bounds[0])
+            .max_abs()
+            .max((ray.origin - bounds[1]).max_abs());
+        let widened = Widened::new(ray, self.tol(tmin.abs() + reach));
+        if !meets_widened(&widened, bounds, tmin, T::INFINITY) {
             return Step::miss(false);
         }
         let mut tau = tmin;
@@ -396,7 +458,7 @@ impl<T: Real> PrimTree<T> {
             let (mut entries, mut exits) = (0usize, 0usize);
             let (mut entry_normal, mut exit_normal) = (V3::zero(), V3::zero());
             for (leaf, b) in &self.members[members.clone()] {
-                if !ray_meets_bounds(ray, b, tau, T::INFINITY) {
+                if !meets_widened(&widened, b, tau, T::INFINITY) {
                     continue;
                 }
                 let s = leaf.step(&self.planes, ray, tau, self.tol(tau));
@@ -496,10 +558,107 @@ impl<T: Real> PrimTree<T> {
         }
     }
 
-    /// Whether a point of the solid's frame is inside the prim.
-    pub fn contains(&self, x: V3<T>) -> bool {
-        self.sdf(x) < T::ZERO
+    /// The signed distance of the subtree at `position`, and whether one of its unions
+    /// (binary or list) has `x` within `near` of, but not inside, two or more of its
+    /// children: on a face they share, say, where the union's value is 0 although the point
+    /// may lie inside the union. For the rare points near a surface only (recursive).
+    fn seam(&self, position: usize, x: V3<T>, near: T) -> (T, bool) {
+        match &self.slots[position - 1] {
+            Slot::Empty => (T::INFINITY, false),
+            Slot::Leaf(leaf) => (leaf.sdf(&self.planes, x), false),
+            Slot::List { code, members, .. } => {
+                let sdfs = self.members[members.clone()]
+                    .iter()
+                    .map(|(leaf, _)| leaf.sdf(&self.planes, x));
+                if *code == TypeCode::ListOverlap {
+                    return (sdfs.fold(-T::INFINITY, T::max), false);
+                }
+                let (v, close) = sdfs.fold((T::INFINITY, 0usize), |(v, close), s| {
+                    (v.min(s), close + (s <= near) as usize)
+                });
+                (v, close > 1 && v >= T::ZERO)
+            }
+            Slot::Operator(code) => {
+                let (a, seam_a) = self.seam(2 * position, x, near);
+                let (b, seam_b) = self.seam(2 * position + 1, x, near);
+                let (v, seam) = match code {
+                    TypeCode::Union => (a.min(b), a.max(b) <= near && a.min(b) >= T::ZERO),
+                    TypeCode::Intersection => (a.max(b), false),
+                    _ => (a.max(-b), false),
+                };
+                (v, seam || seam_a || seam_b)
+            }
+        }
     }
+
+    /// Whether a point of the solid's frame is inside the prim: in its interior, so that
+    /// points of its surface are outside, but points of faces its members share inside.
+    ///
+    /// The signed distance decides, except where it is within the surface tolerance of 0,
+    /// not negative, and some union has the point that near two or more of its children (a
+    /// rare case: the point must lie on two surfaces at once). The point is then inside if
+    /// rays from it in 32 directions spread over the sphere start inside by
+    /// [`Self::first_crossing`] (which hides the faces members share): on a face or edge
+    /// the members share they do; on the solid's surface the rays leaving it do not (at a
+    /// reflex edge, if the outside wedge is wider than about 55 degrees). Rays that cross
+    /// a surface close to the point, where rounding may decide, are left out.
+    pub fn contains(&self, x: V3<T>) -> bool {
+        let v = self.sdf(x);
+        v < T::ZERO || (v <= self.near_max && self.inside_on_seam(x, v))
+    }
+
+    /// [`Self::contains`] for a point with signed distance `v`, not negative but possibly
+    /// within the surface tolerance.
+    #[cold]
+    #[inline(never)]
+    fn inside_on_seam(&self, x: V3<T>, v: T) -> bool {
+        let near = self.tol(x.max_abs());
+        v <= near && self.seam(1, x, near).1 && self.inside_by_probes(x, near)
+    }
+
+    /// Whether rays from `x` in [`SEAM_PROBES`] directions all start inside by
+    /// [`Self::first_crossing`]. A crossing within `2 near` is the surface the ray starts
+    /// on (its state is the one after that crossing), and a ray that crosses a surface
+    /// (another one) within `1000 near` is left out. On a shared face, a ray nearly along
+    /// it from a point rounded into the sliver between the members' rounded planes may
+    /// start outside both, or leave one, and enter the other about the sliver's width over
+    /// its angle to the face further on; on the solid's surface, a ray leaving it crosses
+    /// the surface it starts on a rounding error away (or not at all) and, if at all, the
+    /// solid again much farther away.
+    fn inside_by_probes(&self, x: V3<T>, near: T) -> bool {
+        let (start, far) = (T::TWO * near, T::from_f64(1000.0) * near);
+        let mut inside = false;
+        for k in 0..SEAM_PROBES {
+            let ray = Ray {
+                origin: x,
+                direction: V3::from_f64(probe_direction(k)),
+            };
+            let mut step = self.first_crossing(&ray, T::ZERO);
+            if step.t <= start {
+                step = self.first_crossing(&ray, step.t);
+            }
+            if step.t > far {
+                if !step.inside_before {
+                    return false;
+                }
+                inside = true;
+            }
+        }
+        inside
+    }
+}
+
+/// How many rays decide [`PrimTree::contains`] on faces that members share.
+const SEAM_PROBES: usize = 32;
+
+/// Unit direction `k` of [`SEAM_PROBES`] spread evenly over the sphere (a spherical
+/// Fibonacci set, turned so that none lies along an axis or a diagonal).
+fn probe_direction(k: usize) -> [f64; 3] {
+    let z = 1.0 - (2 * k + 1) as f64 / SEAM_PROBES as f64;
+    let r = (1.0 - z * z).sqrt();
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let phi = 1.68 + golden * k as f64;
+    [r * phi.cos(), r * phi.sin(), z]
 }
 
 /// The leaf of node `index`, its parameters and planes from the double-precision copies

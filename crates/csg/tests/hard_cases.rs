@@ -592,3 +592,135 @@ fn rays_parallel_to_a_270_degree_phi_cut_f32() {
 fn rays_parallel_to_a_270_degree_phi_cut_f64() {
     parallel_to_cut_case::<f64>();
 }
+
+fn contains<T: Real>(tree: &PrimTree<T>, p: [f64; 3]) -> bool {
+    tree.contains(V3::from_f64(p))
+}
+
+/// Boxes of side `s` centred on `c`, as one shape each.
+fn cube_at(s: f64, c: [f64; 3]) -> Shape {
+    box3(s, s, s).unwrap().translate(c[0], c[1], c[2])
+}
+
+fn shared_face_case<T: Real>() {
+    let name = T::NAME;
+    // Two boxes sharing the face x = 0 (a binary union): the face's points are inside, the
+    // solid's surface (where the face meets it too) outside.
+    let pair = prepared::<T>(&(cube_at(10.0, [-5.0, 0.0, 0.0]) + cube_at(10.0, [5.0, 0.0, 0.0])));
+    for p in [[0.0, 1.0, 2.0], [0.0, -4.9, 4.9], [0.0, 0.0, 0.0]] {
+        assert!(contains(&pair, p), "{name}: pair {p:?}");
+    }
+    for p in [
+        [0.0, 5.0, 2.0],
+        [0.0, 5.0, 5.0],
+        [0.0, -5.0, -5.0],
+        [10.0, 1.0, 2.0],
+        [-10.0, 0.0, 0.0],
+        [3.0, 5.0, 0.0],
+        [0.0, 5.0 + 1e-3, 0.0],
+        [20.0, 0.0, 0.0],
+    ] {
+        assert!(!contains(&pair, p), "{name}: pair {p:?}");
+    }
+    // Eight unit cubes of a 2 x 2 x 2 block (a list): faces, edges and the corner the
+    // members share are inside; the block's faces, edges and corners outside.
+    let mut block = None;
+    for c in [-0.5, 0.5] {
+        for d in [-0.5, 0.5] {
+            for e in [-0.5, 0.5] {
+                let cube = cube_at(1.0, [c, d, e]);
+                block = Some(match block {
+                    None => cube,
+                    Some(b) => b + cube,
+                });
+            }
+        }
+    }
+    let block = prepared::<T>(&block.unwrap());
+    assert_eq!(block.height(), 0, "{name}: the block is one list");
+    for p in [
+        [0.0, 0.3, -0.2],
+        [0.0, 0.0, 0.7],
+        [0.0, 0.0, 0.0],
+        [0.5, 0.0, 0.25],
+    ] {
+        assert!(contains(&block, p), "{name}: block {p:?}");
+    }
+    for p in [
+        [0.0, 0.0, 1.0],
+        [0.0, 1.0, 1.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.5],
+        [1.0, 1.0, 1.0],
+    ] {
+        assert!(!contains(&block, p), "{name}: block {p:?}");
+    }
+    // An L of two boxes sharing part of the face y = 1: the shared part is inside, the
+    // rest of that face and the reflex edge at x = y = 1 are the surface.
+    let l = prepared::<T>(
+        &(box3(2.0, 1.0, 1.0).unwrap().translate(1.0, 0.5, 0.5)
+            + box3(1.0, 1.0, 1.0).unwrap().translate(0.5, 1.5, 0.5)),
+    );
+    assert!(contains(&l, [0.5, 1.0, 0.5]), "{name}: L shared face");
+    for p in [
+        [1.0, 1.0, 0.5],
+        [1.5, 1.0, 0.5],
+        [0.0, 1.0, 0.5],
+        [0.5, 1.0, 1.0],
+    ] {
+        assert!(!contains(&l, p), "{name}: L {p:?}");
+    }
+    // Nested: the union's shared face is inside where the rest of the tree keeps it.
+    let halves = cube_at(10.0, [-5.0, 0.0, 0.0]) + cube_at(10.0, [5.0, 0.0, 0.0]);
+    let carved = prepared::<T>(&(halves.clone() - cube_at(4.0, [0.0, 3.0, 0.0])));
+    assert!(contains(&carved, [0.0, -2.0, 0.0]), "{name}: carved");
+    assert!(!contains(&carved, [0.0, 3.0, 0.0]), "{name}: carved hole");
+    assert!(
+        !contains(&carved, [0.0, 1.0, 0.0]),
+        "{name}: carved hole face"
+    );
+    let cut = prepared::<T>(&(halves * cube_at(6.0, [0.0, 0.0, 0.0])));
+    assert!(contains(&cut, [0.0, 1.0, 1.0]), "{name}: cut");
+    assert!(!contains(&cut, [0.0, 3.0, 1.0]), "{name}: cut face");
+
+    // The pair turned and moved: points of the shared face, rounded to T, are inside;
+    // points of the solid's surface are as the signed distance says (outside when on it).
+    let axis = [1.0, 2.0, 3.0];
+    let placed = |s: Shape| s.rotate(axis, 0.7).translate(5.0, -3.0, 2.0);
+    let turned = prepared::<T>(&placed(
+        cube_at(10.0, [-5.0, 0.0, 0.0]) + cube_at(10.0, [5.0, 0.0, 0.0]),
+    ));
+    let place = hytrace_foundry::Transform64::translation([5.0, -3.0, 2.0])
+        .compose(&hytrace_foundry::Transform64::rotation(axis, 0.7));
+    let mut rng = Rng(71);
+    for _ in 0..500 {
+        let local = [0.0, rng.range(-4.9, 4.9), rng.range(-4.9, 4.9)];
+        let p = f32_exact(place.apply_point(local));
+        assert!(contains(&turned, p), "{name}: turned shared face {local:?}");
+        // On the outer face x = 10, and where the shared face meets the top.
+        let q = f32_exact(place.apply_point([10.0, local[1], local[2]]));
+        let x = V3::from_f64(q);
+        assert_eq!(
+            turned.contains(x),
+            turned.sdf(x) < T::ZERO,
+            "{name}: turned outer face {local:?}"
+        );
+        let edge = place.apply_point([0.0, 5.0, local[2]]);
+        let e = V3::from_f64(edge);
+        assert_eq!(
+            turned.contains(e),
+            turned.sdf(e) < T::ZERO,
+            "{name}: turned edge {local:?}"
+        );
+    }
+}
+
+#[test]
+fn points_of_faces_members_share_are_inside_f32() {
+    shared_face_case::<f32>();
+}
+
+#[test]
+fn points_of_faces_members_share_are_inside_f64() {
+    shared_face_case::<f64>();
+}

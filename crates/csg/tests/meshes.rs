@@ -523,6 +523,13 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
                     section_point(s, p)
                 };
                 let o = lerp3(at(sa), at(sb), v);
+                // The face's points are inside (the members' signed distances are 0 there,
+                // or about the rounding of the point to T).
+                assert!(
+                    !inside(o) || csg.contains(V3::from_f64(o)),
+                    "{name} {}: {o:?} on a shared face",
+                    T::NAME
+                );
                 // Across the face from either side, and from a point on it.
                 let d = rng.unit();
                 let n = [d[0], d[1], d[2]];
@@ -547,17 +554,38 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
                 let along = unit3(std::array::from_fn(|k| {
                     let e1 = section_point(sa, poly[j])[k] - section_point(sa, poly[i])[k];
                     let e2 = at(sb)[k] - at(sa)[k];
-                    let c = f1 * e1 + f2 * e2;
-                    // Rounding leaves ~1e-17 across an axis-aligned face: make it exactly 0
-                    // (see `list_culling_of_a_ray_grazing_a_shared_face` for why).
-                    if c.abs() < 1e-12 {
-                        0.0
-                    } else {
-                        c
-                    }
+                    // Rounding leaves ~1e-17 across an axis-aligned face (see
+                    // `list_culling_of_a_ray_grazing_a_shared_face`).
+                    f1 * e1 + f2 * e2
                 }));
                 check(o, along, "along a shared face");
                 check(o, along.map(|c| -c), "along a shared face");
+            }
+        }
+    }
+    // Where the shared faces meet the solid's surface (its side edges at the diagonals'
+    // corners, reflex or not, and its caps) the inside test is the signed distance's.
+    for &(i, j) in &diagonals {
+        let last = &secs[secs.len() - 1];
+        for _ in 0..10 {
+            let c = poly[if rng.next() < 0.5 { i } else { j }];
+            let k = (rng.next() * (secs.len() - 1) as f64) as usize;
+            let side = lerp3(
+                section_point(&secs[k], c),
+                section_point(&secs[k + 1], c),
+                rng.range(0.0, 1.0),
+            );
+            let u = rng.range(0.05, 0.95);
+            let p = [0, 1].map(|k| poly[i][k] + u * (poly[j][k] - poly[i][k]));
+            let cap = section_point(if rng.next() < 0.5 { &secs[0] } else { last }, p);
+            for o in [side, cap] {
+                let x = V3::<T>::from_f64(o);
+                assert_eq!(
+                    csg.contains(x),
+                    csg.sdf(x) < T::ZERO,
+                    "{name} {}: {o:?} on the surface",
+                    T::NAME
+                );
             }
         }
     }
@@ -568,6 +596,11 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
                 let u = rng.range(0.05, 0.95);
                 let p = [0, 1].map(|k| poly[i][k] + u * (poly[j][k] - poly[i][k]));
                 let e = section_point(s, p);
+                assert!(
+                    csg.contains(V3::from_f64(e)),
+                    "{name} {}: {e:?} on a shared edge",
+                    T::NAME
+                );
                 let d = rng.unit();
                 check(e, d, "from a shared edge");
                 let back = rng.range(0.2, 0.8);
@@ -631,16 +664,15 @@ fn xtru_csg_is_exact_and_hides_shared_faces_f64() {
     xtru_cases::<f64>();
 }
 
-/// Known limitation of `PrimTree` lists (prim_tree.rs, not fixed here): a list member is
-/// skipped when `ray_meets_bounds(ray, member_bounds, tau, inf)` fails, with no tolerance.
-/// A ray lying in a shared axis-aligned face (here the star's core/spike face x = 3 cos
-/// 22.5 deg), with a ~1e-17 direction component across it, leaves the core's bounding box
-/// at t = 0 by the slab test while the core's own plane (rounded the same way as the
-/// spike's) keeps it inside up to t = 0.41, where the spike's plane lets it go: the core
-/// is culled after the first step and the union reports a miss from outside. In f32 only
-/// (the ray origin rounds onto the box face; f64 origins keep the box's f32 slack).
+/// Regression: a list member was skipped when `ray_meets_bounds(ray, member_bounds, tau,
+/// inf)` failed, with no tolerance. A ray lying in a shared axis-aligned face (here the
+/// star's core/spike face x = 3 cos 22.5 deg), with a ~1e-17 direction component across it,
+/// leaves the core's bounding box at t = 0 by the slab test while the core's own plane
+/// (rounded the same way as the spike's) keeps it inside up to t = 0.41, where the spike's
+/// plane lets it go: the core was culled after the first step and the union reported a
+/// miss from outside. In f32 only (the ray origin rounds onto the box face; f64 origins
+/// keep the box's f32 slack). Members' boxes are now widened by the surface tolerance.
 #[test]
-#[ignore = "prim_tree.rs: list member culling has no tolerance"]
 fn list_culling_of_a_ray_grazing_a_shared_face() {
     let solid = G4Solid::Xtru {
         polygon: star(),
@@ -662,12 +694,11 @@ fn list_culling_of_a_ray_grazing_a_shared_face() {
     assert!((step.t - 5.480766).abs() < 1e-4, "{step:?}");
 }
 
-/// Known limitation of `PrimTree::contains` (prim_tree.rs, not fixed here): the union's
-/// signed distance is the minimum over its members, exactly 0 on a face two convex pieces
-/// share when the point lies on that plane in floating point, and `contains` wants it
-/// negative: the L's pieces meet on the diagonal x = y, and (-5, -5, 0) reads as outside.
+/// Regression: the union's signed distance is the minimum over its members, exactly 0 on
+/// a face two convex pieces share when the point lies on that plane in floating point, and
+/// `contains` wanted it negative: the L's pieces meet on the diagonal x = y, and (-5, -5,
+/// 0) read as outside.
 #[test]
-#[ignore = "prim_tree.rs: sdf < 0 puts exact points of shared faces outside"]
 fn points_exactly_on_a_shared_face_are_inside() {
     let solid = G4Solid::Xtru {
         polygon: l_polygon(),
