@@ -1,7 +1,7 @@
 //! The GDML document walk: errors with file, line and element path; `<define>`;
 //! expression evaluation; `<loop>`; the top-level sections.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use roxmltree::{Document, Node};
@@ -44,7 +44,7 @@ pub(crate) struct Matrix {
 #[derive(Default)]
 pub(crate) struct Defines {
     scalars: HashMap<String, f64>,
-    variables: HashMap<String, ()>,
+    variables: HashSet<String>,
     pub positions: HashMap<String, Vector>,
     pub rotations: HashMap<String, Vector>,
     pub scales: HashMap<String, Vector>,
@@ -318,7 +318,6 @@ impl<'a, 'input> Reader<'a, 'input> {
             .volume_index
             .get(&name)
             .ok_or_else(|| self.error(w, format!("unknown world volume `{name}`")))?;
-        self.out.warnings.shrink_to_fit();
         Ok(())
     }
 
@@ -350,7 +349,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             return Err(self.error(node, format!("loops nest deeper than {MAX_LOOP_DEPTH}")));
         }
         let var = self.text_attr(node, "for")?.trim().to_string();
-        if !self.defines.variables.contains_key(&var) {
+        if !self.defines.variables.contains(&var) {
             return Err(self.error(node, format!("loop variable `{var}` is not a <variable>")));
         }
         let integer = |r: &Self, attr: &str, default: f64| -> Result<i64, GdmlError> {
@@ -420,7 +419,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             }
             "variable" => {
                 let v = self.required(node, "value")?;
-                self.defines.variables.insert(name.clone(), ());
+                self.defines.variables.insert(name.clone());
                 self.define_scalar(node, name, v)
             }
             "quantity" => {
