@@ -104,7 +104,7 @@ mod tests {
             for _ in 0..300 {
                 let p: [f64; 3] =
                     std::array::from_fn(|k| b.aabb[k] as f64 + rng(&mut state) * BRICK_SIZE as f64);
-                let v = g.sample_trilinear(p);
+                let v = crate::sample_trilinear(&g, p);
                 assert!(
                     v >= b.value_min as f64 - 1e-6 && v <= b.value_max as f64 + 1e-6,
                     "{v} outside {}..{} at {p:?}",
@@ -119,7 +119,7 @@ mod tests {
                 g.origin[k] as f64 - 12.0 + rng(&mut state) * (g.dims[k] as f64 + 24.0)
             });
             if !bricks.iter().any(|b| contains(b, p)) {
-                assert_eq!(g.sample_trilinear(p), 0.0, "{p:?}");
+                assert_eq!(crate::sample_trilinear(&g, p), 0.0, "{p:?}");
             }
         }
     }
@@ -145,7 +145,7 @@ mod tests {
             let q = p.map(|v| v + 0.5);
             assert!(bricks
                 .iter()
-                .any(|b| contains(b, q) && b.value_max >= g.sample_trilinear(q) as f32));
+                .any(|b| contains(b, q) && b.value_max >= crate::sample_trilinear(&g, q) as f32));
         }
     }
 

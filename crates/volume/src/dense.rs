@@ -1,4 +1,6 @@
-//! Dense voxel grids in index space and their reference lookups.
+//! Dense voxel grids in index space.
+
+use crate::grid::{Coord, GridMap, VoxelGrid, BLOCK_SIDE};
 
 /// A grid that cannot be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -16,6 +18,8 @@ pub struct DenseGrid {
     pub values: Vec<f32>,
     /// Value of every voxel outside the box (and of inactive voxels).
     pub background: f32,
+    /// Index-to-world map.
+    pub map: GridMap,
 }
 
 impl DenseGrid {
@@ -35,6 +39,7 @@ impl DenseGrid {
                 dims,
                 values: vec![background; n],
                 background,
+                map: GridMap::IDENTITY,
             }),
             _ => Err(VolumeError(format!(
                 "impossible grid: origin {origin:?}, dims {dims:?}, background {background}"
@@ -69,38 +74,43 @@ impl DenseGrid {
             None => false,
         }
     }
+}
 
-    /// Nearest lookup at index-space point `p`: the voxel at `floor(p + 0.5)`.
-    pub fn sample_nearest(&self, p: [f64; 3]) -> f32 {
-        self.get(p.map(|c| (c + 0.5).floor() as i64))
+impl VoxelGrid for DenseGrid {
+    fn background(&self) -> f32 {
+        self.background
     }
 
-    /// Trilinear lookup at index-space point `p` (OpenVDB's box sampler), in f64.
-    pub fn sample_trilinear(&self, p: [f64; 3]) -> f64 {
-        let base = p.map(|c| c.floor());
-        let frac: [f64; 3] = std::array::from_fn(|k| p[k] - base[k]);
-        let mut sum = 0.0;
-        for corner in 0..8 {
-            let offset = [0, 1, 2].map(|k| (corner >> k & 1) as i64);
-            let weight: f64 = (0..3)
-                .map(|k| {
-                    if offset[k] == 1 {
-                        frac[k]
-                    } else {
-                        1.0 - frac[k]
-                    }
-                })
-                .product();
-            let ijk: [i64; 3] = std::array::from_fn(|k| base[k] as i64 + offset[k]);
-            sum += weight * self.get(ijk) as f64;
+    fn voxel(&self, ijk: Coord) -> f32 {
+        self.get(ijk.map(i64::from))
+    }
+
+    fn block_origins(&self) -> Vec<Coord> {
+        let b = BLOCK_SIDE as i64;
+        let lo: [i64; 3] = std::array::from_fn(|k| (self.origin[k] as i64).div_euclid(b));
+        let hi: [i64; 3] = std::array::from_fn(|k| {
+            (self.origin[k] as i64 + self.dims[k] as i64 - 1).div_euclid(b)
+        });
+        let mut out = Vec::new();
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    out.push([x, y, z].map(|c| (c * b) as i32));
+                }
+            }
         }
-        sum
+        out
+    }
+
+    fn map(&self) -> &GridMap {
+        &self.map
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{sample_nearest, sample_trilinear};
 
     #[test]
     fn lookups_follow_the_voxel_centre_convention() {
@@ -109,12 +119,12 @@ mod tests {
             g.set([x, 0, 5], i as f32);
         }
         assert_eq!(g.get([-3, 0, 5]), 0.0);
-        assert_eq!(g.sample_nearest([-0.51, 0.2, 5.4]), 1.0);
-        assert_eq!(g.sample_nearest([-0.5, 0.2, 5.4]), 2.0);
+        assert_eq!(sample_nearest(&g, [-0.51, 0.2, 5.4]), 1.0);
+        assert_eq!(sample_nearest(&g, [-0.5, 0.2, 5.4]), 2.0);
         // Halfway between voxel -1 (value 1) and voxel 0 (value 2), on the voxel row.
-        assert!((g.sample_trilinear([-0.5, 0.0, 5.0]) - 1.5).abs() < 1e-12);
+        assert!((sample_trilinear(&g, [-0.5, 0.0, 5.0]) - 1.5).abs() < 1e-12);
         // A quarter voxel above the row blends with background 0 along y.
-        assert!((g.sample_trilinear([-0.5, 0.25, 5.0]) - 1.125).abs() < 1e-12);
+        assert!((sample_trilinear(&g, [-0.5, 0.25, 5.0]) - 1.125).abs() < 1e-12);
         assert!(DenseGrid::new([i32::MAX, 0, 0], [2, 1, 1], 0.0).is_err());
         assert!(DenseGrid::new([0; 3], [1, 1, 1], f32::NAN).is_err());
     }

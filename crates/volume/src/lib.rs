@@ -2,16 +2,24 @@
 //!
 //! Index-space convention (as OpenVDB and NanoVDB): voxel centres sit at integer coordinates;
 //! a nearest lookup reads the voxel at `floor(p + 0.5)`, a trilinear lookup blends the eight
-//! voxels around `p`; voxels outside the grid read as the background.
+//! voxels around `p`; inactive voxels and voxels outside the grid read as the background.
 //!
-//! [`DenseGrid`] holds voxels in a box of index space; [`fog_sphere`] makes one procedurally;
-//! [`bricks`] cuts a grid into 8^3 Foundry bricks whose value ranges include a one-voxel halo,
-//! so a brick's `value_max` bounds every trilinear lookup inside its bounds (a true majorant).
+//! Every voxel source ([`DenseGrid`], procedural grids such as [`fog_sphere`]) implements
+//! [`VoxelGrid`]; the lookups ([`sample`]) and the halo-inclusive range mips ([`RangeMips`])
+//! work on any of them. [`bricks`] cuts a grid into 8^3 Foundry bricks whose value ranges
+//! include a one-voxel halo, so a brick's `value_max` bounds every lookup inside its bounds.
 
 mod bricks;
 mod dense;
+mod grid;
 mod procedural;
+mod ranges;
 
 pub use bricks::{bricks, BRICK_SIZE};
 pub use dense::{DenseGrid, VolumeError};
+pub use grid::{
+    sample, sample_nearest, sample_stochastic, sample_trilinear, Coord, Filter, GridMap, VoxelGrid,
+    BLOCK_SIDE,
+};
 pub use procedural::fog_sphere;
+pub use ranges::{RangeLevel, RangeMips, ValueRange, MAX_RANGE_BLOCKS, RANGE_LEVELS};
