@@ -52,7 +52,7 @@ impl GridMap {
             .flatten()
             .chain(&translation)
             .all(|v| v.is_finite());
-        if !finite || !(det.abs() > 1e-12 * scale.powi(3)) {
+        if !finite || det.abs() <= 1e-12 * scale.powi(3) {
             return Err(VolumeError(format!(
                 "index-to-world map is singular or not finite: {matrix:?} + {translation:?}"
             )));
