@@ -2,12 +2,14 @@
 # Runs every check and test of hytrace, installing what cargo cannot:
 #  - Mesa's lavapipe Vulkan driver (Debian: mesa-vulkan-drivers, libvulkan1), so GPU tests
 #    run on machines without a GPU;
+#  - the OpenVDB/NanoVDB references (Debian: python3-openvdb for /usr/bin/python3,
+#    libnanovdb-tools, libopenvdb-tools), oracles of the volume tests;
 #  - the Python oracle environment (.venv, from tests/requirements.txt).
 # GPU and oracle tests fail (not skip) when their dependencies are missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-apt_packages=(mesa-vulkan-drivers libvulkan1)
+apt_packages=(mesa-vulkan-drivers libvulkan1 python3-openvdb libnanovdb-tools libopenvdb-tools)
 missing=()
 for p in "${apt_packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -38,6 +40,8 @@ fi
 
 export HYTRACE_PYTHON="$PWD/$venv/bin/python"
 export HYTRACE_REQUIRE_ORACLES=1
+# Debian's interpreter, which has pyopenvdb (python3-openvdb) and NumPy.
+export HYTRACE_VDB_PYTHON="${HYTRACE_VDB_PYTHON:-/usr/bin/python3}"
 export HYTRACE_REQUIRE_GPU="${HYTRACE_REQUIRE_GPU:-1}"
 # GPU tests run on Vulkan (lavapipe without a GPU), not on a GL fallback.
 export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"

@@ -3,6 +3,7 @@
 
 pub mod gdml;
 pub mod geant4;
+pub mod vdb;
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -47,6 +47,12 @@ impl DenseGrid {
         }
     }
 
+    /// The same grid placed in world space by `map`.
+    pub fn with_map(mut self, map: GridMap) -> DenseGrid {
+        self.map = map;
+        self
+    }
+
     fn slot(&self, ijk: [i64; 3]) -> Option<usize> {
         let mut index = 0usize;
         for k in (0..3).rev() {

@@ -1,0 +1,153 @@
+//! Opening a volume by name: a NanoVDB file (`.nvdb`), an OpenVDB file (`.vdb`) or a
+//! procedural grid (`sphere:...`, `box:...`), as a list of grids with a common summary.
+
+use std::path::Path;
+
+use crate::dense::{DenseGrid, VolumeError};
+use crate::grid::{Coord, GridMap, VoxelGrid};
+use crate::procedural_spec::{is_procedural, procedural_grid};
+
+/// A scalar grid from any source, sampled through [`VoxelGrid`].
+pub enum Volume {
+    /// A dense (procedural) grid.
+    Dense(DenseGrid),
+}
+
+impl Volume {
+    fn inner(&self) -> &dyn VoxelGrid {
+        match self {
+            Volume::Dense(g) => g,
+        }
+    }
+}
+
+impl VoxelGrid for Volume {
+    fn background(&self) -> f32 {
+        self.inner().background()
+    }
+
+    fn voxel(&self, ijk: Coord) -> f32 {
+        self.inner().voxel(ijk)
+    }
+
+    fn block_origins(&self) -> Vec<Coord> {
+        self.inner().block_origins()
+    }
+
+    fn map(&self) -> &GridMap {
+        self.inner().map()
+    }
+
+    fn read_box(&self, origin: Coord, dims: [u32; 3], out: &mut [f32]) {
+        self.inner().read_box(origin, dims, out)
+    }
+}
+
+/// What a file says about one of its grids.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GridSummary {
+    /// Grid name.
+    pub name: String,
+    /// Value type as the file names it (`float`, `Fp8`, `Vec3f`, ...).
+    pub value_type: String,
+    /// Inclusive index-space bounding box of the active voxels.
+    pub index_bbox: Option<[Coord; 2]>,
+    /// World-space bounding box of the active voxels.
+    pub world_bbox: Option<[[f64; 3]; 2]>,
+    /// Active voxels (tiles counted voxel by voxel).
+    pub active_voxels: u64,
+    /// Bytes of the representation as read (the NanoVDB grid buffer, the dense array).
+    pub source_bytes: u64,
+}
+
+/// One grid of an opened volume: its summary and, for scalar grids, the grid itself.
+pub struct NamedVolume {
+    /// The summary.
+    pub summary: GridSummary,
+    /// The grid, or why it cannot be sampled (a vector grid, say).
+    pub grid: Result<Volume, String>,
+}
+
+/// World bounding box of the index box `[lo - 0.5, hi + 0.5]` (the voxels' extent).
+pub fn world_bbox(map: &GridMap, bbox: [Coord; 2]) -> [[f64; 3]; 2] {
+    let mut out = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    for corner in 0..8 {
+        let p = std::array::from_fn(|k| {
+            if corner >> k & 1 == 1 {
+                bbox[1][k] as f64 + 0.5
+            } else {
+                bbox[0][k] as f64 - 0.5
+            }
+        });
+        let w = map.index_to_world(p);
+        for k in 0..3 {
+            out[0][k] = out[0][k].min(w[k]);
+            out[1][k] = out[1][k].max(w[k]);
+        }
+    }
+    out
+}
+
+fn dense_summary(name: &str, g: &DenseGrid) -> GridSummary {
+    let active = g.values.iter().filter(|v| **v != g.background).count() as u64;
+    let bbox = [
+        g.origin,
+        std::array::from_fn(|k| g.origin[k] + g.dims[k] as i32 - 1),
+    ];
+    GridSummary {
+        name: name.to_string(),
+        value_type: "float".to_string(),
+        index_bbox: Some(bbox),
+        world_bbox: Some(world_bbox(&g.map, bbox)),
+        active_voxels: active,
+        source_bytes: (g.values.len() * 4) as u64,
+    }
+}
+
+/// Opens `spec`: a procedural grid or a volume file (by extension).
+pub fn open_volume(spec: &str) -> Result<Vec<NamedVolume>, VolumeError> {
+    if is_procedural(spec) {
+        let g = procedural_grid(spec)?;
+        let summary = dense_summary("density", &g);
+        return Ok(vec![NamedVolume {
+            summary,
+            grid: Ok(Volume::Dense(g)),
+        }]);
+    }
+    let path = Path::new(spec);
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    Err(VolumeError(format!(
+        "{spec}: unknown volume format `{extension}` (expected .nvdb, .vdb, sphere:... or box:...)"
+    )))
+}
+
+/// The grid named `name` (or the first grid when `None`) of an opened volume.
+pub fn select_grid(
+    spec: &str,
+    grids: Vec<NamedVolume>,
+    name: Option<&str>,
+) -> Result<(GridSummary, Volume), VolumeError> {
+    let names: Vec<String> = grids.iter().map(|g| g.summary.name.clone()).collect();
+    let chosen = match name {
+        None => grids.into_iter().next(),
+        Some(n) => grids.into_iter().find(|g| g.summary.name == n),
+    };
+    let Some(chosen) = chosen else {
+        return Err(VolumeError(format!(
+            "{spec}: no grid {} (grids: {})",
+            name.map_or("at all".to_string(), |n| format!("`{n}`")),
+            names.join(", ")
+        )));
+    };
+    match chosen.grid {
+        Ok(g) => Ok((chosen.summary, g)),
+        Err(why) => Err(VolumeError(format!(
+            "{spec}: grid `{}`: {why}",
+            chosen.summary.name
+        ))),
+    }
+}
