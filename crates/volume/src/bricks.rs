@@ -72,7 +72,6 @@ pub fn bricks(grid: &DenseGrid) -> Vec<Brick> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fog_sphere;
 
     /// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
     fn rng(state: &mut u64) -> f64 {
@@ -147,22 +146,5 @@ mod tests {
                 .iter()
                 .any(|b| contains(b, q) && b.value_max >= crate::sample_trilinear(&g, q) as f32));
         }
-    }
-
-    #[test]
-    fn fog_sphere_has_the_requested_profile() {
-        let g = fog_sphere(20.0, 4.0).unwrap();
-        assert_eq!(g.get([0, 0, 0]), 1.0);
-        assert_eq!(g.get([16, 0, 0]), 1.0);
-        assert_eq!(g.get([18, 0, 0]), 0.5);
-        assert_eq!(g.get([20, 0, 0]), 0.0);
-        let bricks = bricks(&g);
-        let active: u32 = bricks.iter().map(|b| b.active_voxels).sum();
-        assert_eq!(
-            active as usize,
-            g.values.iter().filter(|v| **v != 0.0).count()
-        );
-        assert!(fog_sphere(1.0, 2.0).is_err());
-        assert!(fog_sphere(f64::NAN, 1.0).is_err());
     }
 }

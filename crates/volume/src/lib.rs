@@ -13,7 +13,9 @@ mod bricks;
 mod dense;
 mod grid;
 mod procedural;
+mod procedural_spec;
 mod ranges;
+mod source;
 
 pub use bricks::{bricks, BRICK_SIZE};
 pub use dense::{DenseGrid, VolumeError};
@@ -21,5 +23,7 @@ pub use grid::{
     sample, sample_nearest, sample_stochastic, sample_trilinear, Coord, Filter, GridMap, VoxelGrid,
     BLOCK_SIDE,
 };
-pub use procedural::fog_sphere;
+pub use procedural::{fog_box, fog_sphere};
+pub use procedural_spec::{is_procedural, procedural_grid};
 pub use ranges::{RangeLevel, RangeMips, ValueRange, MAX_RANGE_BLOCKS, RANGE_LEVELS};
+pub use source::{open_volume, select_grid, world_bbox, GridSummary, NamedVolume, Volume};
