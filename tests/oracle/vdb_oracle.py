@@ -11,6 +11,9 @@ Subcommands:
                       trilinear lookups (OpenVDB's box sampler convention: voxel centres at
                       integer index coordinates) of the dense source at world points
                       POINTS (N, 3) float64, computed in float64 -> OUT (N,) float64.
+  fog-sphere PATH N   a fog sphere filling an N^3 box (radius N/2 voxels, density 1 inside
+                      a 3-voxel linear blend, as Falcor's createSphere) as a .vdb file, for
+                      the conversion benchmark.
   optical-depth DIR CASE RAYS OUT
                       optical depth of the trilinear field along world rays RAYS (N, 8):
                       ox oy oz tmin dx dy dz tmax, by composite Simpson quadrature with
@@ -104,8 +107,10 @@ def make(directory):
                 files["nanovdb" + suffix] = None
                 sys.stderr.write(f"nanovdb_convert {flags} failed for {name}: {r.stderr.strip()}\n")
         np.save(os.path.join(directory, name + ".npy"), array)
+        samples = [(0, 0, 0), (1, -2, 3), (1_000_000, 2_000_000, -5_000_000)]
         meta = {
             "origin": list(origin),
+            "map_samples": [[list(p), list(grid.transform.indexToWorld(p))] for p in samples],
             "background": background,
             "matrix": m.tolist(),
             "translation": t.tolist(),
@@ -144,29 +149,34 @@ def trilinear_index(array, meta, p):
     return total
 
 
-def world_to_index(meta, world):
-    m = np.asarray(meta["matrix"])
-    t = np.asarray(meta["translation"])
-    return np.linalg.solve(m, (world - t).T).T
+def transform(directory, name):
+    """The case's transform as OpenVDB stores and applies it, which may differ from the
+    matrix it was built from by rounding: OpenVDB's is the reference."""
+    return vdb.read(os.path.join(directory, name + ".vdb"), name).transform
+
+
+def world_to_index(xform, world):
+    return np.array([xform.worldToIndex(tuple(p)) for p in world])
 
 
 def trilinear(directory, name, points_path, out_path):
     array, meta = load(directory, name)
     points = np.load(points_path).astype(np.float64).reshape(-1, 3)
-    np.save(out_path, trilinear_index(array, meta, world_to_index(meta, points)))
+    xform = transform(directory, name)
+    np.save(out_path, trilinear_index(array, meta, world_to_index(xform, points)))
 
 
 def optical_depth(directory, name, rays_path, out_path):
     array, meta = load(directory, name)
     rays = np.load(rays_path).astype(np.float64).reshape(-1, 8)
-    minv = np.linalg.inv(np.asarray(meta["matrix"]))
-    t_world = np.asarray(meta["translation"])
+    xform = transform(directory, name)
     lo = np.asarray(meta["origin"]) - 1.0
     hi = lo + np.asarray(array.shape) + 1.0
     depths = []
     for ray in rays:
-        o = minv @ (ray[0:3] - t_world)
-        d = minv @ ray[4:7]
+        # The index-space ray: t is the same in both spaces (the map is affine).
+        o = np.array(xform.worldToIndex(tuple(ray[0:3])))
+        d = np.array(xform.worldToIndex(tuple(ray[0:3] + ray[4:7]))) - o
         t0, t1 = ray[3], ray[7]
         # Outside [lo, hi] (one voxel beyond the data) the field is the background.
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -199,12 +209,29 @@ def optical_depth(directory, name, rays_path, out_path):
     np.save(out_path, np.asarray(depths))
 
 
+def fog_sphere(path, n):
+    n = int(n)
+    c = (n - 1) / 2.0
+    x = (np.arange(n, dtype=np.float32) - c) ** 2
+    grid = vdb.FloatGrid(0.0)
+    grid.name = "density"
+    # Slab by slab, to keep NumPy's temporaries small.
+    for i in range(n):
+        d = np.sqrt(x[i] + x[:, None] + x[None, :])
+        slab = np.clip((n / 2.0 - d) / 3.0, 0.0, 1.0).astype(np.float32)[None, :, :]
+        grid.copyFromArray(slab, ijk=(i, 0, 0), tolerance=0.0)
+    grid.prune()
+    vdb.write(path, grids=[grid])
+
+
 def main():
     command, args = sys.argv[1], sys.argv[2:]
     if command == "make":
         make(*args)
     elif command == "trilinear":
         trilinear(*args)
+    elif command == "fog-sphere":
+        fog_sphere(*args)
     elif command == "optical-depth":
         optical_depth(*args)
     else:

@@ -28,7 +28,10 @@ pub fn vdb_python() -> Option<PathBuf> {
     for (what, check) in ["python3-openvdb", "libnanovdb-tools"].iter().zip(checks) {
         let ok = matches!(&check, Ok(out) if out.status.success());
         if !ok {
-            let why = format!("{what} ({} with pyopenvdb, nanovdb_convert)", python.display());
+            let why = format!(
+                "{what} ({} with pyopenvdb, nanovdb_convert)",
+                python.display()
+            );
             if required {
                 panic!("HYTRACE_REQUIRE_ORACLES=1 but {why} is missing: run scripts/test.sh");
             }
@@ -78,10 +81,12 @@ pub struct CaseMeta {
     pub origin: [i32; 3],
     /// Background value.
     pub background: f32,
-    /// Index-to-world linear part, rows.
+    /// Index-to-world linear part, rows, as given to OpenVDB (which may store it rounded).
     pub matrix: [[f64; 3]; 3],
     /// Index-to-world translation.
     pub translation: [f64; 3],
+    /// Index points and their world positions by OpenVDB's transform.
+    pub map_samples: Vec<([f64; 3], [f64; 3])>,
     /// Active voxels pyopenvdb reports.
     pub active_voxels: u64,
     /// Files written, by representation (`vdb`, `nanovdb`, `nanovdb_fp8`, ...; null when the

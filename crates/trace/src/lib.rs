@@ -10,3 +10,4 @@ pub mod report;
 pub mod scan;
 pub mod scene;
 pub mod sweep;
+pub mod volume;

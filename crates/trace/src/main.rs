@@ -9,7 +9,9 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scan::{self, Precision};
 use hytrace_trace::sweep::{self, Sweep};
+use hytrace_trace::volume::{self, EstimatorArg, FilterArg, Repr, Space};
 use hytrace_trace::{report, scene};
+use hytrace_volume::TexelFormat;
 
 /// Hybrid ray tracing of analytic CSG solids, triangle meshes and sparse volumes.
 #[derive(Parser)]
@@ -71,6 +73,208 @@ enum Command {
     },
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
+    /// Sparse volumes: NanoVDB (.nvdb), OpenVDB (.vdb) or procedural grids
+    /// (`sphere:RADIUS[,VOXEL[,BLEND]]`, `box:W,H,D[,VOXEL[,BLEND]]`).
+    #[command(subcommand)]
+    Volume(VolumeCommand),
+}
+
+#[derive(Subcommand)]
+enum VolumeCommand {
+    /// Grids, value types, bounding boxes, voxel counts and memory per representation.
+    Info {
+        /// A .nvdb or .vdb file, or a procedural grid.
+        file: String,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Look up the grid at points: (N, 3) float32/float64 in, (N,) float32 out.
+    Sample {
+        /// A .nvdb or .vdb file, or a procedural grid.
+        file: String,
+        /// Points, (N, 3) float32 or float64.
+        #[arg(long)]
+        points: PathBuf,
+        /// Values, (N,) float32.
+        #[arg(long)]
+        out: PathBuf,
+        /// Coordinates of the points.
+        #[arg(long, value_enum, default_value_t = Space::World)]
+        space: Space,
+        /// Lookup filter.
+        #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
+        filter: FilterArg,
+        /// Representation looked up.
+        #[arg(long, value_enum, default_value_t = Repr::Nanovdb)]
+        repr: Repr,
+        /// Grid name (default: the first grid).
+        #[arg(long)]
+        grid: Option<String>,
+        /// Seed of the stochastic filter's random numbers.
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+    },
+    /// Transmittance along rays: (N, 8) rays (ox oy oz tmin dx dy dz tmax, world space) in,
+    /// (N,) float64 out; density = value x scale, per unit of world length.
+    Transmittance {
+        /// A .nvdb or .vdb file, or a procedural grid.
+        file: String,
+        /// Rays, (N, 8) float32 or float64.
+        #[arg(long)]
+        rays: PathBuf,
+        /// Transmittances, (N,) float64.
+        #[arg(long)]
+        out: PathBuf,
+        /// Estimator.
+        #[arg(long, value_enum, default_value_t = EstimatorArg::Exact)]
+        estimator: EstimatorArg,
+        /// Step of `march`, world units.
+        #[arg(long, default_value_t = 0.5)]
+        step: f64,
+        /// Samples per ray of the trackers (delta, ratio, residual).
+        #[arg(long, default_value_t = 1)]
+        spp: u32,
+        /// Seed of the random streams (ray i uses stream i).
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Density per unit of grid value.
+        #[arg(long, default_value_t = 1.0)]
+        density_scale: f64,
+        /// Lookup filter.
+        #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
+        filter: FilterArg,
+        /// Representation traced.
+        #[arg(long, value_enum, default_value_t = Repr::Nanovdb)]
+        repr: Repr,
+        /// Finest mip level of the local majorants (0: 8^3 bricks ... 3: 64^3).
+        #[arg(long, default_value_t = 0)]
+        level: usize,
+        /// One majorant for the whole grid instead of local ones.
+        #[arg(long)]
+        global_majorant: bool,
+        /// Grid name (default: the first grid).
+        #[arg(long)]
+        grid: Option<String>,
+        /// Print one JSON line of counts and timings.
+        #[arg(long)]
+        stats: bool,
+    },
+    /// Write the bricked grid (atlas, indirection, brick table, range mips) as .npy files.
+    Convert {
+        /// A .nvdb or .vdb file, or a procedural grid.
+        file: String,
+        /// Texel format.
+        #[arg(long)]
+        format: TexelFormat,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Grid name (default: the first grid).
+        #[arg(long)]
+        grid: Option<String>,
+    },
+}
+
+fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
+    match command {
+        VolumeCommand::Info { file, json } => {
+            let info = volume::info(&file)?;
+            if json {
+                println!("{info}");
+            } else {
+                print!("{}", volume::info_text(&info));
+            }
+        }
+        VolumeCommand::Sample {
+            file,
+            points,
+            out,
+            space,
+            filter,
+            repr,
+            grid,
+            seed,
+        } => {
+            let (_, g) = volume::open(&file, grid.as_deref())?;
+            let points = volume::read_points(&points)?;
+            let g = volume::represent(g, repr)?;
+            let values = volume::sample_points(g.grid(), &points, space, filter.into(), seed);
+            volume::write_f32(&out, &values)?;
+            eprintln!("{} lookups; wrote {}", values.len(), out.display());
+        }
+        VolumeCommand::Transmittance {
+            file,
+            rays,
+            out,
+            estimator,
+            step,
+            spp,
+            seed,
+            density_scale,
+            filter,
+            repr,
+            level,
+            global_majorant,
+            grid,
+            stats,
+        } => {
+            let t0 = std::time::Instant::now();
+            let (_, g) = volume::open(&file, grid.as_deref())?;
+            let rays = scan::read_rays(&rays)?;
+            let g = volume::represent(g, repr)?;
+            let load_s = t0.elapsed().as_secs_f64();
+            let args = volume::TransmittanceArgs {
+                estimator,
+                step,
+                spp,
+                seed,
+                density_scale,
+                filter: filter.into(),
+                level: (!global_majorant).then_some(level),
+            };
+            let (estimates, mips_s, trace_s) = volume::transmittances(&g, &rays, &args)?;
+            let values: Vec<f64> = estimates.iter().map(|e| e.transmittance).collect();
+            volume::write_f64(&out, &values)?;
+            if stats {
+                let lookups: u64 = estimates.iter().map(|e| e.lookups).sum();
+                let nulls: u64 = estimates.iter().map(|e| e.null_collisions).sum();
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "rays": rays.len(), "load_s": load_s, "mips_s": mips_s,
+                        "trace_s": trace_s, "lookups": lookups, "null_collisions": nulls,
+                    })
+                );
+            } else {
+                eprintln!(
+                    "{} rays, {trace_s:.3} s; wrote {}",
+                    rays.len(),
+                    out.display()
+                );
+            }
+        }
+        VolumeCommand::Convert {
+            file,
+            format,
+            out,
+            grid,
+        } => {
+            let (_, g) = volume::open(&file, grid.as_deref())?;
+            let b = hytrace_volume::BrickedGrid::convert(&g, format)?;
+            b.write_npy_dir(&out)?;
+            let m = b.memory_bytes();
+            eprintln!(
+                "{} bricks ({} with texels), {} bytes, max voxel error {:.3e}; wrote {}",
+                b.bricks().len(),
+                b.atlas_slots(),
+                m.total(),
+                b.error_bound(),
+                out.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -139,6 +343,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 );
             }
         }
+        Command::Volume(command) => run_volume(command)?,
         Command::GpuInfo => {
             let ctx = GpuContext::new()?;
             println!("{}", ctx.describe());

@@ -1,77 +1,65 @@
-//! Cutting a grid into 8^3 bricks with halo-inclusive value ranges.
+//! Foundry brick records of a bricked grid: the bounds and majorants the tracers build their
+//! acceleration structures from.
 
 use hytrace_foundry::{Brick, UNSET};
 
-use crate::dense::DenseGrid;
+use crate::bricked::{BrickedGrid, NO_SLOT};
+use crate::grid::{VoxelGrid, BLOCK_SIDE};
 
-/// Voxels per brick side.
-pub const BRICK_SIZE: u32 = 8;
-
-/// The bricks of `grid` that can return a value other than the background.
-///
-/// A brick covers voxels `origin .. origin + 8` on each axis. A trilinear lookup anywhere in
-/// its bounds `[origin - 0.5, origin + 7.5]` reads voxels `origin - 1 ..= origin + 8`, so the
-/// brick's `value_min`/`value_max` span that halo-inclusive block: `value_max` is a majorant of
-/// every lookup in the brick, including for bricks whose own voxels are all background.
-/// Bricks are aligned to multiples of 8 in index space, also for negative coordinates.
-/// `atlas_slot` is left unset (no atlas yet) and `prim` is set when the bricks are added to a
-/// Foundry.
-pub fn bricks(grid: &DenseGrid) -> Vec<Brick> {
-    let b = BRICK_SIZE as i64;
-    // Brick index range: every brick whose halo-inclusive block [o - 1, o + 8] touches the
-    // grid's voxels [g, g + d - 1], i.e. ceil((g - 8) / 8) ..= floor((g + d) / 8).
-    let lo: [i64; 3] = std::array::from_fn(|k| (grid.origin[k] as i64 - b - 1).div_euclid(b) + 1);
-    let hi: [i64; 3] =
-        std::array::from_fn(|k| (grid.origin[k] as i64 + grid.dims[k] as i64).div_euclid(b));
-    let mut out = Vec::new();
-    for bz in lo[2]..=hi[2] {
-        for by in lo[1]..=hi[1] {
-            for bx in lo[0]..=hi[0] {
-                let origin = [bx * b, by * b, bz * b];
-                let (mut min, mut max, mut active) = (f32::INFINITY, f32::NEG_INFINITY, 0u32);
-                for z in origin[2] - 1..=origin[2] + b {
-                    for y in origin[1] - 1..=origin[1] + b {
-                        for x in origin[0] - 1..=origin[0] + b {
-                            let v = grid.get([x, y, z]);
-                            min = min.min(v);
-                            max = max.max(v);
-                            let inside = (0..3)
-                                .all(|k| [x, y, z][k] >= origin[k] && [x, y, z][k] < origin[k] + b);
-                            active += (inside && v != grid.background) as u32;
-                        }
-                    }
-                }
-                if min == grid.background && max == grid.background {
-                    continue;
-                }
-                let lo_corner = origin.map(|c| c as f32 - 0.5);
-                out.push(Brick {
-                    origin: origin.map(|c| c as i32),
-                    level: 0,
-                    atlas_slot: UNSET,
-                    prim: UNSET,
-                    value_min: min,
-                    value_max: max,
-                    aabb: [
-                        lo_corner[0],
-                        lo_corner[1],
-                        lo_corner[2],
-                        lo_corner[0] + BRICK_SIZE as f32,
-                        lo_corner[1] + BRICK_SIZE as f32,
-                        lo_corner[2] + BRICK_SIZE as f32,
-                    ],
-                    active_voxels: active,
-                    size: BRICK_SIZE,
-                });
+impl BrickedGrid {
+    /// One Foundry brick per 8^3 block whose level-0 range is not the constant background,
+    /// in z, y, x order.
+    ///
+    /// A brick covers voxels `origin .. origin + 8` on each axis and bounds `[origin - 0.5,
+    /// origin + 7.5]` in index space. A lookup anywhere in those bounds reads voxels
+    /// `origin - 1 ..= origin + 8`, and `value_min`/`value_max` are the level-0 range of the
+    /// decoded values over that halo-inclusive block, so `value_max` is a majorant of every
+    /// lookup in the brick, also for bricks of background voxels next to data (those are not
+    /// stored: `atlas_slot` unset, no active voxels). `atlas_slot` is the brick's slot in
+    /// [`BrickedGrid::atlas`] (unset, [`NO_SLOT`], for constant bricks); `prim` is set when
+    /// the bricks are added to a Foundry.
+    pub fn foundry_bricks(&self) -> Vec<Brick> {
+        let background = self.background();
+        let level = &self.ranges().levels[0];
+        let [nx, ny, _] = level.dims.map(|d| d as usize);
+        let side = BLOCK_SIDE as f32;
+        let mut out = Vec::new();
+        for (i, range) in level.ranges.iter().enumerate() {
+            if range.is_constant(background) {
+                continue;
             }
+            let local = [i % nx, i / nx % ny, i / (nx * ny)];
+            let block = std::array::from_fn(|k| level.lo[k] + local[k] as i32);
+            let origin = block.map(|c| c * BLOCK_SIDE);
+            let entry = self.entry(block);
+            let lo = origin.map(|c| c as f32 - 0.5);
+            out.push(Brick {
+                origin,
+                level: 0,
+                atlas_slot: entry.map_or(NO_SLOT, |e| e.atlas_slot),
+                prim: UNSET,
+                value_min: range.min,
+                value_max: range.max,
+                aabb: [
+                    lo[0],
+                    lo[1],
+                    lo[2],
+                    lo[0] + side,
+                    lo[1] + side,
+                    lo[2] + side,
+                ],
+                active_voxels: entry.map_or(0, |e| e.active_voxels),
+                size: BLOCK_SIDE as u32,
+            });
         }
+        out
     }
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{fog_sphere, sample_trilinear, DenseGrid, TexelFormat};
 
     /// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
     fn rng(state: &mut u64) -> f64 {
@@ -86,6 +74,12 @@ mod tests {
         (0..3).all(|k| p[k] >= b.aabb[k] as f64 && p[k] <= b.aabb[k + 3] as f64)
     }
 
+    fn foundry_bricks(g: &DenseGrid, format: TexelFormat) -> (BrickedGrid, Vec<Brick>) {
+        let bricked = BrickedGrid::convert(g, format).unwrap();
+        let bricks = bricked.foundry_bricks();
+        (bricked, bricks)
+    }
+
     #[test]
     fn halo_ranges_bound_every_trilinear_lookup() {
         let mut state = 3;
@@ -98,27 +92,31 @@ mod tests {
                 (rng(&mut state) * 4.0 - 1.0) as f32
             };
         }
-        let bricks = bricks(&g);
-        for b in &bricks {
-            for _ in 0..300 {
-                let p: [f64; 3] =
-                    std::array::from_fn(|k| b.aabb[k] as f64 + rng(&mut state) * BRICK_SIZE as f64);
-                let v = crate::sample_trilinear(&g, p);
-                assert!(
-                    v >= b.value_min as f64 - 1e-6 && v <= b.value_max as f64 + 1e-6,
-                    "{v} outside {}..{} at {p:?}",
-                    b.value_min,
-                    b.value_max
-                );
+        for format in [TexelFormat::F32, TexelFormat::Bc4] {
+            let (bricked, bricks) = foundry_bricks(&g, format);
+            for b in &bricks {
+                assert_eq!(b.origin.map(|c| c.rem_euclid(BLOCK_SIDE)), [0; 3]);
+                for _ in 0..300 {
+                    let p: [f64; 3] = std::array::from_fn(|k| {
+                        b.aabb[k] as f64 + rng(&mut state) * BLOCK_SIDE as f64
+                    });
+                    let v = sample_trilinear(&bricked, p);
+                    assert!(
+                        v >= b.value_min as f64 - 1e-6 && v <= b.value_max as f64 + 1e-6,
+                        "{format}: {v} outside {}..{} at {p:?}",
+                        b.value_min,
+                        b.value_max
+                    );
+                }
             }
-        }
-        // Outside every brick, lookups return the background.
-        for _ in 0..20_000 {
-            let p: [f64; 3] = std::array::from_fn(|k| {
-                g.origin[k] as f64 - 12.0 + rng(&mut state) * (g.dims[k] as f64 + 24.0)
-            });
-            if !bricks.iter().any(|b| contains(b, p)) {
-                assert_eq!(crate::sample_trilinear(&g, p), 0.0, "{p:?}");
+            // Outside every brick, lookups return the background.
+            for _ in 0..20_000 {
+                let p: [f64; 3] = std::array::from_fn(|k| {
+                    g.origin[k] as f64 - 12.0 + rng(&mut state) * (g.dims[k] as f64 + 24.0)
+                });
+                if !bricks.iter().any(|b| contains(b, p)) {
+                    assert_eq!(sample_trilinear(&bricked, p), 0.0, "{p:?}");
+                }
             }
         }
     }
@@ -131,7 +129,7 @@ mod tests {
         for c in corners {
             g.set(c, 1.0);
         }
-        let bricks = bricks(&g);
+        let (bricked, bricks) = foundry_bricks(&g, TexelFormat::Unorm8);
         let active: u32 = bricks.iter().map(|b| b.active_voxels).sum();
         assert_eq!(active as usize, corners.len());
         for c in corners {
@@ -142,9 +140,36 @@ mod tests {
             );
             // Half a voxel beyond the grid's last voxel the lookup is still non-zero and bounded.
             let q = p.map(|v| v + 0.5);
-            assert!(bricks
-                .iter()
-                .any(|b| contains(b, q) && b.value_max >= crate::sample_trilinear(&g, q) as f32));
+            let v = sample_trilinear(&bricked, q) as f32;
+            assert!(v > 0.0);
+            assert!(bricks.iter().any(|b| contains(b, q) && b.value_max >= v));
         }
+        // Background bricks next to data are Foundry bricks without texels.
+        let halo_only = bricks.iter().find(|b| b.origin == [16, 16, 16]).unwrap();
+        assert_eq!((halo_only.atlas_slot, halo_only.active_voxels), (UNSET, 0));
+        assert_eq!(halo_only.value_max, 1.0);
+    }
+
+    #[test]
+    fn fog_sphere_bricks_count_every_active_voxel() {
+        let g = fog_sphere(20.0, 4.0).unwrap();
+        assert_eq!(g.get([0, 0, 0]), 1.0);
+        assert_eq!(g.get([18, 0, 0]), 0.5);
+        assert_eq!(g.get([20, 0, 0]), 0.0);
+        let (bricked, bricks) = foundry_bricks(&g, TexelFormat::F32);
+        let active: u32 = bricks.iter().map(|b| b.active_voxels).sum();
+        assert_eq!(
+            active as usize,
+            g.values.iter().filter(|v| **v != 0.0).count()
+        );
+        // Slots name the stored, non-constant bricks, each once.
+        let mut slots: Vec<u32> = bricks
+            .iter()
+            .map(|b| b.atlas_slot)
+            .filter(|s| *s != UNSET)
+            .collect();
+        slots.sort_unstable();
+        slots.dedup();
+        assert_eq!(slots.len(), bricked.atlas_slots());
     }
 }

@@ -91,7 +91,7 @@ impl VoxelGrid for DenseGrid {
         self.get(ijk.map(i64::from))
     }
 
-    fn block_origins(&self) -> Vec<Coord> {
+    fn block_origins(&self) -> Result<Vec<Coord>, VolumeError> {
         let b = BLOCK_SIDE as i64;
         let lo: [i64; 3] = std::array::from_fn(|k| (self.origin[k] as i64).div_euclid(b));
         let hi: [i64; 3] = std::array::from_fn(|k| {
@@ -105,7 +105,7 @@ impl VoxelGrid for DenseGrid {
                 }
             }
         }
-        out
+        Ok(out)
     }
 
     fn map(&self) -> &GridMap {

@@ -111,8 +111,9 @@ pub trait VoxelGrid: Sync {
     fn voxel(&self, ijk: Coord) -> f32;
 
     /// Origins (multiples of [`BLOCK_SIDE`]) of the 8^3 blocks that may hold a value other
-    /// than the background, each once, in no particular order.
-    fn block_origins(&self) -> Vec<Coord>;
+    /// than the background, each once, in no particular order; an error when they are too
+    /// many to list (more than [`crate::MAX_RANGE_BLOCKS`], e.g. a 4096^3 tile).
+    fn block_origins(&self) -> Result<Vec<Coord>, VolumeError>;
 
     /// The index-to-world map.
     fn map(&self) -> &GridMap;

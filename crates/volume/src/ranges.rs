@@ -122,7 +122,7 @@ impl RangeMips {
     /// The ranges of the lookups `grid` answers. Blocks are read in parallel.
     pub fn build<G: VoxelGrid + ?Sized>(grid: &G) -> Result<RangeMips, VolumeError> {
         let background = grid.background();
-        let origins = grid.block_origins();
+        let origins = grid.block_origins()?;
         let b = BLOCK_SIDE as i64;
         let blocks: Vec<[i64; 3]> = origins
             .iter()
@@ -130,7 +130,12 @@ impl RangeMips {
             .collect();
         // The level-0 box holds every block whose halo touches a data block: the data
         // blocks' bounding box grown by one block.
-        let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+        // An empty source gets empty boxes (hi = lo - 1): every block reads the background.
+        let (mut lo, mut hi) = if blocks.is_empty() {
+            ([0; 3], [-1; 3])
+        } else {
+            ([i64::MAX; 3], [i64::MIN; 3])
+        };
         for blk in &blocks {
             for k in 0..3 {
                 lo[k] = lo[k].min(blk[k] - 1);
@@ -273,5 +278,14 @@ mod tests {
         assert_eq!((r.min, r.max), (0.0, 2.0));
         assert_eq!(mips.range(0, [2, 2, 2]), ValueRange::constant(0.0));
         assert_eq!(mips.range(0, [-5, 900, 3]), ValueRange::constant(0.0));
+    }
+
+    #[test]
+    fn a_grid_of_background_only_has_empty_levels() {
+        let g = DenseGrid::new([0, 0, 0], [0, 0, 0], 0.5).unwrap();
+        let mips = RangeMips::build(&g).unwrap();
+        assert_eq!(mips.levels.len(), RANGE_LEVELS);
+        assert!(mips.levels.iter().all(|l| l.ranges.is_empty()));
+        assert_eq!(mips.range(2, [0, 0, 0]), ValueRange::constant(0.5));
     }
 }

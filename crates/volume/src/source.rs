@@ -5,18 +5,26 @@ use std::path::Path;
 
 use crate::dense::{DenseGrid, VolumeError};
 use crate::grid::{Coord, GridMap, VoxelGrid};
+use crate::nanovdb::{read_nanovdb, NanoGrid};
+use crate::openvdb::{VdbFile, VdbGrid};
 use crate::procedural_spec::{is_procedural, procedural_grid};
 
 /// A scalar grid from any source, sampled through [`VoxelGrid`].
 pub enum Volume {
     /// A dense (procedural) grid.
-    Dense(DenseGrid),
+    Dense(Box<DenseGrid>),
+    /// A scalar grid of an OpenVDB file.
+    Vdb(Box<VdbGrid>),
+    /// A scalar grid of a NanoVDB file.
+    Nano(Box<NanoGrid>),
 }
 
 impl Volume {
     fn inner(&self) -> &dyn VoxelGrid {
         match self {
-            Volume::Dense(g) => g,
+            Volume::Dense(g) => g.as_ref(),
+            Volume::Vdb(g) => g.as_ref(),
+            Volume::Nano(g) => g.as_ref(),
         }
     }
 }
@@ -30,7 +38,7 @@ impl VoxelGrid for Volume {
         self.inner().voxel(ijk)
     }
 
-    fn block_origins(&self) -> Vec<Coord> {
+    fn block_origins(&self) -> Result<Vec<Coord>, VolumeError> {
         self.inner().block_origins()
     }
 
@@ -56,7 +64,10 @@ pub struct GridSummary {
     pub world_bbox: Option<[[f64; 3]; 2]>,
     /// Active voxels (tiles counted voxel by voxel).
     pub active_voxels: u64,
-    /// Bytes of the representation as read (the NanoVDB grid buffer, the dense array).
+    /// What the grid was read from: `nanovdb`, `openvdb` or `procedural`.
+    pub source_kind: &'static str,
+    /// Bytes of the representation as read (the NanoVDB grid buffer, the in-memory
+    /// OpenVDB blocks, the dense array).
     pub source_bytes: u64,
 }
 
@@ -100,6 +111,7 @@ fn dense_summary(name: &str, g: &DenseGrid) -> GridSummary {
         index_bbox: Some(bbox),
         world_bbox: Some(world_bbox(&g.map, bbox)),
         active_voxels: active,
+        source_kind: "procedural",
         source_bytes: (g.values.len() * 4) as u64,
     }
 }
@@ -111,7 +123,7 @@ pub fn open_volume(spec: &str) -> Result<Vec<NamedVolume>, VolumeError> {
         let summary = dense_summary("density", &g);
         return Ok(vec![NamedVolume {
             summary,
-            grid: Ok(Volume::Dense(g)),
+            grid: Ok(Volume::Dense(Box::new(g))),
         }]);
     }
     let path = Path::new(spec);
@@ -120,9 +132,63 @@ pub fn open_volume(spec: &str) -> Result<Vec<NamedVolume>, VolumeError> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    Err(VolumeError(format!(
-        "{spec}: unknown volume format `{extension}` (expected .nvdb, .vdb, sphere:... or box:...)"
-    )))
+    match extension.as_str() {
+        "vdb" => open_vdb(path),
+        "nvdb" => open_nanovdb(path),
+        _ => Err(VolumeError(format!(
+            "{spec}: unknown volume format `{extension}` (expected .nvdb, .vdb, sphere:... or box:...)"
+        ))),
+    }
+}
+
+fn open_nanovdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
+    let file = read_nanovdb(path).map_err(|e| VolumeError(e.to_string()))?;
+    Ok(file
+        .grids
+        .into_iter()
+        .map(|g| NamedVolume {
+            summary: GridSummary {
+                name: g.name().to_string(),
+                value_type: g.grid_type().to_string(),
+                index_bbox: g.index_bbox(),
+                world_bbox: g.world_bbox(),
+                active_voxels: g.active_voxel_count(),
+                source_kind: "nanovdb",
+                source_bytes: g.buffer_bytes(),
+            },
+            grid: match g.check_sampleable() {
+                Ok(()) => Ok(Volume::Nano(Box::new(g))),
+                Err(e) => Err(e.message().to_string()),
+            },
+        })
+        .collect())
+}
+
+fn open_vdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
+    let file = VdbFile::open(path)?;
+    Ok((0..file.grids.len())
+        .map(|i| {
+            let info = &file.grids[i];
+            let grid = file.load(i);
+            let (world, bytes) = match (&grid, info.bbox) {
+                (Ok(g), Some(bbox)) => (Some(world_bbox(g.map(), bbox)), g.memory_bytes()),
+                (Ok(g), None) => (None, g.memory_bytes()),
+                _ => (None, 0),
+            };
+            NamedVolume {
+                summary: GridSummary {
+                    name: info.name.clone(),
+                    value_type: info.value_type.clone(),
+                    index_bbox: info.bbox,
+                    world_bbox: world,
+                    active_voxels: info.active_voxel_count.unwrap_or(0),
+                    source_kind: "openvdb",
+                    source_bytes: bytes as u64,
+                },
+                grid: grid.map(|g| Volume::Vdb(Box::new(g))).map_err(|e| e.0),
+            }
+        })
+        .collect())
 }
 
 /// The grid named `name` (or the first grid when `None`) of an opened volume.

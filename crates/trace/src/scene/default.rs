@@ -9,7 +9,7 @@ use std::f64::consts::PI;
 use anyhow::Context;
 use hytrace_csg::{box3, cylinder, sphere, to_tree, torus, Shape};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
-use hytrace_volume::{bricks, fog_sphere};
+use hytrace_volume::{fog_sphere, BrickedGrid, TexelFormat};
 
 /// Number of PMT-like instances in the default scene.
 pub const DEFAULT_PMT_COUNT: usize = 48;
@@ -71,7 +71,8 @@ pub fn default_scene() -> anyhow::Result<Foundry> {
         row[k] = 30.0;
     }
     let mut s = f.begin_solid("fog");
-    s.add_volume(&bricks(&fog_grid), Some(voxel_to_mm), 4)?;
+    let fog_bricks = BrickedGrid::convert(&fog_grid, TexelFormat::F32)?.foundry_bricks();
+    s.add_volume(&fog_bricks, Some(voxel_to_mm), 4)?;
     let fog = s.finish(4)?;
 
     f.add_instance(vessel, Transform64::IDENTITY, 0, 0)?;

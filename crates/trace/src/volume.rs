@@ -1,0 +1,342 @@
+//! The operations behind `hytrace volume`: open a grid, choose its representation, sample
+//! points, estimate transmittance along rays, convert to a bricked grid, summarize.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_volume::{
+    open_volume, sample, select_grid, BrickedGrid, Estimate, Estimator, Filter, GridSummary,
+    Majorant, RangeMips, Ray, Rng, TexelFormat, TransmittanceParams, Volume, VoxelGrid,
+};
+use rayon::prelude::*;
+use serde_json::json;
+
+use crate::scan::RayRow;
+
+/// Coordinates of sample points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Space {
+    /// Index space: voxel centres at integer coordinates.
+    Index,
+    /// World space, through the grid's index-to-world map.
+    World,
+}
+
+/// Lookup filter (see `hytrace_volume::Filter`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FilterArg {
+    /// The voxel at floor(p + 0.5).
+    Nearest,
+    /// OpenVDB's box sampler: the trilinear blend of the eight voxels around p.
+    Trilinear,
+    /// One of those eight voxels, with probability equal to its trilinear weight.
+    Stochastic,
+}
+
+impl From<FilterArg> for Filter {
+    fn from(f: FilterArg) -> Filter {
+        match f {
+            FilterArg::Nearest => Filter::Nearest,
+            FilterArg::Trilinear => Filter::Trilinear,
+            FilterArg::Stochastic => Filter::Stochastic,
+        }
+    }
+}
+
+/// Representation sampled: the grid as read, or a bricked grid of one texel format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Repr {
+    /// The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as
+    /// read).
+    #[value(alias = "source")]
+    Nanovdb,
+    /// Bricked grid, BC4 texels.
+    Bc4,
+    /// Bricked grid, 8-bit normalized texels.
+    Unorm8,
+    /// Bricked grid, 16-bit normalized texels.
+    Unorm16,
+    /// Bricked grid, half-precision texels.
+    F16,
+    /// Bricked grid, single-precision texels.
+    F32,
+}
+
+impl Repr {
+    fn texel_format(self) -> Option<TexelFormat> {
+        match self {
+            Repr::Nanovdb => None,
+            Repr::Bc4 => Some(TexelFormat::Bc4),
+            Repr::Unorm8 => Some(TexelFormat::Unorm8),
+            Repr::Unorm16 => Some(TexelFormat::Unorm16),
+            Repr::F16 => Some(TexelFormat::F16),
+            Repr::F32 => Some(TexelFormat::F32),
+        }
+    }
+}
+
+/// Transmittance estimator on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EstimatorArg {
+    /// The optical depth integrated exactly (per voxel cell, in f64).
+    Exact,
+    /// Fixed-step midpoint ray marching (--step).
+    March,
+    /// Delta tracking with local majorants.
+    Delta,
+    /// Ratio tracking with local majorants.
+    Ratio,
+    /// Residual ratio tracking (control density = local minorant).
+    Residual,
+}
+
+/// A grid in the representation asked for.
+pub enum Represented {
+    /// The grid as read.
+    Source(Volume),
+    /// Converted to a bricked grid.
+    Bricked(Box<BrickedGrid>),
+}
+
+impl Represented {
+    /// The grid, for lookups.
+    pub fn grid(&self) -> &dyn VoxelGrid {
+        match self {
+            Represented::Source(v) => v,
+            Represented::Bricked(b) => b.as_ref(),
+        }
+    }
+}
+
+/// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, or a procedural grid.
+pub fn open(spec: &str, name: Option<&str>) -> anyhow::Result<(GridSummary, Volume)> {
+    Ok(select_grid(spec, open_volume(spec)?, name)?)
+}
+
+/// The grid in representation `repr`.
+pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
+    Ok(match repr.texel_format() {
+        None => Represented::Source(volume),
+        Some(format) => Represented::Bricked(Box::new(BrickedGrid::convert(&volume, format)?)),
+    })
+}
+
+/// Reads `(N, 3)` float32 or float64 points; errors name the file and the first bad row.
+pub fn read_points(path: &Path) -> anyhow::Result<Vec<[f64; 3]>> {
+    let a = read_array(path)?;
+    let source = path.display();
+    if a.shape.len() != 2 || a.shape[1] != 3 {
+        bail!("{source}: points need shape (N, 3), got {:?}", a.shape);
+    }
+    let values: Vec<f64> = match a.scalar {
+        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        Scalar::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&a.bytes),
+        other => bail!("{source}: points must be float32 or float64, got {other:?}"),
+    };
+    values
+        .chunks_exact(3)
+        .enumerate()
+        .map(|(i, c)| {
+            let p = [c[0], c[1], c[2]];
+            if p.iter().all(|v| v.is_finite()) {
+                Ok(p)
+            } else {
+                bail!("{source}: point {i}: {p:?} is not finite")
+            }
+        })
+        .collect()
+}
+
+/// Lookups of `grid` at `points`; point `i` of a stochastic lookup uses the random stream
+/// `(seed, i)`.
+pub fn sample_points(
+    grid: &dyn VoxelGrid,
+    points: &[[f64; 3]],
+    space: Space,
+    filter: Filter,
+    seed: u32,
+) -> Vec<f32> {
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let index = match space {
+                Space::Index => *p,
+                Space::World => grid.map().world_to_index(*p),
+            };
+            let mut rng = Rng::new(seed, i as u32, 0);
+            let u = [rng.next_f64(), rng.next_f64(), rng.next_f64()];
+            sample(grid, index, filter, u)
+        })
+        .collect()
+}
+
+/// Writes `(N,)` values atomically.
+pub fn write_f32(path: &Path, values: &[f32]) -> anyhow::Result<()> {
+    write_array(
+        path,
+        Scalar::F32,
+        &[values.len() as u64],
+        bytemuck::cast_slice(values),
+    )?;
+    Ok(())
+}
+
+/// Writes `(N,)` values atomically.
+pub fn write_f64(path: &Path, values: &[f64]) -> anyhow::Result<()> {
+    write_array(
+        path,
+        Scalar::F64,
+        &[values.len() as u64],
+        bytemuck::cast_slice(values),
+    )?;
+    Ok(())
+}
+
+/// Parameters of `hytrace volume transmittance`.
+#[derive(Clone, Copy, Debug)]
+pub struct TransmittanceArgs {
+    /// Estimator.
+    pub estimator: EstimatorArg,
+    /// March step (world units).
+    pub step: f64,
+    /// Samples per ray of the trackers.
+    pub spp: u32,
+    /// Seed of the random streams.
+    pub seed: u32,
+    /// Density per unit of grid value.
+    pub density_scale: f64,
+    /// Lookup filter.
+    pub filter: Filter,
+    /// Finest mip level of the local majorants, or `None` for one global majorant.
+    pub level: Option<usize>,
+}
+
+impl TransmittanceArgs {
+    /// The library's parameters.
+    pub fn params(&self) -> TransmittanceParams {
+        TransmittanceParams {
+            estimator: match self.estimator {
+                EstimatorArg::Exact => Estimator::Exact,
+                EstimatorArg::March => Estimator::March { step: self.step },
+                EstimatorArg::Delta => Estimator::Delta,
+                EstimatorArg::Ratio => Estimator::Ratio,
+                EstimatorArg::Residual => Estimator::Residual,
+            },
+            density_scale: self.density_scale,
+            spp: self.spp,
+            seed: self.seed,
+            filter: self.filter,
+            majorant: match self.level {
+                Some(level) => Majorant::Local { level },
+                None => Majorant::Global,
+            },
+        }
+    }
+}
+
+/// Transmittance estimates along `rays` through `grid` (range mips built from the grid,
+/// or the bricked grid's own), with the time spent building mips and estimating.
+pub fn transmittances(
+    grid: &Represented,
+    rays: &[RayRow],
+    args: &TransmittanceArgs,
+) -> anyhow::Result<(Vec<Estimate>, f64, f64)> {
+    let t0 = Instant::now();
+    let built;
+    let mips = match grid {
+        Represented::Bricked(b) => b.ranges(),
+        Represented::Source(v) => {
+            built = RangeMips::build(v)?;
+            &built
+        }
+    };
+    let t1 = Instant::now();
+    let rays: Vec<Ray> = rays
+        .iter()
+        .map(|r| Ray::new(r.origin, r.direction, r.tmin, r.tmax))
+        .collect();
+    let estimates = hytrace_volume::transmittance_batch(grid.grid(), mips, &rays, &args.params())?;
+    let t2 = Instant::now();
+    Ok((estimates, (t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()))
+}
+
+/// Memory of one representation, for `volume info`.
+fn memory_row(name: &str, bytes: usize, bound: Option<f64>) -> serde_json::Value {
+    json!({"representation": name, "bytes": bytes, "error_bound": bound})
+}
+
+/// The summary `hytrace volume info` prints: every grid of `spec` with its bounding boxes,
+/// voxel counts and the memory of each representation (bricked ones measured by
+/// converting the scalar grids).
+pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
+    let mut grids = Vec::new();
+    for named in open_volume(spec)? {
+        let s = &named.summary;
+        let mut memory = vec![memory_row(
+            s.source_kind,
+            s.source_bytes as usize,
+            Some(0.0),
+        )];
+        let mut note = None;
+        match &named.grid {
+            Ok(volume) => {
+                for format in TexelFormat::ALL {
+                    let b = BrickedGrid::convert(volume, format)
+                        .with_context(|| format!("{spec}: grid `{}`: {format}", s.name))?;
+                    memory.push(memory_row(
+                        format.name(),
+                        b.memory_bytes().total(),
+                        Some(b.error_bound()),
+                    ));
+                }
+            }
+            Err(why) => note = Some(why.clone()),
+        }
+        grids.push(json!({
+            "name": s.name,
+            "value_type": s.value_type,
+            "index_bbox": s.index_bbox,
+            "world_bbox": s.world_bbox,
+            "active_voxels": s.active_voxels,
+            "memory": memory,
+            "note": note,
+        }));
+    }
+    Ok(json!({"source": spec, "grids": grids}))
+}
+
+/// The text form of [`info`].
+pub fn info_text(info: &serde_json::Value) -> String {
+    let mut out = format!("{}\n", info["source"].as_str().unwrap_or(""));
+    for g in info["grids"].as_array().into_iter().flatten() {
+        out += &format!(
+            "grid `{}` ({}): {} active voxels, index bbox {}, world bbox {}\n",
+            g["name"].as_str().unwrap_or(""),
+            g["value_type"].as_str().unwrap_or(""),
+            g["active_voxels"],
+            g["index_bbox"],
+            g["world_bbox"],
+        );
+        if let Some(note) = g["note"].as_str() {
+            out += &format!("  not sampled: {note}\n");
+        }
+        for m in g["memory"].as_array().into_iter().flatten() {
+            let bound = m["error_bound"]
+                .as_f64()
+                .map_or(String::new(), |b| format!(", max voxel error {b:.3e}"));
+            out += &format!(
+                "  {:<8} {:>12} bytes{bound}\n",
+                m["representation"].as_str().unwrap_or(""),
+                m["bytes"],
+            );
+        }
+    }
+    out
+}

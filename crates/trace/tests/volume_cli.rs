@@ -1,0 +1,358 @@
+//! `hytrace volume` end to end: info, sample, transmittance and convert on procedural grids
+//! and committed files, checked against analytic values, and bad input that must fail
+//! cleanly, naming what is wrong, without leaving an output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+
+fn hytrace(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn data(path: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data")
+        .join(path)
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+fn write_f64(path: &Path, shape: &[u64], values: &[f64]) {
+    write_array(path, Scalar::F64, shape, bytemuck::cast_slice(values)).unwrap();
+}
+
+fn read_values<T: bytemuck::Pod>(path: &Path, scalar: Scalar) -> Vec<T> {
+    let a = read_array(path).unwrap();
+    assert_eq!(a.scalar, scalar, "{}", path.display());
+    assert_eq!(a.shape.len(), 1, "{}: shape {:?}", path.display(), a.shape);
+    bytemuck::pod_collect_to_vec(&a.bytes)
+}
+
+struct Dir(tempfile::TempDir);
+
+impl Dir {
+    fn new() -> Dir {
+        Dir(tempfile::tempdir().unwrap())
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.path().join(name)
+    }
+
+    fn arg(&self, name: &str) -> String {
+        self.path(name).to_str().unwrap().to_string()
+    }
+}
+
+/// The fog box `box:20,20,20,1,4`: half extents 10 voxels, a 4-voxel blend. Along the x axis
+/// through the centre the voxel values are clamp((10 - |i|) / 4, 0, 1), linearly
+/// interpolated between voxel centres: the optical depth across is the trapezoid sum
+/// 13 * 1 + 2 * (0.75 + 0.5 + 0.25) = 16.
+const FOG_BOX: &str = "box:20,20,20,1,4";
+
+#[test]
+fn transmittance_across_a_fog_box_is_the_analytic_one() {
+    let d = Dir::new();
+    let scale = 0.05;
+    // Along x through the centre, along x through voxel faces (y = 0.5: the same profile,
+    // both neighbours equal), with a zero direction component, and an infinite end.
+    let rays = [
+        [-30.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, f64::INFINITY],
+        [30.0, 0.5, 0.0, 0.0, -1.0, 0.0, 0.0, 100.0],
+        [0.0, -40.0, 0.5, 0.0, 0.0, 1.0, 0.0, f64::INFINITY],
+    ];
+    write_f64(&d.path("rays.npy"), &[3, 8], rays.as_flattened());
+    let want = (-16.0f64 * scale).exp();
+    for estimator in ["exact", "march", "delta", "ratio", "residual"] {
+        let spp = if matches!(estimator, "exact" | "march") {
+            "1"
+        } else {
+            "20000"
+        };
+        let out = hytrace(&[
+            "volume",
+            "transmittance",
+            FOG_BOX,
+            "--rays",
+            &d.arg("rays.npy"),
+            "--out",
+            &d.arg("t.npy"),
+            "--estimator",
+            estimator,
+            "--spp",
+            spp,
+            "--step",
+            "0.25",
+            "--density-scale",
+            &scale.to_string(),
+        ]);
+        assert!(out.status.success(), "{estimator}: {}", stderr(&out));
+        let t: Vec<f64> = read_values(&d.path("t.npy"), Scalar::F64);
+        // The unbiased trackers' samples lie in [0, 1]: standard error <= sqrt(T(1-T)/spp).
+        let tol = match estimator {
+            "exact" => 1e-12,
+            // Midpoint steps that straddle the profile's kinks: O(step^2) per kink.
+            "march" => 1e-3,
+            _ => 4.0 * (want * (1.0 - want) / 20000.0).sqrt(),
+        };
+        for (i, v) in t.iter().enumerate() {
+            assert!(
+                (v - want).abs() <= tol,
+                "{estimator}: ray {i}: T {v} != exp(-16 * {scale}) = {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn samples_follow_the_voxel_convention_in_every_representation() {
+    let d = Dir::new();
+    // World = index for voxel size 1. Voxel 8 of the box's x axis holds 0.5, voxel 9 0.25.
+    let points = [
+        [8.0, 0.0, 0.0],
+        [8.5, 0.0, 0.0],
+        [8.49, 0.0, 0.0],
+        [50.0, 0.0, 0.0],
+    ];
+    write_f64(&d.path("p.npy"), &[4, 3], points.as_flattened());
+    for (filter, want) in [
+        ("nearest", [0.5, 0.25, 0.5, 0.0]),
+        ("trilinear", [0.5, 0.375, 0.3775, 0.0]),
+    ] {
+        for repr in ["nanovdb", "f32", "f16", "unorm16", "unorm8", "bc4"] {
+            let out = hytrace(&[
+                "volume",
+                "sample",
+                FOG_BOX,
+                "--points",
+                &d.arg("p.npy"),
+                "--out",
+                &d.arg("v.npy"),
+                "--filter",
+                filter,
+                "--repr",
+                repr,
+            ]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            let v: Vec<f32> = read_values(&d.path("v.npy"), Scalar::F32);
+            // Quantized formats: within their share of the brick's range [0, 1].
+            let tol = match repr {
+                "bc4" => 1.0 / 14.0 + 1e-6,
+                "unorm8" => 0.5 / 255.0 + 1e-6,
+                "unorm16" | "f16" => 1e-3,
+                _ => 1e-6,
+            };
+            for (i, (g, w)) in v.iter().zip(want).enumerate() {
+                assert!(
+                    (*g as f64 - w).abs() <= tol,
+                    "{filter} {repr}: point {i}: {g} != {w}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn info_lists_grids_and_memory_per_representation() {
+    let out = hytrace(&["volume", "info", &data("openvdb/grids.vdb"), "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let grids = info["grids"].as_array().unwrap();
+    let names: Vec<&str> = grids.iter().map(|g| g["name"].as_str().unwrap()).collect();
+    assert!(
+        names.contains(&"density") && names.contains(&"velocity"),
+        "{names:?}"
+    );
+    let density = grids.iter().find(|g| g["name"] == "density").unwrap();
+    let memory: Vec<&str> = density["memory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["representation"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        memory,
+        ["openvdb", "bc4", "unorm8", "unorm16", "f16", "f32"]
+    );
+    let velocity = grids.iter().find(|g| g["name"] == "velocity").unwrap();
+    assert!(velocity["note"].as_str().unwrap().contains("vec3s"));
+    let text = hytrace(&["volume", "info", "sphere:5,0.5"]);
+    assert!(text.status.success(), "{}", stderr(&text));
+    assert!(String::from_utf8_lossy(&text.stdout).contains("procedural"));
+}
+
+#[test]
+fn convert_writes_a_complete_directory() {
+    let d = Dir::new();
+    let out = hytrace(&[
+        "volume",
+        "convert",
+        "sphere:6,0.5,3",
+        "--format",
+        "unorm8",
+        "-o",
+        &d.arg("bricks"),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for f in ["atlas.npy", "indirection.npy", "bricks.npy", "meta.json"] {
+        assert!(d.path("bricks").join(f).exists(), "{f} missing");
+    }
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path("bricks/meta.json")).unwrap())
+            .unwrap();
+    assert_eq!(meta["format"], "unorm8");
+    let bad = hytrace(&[
+        "volume",
+        "convert",
+        "sphere:6",
+        "--format",
+        "bc7",
+        "-o",
+        &d.arg("other"),
+    ]);
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains("bc7"), "{}", stderr(&bad));
+    assert!(!d.path("other").exists());
+}
+
+#[test]
+fn bad_input_fails_cleanly_without_output() {
+    let d = Dir::new();
+    write_f64(&d.path("p2.npy"), &[2, 2], &[0.0; 4]);
+    write_f64(
+        &d.path("nan.npy"),
+        &[2, 3],
+        &[0.0, 0.0, 0.0, f64::NAN, 1.0, 2.0],
+    );
+    write_f64(&d.path("p.npy"), &[1, 3], &[0.0; 3]);
+    write_f64(
+        &d.path("badray.npy"),
+        &[1, 8],
+        &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+    );
+    write_f64(
+        &d.path("ray.npy"),
+        &[1, 8],
+        &[0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
+    let truncated = d.path("cut.vdb");
+    let whole = std::fs::read(data("openvdb/density_zip.vdb")).unwrap();
+    std::fs::write(&truncated, &whole[..whole.len() / 2]).unwrap();
+    let out_arg = d.arg("out.npy");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["sample", FOG_BOX, "--points", &d.arg("p2.npy")].map_owned(),
+            "(N, 3)",
+        ),
+        (
+            vec!["sample", FOG_BOX, "--points", &d.arg("nan.npy")].map_owned(),
+            "point 1",
+        ),
+        (
+            vec!["sample", "sphere:1,0", "--points", &d.arg("p.npy")].map_owned(),
+            "voxel size",
+        ),
+        (
+            vec![
+                "sample",
+                &d.arg("missing.nvdb"),
+                "--points",
+                &d.arg("p.npy"),
+            ]
+            .map_owned(),
+            "missing.nvdb",
+        ),
+        (
+            vec![
+                "sample",
+                truncated.to_str().unwrap(),
+                "--points",
+                &d.arg("p.npy"),
+            ]
+            .map_owned(),
+            "cut.vdb",
+        ),
+        (
+            vec![
+                "sample",
+                &data("openvdb/grids.vdb"),
+                "--points",
+                &d.arg("p.npy"),
+                "--grid",
+                "nope",
+            ]
+            .map_owned(),
+            "nope",
+        ),
+        (
+            vec![
+                "sample",
+                &data("openvdb/grids.vdb"),
+                "--points",
+                &d.arg("p.npy"),
+                "--grid",
+                "velocity",
+            ]
+            .map_owned(),
+            "vec3s",
+        ),
+        (
+            vec!["transmittance", FOG_BOX, "--rays", &d.arg("badray.npy")].map_owned(),
+            "zero length",
+        ),
+        (
+            vec!["transmittance", FOG_BOX, "--rays", &d.arg("p.npy")].map_owned(),
+            "(N, 8)",
+        ),
+        (
+            vec![
+                "transmittance",
+                FOG_BOX,
+                "--rays",
+                &d.arg("ray.npy"),
+                "--spp",
+                "0",
+            ]
+            .map_owned(),
+            "spp",
+        ),
+        (
+            vec!["sample", "data.xyz", "--points", &d.arg("p.npy")].map_owned(),
+            "unknown volume format",
+        ),
+    ];
+    for (args, expect) in cases {
+        let mut full = vec!["volume".to_string()];
+        full.extend(args);
+        full.extend(["--out".to_string(), out_arg.clone()]);
+        let refs: Vec<&str> = full.iter().map(String::as_str).collect();
+        let out = hytrace(&refs);
+        assert!(!out.status.success(), "{full:?} succeeded");
+        let err = stderr(&out);
+        assert!(err.contains(expect), "{full:?}: `{expect}` not in: {err}");
+        assert!(!err.contains("panicked"), "{full:?}: {err}");
+        assert!(!d.path("out.npy").exists(), "{full:?} left an output file");
+    }
+}
+
+/// `vec![&str]` to owned strings.
+trait MapOwned {
+    fn map_owned(self) -> Vec<String>;
+}
+
+impl MapOwned for Vec<&str> {
+    fn map_owned(self) -> Vec<String> {
+        self.into_iter().map(str::to_string).collect()
+    }
+}
