@@ -114,6 +114,10 @@ enum VolumeCommand {
         /// Seed of the stochastic filter's random numbers.
         #[arg(long, default_value_t = 0)]
         seed: u32,
+        /// Write the local majorant at this mip level (0: 8^3 blocks .. 3: 64^3) of the block
+        /// holding each point instead of the value: the largest value any lookup there reads.
+        #[arg(long)]
+        majorant: Option<usize>,
     },
     /// Transmittance along rays: (N, 8) rays (ox oy oz tmin dx dy dz tmax, world space) in,
     /// (N,) float64 out; density = value x scale, per unit of world length.
@@ -195,11 +199,15 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             repr,
             grid,
             seed,
+            majorant,
         } => {
             let (_, g) = volume::open(&file, grid.as_deref())?;
             let points = volume::read_points(&points)?;
             let g = volume::represent(g, repr)?;
-            let values = volume::sample_points(g.grid(), &points, space, filter.into(), seed);
+            let values = match majorant {
+                Some(level) => volume::majorants(&g, &points, space, level)?,
+                None => volume::sample_points(g.grid(), &points, space, filter.into(), seed),
+            };
             volume::write_f32(&out, &values)?;
             eprintln!("{} lookups; wrote {}", values.len(), out.display());
         }

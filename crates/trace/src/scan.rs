@@ -75,13 +75,18 @@ pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<Ray
         .collect()
 }
 
-/// Reads and validates a rays file.
-pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
+/// Reads an `(N, W)` float32 or float64 array as rows of f64; `what` names the rows in
+/// errors ("rays need shape (N, 8) ...", with `columns` describing the columns).
+pub fn read_float_rows<const W: usize>(
+    path: &Path,
+    what: &str,
+    columns: &str,
+) -> anyhow::Result<Vec<[f64; W]>> {
     let a = read_array(path)?;
-    let source = path.display().to_string();
-    if a.shape.len() != 2 || a.shape[1] != 8 {
+    let source = path.display();
+    if a.shape.len() != 2 || a.shape[1] != W as u64 {
         bail!(
-            "{source}: rays need shape (N, 8) (ox oy oz tmin dx dy dz tmax), got {:?}",
+            "{source}: {what} need shape (N, {W}){columns}, got {:?}",
             a.shape
         );
     }
@@ -91,13 +96,18 @@ pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
             .map(f64::from)
             .collect(),
         Scalar::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&a.bytes),
-        other => bail!("{source}: rays must be float32 or float64, got {other:?}"),
+        other => bail!("{source}: {what} must be float32 or float64, got {other:?}"),
     };
-    let rows: Vec<[f64; 8]> = values
-        .chunks_exact(8)
+    Ok(values
+        .chunks_exact(W)
         .map(|c| std::array::from_fn(|k| c[k]))
-        .collect();
-    rays_from_rows(&rows, &source)
+        .collect())
+}
+
+/// Reads and validates a rays file.
+pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
+    let rows = read_float_rows::<8>(path, "rays", " (ox oy oz tmin dx dy dz tmax)")?;
+    rays_from_rows(&rows, &path.display().to_string())
 }
 
 /// Writes rays as an `(N, 8)` float64 array.

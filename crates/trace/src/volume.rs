@@ -1,12 +1,13 @@
 //! The operations behind `hytrace volume`: open a grid, choose its representation, sample
 //! points, estimate transmittance along rays, convert to a bricked grid, summarize.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use hytrace_foundry::layout::Scalar;
-use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
     open_volume, sample, select_grid, BrickedGrid, Estimate, Estimator, Filter, GridSummary,
     Majorant, RangeMips, Ray, Rng, TexelFormat, TransmittanceParams, Volume, VoxelGrid,
@@ -14,7 +15,7 @@ use hytrace_volume::{
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::scan::RayRow;
+use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -109,6 +110,15 @@ impl Represented {
             Represented::Bricked(b) => b.as_ref(),
         }
     }
+
+    /// The range mips of what lookups on this representation read: the bricked grid's own,
+    /// or built from the grid as read.
+    pub fn range_mips(&self) -> anyhow::Result<Cow<'_, RangeMips>> {
+        Ok(match self {
+            Represented::Bricked(b) => Cow::Borrowed(b.ranges()),
+            Represented::Source(v) => Cow::Owned(RangeMips::build(v)?),
+        })
+    }
 }
 
 /// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, or a procedural grid.
@@ -126,31 +136,11 @@ pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
 
 /// Reads `(N, 3)` float32 or float64 points; errors name the file and the first bad row.
 pub fn read_points(path: &Path) -> anyhow::Result<Vec<[f64; 3]>> {
-    let a = read_array(path)?;
-    let source = path.display();
-    if a.shape.len() != 2 || a.shape[1] != 3 {
-        bail!("{source}: points need shape (N, 3), got {:?}", a.shape);
+    let rows = read_float_rows::<3>(path, "points", "")?;
+    if let Some(i) = rows.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        bail!("{}: point {i}: {:?} is not finite", path.display(), rows[i]);
     }
-    let values: Vec<f64> = match a.scalar {
-        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
-            .into_iter()
-            .map(f64::from)
-            .collect(),
-        Scalar::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&a.bytes),
-        other => bail!("{source}: points must be float32 or float64, got {other:?}"),
-    };
-    values
-        .chunks_exact(3)
-        .enumerate()
-        .map(|(i, c)| {
-            let p = [c[0], c[1], c[2]];
-            if p.iter().all(|v| v.is_finite()) {
-                Ok(p)
-            } else {
-                bail!("{source}: point {i}: {p:?} is not finite")
-            }
-        })
-        .collect()
+    Ok(rows)
 }
 
 /// Lookups of `grid` at `points`; point `i` of a stochastic lookup uses the random stream
@@ -175,6 +165,34 @@ pub fn sample_points(
             sample(grid, index, filter, u)
         })
         .collect()
+}
+
+/// The local majorant at mip `level` (0: 8^3 blocks .. 3: 64^3) of the block holding each
+/// point: the largest value any lookup there can read on this representation.
+pub fn majorants(
+    grid: &Represented,
+    points: &[[f64; 3]],
+    space: Space,
+    level: usize,
+) -> anyhow::Result<Vec<f32>> {
+    let mips = grid.range_mips()?;
+    if level >= mips.levels.len() {
+        bail!(
+            "majorant level {level}: the range mips have levels 0 to {}",
+            mips.levels.len() - 1
+        );
+    }
+    let map = grid.grid().map();
+    Ok(points
+        .par_iter()
+        .map(|p| {
+            let index = match space {
+                Space::Index => *p,
+                Space::World => map.world_to_index(*p),
+            };
+            mips.range_at(level, index).max
+        })
+        .collect())
 }
 
 /// Writes `(N,)` values atomically.
@@ -249,20 +267,13 @@ pub fn transmittances(
     args: &TransmittanceArgs,
 ) -> anyhow::Result<(Vec<Estimate>, f64, f64)> {
     let t0 = Instant::now();
-    let built;
-    let mips = match grid {
-        Represented::Bricked(b) => b.ranges(),
-        Represented::Source(v) => {
-            built = RangeMips::build(v)?;
-            &built
-        }
-    };
+    let mips = grid.range_mips()?;
     let t1 = Instant::now();
     let rays: Vec<Ray> = rays
         .iter()
         .map(|r| Ray::new(r.origin, r.direction, r.tmin, r.tmax))
         .collect();
-    let estimates = hytrace_volume::transmittance_batch(grid.grid(), mips, &rays, &args.params())?;
+    let estimates = hytrace_volume::transmittance_batch(grid.grid(), &mips, &rays, &args.params())?;
     let t2 = Instant::now();
     Ok((estimates, (t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()))
 }

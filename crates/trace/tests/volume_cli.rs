@@ -164,6 +164,50 @@ fn samples_follow_the_voxel_convention_in_every_representation() {
 }
 
 #[test]
+fn majorants_bound_the_block_and_its_halo() {
+    let d = Dir::new();
+    let points = [[8.0, 0.0, 0.0], [50.0, 0.0, 0.0], [-7.6, 0.0, 0.0]];
+    write_f64(&d.path("p.npy"), &[3, 3], points.as_flattened());
+    // Level 0: point 8 lies in the block of voxels 8..15, whose halo reaches voxel 7 (0.75);
+    // the block of voxels 48..55 and its halo are empty; -7.6 rounds to voxel -8, in the
+    // block of voxels -8..-1 whose halo reaches voxel 0 (1.0). Level 3: one 64^3 block
+    // around the origin holds the whole box (max 1).
+    for (level, want) in [("0", [0.75, 0.0, 1.0]), ("3", [1.0, 1.0, 1.0])] {
+        for repr in ["nanovdb", "unorm8"] {
+            let out = hytrace(&[
+                "volume",
+                "sample",
+                FOG_BOX,
+                "--points",
+                &d.arg("p.npy"),
+                "--out",
+                &d.arg("m.npy"),
+                "--majorant",
+                level,
+                "--repr",
+                repr,
+            ]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            let m: Vec<f32> = read_values(&d.path("m.npy"), Scalar::F32);
+            assert_eq!(m, want.map(|v| v as f32), "level {level} {repr}");
+        }
+    }
+    let bad = hytrace(&[
+        "volume",
+        "sample",
+        FOG_BOX,
+        "--points",
+        &d.arg("p.npy"),
+        "--out",
+        &d.arg("x.npy"),
+        "--majorant",
+        "4",
+    ]);
+    assert!(!bad.status.success() && stderr(&bad).contains("majorant level 4"));
+    assert!(!d.path("x.npy").exists());
+}
+
+#[test]
 fn info_lists_grids_and_memory_per_representation() {
     let out = hytrace(&["volume", "info", &data("openvdb/grids.vdb"), "--json"]);
     assert!(out.status.success(), "{}", stderr(&out));

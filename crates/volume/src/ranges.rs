@@ -205,6 +205,19 @@ impl RangeMips {
         self.levels[level].range_or(block, self.background)
     }
 
+    /// The range at `level` (panics beyond the levels) of the block holding index-space
+    /// point `p` (the background's range for non-finite points, which read the background).
+    pub fn range_at(&self, level: usize, p: [f64; 3]) -> ValueRange {
+        if p.iter().any(|c| !c.is_finite()) {
+            return ValueRange::constant(self.background);
+        }
+        let side = f64::from(self.levels[level].side);
+        // The block whose voxels are nearest to p (lookup regions are [s b - 0.5, s b + s - 0.5));
+        // the float-to-int cast saturates far outside, where every block is the background's.
+        let block = p.map(|c| ((c + 0.5) / side).floor() as i32);
+        self.range(level, block)
+    }
+
     /// Bytes the ranges occupy.
     pub fn memory_bytes(&self) -> usize {
         self.levels

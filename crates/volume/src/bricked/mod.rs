@@ -166,13 +166,7 @@ impl BrickedGrid {
     /// lookup on this grid within that block (the background's range for non-finite points,
     /// which read the background).
     pub fn range_at(&self, level: usize, p: [f64; 3]) -> ValueRange {
-        if p.iter().any(|c| !c.is_finite()) {
-            return ValueRange::constant(self.background);
-        }
-        let side = f64::from(self.ranges.levels[level].side);
-        // The block whose voxels are nearest to p (lookup regions are [s b - 0.5, s b + s - 0.5)).
-        let block = p.map(|c| ((c + 0.5) / side).floor() as i32);
-        self.ranges.range(level, block)
+        self.ranges.range_at(level, p)
     }
 
     /// The local majorant at mip `level` around index-space point `p` (see
