@@ -14,15 +14,11 @@ use hytrace_trace::scan::{rays_from_rows, RayRow};
 use hytrace_trace::volume::{
     open, sample_points, transmittances, EstimatorArg, Represented, Space, TransmittanceArgs,
 };
-use hytrace_volume::{BrickedGrid, Filter, TexelFormat, Volume, VoxelGrid};
+use hytrace_volume::{BrickedGrid, Filter, Rng, TexelFormat, Volume, VoxelGrid};
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-fn rng(state: &mut u64) -> f64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+/// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
+fn rng(state: &mut Rng) -> f64 {
+    state.next_f64()
 }
 
 /// Best time of `runs` calls of `f`, in seconds, and the last result.
@@ -113,7 +109,7 @@ fn main() {
     );
 
     // Lookups at random points of the sphere's box.
-    let mut state = 1;
+    let mut state = Rng::new(1, 0, 0);
     let points: Vec<[f64; 3]> = (0..2_000_000)
         .map(|_| std::array::from_fn(|_| rng(&mut state) * side as f64))
         .collect();
@@ -143,7 +139,7 @@ fn main() {
 
 /// Accuracy against time of the transmittance estimators on chords of the sphere.
 fn transmittance_table(grid: Volume, side: usize) {
-    let mut state = 5;
+    let mut state = Rng::new(5, 0, 0);
     let c = side as f64 / 2.0;
     let rows: Vec<[f64; 8]> = (0..20_000)
         .map(|_| {

@@ -59,15 +59,11 @@ impl BrickedGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{fog_sphere, sample_trilinear, DenseGrid, TexelFormat};
+    use crate::{fog_sphere, sample_trilinear, DenseGrid, Rng, TexelFormat};
 
-    /// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-    fn rng(state: &mut u64) -> f64 {
-        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = *state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    /// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
+    fn rng(state: &mut Rng) -> f64 {
+        state.next_f64()
     }
 
     fn contains(b: &Brick, p: [f64; 3]) -> bool {
@@ -82,7 +78,7 @@ mod tests {
 
     #[test]
     fn halo_ranges_bound_every_trilinear_lookup() {
-        let mut state = 3;
+        let mut state = Rng::new(3, 0, 0);
         // Negative origin, sides that are not multiples of 8, random values.
         let mut g = DenseGrid::new([-13, -8, 5], [21, 16, 11], 0.0).unwrap();
         for v in g.values.iter_mut() {

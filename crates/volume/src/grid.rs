@@ -172,12 +172,27 @@ pub fn sample_trilinear<G: VoxelGrid + ?Sized>(g: &G, p: [f64; 3]) -> f64 {
     }
     let base = p.map(f64::floor);
     let frac: [f64; 3] = std::array::from_fn(|k| p[k] - base[k]);
+    // The eight voxels in one box read (sources resolve their block once), unless the box
+    // leaves the i32 index range, where voxels read one by one (the outside ones as the
+    // background).
+    let mut corners = [0f32; 8];
+    if base
+        .iter()
+        .all(|c| *c >= i32::MIN as f64 && *c < i32::MAX as f64)
+    {
+        g.read_box(base.map(|c| c as i32), [2, 2, 2], &mut corners);
+    } else {
+        for (corner, value) in corners.iter_mut().enumerate() {
+            let c = std::array::from_fn(|k| base[k] + (corner >> k & 1) as f64);
+            *value = voxel_or_background(g, c);
+        }
+    }
     let mut sum = 0.0;
-    for corner in 0..8 {
-        let offset: [f64; 3] = std::array::from_fn(|k| (corner >> k & 1) as f64);
+    // Corner bits: x is bit 0, as read_box orders voxels x fastest.
+    for (corner, value) in corners.iter().enumerate() {
         let weight: f64 = (0..3)
             .map(|k| {
-                if offset[k] == 1.0 {
+                if corner >> k & 1 == 1 {
                     frac[k]
                 } else {
                     1.0 - frac[k]
@@ -185,8 +200,7 @@ pub fn sample_trilinear<G: VoxelGrid + ?Sized>(g: &G, p: [f64; 3]) -> f64 {
             })
             .product();
         if weight != 0.0 {
-            let c = std::array::from_fn(|k| base[k] + offset[k]);
-            sum += weight * voxel_or_background(g, c) as f64;
+            sum += weight * *value as f64;
         }
     }
     sum

@@ -237,19 +237,16 @@ impl RangeLevel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{sample_nearest, sample_trilinear, DenseGrid};
+    use crate::{sample_nearest, sample_trilinear, DenseGrid, Rng};
 
-    fn rng(state: &mut u64) -> f64 {
-        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = *state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    /// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
+    fn rng(state: &mut Rng) -> f64 {
+        state.next_f64()
     }
 
     #[test]
     fn every_level_bounds_every_lookup_in_its_blocks() {
-        let mut state = 11;
+        let mut state = Rng::new(11, 0, 0);
         let mut g = DenseGrid::new([-37, 5, -70], [45, 29, 80], 0.5).unwrap();
         for v in g.values.iter_mut() {
             if rng(&mut state) < 0.4 {

@@ -7,23 +7,19 @@ use std::path::Path;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, read_records};
 use hytrace_volume::{
-    sample_nearest, sample_stochastic, sample_trilinear, BrickEntry, BrickedGrid, DenseGrid,
+    sample_nearest, sample_stochastic, sample_trilinear, BrickEntry, BrickedGrid, DenseGrid, Rng,
     TexelFormat, VoxelGrid, NO_BRICK, NO_SLOT, RANGE_LEVELS,
 };
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-fn rng(state: &mut u64) -> f64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+/// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
+fn rng(state: &mut Rng) -> f64 {
+    state.next_f64()
 }
 
 /// Negative origin, sides that are not multiples of 8; random values, an empty region, a
 /// constant aligned brick, a smooth ramp and a lone voxel whose neighbour brick is empty.
 fn structured_grid() -> DenseGrid {
-    let mut state = 7;
+    let mut state = Rng::new(7, 0, 0);
     let mut g = DenseGrid::new([-19, -6, -27], [37, 22, 29], 0.0).unwrap();
     for z in -27..2 {
         for y in -6..16 {
@@ -59,8 +55,8 @@ fn structured_grid() -> DenseGrid {
 }
 
 /// A grid with values `base + spread * noise` filling the bricks of `[-8, 16)^3`.
-fn offset_grid(base: f32, spread: f32, seed: u64) -> DenseGrid {
-    let mut state = seed;
+fn offset_grid(base: f32, spread: f32, seed: u32) -> DenseGrid {
+    let mut state = Rng::new(seed, 0, 0);
     let mut g = DenseGrid::new([-8; 3], [24; 3], 0.0).unwrap();
     for v in g.values.iter_mut() {
         *v = base + spread * (rng(&mut state) * 2.0 - 1.0) as f32;
@@ -163,7 +159,7 @@ fn f32_is_exact_and_quantized_formats_use_the_brick_range() {
 
 #[test]
 fn ranges_near_the_f32_limit() {
-    let mut state = 9;
+    let mut state = Rng::new(9, 0, 0);
     let mut g = DenseGrid::new([0; 3], [8, 8, 16], 0.0).unwrap();
     for v in g.values.iter_mut() {
         *v = (1e37 + rng(&mut state) * 2.9e38) as f32;
@@ -223,7 +219,7 @@ fn non_finite_voxels_and_f16_overflow_are_errors() {
 }
 
 /// Random lookups of every filter on `b` lie within every level's range at their point.
-fn assert_ranges_bound_lookups(b: &BrickedGrid, points: &[[f64; 3]], state: &mut u64) {
+fn assert_ranges_bound_lookups(b: &BrickedGrid, points: &[[f64; 3]], state: &mut Rng) {
     for p in points {
         let u: [f64; 3] = std::array::from_fn(|_| rng(state));
         let lookups = [
@@ -256,7 +252,7 @@ fn assert_ranges_bound_lookups(b: &BrickedGrid, points: &[[f64; 3]], state: &mut
 #[test]
 fn ranges_bound_every_lookup() {
     let g = structured_grid();
-    let mut state = 13;
+    let mut state = Rng::new(13, 0, 0);
     let mut points: Vec<[f64; 3]> = (0..6000)
         .map(|_| {
             std::array::from_fn(|k| {
@@ -356,7 +352,7 @@ fn long_lines_need_no_atlas_coordinate_limit() {
 #[test]
 fn box_reads_match_voxel_reads() {
     let g = structured_grid();
-    let mut state = 17;
+    let mut state = Rng::new(17, 0, 0);
     for format in [TexelFormat::Bc4, TexelFormat::Unorm16] {
         let b = BrickedGrid::convert(&g, format).unwrap();
         for _ in 0..50 {

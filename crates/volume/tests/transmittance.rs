@@ -5,17 +5,13 @@
 use hytrace_volume::{
     fog_sphere, global_range, sample_nearest, sample_stochastic, sample_trilinear, transmittance,
     transmittance_batch, CellWalk, Coord, DenseGrid, Estimate, Estimator, Filter, GridMap,
-    IndexRay, Majorant, RangeMips, Ray, Segment, SegmentWalk, TransmittanceParams, VoxelGrid,
+    IndexRay, Majorant, RangeMips, Ray, Rng, Segment, SegmentWalk, TransmittanceParams, VoxelGrid,
     LEVEL_GLOBAL, LEVEL_OUTSIDE,
 };
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-fn rng(state: &mut u64) -> f64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+/// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
+fn rng(state: &mut Rng) -> f64 {
+    state.next_f64()
 }
 
 fn unit(v: [f64; 3]) -> [f64; 3] {
@@ -23,7 +19,7 @@ fn unit(v: [f64; 3]) -> [f64; 3] {
     v.map(|c| c / n)
 }
 
-fn random_dir(state: &mut u64) -> [f64; 3] {
+fn random_dir(state: &mut Rng) -> [f64; 3] {
     loop {
         let v: [f64; 3] = std::array::from_fn(|_| rng(state) * 2.0 - 1.0);
         let n2 = v.iter().map(|c| c * c).sum::<f64>();
@@ -35,7 +31,7 @@ fn random_dir(state: &mut u64) -> [f64; 3] {
 
 /// Sparse random values in [lo, hi) (a fraction `fill` of the voxels), the rest background.
 fn random_grid(
-    state: &mut u64,
+    state: &mut Rng,
     origin: [i32; 3],
     dims: [u32; 3],
     background: f32,
@@ -133,7 +129,7 @@ fn check_segments<G: VoxelGrid>(
     mips: &RangeMips,
     ray: &IndexRay,
     segs: &[Segment],
-    state: &mut u64,
+    state: &mut Rng,
 ) {
     if ray.tmax <= ray.tmin {
         assert!(segs.is_empty(), "{segs:?}");
@@ -189,7 +185,7 @@ fn check_segments<G: VoxelGrid>(
 }
 
 /// Checks the walks at every level and the global one.
-fn check_all_walks<G: VoxelGrid>(g: &G, mips: &RangeMips, ray: &IndexRay, state: &mut u64) {
+fn check_all_walks<G: VoxelGrid>(g: &G, mips: &RangeMips, ray: &IndexRay, state: &mut Rng) {
     for level in 0..mips.levels.len() {
         let segs: Vec<Segment> = SegmentWalk::new(mips, ray, level).unwrap().collect();
         // Levels from the requested one to the coarsest; never the fallback range.
@@ -203,7 +199,7 @@ fn check_all_walks<G: VoxelGrid>(g: &G, mips: &RangeMips, ray: &IndexRay, state:
     check_segments(g, mips, ray, &segs, state);
 }
 
-fn test_grids(state: &mut u64) -> Vec<DenseGrid> {
+fn test_grids(state: &mut Rng) -> Vec<DenseGrid> {
     let mut sparse = random_grid(state, [-37, 5, -70], [45, 29, 80], 0.0, 0.4, (-3.0, 7.0));
     // Far-apart clusters, so the coarse levels hold constant blocks between them.
     sparse.set([-37, 5, -70], 9.0);
@@ -225,7 +221,7 @@ fn test_grids(state: &mut u64) -> Vec<DenseGrid> {
 
 #[test]
 fn segments_bound_every_lookup_on_random_rays() {
-    let mut state = 1;
+    let mut state = Rng::new(1, 0, 0);
     for g in test_grids(&mut state) {
         let mips = RangeMips::build(&g).unwrap();
         let lo = g.origin.map(|c| c as f64 - 20.0);
@@ -247,7 +243,7 @@ fn segments_bound_every_lookup_on_random_rays() {
 
 #[test]
 fn zero_direction_components() {
-    let mut state = 2;
+    let mut state = Rng::new(2, 0, 0);
     for g in test_grids(&mut state) {
         let mips = RangeMips::build(&g).unwrap();
         for i in 0..60 {
@@ -330,7 +326,7 @@ fn empty_space_is_skipped_at_coarse_levels() {
     let segs: Vec<Segment> = SegmentWalk::new(&mips, &ray, 0).unwrap().collect();
     let coarse = segs.iter().filter(|s| s.level == 3).count();
     assert!(coarse >= 5 && segs.len() < 30, "{segs:#?}");
-    let mut state = 18;
+    let mut state = Rng::new(18, 0, 0);
     check_all_walks(&g, &mips, &ray, &mut state);
     // Each block adds 8 along the ray, plus the halo's blend on either side (values ramp
     // from 0 to 1 over one voxel: half a voxel's worth each side).
@@ -343,7 +339,7 @@ fn empty_space_is_skipped_at_coarse_levels() {
 
 #[test]
 fn ray_along_brick_face() {
-    let mut state = 3;
+    let mut state = Rng::new(3, 0, 0);
     let g = random_grid(
         &mut state,
         [-20, -20, -20],
@@ -394,7 +390,7 @@ fn ray_along_brick_face() {
 
 #[test]
 fn ray_starting_on_boundary() {
-    let mut state = 4;
+    let mut state = Rng::new(4, 0, 0);
     let g = random_grid(&mut state, [0, 0, 0], [30, 20, 25], 0.0, 0.6, (0.0, 2.0));
     let mips = RangeMips::build(&g).unwrap();
     let top = mips.levels.last().unwrap();
@@ -427,7 +423,7 @@ fn ray_starting_on_boundary() {
 
 #[test]
 fn far_away_origin() {
-    let mut state = 5;
+    let mut state = Rng::new(5, 0, 0);
     let g = random_grid(
         &mut state,
         [-16, -16, -16],
@@ -471,7 +467,7 @@ fn far_away_origin() {
 
 #[test]
 fn infinite_tmax() {
-    let mut state = 6;
+    let mut state = Rng::new(6, 0, 0);
     let zero = random_grid(
         &mut state,
         [-10, -10, -10],
@@ -518,7 +514,7 @@ fn infinite_tmax() {
 
 #[test]
 fn background_nonzero_finite_tmax() {
-    let mut state = 7;
+    let mut state = Rng::new(7, 0, 0);
     let g = random_grid(
         &mut state,
         [-10, -12, -8],
@@ -596,7 +592,7 @@ fn exact_matches_analytic_ramp() {
             }
         }
     }
-    let mut state = 8;
+    let mut state = Rng::new(8, 0, 0);
     for map in [GridMap::IDENTITY, anisotropic_map()] {
         g.map = map;
         let mips = RangeMips::build(&g).unwrap();
@@ -633,7 +629,7 @@ fn exact_matches_constant_fields() {
     g.values.fill(c);
     g.map = anisotropic_map();
     let mips = RangeMips::build(&g).unwrap();
-    let mut state = 9;
+    let mut state = Rng::new(9, 0, 0);
     for filter in [Filter::Trilinear, Filter::Nearest, Filter::Stochastic] {
         for _ in 0..10 {
             let p: [f64; 3] = std::array::from_fn(|_| rng(&mut state) * 10.0);
@@ -663,7 +659,7 @@ fn exact_matches_constant_fields() {
 
 #[test]
 fn exact_matches_brute_force_quadrature() {
-    let mut state = 10;
+    let mut state = Rng::new(10, 0, 0);
     let mut sphere = fog_sphere(14.0, 5.0).unwrap();
     sphere.map = anisotropic_map();
     let mut sparse = random_grid(
@@ -732,7 +728,7 @@ fn assert_unbiased(e: &Estimate, exact: f64, spp: u32, what: &str) {
 
 #[test]
 fn trackers_are_unbiased() {
-    let mut state = 11;
+    let mut state = Rng::new(11, 0, 0);
     let mut sphere = fog_sphere(16.0, 8.0).unwrap();
     sphere.map = anisotropic_map();
     let sparse = random_grid(
@@ -787,7 +783,7 @@ fn trackers_are_unbiased_to_a_tight_tolerance() {
     // four standard errors per ray; the rays' mean z-score must stay small too.
     let g = fog_sphere(16.0, 10.0).unwrap();
     let mips = RangeMips::build(&g).unwrap();
-    let mut state = 17;
+    let mut state = Rng::new(17, 0, 0);
     let rays: Vec<Ray> = (0..8)
         .map(|_| {
             let p: [f64; 3] = std::array::from_fn(|_| rng(&mut state) * 6.0 - 3.0);
@@ -814,7 +810,7 @@ fn trackers_are_unbiased_to_a_tight_tolerance() {
 
 #[test]
 fn nearest_trackers_are_unbiased() {
-    let mut state = 12;
+    let mut state = Rng::new(12, 0, 0);
     let g = random_grid(
         &mut state,
         [-12, -12, -12],
@@ -841,7 +837,7 @@ fn nearest_trackers_are_unbiased() {
 fn residual_variance_not_above_ratio_on_smooth_field() {
     let g = fog_sphere(20.0, 16.0).unwrap();
     let mips = RangeMips::build(&g).unwrap();
-    let mut state = 13;
+    let mut state = Rng::new(13, 0, 0);
     for _ in 0..3 {
         let p: [f64; 3] = std::array::from_fn(|_| rng(&mut state) * 8.0 - 4.0);
         let ray = world_ray(&g.map, p, random_dir(&mut state), 30.0, 60.0);
@@ -861,7 +857,7 @@ fn residual_variance_not_above_ratio_on_smooth_field() {
 
 #[test]
 fn local_majorants_need_fewer_lookups_than_global() {
-    let mut state = 14;
+    let mut state = Rng::new(14, 0, 0);
     let mut g = DenseGrid::new([-60, -60, -60], [120, 120, 120], 0.0).unwrap();
     // A thin dense shell and a hot spot: most of the box is empty.
     for _ in 0..4000 {
@@ -921,7 +917,7 @@ fn march_converges_quadratically() {
 fn batch_is_deterministic_and_matches_single_rays() {
     let g = fog_sphere(10.0, 4.0).unwrap();
     let mips = RangeMips::build(&g).unwrap();
-    let mut state = 15;
+    let mut state = Rng::new(15, 0, 0);
     let rays: Vec<Ray> = (0..40)
         .map(|_| world_ray(&g.map, [0.0; 3], random_dir(&mut state), 20.0, 40.0))
         .collect();
@@ -940,7 +936,7 @@ fn batch_is_deterministic_and_matches_single_rays() {
 
 #[test]
 fn cell_walk_visits_the_cells_in_order() {
-    let mut state = 16;
+    let mut state = Rng::new(16, 0, 0);
     for i in 0..200 {
         let p: [f64; 3] = std::array::from_fn(|_| rng(&mut state) * 20.0 - 10.0);
         let mut d = random_dir(&mut state);
