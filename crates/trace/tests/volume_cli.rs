@@ -55,6 +55,19 @@ impl Dir {
     }
 }
 
+/// `hytrace volume sample FOG_BOX` of the points in `p.npy` with `options`, read back from
+/// `v.npy`.
+fn sample_fog_box(d: &Dir, options: &[&str]) -> Vec<f32> {
+    let (points, out) = (d.arg("p.npy"), d.arg("v.npy"));
+    let mut args = vec![
+        "volume", "sample", FOG_BOX, "--points", &points, "--out", &out,
+    ];
+    args.extend(options);
+    let run = hytrace(&args);
+    assert!(run.status.success(), "{args:?}: {}", stderr(&run));
+    read_values(&d.path("v.npy"), Scalar::F32)
+}
+
 /// The fog box `box:20,20,20,1,4`: half extents 10 voxels, a 4-voxel blend. Along the x axis
 /// through the centre the voxel values are clamp((10 - |i|) / 4, 0, 1), linearly
 /// interpolated between voxel centres: the optical depth across is the trapezoid sum
@@ -131,21 +144,7 @@ fn samples_follow_the_voxel_convention_in_every_representation() {
         ("trilinear", [0.5, 0.375, 0.3775, 0.0]),
     ] {
         for repr in ["nanovdb", "f32", "f16", "unorm16", "unorm8", "bc4"] {
-            let out = hytrace(&[
-                "volume",
-                "sample",
-                FOG_BOX,
-                "--points",
-                &d.arg("p.npy"),
-                "--out",
-                &d.arg("v.npy"),
-                "--filter",
-                filter,
-                "--repr",
-                repr,
-            ]);
-            assert!(out.status.success(), "{}", stderr(&out));
-            let v: Vec<f32> = read_values(&d.path("v.npy"), Scalar::F32);
+            let v = sample_fog_box(&d, &["--filter", filter, "--repr", repr]);
             // Quantized formats: within their share of the brick's range [0, 1].
             let tol = match repr {
                 "bc4" => 1.0 / 14.0 + 1e-6,
@@ -174,21 +173,7 @@ fn majorants_bound_the_block_and_its_halo() {
     // around the origin holds the whole box (max 1).
     for (level, want) in [("0", [0.75, 0.0, 1.0]), ("3", [1.0, 1.0, 1.0])] {
         for repr in ["nanovdb", "unorm8"] {
-            let out = hytrace(&[
-                "volume",
-                "sample",
-                FOG_BOX,
-                "--points",
-                &d.arg("p.npy"),
-                "--out",
-                &d.arg("m.npy"),
-                "--majorant",
-                level,
-                "--repr",
-                repr,
-            ]);
-            assert!(out.status.success(), "{}", stderr(&out));
-            let m: Vec<f32> = read_values(&d.path("m.npy"), Scalar::F32);
+            let m = sample_fog_box(&d, &["--majorant", level, "--repr", repr]);
             assert_eq!(m, want.map(|v| v as f32), "level {level} {repr}");
         }
     }
