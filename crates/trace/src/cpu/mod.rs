@@ -11,14 +11,24 @@
 //!
 //! Every instance is tested by its world bounds, then its solid's CSG and mesh prims by
 //! their bounds in the solid's frame, then the prims themselves (see
-//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. A bounding volume
-//! hierarchy over the instances replaces the linear loops in the BVH issue; the answers
-//! do not change.
+//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. Groups of more
+//! than [`BVH_MIN_MEMBERS`] instances searched together (a flat scene's instances, a
+//! hierarchy's roots, one mother's daughters) sit in a bounding volume hierarchy
+//! ([`bvh`]); it returns exactly what the linear loop over the group did, ties included.
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3};
 use hytrace_foundry::{Foundry, UNSET};
+
+mod bvh;
+#[cfg(test)]
+mod tests;
+
+use bvh::InstanceBvh;
+
+/// Groups of more instances than this are searched through a BVH.
+pub const BVH_MIN_MEMBERS: usize = 8;
 
 /// One placement of a solid.
 #[derive(Clone, Debug)]
@@ -39,13 +49,43 @@ pub struct Hit<T> {
     pub instance: u32,
 }
 
+/// Instances searched together, in placement order (which is also increasing instance
+/// index), with a BVH over them when they are many.
+#[derive(Clone, Debug)]
+struct Group<T> {
+    members: Vec<u32>,
+    bvh: Option<Box<InstanceBvh<T>>>,
+}
+
+impl<T: Real> Group<T> {
+    fn new(members: Vec<u32>, placements: &[Placement<T>]) -> Self {
+        let bvh = (members.len() > BVH_MIN_MEMBERS).then(|| {
+            let boxed: Vec<_> = members
+                .iter()
+                .map(|&i| (i, placements[i as usize].bounds))
+                .collect();
+            Box::new(InstanceBvh::new(&boxed))
+        });
+        Group { members, bvh }
+    }
+}
+
 /// The placement tree of a hierarchical scene.
 #[derive(Clone, Debug)]
-struct Hierarchy {
+struct Hierarchy<T> {
     /// Instances without a mother (the world).
-    roots: Vec<u32>,
-    /// Daughters of each instance, in placement order.
-    daughters: Vec<Vec<u32>>,
+    roots: Group<T>,
+    /// Daughters of each instance.
+    daughters: Vec<Group<T>>,
+}
+
+/// How the instances are searched.
+#[derive(Clone, Debug)]
+enum Layout<T> {
+    /// All instances at once, for the first crossing.
+    Flat(Group<T>),
+    /// As Geant4's navigator.
+    Tree(Hierarchy<T>),
 }
 
 /// A Foundry's CSG content prepared for tracing in precision `T`.
@@ -53,7 +93,7 @@ struct Hierarchy {
 pub struct CpuScene<T> {
     placements: Vec<Placement<T>>,
     solids: Vec<Vec<PreparedPrim<T>>>,
-    hierarchy: Option<Hierarchy>,
+    layout: Layout<T>,
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
@@ -92,23 +132,32 @@ impl<T: Real> CpuScene<T> {
                 bounds: world_bounds(aabb, tran),
             });
         }
-        let hierarchy = f.inst_mother.iter().any(|m| m.index != UNSET).then(|| {
-            let mut h = Hierarchy {
-                roots: Vec::new(),
-                daughters: vec![Vec::new(); f.inst.len()],
-            };
+        let layout = if f.inst_mother.iter().any(|m| m.index != UNSET) {
+            let mut roots = Vec::new();
+            let mut daughters = vec![Vec::new(); f.inst.len()];
             for (i, m) in f.inst_mother.iter().enumerate() {
                 match m.index {
-                    UNSET => h.roots.push(i as u32),
-                    mother => h.daughters[mother as usize].push(i as u32),
+                    UNSET => roots.push(i as u32),
+                    mother => daughters[mother as usize].push(i as u32),
                 }
             }
-            h
-        });
+            Layout::Tree(Hierarchy {
+                roots: Group::new(roots, &placements),
+                daughters: daughters
+                    .into_iter()
+                    .map(|d| Group::new(d, &placements))
+                    .collect(),
+            })
+        } else {
+            Layout::Flat(Group::new(
+                (0..placements.len() as u32).collect(),
+                &placements,
+            ))
+        };
         Ok(CpuScene {
             placements,
             solids,
-            hierarchy,
+            layout,
         })
     }
 
@@ -143,6 +192,64 @@ impl<T: Real> CpuScene<T> {
         best
     }
 
+    /// The nearer of `seed` and the first crossing of a member of `group`: what folding
+    /// [`Self::cross_instance`] over the members in placement order gives, that is the
+    /// nearest crossing, ties going to `seed`, then to the lowest instance index.
+    fn enter(
+        &self,
+        group: &Group<T>,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        seed: Option<Hit<T>>,
+    ) -> Option<Hit<T>> {
+        let Some(bvh) = &group.bvh else {
+            return group.members.iter().fold(seed, |best, &i| {
+                self.cross_instance(i as usize, ray, tmin, tmax, best)
+            });
+        };
+        let mut best = seed;
+        let mut seeded = seed.is_some();
+        bvh.visit_ray(ray, tmin, best.map_or(tmax, |b| b.t), |i| {
+            match best {
+                // Visited out of order: an earlier member wins a tie with a later one.
+                Some(b) if !seeded && i < b.instance => {
+                    let bounds = &self.placements[i as usize].bounds;
+                    if ray_meets_bounds(ray, bounds, tmin, b.t) {
+                        let own = self.cross_instance(i as usize, ray, tmin, tmax, None);
+                        if let Some(h) = own.filter(|h| h.t <= b.t) {
+                            best = Some(h);
+                        }
+                    }
+                }
+                _ => {
+                    best = self.cross_instance(i as usize, ray, tmin, tmax, best);
+                    if best.is_some_and(|h| h.instance == i) {
+                        seeded = false;
+                    }
+                }
+            }
+            best.map_or(tmax, |b| b.t)
+        });
+        best
+    }
+
+    /// The last-placed member of `group` containing `x` (`scratch` is working space).
+    fn locate(&self, group: &Group<T>, x: V3<T>, scratch: &mut Vec<u32>) -> Option<u32> {
+        let Some(bvh) = &group.bvh else {
+            return group
+                .members
+                .iter()
+                .rev()
+                .copied()
+                .find(|&c| self.contains(c, x));
+        };
+        scratch.clear();
+        bvh.candidates_at(x, scratch);
+        scratch.sort_unstable_by(|a, b| b.cmp(a));
+        scratch.iter().copied().find(|&c| self.contains(c, x))
+    }
+
     /// Whether instance `index`'s solid contains the world point `x`.
     fn contains(&self, index: u32, x: V3<T>) -> bool {
         let p = &self.placements[index as usize];
@@ -160,24 +267,16 @@ impl<T: Real> CpuScene<T> {
 
     /// Geant4's navigator step: locate the origin, then the nearer of leaving the located
     /// instance and entering one of its daughters.
-    fn navigate(&self, h: &Hierarchy, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+    fn navigate(&self, h: &Hierarchy<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
         let mut current = None;
-        let mut candidates = &h.roots;
-        'descend: loop {
-            for &c in candidates.iter().rev() {
-                if self.contains(c, ray.origin) {
-                    current = Some(c);
-                    candidates = &h.daughters[c as usize];
-                    continue 'descend;
-                }
-            }
-            break;
+        let mut group = &h.roots;
+        let mut scratch = Vec::new();
+        while let Some(c) = self.locate(group, ray.origin, &mut scratch) {
+            current = Some(c);
+            group = &h.daughters[c as usize];
         }
-        let mut best = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax));
-        for &d in candidates {
-            best = self.cross_instance(d as usize, ray, tmin, tmax, best);
-        }
-        best
+        let exit = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax));
+        self.enter(group, ray, tmin, tmax, exit)
     }
 
     /// Where the ray leaves the instance its origin was located in. An origin within the
@@ -203,11 +302,9 @@ impl<T: Real> CpuScene<T> {
     /// The first surface crossing with `tmin < t < tmax` of a ray with a unit direction,
     /// wherever it starts (inside or outside any solid).
     pub fn trace(&self, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-        let best = match &self.hierarchy {
-            Some(h) => self.navigate(h, ray, tmin, tmax),
-            None => (0..self.placements.len()).fold(None, |best, i| {
-                self.cross_instance(i, ray, tmin, tmax, best)
-            }),
+        let best = match &self.layout {
+            Layout::Tree(h) => self.navigate(h, ray, tmin, tmax),
+            Layout::Flat(all) => self.enter(all, ray, tmin, tmax, None),
         };
         best.map(|mut h| {
             let p = &self.placements[h.instance as usize];

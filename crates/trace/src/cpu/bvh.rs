@@ -1,0 +1,222 @@
+//! Bounding volume hierarchies over groups of instances (all of a flat scene's, or one
+//! mother's daughters), replacing the tracer's linear loops.
+//!
+//! obvhs builds the tree from f32 copies of the instances' world bounds, each rounded
+//! outward, so every node box (a union of such boxes, exact in f32) contains the exact
+//! bounds of every instance below it. The traversal runs in the kernel's precision over
+//! those boxes with the arithmetic of [`hytrace_csg::ray_meets_bounds`], which is monotone
+//! in the box: whenever an instance's own bounds test passes, so does every node above it,
+//! and no instance the ray meets is culled. Instances with non-finite bounds stay out of
+//! the tree and are visited every time.
+
+use std::time::Duration;
+
+use glam::Vec3A;
+use hytrace_csg::{Bounds, Ray, Real, V3};
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::builder::build_bvh2;
+use obvhs::BvhBuildParams;
+
+/// A node: its box, then either children `first, first + 1` (`count == 0`) or the items
+/// `first..first + count` of the leaf-ordered item list.
+#[derive(Clone, Debug)]
+struct Node<T> {
+    bounds: Bounds<T>,
+    first: u32,
+    count: u32,
+}
+
+/// A BVH over a group of instances, queried by ray (nearest nodes first) or by point.
+#[derive(Clone, Debug)]
+pub(super) struct InstanceBvh<T> {
+    nodes: Vec<Node<T>>,
+    /// Instance indices in leaf order.
+    items: Vec<u32>,
+    /// Instances whose bounds are not finite: not in the tree, visited by every query.
+    unbounded: Vec<u32>,
+    /// Levels below the root (bounds the traversal stack).
+    depth: usize,
+}
+
+/// The largest f32 not above `v`.
+pub(super) fn f32_down(v: f64) -> f32 {
+    let r = v as f32;
+    if f64::from(r) > v {
+        r.next_down()
+    } else {
+        r
+    }
+}
+
+/// The smallest f32 not below `v`.
+pub(super) fn f32_up(v: f64) -> f32 {
+    let r = v as f32;
+    if f64::from(r) < v {
+        r.next_up()
+    } else {
+        r
+    }
+}
+
+/// Levels below the root of an obvhs BVH2 (0 for a single leaf).
+fn depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
+    let mut deepest = 0;
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((index, level)) = stack.pop() {
+        let Some(n) = nodes.get(index) else { continue };
+        deepest = deepest.max(level);
+        if n.prim_count == 0 {
+            let first = n.first_index as usize;
+            stack.push((first, level + 1));
+            stack.push((first + 1, level + 1));
+        }
+    }
+    deepest
+}
+
+/// Entry parameter of `ray` into `bounds` within `[tmin, tmax]`, if it meets them: the
+/// arithmetic of `ray_meets_bounds`, so that the two agree on which boxes are met.
+fn entry<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> Option<T> {
+    let (mut lo, mut hi) = (tmin, tmax);
+    for k in 0..3 {
+        let (o, d) = (ray.origin.get(k), ray.direction.get(k));
+        let (a, b) = (bounds[0].get(k), bounds[1].get(k));
+        if d == T::ZERO {
+            if o < a || o > b {
+                return None;
+            }
+            continue;
+        }
+        let (ta, tb) = ((a - o) / d, (b - o) / d);
+        lo = lo.max(ta.min(tb));
+        hi = hi.min(ta.max(tb));
+    }
+    (lo <= hi).then_some(lo)
+}
+
+/// Whether `bounds` contain `x` (faces included).
+fn holds<T: Real>(bounds: &Bounds<T>, x: V3<T>) -> bool {
+    (0..3).all(|k| x.get(k) >= bounds[0].get(k) && x.get(k) <= bounds[1].get(k))
+}
+
+impl<T: Real> InstanceBvh<T> {
+    /// A BVH over instances given as `(index, world bounds)`.
+    pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Self {
+        let finite =
+            |b: &Bounds<T>| (0..3).all(|k| b[0].get(k).is_finite() && b[1].get(k).is_finite());
+        let (bounded, unbounded): (Vec<_>, Vec<_>) = members.iter().partition(|(_, b)| finite(b));
+        let boxes: Vec<Aabb> = bounded
+            .iter()
+            .map(|(_, b)| {
+                let [lo, hi] = [b[0].to_f64(), b[1].to_f64()];
+                Aabb::new(
+                    Vec3A::from_array(lo.map(f32_down)),
+                    Vec3A::from_array(hi.map(f32_up)),
+                )
+            })
+            .collect();
+        let unbounded = unbounded.iter().map(|(i, _)| *i).collect();
+        if boxes.is_empty() {
+            return InstanceBvh {
+                nodes: Vec::new(),
+                items: Vec::new(),
+                unbounded,
+                depth: 0,
+            };
+        }
+        let bvh = build_bvh2(
+            &boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let corner = |v: Vec3A| V3::from_f64([v.x, v.y, v.z].map(f64::from));
+        InstanceBvh {
+            nodes: bvh
+                .nodes
+                .iter()
+                .map(|n| Node {
+                    bounds: [corner(n.aabb.min), corner(n.aabb.max)],
+                    first: n.first_index,
+                    count: n.prim_count,
+                })
+                .collect(),
+            items: bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| bounded[i as usize].0)
+                .collect(),
+            unbounded,
+            depth: depth(&bvh.nodes),
+        }
+    }
+
+    /// Calls `visit` on every instance whose node boxes the ray meets within
+    /// `[tmin, limit]`, nearer nodes first; `visit` tests the instance and returns the
+    /// limit from then on (the nearest crossing found so far). Boxes met exactly at the
+    /// limit are still visited, so crossings tied with the best one are seen.
+    pub(super) fn visit_ray(
+        &self,
+        ray: &Ray<T>,
+        tmin: T,
+        mut limit: T,
+        mut visit: impl FnMut(u32) -> T,
+    ) {
+        for &i in &self.unbounded {
+            limit = visit(i);
+        }
+        if self.nodes.is_empty() {
+            return;
+        }
+        // (node, entry parameter); children are pushed farther first.
+        let mut stack = Vec::with_capacity(self.depth + 2);
+        if let Some(t) = entry(ray, &self.nodes[0].bounds, tmin, limit) {
+            stack.push((0u32, t));
+        }
+        while let Some((index, t)) = stack.pop() {
+            if t > limit {
+                continue;
+            }
+            let node = &self.nodes[index as usize];
+            if node.count > 0 {
+                for &i in &self.items[node.first as usize..(node.first + node.count) as usize] {
+                    limit = visit(i);
+                }
+                continue;
+            }
+            let (a, b) = (node.first, node.first + 1);
+            let ta = entry(ray, &self.nodes[a as usize].bounds, tmin, limit);
+            let tb = entry(ray, &self.nodes[b as usize].bounds, tmin, limit);
+            match (ta, tb) {
+                (Some(ta), Some(tb)) if ta <= tb => stack.extend([(b, tb), (a, ta)]),
+                (Some(ta), Some(tb)) => stack.extend([(a, ta), (b, tb)]),
+                (Some(ta), None) => stack.push((a, ta)),
+                (None, Some(tb)) => stack.push((b, tb)),
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Appends to `out` every instance whose node boxes contain `x` (a superset of those
+    /// whose own bounds do), in no particular order.
+    pub(super) fn candidates_at(&self, x: V3<T>, out: &mut Vec<u32>) {
+        out.extend_from_slice(&self.unbounded);
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = Vec::with_capacity(self.depth + 2);
+        stack.push(0u32);
+        while let Some(index) = stack.pop() {
+            let node = &self.nodes[index as usize];
+            if !holds(&node.bounds, x) {
+                continue;
+            }
+            if node.count > 0 {
+                out.extend_from_slice(
+                    &self.items[node.first as usize..(node.first + node.count) as usize],
+                );
+            } else {
+                stack.extend([node.first, node.first + 1]);
+            }
+        }
+    }
+}
