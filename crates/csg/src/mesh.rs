@@ -1,11 +1,13 @@
 //! Triangle-mesh prims: closed meshes (tessellated solids, or solids with no analytic form
-//! here) traced in f32 or f64 with the same crossing semantics as CSG trees.
+//! here) and open ones (mesh-file scenes), traced in f32 or f64 with the same crossing
+//! semantics as CSG trees.
 //!
 //! Triangles sit in a binary BVH built by obvhs (from their f32 copies); the traversal runs
 //! in the kernel's precision over node boxes padded for the f32 rounding, so it never culls
 //! a triangle the ray meets. Triangles are counter-clockwise seen from outside, so the
 //! geometric normal `(v1 - v0) x (v2 - v0)` points out and classifies each crossing as an
-//! entry or an exit.
+//! entry or an exit. Rays meet triangles by the watertight test of Woop, Benthin and Wald,
+//! so a ray through an edge or vertex shared by triangles never slips between them.
 
 use std::time::Duration;
 
@@ -20,7 +22,16 @@ use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
-/// A closed triangle mesh ready for intersection in precision `T`.
+/// A triangle mesh ready for intersection in precision `T`, closed or open.
+///
+/// [`Self::first_crossing`] assumes nothing about closure: it is the nearest triangle
+/// crossing, with that triangle's geometric normal `(v1 - v0) x (v2 - v0)`, and the ray
+/// counts as inside before it when it comes from behind the triangle. On a closed,
+/// outward-wound mesh these are entries and exits of its region. An open mesh (a
+/// heightfield, a sheet) bounds no region: its first crossings are plain first hits, and
+/// "inside" only names the side behind the triangle. [`Self::contains`] counts crossings
+/// and so means something only for closed meshes; tracers ask it only in hierarchical
+/// (GDML) scenes, whose meshes are closed solids.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MeshPrim<T> {
     triangles: Vec<[V3<T>; 3]>,
@@ -56,6 +67,44 @@ fn bvh_depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
         }
     }
     deepest
+}
+
+/// The per-ray part of the watertight test: axes permuted so `z` is the direction's
+/// largest component, and the shear mapping the direction to +z.
+struct Shear<T> {
+    /// `kx, ky, kz`: `kz` the dominant axis, `kx, ky` swapped when the direction's `kz`
+    /// component is negative, so triangles keep their winding in the sheared frame.
+    axes: [usize; 3],
+    /// `d[kx] / d[kz]`.
+    x: T,
+    /// `d[ky] / d[kz]`.
+    y: T,
+    /// `1 / d[kz]`.
+    z: T,
+}
+
+impl<T: Real> Shear<T> {
+    fn new(d: V3<T>) -> Self {
+        let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
+        let kz = if ax >= ay && ax >= az {
+            0
+        } else if ay >= az {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if d.get(kz) < T::ZERO {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let dz = d.get(kz);
+        Shear {
+            axes: [kx, ky, kz],
+            x: d.get(kx) / dz,
+            y: d.get(ky) / dz,
+            z: T::ONE / dz,
+        }
+    }
 }
 
 /// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
@@ -192,9 +241,9 @@ impl<T: Real> MeshPrim<T> {
     }
 
     /// The nearest crossing after `after` of a (recentred) ray, with the triangle's
-    /// outward, not normalized, normal.
+    /// geometric, not normalized, normal.
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
-        let (o, d) = (ray.origin, ray.direction);
+        let shear = Shear::new(ray.direction);
         let mut best: Option<(T, V3<T>)> = None;
         // A fixed stack (no allocation per ray): depth was bounded when the mesh was built,
         // and visiting pushes two children for each node popped.
@@ -214,52 +263,75 @@ impl<T: Real> MeshPrim<T> {
                 continue;
             }
             let leaf = node.first as usize..(node.first + node.count) as usize;
-            if let Some(hit) = Self::nearest_in(&self.triangles[leaf], o, d, after, limit) {
+            if let Some(hit) = Self::nearest_in(&self.triangles[leaf], ray, &shear, after, limit) {
                 best = Some(hit);
             }
         }
         best
     }
 
-    /// The nearest crossing in `(after, limit)` among `triangles`.
+    /// The nearest crossing in `(after, limit)` among `triangles`, by the watertight test
+    /// of Woop, Benthin and Wald (2013): vertices are taken relative to the origin and
+    /// sheared so the ray runs along +z, leaving a 2D point-in-triangle test at (0, 0) by
+    /// the signs of three edge functions. Adjacent triangles evaluate a shared edge's
+    /// function from the same two sheared vertices, with opposite signs, so no ray passes
+    /// between them; zeros count as inside (a ray through an edge hits both sides).
     fn nearest_in(
         triangles: &[[V3<T>; 3]],
-        o: V3<T>,
-        d: V3<T>,
+        ray: &Ray<T>,
+        shear: &Shear<T>,
         after: T,
         limit: T,
     ) -> Option<(T, V3<T>)> {
         let mut best: Option<(T, V3<T>)> = None;
+        let [kx, ky, kz] = shear.axes;
         for [v0, v1, v2] in triangles {
-            // Moller-Trumbore, edges inclusive so shared edges are never both missed.
-            let (e1, e2) = (*v1 - *v0, *v2 - *v0);
-            let p = d.cross(e2);
-            let det = e1.dot(p);
-            if det == T::ZERO {
+            let (a, b, c) = (*v0 - ray.origin, *v1 - ray.origin, *v2 - ray.origin);
+            let sheared = |p: V3<T>| {
+                (
+                    p.get(kx) - shear.x * p.get(kz),
+                    p.get(ky) - shear.y * p.get(kz),
+                )
+            };
+            let ((ax, ay), (bx, by), (cx, cy)) = (sheared(a), sheared(b), sheared(c));
+            let mut u = cx * by - cy * bx;
+            let mut v = ax * cy - ay * cx;
+            let mut w = bx * ay - by * ax;
+            // In f32 an edge function of exactly 0 may be a rounding artefact of the
+            // products: recompute all three from the same sheared values in f64 (the f64
+            // kernel has no wider type to fall back to).
+            if T::NAME == "f32" && (u == T::ZERO || v == T::ZERO || w == T::ZERO) {
+                let edge = |px: T, py: T, qx: T, qy: T| {
+                    T::from_f64(px.to_f64() * qy.to_f64() - py.to_f64() * qx.to_f64())
+                };
+                u = edge(cx, cy, bx, by);
+                v = edge(ax, ay, cx, cy);
+                w = edge(bx, by, ax, ay);
+            }
+            let negative = u < T::ZERO || v < T::ZERO || w < T::ZERO;
+            let positive = u > T::ZERO || v > T::ZERO || w > T::ZERO;
+            let det = u + v + w;
+            if (negative && positive) || det == T::ZERO {
                 continue;
             }
-            let inv = T::ONE / det;
-            let s = o - *v0;
-            let u = s.dot(p) * inv;
-            if u < T::ZERO || u > T::ONE {
-                continue;
-            }
-            let q = s.cross(e1);
-            let v = d.dot(q) * inv;
-            if v < T::ZERO || u + v > T::ONE {
-                continue;
-            }
-            let t = e2.dot(q) * inv;
+            // Barycentric-weighted heights along the ray, then one division.
+            let (az, bz, cz) = (
+                shear.z * a.get(kz),
+                shear.z * b.get(kz),
+                shear.z * c.get(kz),
+            );
+            let t = (u * az + v * bz + w * cz) / det;
             if t > after && t < limit && best.is_none_or(|(b, _)| t < b) {
-                best = Some((t, e1.cross(e2)));
+                best = Some((t, (*v1 - *v0).cross(*v2 - *v0)));
             }
         }
         best
     }
 
     /// The first crossing of the mesh's surface after `tmin` (crossings within the surface
-    /// tolerance of `tmin` are the surface the ray starts on), with the outward normal and
-    /// whether the ray is inside before it.
+    /// tolerance of `tmin` are the surface the ray starts on), with the triangle's
+    /// geometric normal (outward on a closed mesh) and whether the ray comes from behind
+    /// that triangle (from inside, on a closed mesh).
     pub fn first_crossing(&self, ray: &Ray<T>, tmin: T) -> Step<T> {
         if !ray_meets_bounds(ray, &self.bounds, tmin, T::INFINITY) {
             return Step::miss(false);
@@ -277,7 +349,7 @@ impl<T: Real> MeshPrim<T> {
     }
 
     /// Whether a point of the solid's frame is inside the mesh (parity of the crossings of
-    /// a ray from it).
+    /// a ray from it); meaningful for closed meshes only.
     pub fn contains(&self, x: V3<T>) -> bool {
         let ray = Ray {
             origin: x,

@@ -8,12 +8,12 @@ use crate::prim_tree::{Bounds, PrimTree};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
-/// A prim with surfaces: a CSG tree or a closed mesh.
+/// A prim with surfaces: a CSG tree or a triangle mesh.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PreparedPrim<T> {
     /// A CSG tree.
     Csg(PrimTree<T>),
-    /// A closed triangle mesh.
+    /// A triangle mesh, closed or open (see [`MeshPrim`]).
     Mesh(MeshPrim<T>),
 }
 

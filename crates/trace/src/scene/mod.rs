@@ -2,6 +2,7 @@
 
 mod default;
 mod gdml_scene;
+mod mesh_scene;
 mod toml_scene;
 
 use std::path::Path;
@@ -12,12 +13,14 @@ use hytrace_foundry::Foundry;
 
 pub use default::default_scene;
 pub use gdml_scene::{gdml_to_foundry, load_gdml_scene, GDML_MESH_TOLERANCE};
+pub use mesh_scene::{gltf_to_foundry, load_mesh_scene, obj_to_foundry};
 pub use toml_scene::{load_toml_scene, scene_from_toml};
 
 /// Loads the scene named on the command line: none or `default` gives the embedded default
 /// scene; a directory is read as a Foundry written by `hytrace foundry`; a `.toml` file is a
 /// scene file of CSG expressions (see [`scene_from_toml`]); a `.gdml` file is read with
-/// Geant4's semantics (see [`load_gdml_scene`]).
+/// Geant4's semantics (see [`load_gdml_scene`]); an `.obj`, `.gltf` or `.glb` file is a
+/// triangle-mesh scene (see [`load_mesh_scene`]).
 pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<Foundry> {
     match arg {
         None => default_scene(),
@@ -27,9 +30,18 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<F
         Some(p) if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("gdml")) => {
             load_gdml_scene(p, options)
         }
+        Some(p)
+            if p.extension().is_some_and(|e| {
+                ["obj", "gltf", "glb"]
+                    .iter()
+                    .any(|m| e.eq_ignore_ascii_case(m))
+            }) =>
+        {
+            load_mesh_scene(p)
+        }
         Some(p) if !p.exists() => bail!("{}: no such file or directory", p.display()),
         Some(p) => bail!(
-            "{}: not a scene this build reads (expected `default`, a Foundry directory with meta.json, a .toml scene file or a .gdml file)",
+            "{}: not a scene this build reads (expected `default`, a Foundry directory with meta.json, a .toml scene file, a .gdml file or an .obj, .gltf or .glb mesh)",
             p.display()
         ),
     }

@@ -1,0 +1,264 @@
+//! Watertightness of the mesh prims' ray/triangle test: rays aimed exactly at the shared
+//! edges and vertices of closed meshes (an icosphere, a subdivided cube) always hit, in f32
+//! and f64; open meshes give first hits with the triangle's geometric normal.
+
+use std::collections::HashMap;
+
+use hytrace_csg::{MeshPrim, Ray, Real, V3};
+
+mod common;
+use common::Rng;
+
+type Tri = [[f64; 3]; 3];
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn unit(a: [f64; 3]) -> [f64; 3] {
+    let l = dot(a, a).sqrt();
+    a.map(|c| c / l)
+}
+
+/// An icosphere of radius `r` about `centre`, `levels` times subdivided, counter-clockwise
+/// from outside, vertices shared exactly between neighbours.
+fn icosphere(r: f64, centre: [f64; 3], levels: usize) -> Vec<Tri> {
+    let g = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut verts: Vec<[f64; 3]> = [
+        [-1.0, g, 0.0],
+        [1.0, g, 0.0],
+        [-1.0, -g, 0.0],
+        [1.0, -g, 0.0],
+        [0.0, -1.0, g],
+        [0.0, 1.0, g],
+        [0.0, -1.0, -g],
+        [0.0, 1.0, -g],
+        [g, 0.0, -1.0],
+        [g, 0.0, 1.0],
+        [-g, 0.0, -1.0],
+        [-g, 0.0, 1.0],
+    ]
+    .map(unit)
+    .to_vec();
+    let mut faces: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut midpoint = |a: usize, b: usize, verts: &mut Vec<[f64; 3]>| {
+            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                let (p, q) = (verts[a], verts[b]);
+                verts.push(unit([0, 1, 2].map(|k| p[k] + q[k])));
+                verts.len() - 1
+            })
+        };
+        faces = faces
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let ab = midpoint(a, b, &mut verts);
+                let bc = midpoint(b, c, &mut verts);
+                let ca = midpoint(c, a, &mut verts);
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    let place = |v: [f64; 3]| [0, 1, 2].map(|k| centre[k] + r * v[k]);
+    faces.iter().map(|f| f.map(|i| place(verts[i]))).collect()
+}
+
+/// The cube `[-h, h]^3` about `centre` with each face split into `n x n` quads of two
+/// triangles, lattice points computed once so neighbours share vertices exactly.
+fn subdivided_cube(h: f64, centre: [f64; 3], n: usize) -> Vec<Tri> {
+    let at =
+        |i: [usize; 3]| [0, 1, 2].map(|k| centre[k] + h * (2.0 * i[k] as f64 / n as f64 - 1.0));
+    let mut tris = Vec::new();
+    for axis in 0..3 {
+        for side in [0, n] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for i in 0..n {
+                for j in 0..n {
+                    let corner = |di: usize, dj: usize| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[u] = i + di;
+                        p[v] = j + dj;
+                        at(p)
+                    };
+                    let (a, b, c, d) = (corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1));
+                    for t in [[a, b, c], [a, c, d]] {
+                        let mut outward = [0.0; 3];
+                        outward[axis] = if side == 0 { -1.0 } else { 1.0 };
+                        let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+                        tris.push(if dot(n, outward) > 0.0 {
+                            t
+                        } else {
+                            [t[0], t[2], t[1]]
+                        });
+                    }
+                }
+            }
+        }
+    }
+    tris
+}
+
+/// Targets on the mesh: every vertex, every edge's midpoint and points at fractions of it.
+fn edge_and_vertex_targets(tris: &[Tri]) -> Vec<[f64; 3]> {
+    let mut out = Vec::new();
+    for t in tris {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            out.push(a);
+            for f in [0.5, 1.0 / 3.0, 0.123_456_789] {
+                out.push([0, 1, 2].map(|c| a[c] + f * (b[c] - a[c])));
+            }
+        }
+    }
+    out
+}
+
+/// Rays from outside aimed exactly at every target (coming in within 24 degrees of
+/// the outward direction from `centre`, so none grazes a silhouette) must all hit, at the
+/// target's distance.
+fn assert_watertight<T: Real>(name: &str, tris: &[Tri], centre: [f64; 3], seed: u64) {
+    let mesh = MeshPrim::<T>::new(tris).unwrap();
+    let mut rng = Rng(seed);
+    let targets = edge_and_vertex_targets(tris);
+    let mut misses = Vec::new();
+    for p in &targets {
+        let out = unit(sub(*p, centre));
+        let wobble = rng.unit();
+        let from = unit([0, 1, 2].map(|k| out[k] + 0.4 * wobble[k]));
+        let dist = rng.range(0.5, 50.0);
+        let o = [0, 1, 2].map(|k| p[k] + dist * from[k]);
+        let d = unit(sub(*p, o));
+        let ray = Ray {
+            origin: V3::<T>::from_f64(o),
+            direction: V3::<T>::from_f64(d),
+        };
+        let step = mesh.first_crossing(&ray, T::ZERO);
+        let expected = dot(sub(*p, o), d);
+        let tol = if T::NAME == "f32" { 1e-3 } else { 1e-9 };
+        if !step.is_hit() || (step.t.to_f64() - expected).abs() > tol * (1.0 + expected) {
+            misses.push((o, d, expected, step.t.to_f64()));
+        }
+    }
+    assert!(
+        misses.is_empty(),
+        "{name} ({}): {} of {} rays at edges and vertices went wrong, e.g. {:?}",
+        T::NAME,
+        misses.len(),
+        targets.len(),
+        &misses[..misses.len().min(5)]
+    );
+}
+
+fn closed_cases<T: Real>() {
+    let c = [5.1, -3.7, 2.2];
+    assert_watertight::<T>("icosphere", &icosphere(37.3, c, 3), c, 1);
+    assert_watertight::<T>("subdivided cube", &subdivided_cube(12.5, c, 7), c, 2);
+    // Far from the origin, where f32 rounding of the sheared vertices is coarse.
+    let far = [1e4, -2e4, 3e3];
+    assert_watertight::<T>("far icosphere", &icosphere(3.0, far, 2), far, 3);
+}
+
+#[test]
+fn rays_at_shared_edges_and_vertices_hit_f32() {
+    closed_cases::<f32>();
+}
+
+#[test]
+fn rays_at_shared_edges_and_vertices_hit_f64() {
+    closed_cases::<f64>();
+}
+
+/// A heightfield: an open sheet z = f(x, y) over a grid, counter-clockwise from above.
+fn heightfield(n: usize) -> Vec<Tri> {
+    let z = |i: usize, j: usize| [i as f64, j as f64, ((i * 7 + j * 3) % 5) as f64 * 0.2];
+    let mut tris = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (z(i, j), z(i + 1, j), z(i + 1, j + 1), z(i, j + 1));
+            tris.push([a, b, c]);
+            tris.push([a, c, d]);
+        }
+    }
+    tris
+}
+
+fn open_case<T: Real>() {
+    let tris = heightfield(8);
+    let mesh = MeshPrim::<T>::new(&tris).unwrap();
+    // Straight down and straight up at every grid vertex and edge midpoint: a hit at the
+    // surface, the normal up (the triangles' geometric normal) either way, "inside" only
+    // when coming from below (behind the triangles).
+    for i in 0..=16 {
+        for j in 0..=16 {
+            let (x, y) = (i as f64 * 0.5, j as f64 * 0.5);
+            for (oz, dz) in [(10.0, -1.0), (-10.0, 1.0)] {
+                let ray = Ray {
+                    origin: V3::<T>::from_f64([x, y, oz]),
+                    direction: V3::<T>::from_f64([0.0, 0.0, dz]),
+                };
+                let step = mesh.first_crossing(&ray, T::ZERO);
+                assert!(step.is_hit(), "({x}, {y}) from z = {oz}");
+                assert!(
+                    step.normal.z > T::ZERO,
+                    "({x}, {y}): normal {:?}",
+                    step.normal
+                );
+                assert_eq!(step.inside_before, dz > 0.0);
+                let height = ((i / 2 * 7 + j / 2 * 3) % 5) as f64 * 0.2;
+                if i % 2 == 0 && j % 2 == 0 {
+                    let t = step.t.to_f64();
+                    assert!((t - (oz - height).abs()).abs() < 1e-5, "({x}, {y}): t {t}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn open_meshes_give_first_hits() {
+    open_case::<f32>();
+    open_case::<f64>();
+}
+
+#[test]
+fn closed_meshes_contain_their_inside() {
+    let c = [1.0, 2.0, 3.0];
+    let mesh = MeshPrim::<f64>::new(&icosphere(10.0, c, 2)).unwrap();
+    assert!(mesh.contains(V3::from_f64(c)));
+    assert!(!mesh.contains(V3::from_f64([12.0, 2.0, 3.0])));
+}

@@ -1,0 +1,421 @@
+//! Triangle-mesh files as scenes: Wavefront OBJ (via `tobj`) and glTF 2.0, `.gltf` or
+//! binary `.glb` (via `gltf`).
+//!
+//! OBJ: every object or group (`o`/`g`) with faces becomes one solid, placed once; faces
+//! are fan-triangulated and positions read in f64 (normals, texture coordinates and
+//! materials are ignored).
+//!
+//! glTF: every mesh of the scene (the default scene, else the first) becomes one solid of
+//! the triangles of all its `TRIANGLES` primitives (other modes are skipped), and every node
+//! of the hierarchy that has a mesh becomes one instance of it, placed by the product of
+//! the node transforms from the root. A mesh used by several nodes is one solid placed
+//! several times. Buffers are the GLB's binary chunk, base64 `data:` URIs or files beside
+//! the `.gltf`.
+//!
+//! Each solid's vertices are stored relative to the centre of its bounds, the centre going
+//! into the instance's (f64) transform, so meshes far from the origin keep their f32
+//! precision. Meshes need not be closed: an open mesh gives first hits only (see
+//! [`hytrace_csg::MeshPrim`]).
+
+use std::collections::hash_map::{Entry, HashMap};
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context};
+use hytrace_foundry::{Foundry, Transform64, Triangle, UNSET};
+
+/// Most nodes a glTF hierarchy walk may visit (shared subtrees are walked once per use).
+const MAX_GLTF_NODES: usize = 10_000_000;
+
+/// Reads an `.obj`, `.gltf` or `.glb` file into a Foundry; errors name the file.
+pub fn load_mesh_scene(path: &Path) -> anyhow::Result<Foundry> {
+    let source = path.display().to_string();
+    let bytes = std::fs::read(path).with_context(|| format!("reading {source}"))?;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let dir = path.parent();
+    match ext.as_str() {
+        "obj" => obj_to_foundry(&bytes),
+        "gltf" | "glb" => gltf_to_foundry(&bytes, dir),
+        _ => bail!("not a mesh file (expected .obj, .gltf or .glb)"),
+    }
+    .with_context(|| format!("{source}: reading the mesh"))
+}
+
+/// Vertex positions and the triangles indexing them.
+type IndexedTriangles = (Vec<[f64; 3]>, Vec<[usize; 3]>);
+
+/// A Foundry solid and the centre its vertices are stored relative to.
+type CentredSolid = (u32, [f64; 3]);
+
+/// Appends one solid of the triangles `indices` over `positions`, vertices stored relative
+/// to the centre of their bounds; returns the solid and that centre.
+fn add_mesh_solid(
+    f: &mut Foundry,
+    name: &str,
+    positions: &[[f64; 3]],
+    indices: &[[usize; 3]],
+) -> anyhow::Result<CentredSolid> {
+    ensure!(!indices.is_empty(), "mesh `{name}` has no triangles");
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for (t, tri) in indices.iter().enumerate() {
+        for &i in tri {
+            let p = positions.get(i).with_context(|| {
+                format!(
+                    "mesh `{name}`: triangle {t} uses vertex {i} of {}",
+                    positions.len()
+                )
+            })?;
+            ensure!(
+                p.iter().all(|c| c.is_finite()),
+                "mesh `{name}`: vertex {i} is not finite: {p:?}"
+            );
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+    }
+    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let relative = |i: usize| {
+        let p = positions[i];
+        [
+            (p[0] - centre[0]) as f32,
+            (p[1] - centre[1]) as f32,
+            (p[2] - centre[2]) as f32,
+            0.0,
+        ]
+    };
+    let triangles: Vec<Triangle> = indices
+        .iter()
+        .map(|t| Triangle { v: t.map(relative) })
+        .collect();
+    let identity = f.solid.len() as u32;
+    let mut s = f.begin_solid(name);
+    s.add_mesh(&triangles, None, identity, UNSET)?;
+    Ok((s.finish(identity)?, centre))
+}
+
+/// Builds a Foundry from the bytes of an OBJ file: one solid per object or group with
+/// faces, each placed once. Material libraries are not read.
+pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, _) = tobj::load_obj_buf(&mut &bytes[..], &options, |_| {
+        Ok((Vec::new(), Default::default()))
+    })
+    .map_err(|e| anyhow::anyhow!("not a valid OBJ file: {e}"))?;
+    let mut f = Foundry::new();
+    for (k, model) in models.iter().enumerate() {
+        let m = &model.mesh;
+        if m.indices.is_empty() {
+            continue;
+        }
+        ensure!(
+            m.indices.len().is_multiple_of(3),
+            "object `{}`: {} face indices, not whole triangles",
+            model.name,
+            m.indices.len()
+        );
+        let positions: Vec<[f64; 3]> = m
+            .positions
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let indices: Vec<[usize; 3]> = m
+            .indices
+            .chunks_exact(3)
+            .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
+            .collect();
+        let name = if model.name.is_empty() {
+            format!("object{k}")
+        } else {
+            model.name.clone()
+        };
+        let (solid, centre) = add_mesh_solid(&mut f, &name, &positions, &indices)?;
+        f.add_instance(solid, Transform64::translation(centre), UNSET, k as i32)?;
+    }
+    ensure!(!f.inst.is_empty(), "no triangles (no object has faces)");
+    f.validate().context("built an invalid Foundry")?;
+    Ok(f)
+}
+
+/// The bytes of every buffer: the GLB's binary chunk, a base64 `data:` URI, or a file
+/// beside the `.gltf` (`dir`).
+fn gltf_buffers(doc: &gltf::Gltf, dir: Option<&Path>) -> anyhow::Result<Vec<Vec<u8>>> {
+    doc.buffers()
+        .map(|b| {
+            let data = match b.source() {
+                gltf::buffer::Source::Bin => doc
+                    .blob
+                    .clone()
+                    .with_context(|| format!("buffer {}: no binary chunk", b.index()))?,
+                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                    let (_, payload) = uri
+                        .split_once(";base64,")
+                        .with_context(|| format!("buffer {}: data URI is not base64", b.index()))?;
+                    base64_decode(payload)
+                        .with_context(|| format!("buffer {}: bad base64", b.index()))?
+                }
+                gltf::buffer::Source::Uri(uri) => {
+                    let dir = dir.with_context(|| format!("buffer {}: no directory", b.index()))?;
+                    let p = dir.join(uri);
+                    std::fs::read(&p)
+                        .with_context(|| format!("buffer {}: reading {}", b.index(), p.display()))?
+                }
+            };
+            ensure!(
+                data.len() >= b.length(),
+                "buffer {}: {} bytes, shorter than its byteLength {}",
+                b.index(),
+                data.len(),
+                b.length()
+            );
+            Ok(data)
+        })
+        .collect()
+}
+
+/// Decodes standard base64 (padding optional, no whitespace).
+fn base64_decode(text: &str) -> Option<Vec<u8>> {
+    let value = |c: u8| -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return None,
+        } as u32)
+    };
+    let text = text.trim_end_matches('=').as_bytes();
+    let mut out = Vec::with_capacity(text.len() * 3 / 4);
+    for chunk in text.chunks(4) {
+        if chunk.len() == 1 {
+            return None;
+        }
+        let mut bits = 0u32;
+        for (k, &c) in chunk.iter().enumerate() {
+            bits |= value(c)? << (18 - 6 * k);
+        }
+        out.extend_from_slice(&bits.to_be_bytes()[1..chunk.len()]);
+    }
+    Some(out)
+}
+
+/// The bytes of element `i` of an accessor for each `i`, bounds checked against its view
+/// and buffer (no sparse accessors).
+fn accessor_elements<'a>(
+    acc: &gltf::Accessor,
+    buffers: &'a [Vec<u8>],
+) -> anyhow::Result<Vec<&'a [u8]>> {
+    ensure!(
+        acc.sparse().is_none(),
+        "accessor {}: sparse accessors are not supported",
+        acc.index()
+    );
+    let view = acc
+        .view()
+        .with_context(|| format!("accessor {}: no buffer view", acc.index()))?;
+    let size = acc.size();
+    let stride = view.stride().unwrap_or(size);
+    let buffer = &buffers[view.buffer().index()];
+    let out_of_range = || format!("accessor {}: reaches past its buffer", acc.index());
+    let view_end = view
+        .offset()
+        .checked_add(view.length())
+        .filter(|&e| e <= buffer.len())
+        .with_context(out_of_range)?;
+    let data = &buffer[view.offset()..view_end];
+    (0..acc.count())
+        .map(|i| {
+            let start = i
+                .checked_mul(stride)
+                .and_then(|s| s.checked_add(acc.offset()))
+                .with_context(out_of_range)?;
+            data.get(start..start.saturating_add(size))
+                .with_context(out_of_range)
+        })
+        .collect()
+}
+
+/// Positions and triangles of the `TRIANGLES` primitives of a glTF mesh.
+fn gltf_mesh_triangles(mesh: &gltf::Mesh, buffers: &[Vec<u8>]) -> anyhow::Result<IndexedTriangles> {
+    use gltf::accessor::{DataType, Dimensions};
+    let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+    for prim in mesh.primitives() {
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            continue;
+        }
+        let what = || format!("mesh {} primitive {}", mesh.index(), prim.index());
+        let acc = prim
+            .get(&gltf::Semantic::Positions)
+            .with_context(|| format!("{}: no POSITION attribute", what()))?;
+        ensure!(
+            acc.data_type() == DataType::F32 && acc.dimensions() == Dimensions::Vec3,
+            "{}: POSITION must be float VEC3",
+            what()
+        );
+        let first = positions.len();
+        for e in accessor_elements(&acc, buffers).with_context(what)? {
+            let c = |k: usize| f32::from_le_bytes(e[4 * k..4 * k + 4].try_into().unwrap());
+            positions.push([c(0), c(1), c(2)].map(f64::from));
+        }
+        let corners: Vec<usize> = match prim.indices() {
+            None => (0..positions.len() - first).collect(),
+            Some(acc) => {
+                ensure!(
+                    acc.dimensions() == Dimensions::Scalar,
+                    "{}: indices must be SCALAR",
+                    what()
+                );
+                let elements = accessor_elements(&acc, buffers).with_context(what)?;
+                match acc.data_type() {
+                    DataType::U8 => elements.iter().map(|e| e[0] as usize).collect(),
+                    DataType::U16 => elements
+                        .iter()
+                        .map(|e| u16::from_le_bytes([e[0], e[1]]) as usize)
+                        .collect(),
+                    DataType::U32 => elements
+                        .iter()
+                        .map(|e| u32::from_le_bytes([e[0], e[1], e[2], e[3]]) as usize)
+                        .collect(),
+                    other => bail!("{}: indices of type {other:?}", what()),
+                }
+            }
+        };
+        ensure!(
+            corners.len().is_multiple_of(3),
+            "{}: {} indices, not whole triangles",
+            what(),
+            corners.len()
+        );
+        let count = positions.len() - first;
+        for c in corners.chunks_exact(3) {
+            ensure!(
+                c.iter().all(|&i| i < count),
+                "{}: index out of range in {c:?} ({count} vertices)",
+                what()
+            );
+            triangles.push([first + c[0], first + c[1], first + c[2]]);
+        }
+    }
+    Ok((positions, triangles))
+}
+
+/// A node's local transform (glTF matrices are column-major).
+fn node_transform(node: &gltf::Node) -> anyhow::Result<Transform64> {
+    let m = node.transform().matrix();
+    let rows: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|c| m[c][r] as f64));
+    ensure!(
+        rows.iter().flatten().all(|v| v.is_finite()),
+        "node {}: transform is not finite",
+        node.index()
+    );
+    Ok(Transform64 { rows })
+}
+
+/// Parses and validates a `.gltf` or `.glb` file. gltf-json's validation indexes a
+/// primitive's POSITION accessor before checking that it exists, so that is checked first.
+fn parse_gltf(bytes: &[u8]) -> anyhow::Result<gltf::Gltf> {
+    use gltf::json::mesh::Semantic;
+    use gltf::json::validation::Checked;
+    let invalid = |e: gltf::Error| anyhow::anyhow!("not valid glTF: {e}");
+    let unchecked = gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
+    let root = unchecked.document.as_json();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for p in &mesh.primitives {
+            if let Some(i) = p.attributes.get(&Checked::Valid(Semantic::Positions)) {
+                ensure!(
+                    i.value() < root.accessors.len(),
+                    "not valid glTF: mesh {m}: POSITION accessor {} of {}",
+                    i.value(),
+                    root.accessors.len()
+                );
+            }
+        }
+    }
+    let document = gltf::Document::from_json(unchecked.document.into_json()).map_err(invalid)?;
+    Ok(gltf::Gltf {
+        document,
+        blob: unchecked.blob,
+    })
+}
+
+/// Builds a Foundry from the bytes of a `.gltf` or `.glb` file; `dir` holds its external
+/// buffers.
+pub fn gltf_to_foundry(bytes: &[u8], dir: Option<&Path>) -> anyhow::Result<Foundry> {
+    let doc = parse_gltf(bytes)?;
+    let buffers = gltf_buffers(&doc, dir)?;
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .context("no scene")?;
+    let mut f = Foundry::new();
+    // Foundry solid of each glTF mesh built so far (None: the mesh has no triangles).
+    let mut solids: HashMap<usize, Option<CentredSolid>> = HashMap::new();
+    let mut stack: Vec<(gltf::Node, Transform64, usize)> = scene
+        .nodes()
+        .map(|n| (n, Transform64::IDENTITY, 0))
+        .collect();
+    let mut visited = 0usize;
+    while let Some((node, parent, depth)) = stack.pop() {
+        visited += 1;
+        ensure!(
+            visited <= MAX_GLTF_NODES && depth <= doc.nodes().len(),
+            "the node hierarchy has a cycle or expands into more than {MAX_GLTF_NODES} nodes"
+        );
+        let to_world = parent.compose(&node_transform(&node)?);
+        if let Some(mesh) = node.mesh() {
+            let built = match solids.entry(mesh.index()) {
+                Entry::Occupied(e) => *e.get(),
+                Entry::Vacant(e) => {
+                    let (positions, triangles) = gltf_mesh_triangles(&mesh, &buffers)?;
+                    let name = mesh
+                        .name()
+                        .map_or_else(|| format!("mesh{}", mesh.index()), str::to_string);
+                    let built = if triangles.is_empty() {
+                        None
+                    } else {
+                        Some(add_mesh_solid(&mut f, &name, &positions, &triangles)?)
+                    };
+                    *e.insert(built)
+                }
+            };
+            if let Some((solid, centre)) = built {
+                let placement = to_world.compose(&Transform64::translation(centre));
+                let copy = f.inst.len() as i32;
+                f.add_instance(solid, placement, UNSET, copy)
+                    .with_context(|| format!("placing node {}", node.index()))?;
+            }
+        }
+        stack.extend(node.children().map(|c| (c, to_world, depth + 1)));
+    }
+    ensure!(
+        !f.inst.is_empty(),
+        "no triangles (no node has a triangle mesh)"
+    );
+    f.validate().context("built an invalid Foundry")?;
+    Ok(f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_round_trips_known_strings() {
+        assert_eq!(base64_decode("aGVsbG8=").unwrap(), b"hello");
+        assert_eq!(base64_decode("aGVsbG8h").unwrap(), b"hello!");
+        assert_eq!(base64_decode("aGk").unwrap(), b"hi");
+        assert!(base64_decode("a").is_none());
+        assert!(base64_decode("a*==").is_none());
+    }
+}
