@@ -23,9 +23,10 @@ mod tree;
 
 pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
 pub use expr::{parse_shape, ExprError};
+pub use mesh::bvh2_depth;
 pub use mesh::MeshPrim;
 pub use prepared::PreparedPrim;
-pub use prim_tree::{ray_meets_bounds, Bounds, PrimTree};
+pub use prim_tree::{ray_bounds_entry, ray_meets_bounds, Bounds, PrimTree};
 pub use real::{Ray, Real, V3};
 pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,

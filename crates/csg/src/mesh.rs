@@ -53,8 +53,9 @@ struct MeshNode<T> {
 /// triangles stay far below it).
 const MAX_BVH_DEPTH: usize = 64;
 
-/// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree).
-fn bvh_depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
+/// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree): the
+/// traversal stack a tree needs.
+pub fn bvh2_depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
     let mut deepest = 0;
     let mut stack = vec![(0usize, 0usize)];
     while let Some((index, depth)) = stack.pop() {
@@ -158,7 +159,7 @@ impl<T: Real> MeshPrim<T> {
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
         let padded =
             |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
-        let depth = bvh_depth(&bvh.nodes);
+        let depth = bvh2_depth(&bvh.nodes);
         if depth > MAX_BVH_DEPTH {
             return Err(CsgError {
                 primitive: "mesh",

@@ -80,13 +80,19 @@ fn bounds_of<T: Real>(aabb: &[f32; 6]) -> Bounds<T> {
 /// Whether `ray` meets `bounds` at some parameter in `[tmin, tmax]` (slab test, exact for
 /// zero direction components).
 pub fn ray_meets_bounds<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> bool {
+    ray_bounds_entry(ray, bounds, tmin, tmax).is_some()
+}
+
+/// The first parameter in `[tmin, tmax]` at which `ray` is inside `bounds`, if any (the
+/// slab test of [`ray_meets_bounds`]: nearest-first traversals order boxes by it).
+pub fn ray_bounds_entry<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> Option<T> {
     let (mut lo, mut hi) = (tmin, tmax);
     for k in 0..3 {
         let (o, d) = (ray.origin.get(k), ray.direction.get(k));
         let (a, b) = (bounds[0].get(k), bounds[1].get(k));
         if d == T::ZERO {
             if o < a || o > b {
-                return false;
+                return None;
             }
             continue;
         }
@@ -94,7 +100,7 @@ pub fn ray_meets_bounds<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax
         lo = lo.max(ta.min(tb));
         hi = hi.min(ta.max(tb));
     }
-    lo <= hi
+    (lo <= hi).then_some(lo)
 }
 
 /// A ray set up for slab tests against boxes widened by `pad` on every side: its origin

@@ -12,7 +12,7 @@
 use std::time::Duration;
 
 use glam::Vec3A;
-use hytrace_csg::{Bounds, Ray, Real, V3};
+use hytrace_csg::{bvh2_depth, ray_bounds_entry, Bounds, Ray, Real, V3};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::BvhBuildParams;
@@ -56,42 +56,6 @@ pub(super) fn f32_up(v: f64) -> f32 {
     } else {
         r
     }
-}
-
-/// Levels below the root of an obvhs BVH2 (0 for a single leaf).
-fn depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
-    let mut deepest = 0;
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((index, level)) = stack.pop() {
-        let Some(n) = nodes.get(index) else { continue };
-        deepest = deepest.max(level);
-        if n.prim_count == 0 {
-            let first = n.first_index as usize;
-            stack.push((first, level + 1));
-            stack.push((first + 1, level + 1));
-        }
-    }
-    deepest
-}
-
-/// Entry parameter of `ray` into `bounds` within `[tmin, tmax]`, if it meets them: the
-/// arithmetic of `ray_meets_bounds`, so that the two agree on which boxes are met.
-fn entry<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> Option<T> {
-    let (mut lo, mut hi) = (tmin, tmax);
-    for k in 0..3 {
-        let (o, d) = (ray.origin.get(k), ray.direction.get(k));
-        let (a, b) = (bounds[0].get(k), bounds[1].get(k));
-        if d == T::ZERO {
-            if o < a || o > b {
-                return None;
-            }
-            continue;
-        }
-        let (ta, tb) = ((a - o) / d, (b - o) / d);
-        lo = lo.max(ta.min(tb));
-        hi = hi.min(ta.max(tb));
-    }
-    (lo <= hi).then_some(lo)
 }
 
 /// Whether `bounds` contain `x` (faces included).
@@ -146,7 +110,7 @@ impl<T: Real> InstanceBvh<T> {
                 .map(|&i| bounded[i as usize].0)
                 .collect(),
             unbounded,
-            depth: depth(&bvh.nodes),
+            depth: bvh2_depth(&bvh.nodes),
         }
     }
 
@@ -169,7 +133,7 @@ impl<T: Real> InstanceBvh<T> {
         }
         // (node, entry parameter); children are pushed farther first.
         let mut stack = Vec::with_capacity(self.depth + 2);
-        if let Some(t) = entry(ray, &self.nodes[0].bounds, tmin, limit) {
+        if let Some(t) = ray_bounds_entry(ray, &self.nodes[0].bounds, tmin, limit) {
             stack.push((0u32, t));
         }
         while let Some((index, t)) = stack.pop() {
@@ -184,8 +148,8 @@ impl<T: Real> InstanceBvh<T> {
                 continue;
             }
             let (a, b) = (node.first, node.first + 1);
-            let ta = entry(ray, &self.nodes[a as usize].bounds, tmin, limit);
-            let tb = entry(ray, &self.nodes[b as usize].bounds, tmin, limit);
+            let ta = ray_bounds_entry(ray, &self.nodes[a as usize].bounds, tmin, limit);
+            let tb = ray_bounds_entry(ray, &self.nodes[b as usize].bounds, tmin, limit);
             match (ta, tb) {
                 (Some(ta), Some(tb)) if ta <= tb => stack.extend([(b, tb), (a, ta)]),
                 (Some(ta), Some(tb)) => stack.extend([(a, ta), (b, tb)]),
