@@ -34,9 +34,11 @@ pub(super) struct InstanceBvh<T> {
     items: Vec<u32>,
     /// Instances whose bounds are not finite: not in the tree, visited by every query.
     unbounded: Vec<u32>,
-    /// Levels below the root (bounds the traversal stack).
-    depth: usize,
 }
+
+/// Deepest instance BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
+/// stay far below it); a deeper one is an error when the scene is prepared.
+const MAX_DEPTH: usize = 64;
 
 /// The largest f32 not above `v`.
 pub(super) fn f32_down(v: f64) -> f32 {
@@ -58,14 +60,42 @@ pub(super) fn f32_up(v: f64) -> f32 {
     }
 }
 
+/// A traversal stack on the call stack: a depth-first walk of a tree at most [`MAX_DEPTH`]
+/// levels deep holds at most one pending sibling per level plus the node being expanded,
+/// so no query allocates.
+struct Stack<E> {
+    items: [E; MAX_DEPTH + 2],
+    len: usize,
+}
+
+impl<E: Copy> Stack<E> {
+    fn new(fill: E) -> Self {
+        Stack {
+            items: [fill; MAX_DEPTH + 2],
+            len: 0,
+        }
+    }
+
+    fn push(&mut self, e: E) {
+        self.items[self.len] = e;
+        self.len += 1;
+    }
+
+    fn pop(&mut self) -> Option<E> {
+        self.len = self.len.checked_sub(1)?;
+        Some(self.items[self.len])
+    }
+}
+
 /// Whether `bounds` contain `x` (faces included).
-fn holds<T: Real>(bounds: &Bounds<T>, x: V3<T>) -> bool {
+pub(super) fn holds<T: Real>(bounds: &Bounds<T>, x: V3<T>) -> bool {
     (0..3).all(|k| x.get(k) >= bounds[0].get(k) && x.get(k) <= bounds[1].get(k))
 }
 
 impl<T: Real> InstanceBvh<T> {
-    /// A BVH over instances given as `(index, world bounds)`.
-    pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Self {
+    /// A BVH over instances given as `(index, world bounds)`; an error when the tree is
+    /// deeper than the traversal stacks hold.
+    pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Result<Self, String> {
         let finite =
             |b: &Bounds<T>| (0..3).all(|k| b[0].get(k).is_finite() && b[1].get(k).is_finite());
         let (bounded, unbounded): (Vec<_>, Vec<_>) = members.iter().partition(|(_, b)| finite(b));
@@ -81,20 +111,26 @@ impl<T: Real> InstanceBvh<T> {
             .collect();
         let unbounded = unbounded.iter().map(|(i, _)| *i).collect();
         if boxes.is_empty() {
-            return InstanceBvh {
+            return Ok(InstanceBvh {
                 nodes: Vec::new(),
                 items: Vec::new(),
                 unbounded,
-                depth: 0,
-            };
+            });
         }
         let bvh = build_bvh2(
             &boxes,
             BvhBuildParams::medium_build(),
             &mut Duration::default(),
         );
+        let depth = bvh2_depth(&bvh.nodes);
+        if depth > MAX_DEPTH {
+            return Err(format!(
+                "the BVH over {} instances is {depth} levels deep, more than {MAX_DEPTH}",
+                boxes.len()
+            ));
+        }
         let corner = |v: Vec3A| V3::from_f64([v.x, v.y, v.z].map(f64::from));
-        InstanceBvh {
+        Ok(InstanceBvh {
             nodes: bvh
                 .nodes
                 .iter()
@@ -110,8 +146,7 @@ impl<T: Real> InstanceBvh<T> {
                 .map(|&i| bounded[i as usize].0)
                 .collect(),
             unbounded,
-            depth: bvh2_depth(&bvh.nodes),
-        }
+        })
     }
 
     /// Calls `visit` on every instance whose node boxes the ray meets within
@@ -132,9 +167,9 @@ impl<T: Real> InstanceBvh<T> {
             return;
         }
         // (node, entry parameter); children are pushed farther first.
-        let mut stack = Vec::with_capacity(self.depth + 2);
+        let mut stack = Stack::new((0u32, T::ZERO));
         if let Some(t) = ray_bounds_entry(ray, &self.nodes[0].bounds, tmin, limit) {
-            stack.push((0u32, t));
+            stack.push((0, t));
         }
         while let Some((index, t)) = stack.pop() {
             if t > limit {
@@ -151,8 +186,14 @@ impl<T: Real> InstanceBvh<T> {
             let ta = ray_bounds_entry(ray, &self.nodes[a as usize].bounds, tmin, limit);
             let tb = ray_bounds_entry(ray, &self.nodes[b as usize].bounds, tmin, limit);
             match (ta, tb) {
-                (Some(ta), Some(tb)) if ta <= tb => stack.extend([(b, tb), (a, ta)]),
-                (Some(ta), Some(tb)) => stack.extend([(a, ta), (b, tb)]),
+                (Some(ta), Some(tb)) if ta <= tb => {
+                    stack.push((b, tb));
+                    stack.push((a, ta));
+                }
+                (Some(ta), Some(tb)) => {
+                    stack.push((a, ta));
+                    stack.push((b, tb));
+                }
                 (Some(ta), None) => stack.push((a, ta)),
                 (None, Some(tb)) => stack.push((b, tb)),
                 (None, None) => {}
@@ -167,8 +208,8 @@ impl<T: Real> InstanceBvh<T> {
         if self.nodes.is_empty() {
             return;
         }
-        let mut stack = Vec::with_capacity(self.depth + 2);
-        stack.push(0u32);
+        let mut stack = Stack::new(0u32);
+        stack.push(0);
         while let Some(index) = stack.pop() {
             let node = &self.nodes[index as usize];
             if !holds(&node.bounds, x) {
@@ -179,7 +220,8 @@ impl<T: Real> InstanceBvh<T> {
                     &self.items[node.first as usize..(node.first + node.count) as usize],
                 );
             } else {
-                stack.extend([node.first, node.first + 1]);
+                stack.push(node.first);
+                stack.push(node.first + 1);
             }
         }
     }

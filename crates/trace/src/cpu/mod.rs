@@ -25,7 +25,7 @@ mod bvh;
 #[cfg(test)]
 mod tests;
 
-use bvh::InstanceBvh;
+use bvh::{holds, InstanceBvh};
 
 /// Groups of more instances than this are searched through a BVH.
 pub const BVH_MIN_MEMBERS: usize = 8;
@@ -58,15 +58,19 @@ struct Group<T> {
 }
 
 impl<T: Real> Group<T> {
-    fn new(members: Vec<u32>, placements: &[Placement<T>]) -> Self {
-        let bvh = (members.len() > BVH_MIN_MEMBERS).then(|| {
+    fn new(members: Vec<u32>, placements: &[Placement<T>]) -> anyhow::Result<Self> {
+        let bvh = if members.len() > BVH_MIN_MEMBERS {
             let boxed: Vec<_> = members
                 .iter()
                 .map(|&i| (i, placements[i as usize].bounds))
                 .collect();
-            Box::new(InstanceBvh::new(&boxed))
-        });
-        Group { members, bvh }
+            Some(Box::new(
+                InstanceBvh::new(&boxed).map_err(anyhow::Error::msg)?,
+            ))
+        } else {
+            None
+        };
+        Ok(Group { members, bvh })
     }
 }
 
@@ -142,17 +146,17 @@ impl<T: Real> CpuScene<T> {
                 }
             }
             Layout::Tree(Hierarchy {
-                roots: Group::new(roots, &placements),
+                roots: Group::new(roots, &placements)?,
                 daughters: daughters
                     .into_iter()
                     .map(|d| Group::new(d, &placements))
-                    .collect(),
+                    .collect::<anyhow::Result<_>>()?,
             })
         } else {
             Layout::Flat(Group::new(
                 (0..placements.len() as u32).collect(),
                 &placements,
-            ))
+            )?)
         };
         Ok(CpuScene {
             placements,
@@ -253,12 +257,7 @@ impl<T: Real> CpuScene<T> {
     /// Whether instance `index`'s solid contains the world point `x`.
     fn contains(&self, index: u32, x: V3<T>) -> bool {
         let p = &self.placements[index as usize];
-        let [lo, hi] = &p.bounds;
-        let inside_bounds = |v: T, a: T, b: T| v >= a && v <= b;
-        if !(inside_bounds(x.x, lo.x, hi.x)
-            && inside_bounds(x.y, lo.y, hi.y)
-            && inside_bounds(x.z, lo.z, hi.z))
-        {
+        if !holds(&p.bounds, x) {
             return false;
         }
         let local = p.frame.point_to_local(x);
