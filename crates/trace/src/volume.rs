@@ -5,7 +5,7 @@ use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
@@ -298,14 +298,20 @@ pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
         let mut note = None;
         match &named.grid {
             Ok(volume) => {
+                // A grid that cannot be bricked (tiles spanning too many blocks, values a
+                // format cannot hold) is still described; the reason replaces its rows.
                 for format in TexelFormat::ALL {
-                    let b = BrickedGrid::convert(volume, format)
-                        .with_context(|| format!("{spec}: grid `{}`: {format}", s.name))?;
-                    memory.push(memory_row(
-                        format.name(),
-                        b.memory_bytes().total(),
-                        Some(b.error_bound()),
-                    ));
+                    match BrickedGrid::convert(volume, format) {
+                        Ok(b) => memory.push(memory_row(
+                            format.name(),
+                            b.memory_bytes().total(),
+                            Some(b.error_bound()),
+                        )),
+                        Err(e) => {
+                            note = Some(format!("not bricked as {format}: {}", e.0));
+                            break;
+                        }
+                    }
                 }
             }
             Err(why) => note = Some(why.clone()),
@@ -336,7 +342,7 @@ pub fn info_text(info: &serde_json::Value) -> String {
             g["world_bbox"],
         );
         if let Some(note) = g["note"].as_str() {
-            out += &format!("  not sampled: {note}\n");
+            out += &format!("  note: {note}\n");
         }
         for m in g["memory"].as_array().into_iter().flatten() {
             let bound = m["error_bound"]

@@ -216,6 +216,20 @@ fn info_lists_grids_and_memory_per_representation() {
     );
     let velocity = grids.iter().find(|g| g["name"] == "velocity").unwrap();
     assert!(velocity["note"].as_str().unwrap().contains("vec3s"));
+    // A grid whose 4096^3 root tile is too big to brick is still described, with why.
+    let tile = hytrace(&[
+        "volume",
+        "info",
+        &data("nanovdb/roottile_zip.nvdb"),
+        "--json",
+    ]);
+    assert!(tile.status.success(), "{}", stderr(&tile));
+    let info: serde_json::Value = serde_json::from_slice(&tile.stdout).unwrap();
+    let note = info["grids"][0]["note"].as_str().unwrap();
+    assert!(
+        note.contains("not bricked") && note.contains("blocks"),
+        "{note}"
+    );
     let text = hytrace(&["volume", "info", "sphere:5,0.5"]);
     assert!(text.status.success(), "{}", stderr(&text));
     assert!(String::from_utf8_lossy(&text.stdout).contains("procedural"));
