@@ -86,6 +86,17 @@ pub fn ray_meets_bounds<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax
 /// The first parameter in `[tmin, tmax]` at which `ray` is inside `bounds`, if any (the
 /// slab test of [`ray_meets_bounds`]: nearest-first traversals order boxes by it).
 pub fn ray_bounds_entry<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax: T) -> Option<T> {
+    ray_bounds_span(ray, bounds, tmin, tmax).map(|(t0, _)| t0)
+}
+
+/// The part `[t0, t1]` of `[tmin, tmax]` in which `ray` is inside `bounds`, if any (slab
+/// test, exact for zero direction components).
+pub fn ray_bounds_span<T: Real>(
+    ray: &Ray<T>,
+    bounds: &Bounds<T>,
+    tmin: T,
+    tmax: T,
+) -> Option<(T, T)> {
     let (mut lo, mut hi) = (tmin, tmax);
     for k in 0..3 {
         let (o, d) = (ray.origin.get(k), ray.direction.get(k));
@@ -100,7 +111,7 @@ pub fn ray_bounds_entry<T: Real>(ray: &Ray<T>, bounds: &Bounds<T>, tmin: T, tmax
         lo = lo.max(ta.min(tb));
         hi = hi.min(ta.max(tb));
     }
-    (lo <= hi).then_some(lo)
+    (lo <= hi).then_some((lo, hi))
 }
 
 /// A ray set up for slab tests against boxes widened by `pad` on every side: its origin

@@ -75,6 +75,30 @@ pub struct Optics {
     pub boundaries: Vec<Boundary>,
     /// Names of placed volumes; [`crate::Instance::identity`] indexes them when set.
     pub volumes: Vec<String>,
+    /// The participating medium of every volume prim: where its voxels come from and how
+    /// dense it is (absent in files written before media existed).
+    #[serde(default)]
+    pub media: Vec<Medium>,
+}
+
+/// A participating medium: the voxel grid behind a volume prim's bricks.
+///
+/// The Foundry keeps the bricks (bounds and majorants, what acceleration structures need);
+/// the voxels stay in their source, which tracers open again.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Medium {
+    /// The volume prim (index into the prim array).
+    pub prim: u32,
+    /// A .nvdb or .vdb path, or a procedural grid (`sphere:...`, `box:...`).
+    pub source: String,
+    /// Grid name inside the source (`None`: the first grid).
+    pub grid: Option<String>,
+    /// Extinction per unit length of the scene per unit of grid value.
+    pub density_scale: f64,
+    /// Texel format of the bricked grid the bricks were built from (`f32`, `f16`,
+    /// `unorm16`, `unorm8`, `bc4`).
+    pub format: String,
 }
 
 impl Optics {
@@ -95,6 +119,17 @@ impl Optics {
             check("inner_material", b.inner_material, self.materials.len())?;
             check("outer_surface", b.outer_surface, self.surfaces.len())?;
             check("inner_surface", b.inner_surface, self.surfaces.len())?;
+        }
+        for (i, m) in self.media.iter().enumerate() {
+            if !(m.density_scale.is_finite() && m.density_scale >= 0.0) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!(
+                        "medium {i}: density scale {} is not finite and >= 0",
+                        m.density_scale
+                    ),
+                });
+            }
         }
         Ok(())
     }

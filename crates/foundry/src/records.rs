@@ -238,6 +238,12 @@ impl Transform64 {
         std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + r[i][3])
     }
 
+    /// Applies the linear part of the transform to a direction.
+    pub fn apply_vector(&self, v: [f64; 3]) -> [f64; 3] {
+        let r = &self.rows;
+        std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
+    }
+
     /// Matrix product `self * other` (apply `other` first).
     pub fn compose(&self, other: &Transform64) -> Transform64 {
         let (a, b) = (&self.rows, &other.rows);

@@ -618,7 +618,43 @@ impl Foundry {
                 ));
             }
         }
+        self.validate_media()?;
         self.optics.validate()
+    }
+
+    /// Every volume prim has exactly one medium, and every medium names a volume prim.
+    fn validate_media(&self) -> Result<()> {
+        let mut owner = vec![None; self.prim.len()];
+        for (i, m) in self.optics.media.iter().enumerate() {
+            let is_volume = self
+                .prim
+                .get(m.prim as usize)
+                .is_some_and(|p| p.kind == PrimKind::Volume as u32);
+            if !is_volume {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("medium {i}: prim {} is not a volume prim", m.prim),
+                });
+            }
+            if let Some(j) = owner[m.prim as usize].replace(i) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("media {j} and {i} both describe prim {}", m.prim),
+                });
+            }
+        }
+        match self
+            .prim
+            .iter()
+            .enumerate()
+            .find(|(i, p)| p.kind == PrimKind::Volume as u32 && owner[*i].is_none())
+        {
+            Some((i, _)) => Err(FoundryError::File {
+                path: "optics.json".into(),
+                problem: format!("volume prim {i} has no medium"),
+            }),
+            None => Ok(()),
+        }
     }
 
     fn validate_items(&self) -> Result<()> {

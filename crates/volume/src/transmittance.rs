@@ -174,6 +174,26 @@ pub fn transmittance<G: VoxelGrid + ?Sized>(
     Context::new(grid, mips, params)?.estimate(ray, ray_index)
 }
 
+/// Transmittance over one grid prepared once for many rays given in its index space (a grid
+/// placed in a scene, whose rays come through the scene's transforms).
+pub struct IndexTransmittance<'a, G: ?Sized>(Context<'a, G>);
+
+impl<'a, G: VoxelGrid + ?Sized> IndexTransmittance<'a, G> {
+    /// Checks `params` against the grid (see [`TransmittanceParams::validate`]).
+    pub fn new(
+        grid: &'a G,
+        mips: &'a RangeMips,
+        params: &'a TransmittanceParams,
+    ) -> Result<Self, VolumeError> {
+        Context::new(grid, mips, params).map(IndexTransmittance)
+    }
+
+    /// The transmittance along `ray`; `ray_index` selects its random streams.
+    pub fn estimate(&self, ray: &IndexRay, ray_index: u32) -> Result<Estimate, VolumeError> {
+        self.0.estimate_index(ray, ray_index)
+    }
+}
+
 /// The transmittances of `rays`, in parallel; ray `i` uses the random streams of index `i`.
 pub fn transmittance_batch<G: VoxelGrid + ?Sized>(
     grid: &G,
@@ -246,7 +266,11 @@ impl<'a, G: VoxelGrid + ?Sized> Context<'a, G> {
     }
 
     fn estimate(&self, ray: &Ray, ray_index: u32) -> Result<Estimate, VolumeError> {
-        let ray = IndexRay::from_world(ray, self.grid.map())?;
+        self.estimate_index(&IndexRay::from_world(ray, self.grid.map())?, ray_index)
+    }
+
+    fn estimate_index(&self, ray: &IndexRay, ray_index: u32) -> Result<Estimate, VolumeError> {
+        let ray = *ray;
         let segments: Vec<Segment> = match self.global {
             Some(range) => SegmentWalk::global(self.mips, &ray, range)?.collect(),
             None => SegmentWalk::new(self.mips, &ray, self.level)?.collect(),

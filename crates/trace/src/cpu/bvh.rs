@@ -1,13 +1,13 @@
-//! Bounding volume hierarchies over groups of instances (all of a flat scene's, or one
-//! mother's daughters), replacing the tracer's linear loops.
+//! Bounding volume hierarchies over boxes with ids, replacing the tracer's linear loops: over
+//! groups of instances (all of a flat scene's, one mother's daughters, those holding media)
+//! and over the leaves of one solid (its surface prims and its volume-brick clusters).
 //!
-//! obvhs builds the tree from f32 copies of the instances' world bounds, each rounded
-//! outward, so every node box (a union of such boxes, exact in f32) contains the exact
-//! bounds of every instance below it. The traversal runs in the kernel's precision over
-//! those boxes with the arithmetic of [`hytrace_csg::ray_meets_bounds`], which is monotone
-//! in the box: whenever an instance's own bounds test passes, so does every node above it,
-//! and no instance the ray meets is culled. Instances with non-finite bounds stay out of
-//! the tree and are visited every time.
+//! obvhs builds the tree from f32 copies of the boxes, each rounded outward, so every node
+//! box (a union of such boxes, exact in f32) contains the exact box of every item below
+//! it. The traversal runs in the kernel's precision over those boxes with the arithmetic
+//! of [`hytrace_csg::ray_meets_bounds`], which is monotone in the box: whenever an item's
+//! own bounds test passes, so does every node above it, and no item the ray meets is
+//! culled. Items with non-finite bounds stay out of the tree and are visited every time.
 
 use std::time::Duration;
 
@@ -26,17 +26,17 @@ struct Node<T> {
     count: u32,
 }
 
-/// A BVH over a group of instances, queried by ray (nearest nodes first) or by point.
+/// A BVH over boxes with `u32` ids, queried by ray (nearest nodes first) or by point.
 #[derive(Clone, Debug)]
-pub(super) struct InstanceBvh<T> {
+pub(super) struct BoxBvh<T> {
     nodes: Vec<Node<T>>,
-    /// Instance indices in leaf order.
+    /// Item ids in leaf order.
     items: Vec<u32>,
-    /// Instances whose bounds are not finite: not in the tree, visited by every query.
+    /// Items whose bounds are not finite: not in the tree, visited by every query.
     unbounded: Vec<u32>,
 }
 
-/// Deepest instance BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
+/// Deepest BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
 /// stay far below it); a deeper one is an error when the scene is prepared.
 const MAX_DEPTH: usize = 64;
 
@@ -92,9 +92,9 @@ pub(super) fn holds<T: Real>(bounds: &Bounds<T>, x: V3<T>) -> bool {
     (0..3).all(|k| x.get(k) >= bounds[0].get(k) && x.get(k) <= bounds[1].get(k))
 }
 
-impl<T: Real> InstanceBvh<T> {
-    /// A BVH over instances given as `(index, world bounds)`; an error when the tree is
-    /// deeper than the traversal stacks hold.
+impl<T: Real> BoxBvh<T> {
+    /// A BVH over items given as `(id, bounds)`; an error when the tree is deeper than the
+    /// traversal stacks hold.
     pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Result<Self, String> {
         let finite =
             |b: &Bounds<T>| (0..3).all(|k| b[0].get(k).is_finite() && b[1].get(k).is_finite());
@@ -111,7 +111,7 @@ impl<T: Real> InstanceBvh<T> {
             .collect();
         let unbounded = unbounded.iter().map(|(i, _)| *i).collect();
         if boxes.is_empty() {
-            return Ok(InstanceBvh {
+            return Ok(BoxBvh {
                 nodes: Vec::new(),
                 items: Vec::new(),
                 unbounded,
@@ -125,12 +125,12 @@ impl<T: Real> InstanceBvh<T> {
         let depth = bvh2_depth(&bvh.nodes);
         if depth > MAX_DEPTH {
             return Err(format!(
-                "the BVH over {} instances is {depth} levels deep, more than {MAX_DEPTH}",
+                "the BVH over {} boxes is {depth} levels deep, more than {MAX_DEPTH}",
                 boxes.len()
             ));
         }
         let corner = |v: Vec3A| V3::from_f64([v.x, v.y, v.z].map(f64::from));
-        Ok(InstanceBvh {
+        Ok(BoxBvh {
             nodes: bvh
                 .nodes
                 .iter()
@@ -149,10 +149,10 @@ impl<T: Real> InstanceBvh<T> {
         })
     }
 
-    /// Calls `visit` on every instance whose node boxes the ray meets within
-    /// `[tmin, limit]`, nearer nodes first; `visit` tests the instance and returns the
-    /// limit from then on (the nearest crossing found so far). Boxes met exactly at the
-    /// limit are still visited, so crossings tied with the best one are seen.
+    /// Calls `visit` on every item whose node boxes the ray meets within `[tmin, limit]`,
+    /// nearer nodes first; `visit` tests the item and returns the limit from then on (the
+    /// nearest crossing found so far; below `tmin` to stop). Boxes met exactly at the limit
+    /// are still visited, so crossings tied with the best one are seen.
     pub(super) fn visit_ray(
         &self,
         ray: &Ray<T>,
@@ -162,6 +162,9 @@ impl<T: Real> InstanceBvh<T> {
     ) {
         for &i in &self.unbounded {
             limit = visit(i);
+            if limit < tmin {
+                return;
+            }
         }
         if self.nodes.is_empty() {
             return;
@@ -179,6 +182,9 @@ impl<T: Real> InstanceBvh<T> {
             if node.count > 0 {
                 for &i in &self.items[node.first as usize..(node.first + node.count) as usize] {
                     limit = visit(i);
+                    if limit < tmin {
+                        return;
+                    }
                 }
                 continue;
             }
@@ -201,8 +207,8 @@ impl<T: Real> InstanceBvh<T> {
         }
     }
 
-    /// Appends to `out` every instance whose node boxes contain `x` (a superset of those
-    /// whose own bounds do), in no particular order.
+    /// Appends to `out` every item whose node boxes contain `x` (a superset of those whose
+    /// own bounds do), in no particular order.
     pub(super) fn candidates_at(&self, x: V3<T>, out: &mut Vec<u32>) {
         out.extend_from_slice(&self.unbounded);
         if self.nodes.is_empty() {

@@ -11,21 +11,33 @@
 //!
 //! Every instance is tested by its world bounds, then its solid's CSG and mesh prims by
 //! their bounds in the solid's frame, then the prims themselves (see
-//! [`hytrace_csg::PreparedPrim`]). Volume prims are media, not surfaces. Groups of more
-//! than [`BVH_MIN_MEMBERS`] instances searched together (a flat scene's instances, a
-//! hierarchy's roots, one mother's daughters) sit in a bounding volume hierarchy
-//! ([`bvh`]); it returns exactly what the linear loop over the group did, ties included.
+//! [`hytrace_csg::PreparedPrim`]). Groups of more than [`BVH_MIN_MEMBERS`] instances searched
+//! together (a flat scene's instances, a hierarchy's roots, one mother's daughters) sit in a
+//! bounding volume hierarchy ([`bvh`]); it returns exactly what the linear loop over the
+//! group did, ties included. So do a solid's leaves when they are many: its surface prims
+//! and the clusters of its volume bricks ([`solid`]), two levels in all (instances, then
+//! each solid's leaves), so repeated solids cost one structure.
+//!
+//! Volume prims are media, not surfaces: [`CpuScene::trace`] and [`CpuScene::occluded`] go
+//! through them, and [`media::SceneMedia`] adds the transmittance of the media along a ray
+//! up to its first surface crossing, finding them through a BVH over the instances that hold
+//! media and each solid's brick clusters.
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
-use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3};
+use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, Ray, Real, V3};
 use hytrace_foundry::{Foundry, UNSET};
 
 mod bvh;
+pub mod media;
+#[cfg(feature = "embree")]
+mod parts;
+mod solid;
 #[cfg(test)]
 mod tests;
 
-use bvh::{holds, InstanceBvh};
+use bvh::{holds, BoxBvh};
+use solid::SolidAccel;
 
 /// Groups of more instances than this are searched through a BVH.
 pub const BVH_MIN_MEMBERS: usize = 8;
@@ -47,6 +59,8 @@ pub struct Hit<T> {
     pub normal: V3<T>,
     /// Index of the instance crossed.
     pub instance: u32,
+    /// Index of the Foundry prim crossed (the solid's and boundary are the instance's).
+    pub prim: u32,
 }
 
 /// Instances searched together, in placement order (which is also increasing instance
@@ -54,7 +68,7 @@ pub struct Hit<T> {
 #[derive(Clone, Debug)]
 struct Group<T> {
     members: Vec<u32>,
-    bvh: Option<Box<InstanceBvh<T>>>,
+    bvh: Option<Box<BoxBvh<T>>>,
 }
 
 impl<T: Real> Group<T> {
@@ -64,9 +78,7 @@ impl<T: Real> Group<T> {
                 .iter()
                 .map(|&i| (i, placements[i as usize].bounds))
                 .collect();
-            Some(Box::new(
-                InstanceBvh::new(&boxed).map_err(anyhow::Error::msg)?,
-            ))
+            Some(Box::new(BoxBvh::new(&boxed).map_err(anyhow::Error::msg)?))
         } else {
             None
         };
@@ -92,17 +104,22 @@ enum Layout<T> {
     Tree(Hierarchy<T>),
 }
 
-/// A Foundry's CSG content prepared for tracing in precision `T`.
+/// A Foundry's content prepared for tracing in precision `T`.
 #[derive(Clone, Debug)]
 pub struct CpuScene<T> {
     placements: Vec<Placement<T>>,
-    solids: Vec<Vec<PreparedPrim<T>>>,
+    solids: Vec<SolidAccel<T>>,
     layout: Layout<T>,
+    /// The instances whose solids hold media.
+    media: Group<T>,
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
-    let b = transform_bounds(&aabb.map(f64::from), t);
-    // Widen by a relative hair so rounding to T never clips a surface.
+    widened_bounds(&transform_bounds(&aabb.map(f64::from), t))
+}
+
+/// `b` in precision `T`, widened by a relative hair so rounding never clips a surface.
+fn widened_bounds<T: Real>(b: &hytrace_csg::Aabb) -> Bounds<T> {
     let pad = 1e-6 * b.iter().fold(1.0f64, |a, v| a.max(v.abs()));
     [
         V3::from_f64([b[0] - pad, b[1] - pad, b[2] - pad]),
@@ -113,17 +130,13 @@ fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> B
 impl<T: Real> CpuScene<T> {
     /// Prepares every instance of a validated Foundry.
     pub fn new(f: &Foundry) -> anyhow::Result<Self> {
-        let mut solids = Vec::with_capacity(f.solid.len());
-        for (i, s) in f.solid.iter().enumerate() {
-            let mut trees = Vec::new();
-            for p in s.prim_offset as usize..(s.prim_offset + s.num_prim) as usize {
-                let prepared = PreparedPrim::from_foundry(f, p).with_context(|| {
+        let solids = (0..f.solid.len())
+            .map(|i| {
+                SolidAccel::new(f, i).with_context(|| {
                     format!("solid {i} `{}`", f.solid_names.get(i).map_or("", |n| n))
-                })?;
-                trees.extend(prepared);
-            }
-            solids.push(trees);
-        }
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
         let mut placements = Vec::with_capacity(f.inst.len());
         for (i, (inst, tran)) in f.inst.iter().zip(&f.inst_tran).enumerate() {
             let tran = &tran.to_transform();
@@ -158,10 +171,15 @@ impl<T: Real> CpuScene<T> {
                 &placements,
             )?)
         };
+        let holding_media = (0..placements.len() as u32)
+            .filter(|&i| !solids[placements[i as usize].solid].clusters.is_empty())
+            .collect();
+        let media = Group::new(holding_media, &placements)?;
         Ok(CpuScene {
             placements,
             solids,
             layout,
+            media,
         })
     }
 
@@ -172,28 +190,23 @@ impl<T: Real> CpuScene<T> {
         ray: &Ray<T>,
         tmin: T,
         tmax: T,
-        mut best: Option<Hit<T>>,
+        best: Option<Hit<T>>,
     ) -> Option<Hit<T>> {
         let p = &self.placements[index];
         if !ray_meets_bounds(ray, &p.bounds, tmin, best.map_or(tmax, |b| b.t)) {
             return best;
         }
         let local = p.frame.ray_to_local(ray);
-        for tree in &self.solids[p.solid] {
-            let limit = best.map_or(tmax, |b| b.t);
-            if !ray_meets_bounds(&local, tree.bounds(), tmin, limit) {
-                continue;
-            }
-            let step = tree.first_crossing(&local, tmin);
-            if step.t < limit && step.t > tmin {
-                best = Some(Hit {
-                    t: step.t,
-                    normal: step.normal,
-                    instance: index as u32,
-                });
-            }
+        let limit = best.map_or(tmax, |b| b.t);
+        match self.solids[p.solid].cross(&local, tmin, limit) {
+            Some(c) => Some(Hit {
+                t: c.t,
+                normal: c.normal,
+                instance: index as u32,
+                prim: c.prim,
+            }),
+            None => best,
         }
-        best
     }
 
     /// The nearer of `seed` and the first crossing of a member of `group`: what folding
@@ -260,8 +273,7 @@ impl<T: Real> CpuScene<T> {
         if !holds(&p.bounds, x) {
             return false;
         }
-        let local = p.frame.point_to_local(x);
-        self.solids[p.solid].iter().any(|t| t.contains(local))
+        self.solids[p.solid].contains(p.frame.point_to_local(x))
     }
 
     /// Geant4's navigator step: locate the origin, then the nearer of leaving the located
@@ -310,6 +322,35 @@ impl<T: Real> CpuScene<T> {
             h.normal = p.frame.normal_to_parent(h.normal).normalized();
             h
         })
+    }
+
+    /// Whether any surface crosses the ray with `tmin < t < tmax` (shadow rays): the
+    /// search stops at the first crossing found. In a hierarchical scene every surface
+    /// counts, the located volume's and its daughters' alike, so this is whether
+    /// [`Self::trace`] finds a crossing.
+    pub fn occluded(&self, ray: &Ray<T>, tmin: T, tmax: T) -> bool {
+        let all = match &self.layout {
+            Layout::Tree(_) => return self.trace(ray, tmin, tmax).is_some(),
+            Layout::Flat(all) => all,
+        };
+        let Some(bvh) = &all.bvh else {
+            return all.members.iter().any(|&i| {
+                self.cross_instance(i as usize, ray, tmin, tmax, None)
+                    .is_some()
+            });
+        };
+        let mut found = false;
+        bvh.visit_ray(ray, tmin, tmax, |i| {
+            found = self
+                .cross_instance(i as usize, ray, tmin, tmax, None)
+                .is_some();
+            if found {
+                -T::INFINITY
+            } else {
+                tmax
+            }
+        });
+        found
     }
 
     /// Number of placed solids.

@@ -159,6 +159,11 @@ fn compare<T: Real>(mother: bool) {
                     key(expected),
                     "seed {seed} ray {ray:?} tmin {tmin:?} tmax {tmax:?}"
                 );
+                assert_eq!(
+                    scene.occluded(&ray, tmin, tmax),
+                    expected.is_some(),
+                    "any-hit, seed {seed} ray {ray:?} tmin {tmin:?} tmax {tmax:?}"
+                );
                 hits += usize::from(got.is_some());
             }
             let mut scratch = Vec::new();
@@ -196,6 +201,61 @@ fn navigator_bvh_matches_linear_f64() {
 #[test]
 fn navigator_bvh_matches_linear_f32() {
     compare::<f32>(true);
+}
+
+/// One solid of many CSG prims (searched through the solid's own BVH) against the same
+/// prims as separate one-prim solids placed where they are (searched by the instance BVH):
+/// the same crossings, bit for bit, the prim index standing for the instance index.
+fn many_prims_in_one_solid<T: Real>() {
+    let (mut together, mut apart) = (Foundry::new(), Foundry::new());
+    let mut rng = Rng::new(7, 0, 0);
+    let mut b = together.begin_solid("cluster");
+    for n in 0..40 {
+        let p = [0; 3].map(|_| uniform(&mut rng, -80.0, 80.0));
+        let shape = match n % 2 {
+            0 => box3(30.0, 30.0, 30.0).unwrap(),
+            _ => sphere(20.0).unwrap(),
+        }
+        .translate(p[0], p[1], p[2]);
+        b.add_csg(to_tree(&shape).unwrap(), n, UNSET).unwrap();
+        let single = add_solid(&mut apart, "one", shape);
+        apart
+            .add_instance(single, Transform64::IDENTITY, 0, 0)
+            .unwrap();
+    }
+    let cluster = b.finish(0).unwrap();
+    together
+        .add_instance(cluster, Transform64::IDENTITY, 0, 0)
+        .unwrap();
+    let (together, apart) = (
+        CpuScene::<T>::new(&together).unwrap(),
+        CpuScene::<T>::new(&apart).unwrap(),
+    );
+    assert!(together.solids[0].prims.len() == 40 && together.placements.len() == 1);
+    let mut hits = 0;
+    for ray in random_rays::<T>(8, [0.0; 3], 4000) {
+        let (a, b) = (
+            together.trace(&ray, T::ZERO, T::INFINITY),
+            apart.trace(&ray, T::ZERO, T::INFINITY),
+        );
+        assert_eq!(
+            a.map(|h| (h.t.to_f64(), h.normal.to_f64(), h.prim)),
+            b.map(|h| (h.t.to_f64(), h.normal.to_f64(), h.instance)),
+            "ray {ray:?}"
+        );
+        hits += usize::from(a.is_some());
+    }
+    assert!(hits > 1000, "hits {hits}");
+}
+
+#[test]
+fn solid_bvh_over_prims_matches_instances_f64() {
+    many_prims_in_one_solid::<f64>();
+}
+
+#[test]
+fn solid_bvh_over_prims_matches_instances_f32() {
+    many_prims_in_one_solid::<f32>();
 }
 
 #[test]

@@ -9,10 +9,15 @@ use std::f64::consts::PI;
 use anyhow::Context;
 use hytrace_csg::{box3, cylinder, sphere, to_tree, torus, Shape};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
-use hytrace_volume::{fog_sphere, BrickedGrid, TexelFormat};
+use hytrace_volume::TexelFormat;
+
+use super::media::{add_medium_solid, MediumSpec};
 
 /// Number of PMT-like instances in the default scene.
 pub const DEFAULT_PMT_COUNT: usize = 48;
+
+/// Extinction of the default scene's fog per mm at grid value 1.
+pub const DEFAULT_FOG_DENSITY: f64 = 0.002;
 
 fn add_csg_solid(f: &mut Foundry, name: &str, shape: &Shape, identity: u32) -> anyhow::Result<u32> {
     let tree = to_tree(shape).with_context(|| format!("solid `{name}`"))?;
@@ -64,16 +69,20 @@ pub fn default_scene() -> anyhow::Result<Foundry> {
     let pmt_shape = sphere(100.0)?.scale(1.0, 1.0, 0.6) + cylinder(45.0, -180.0, 0.0)?;
     let pmt = add_csg_solid(&mut f, "pmt", &pmt_shape, 3)?;
 
-    // Fog: a sphere of 24 voxels (blend 6) at 30 mm per voxel, radius 720 mm.
-    let fog_grid = fog_sphere(24.0, 6.0)?;
-    let mut voxel_to_mm = Transform64::IDENTITY;
-    for (k, row) in voxel_to_mm.rows[..3].iter_mut().enumerate() {
-        row[k] = 30.0;
-    }
-    let mut s = f.begin_solid("fog");
-    let fog_bricks = BrickedGrid::convert(&fog_grid, TexelFormat::F32)?.foundry_bricks();
-    s.add_volume(&fog_bricks, Some(voxel_to_mm), 4)?;
-    let fog = s.finish(4)?;
+    // Fog: a sphere of radius 720 mm in 30 mm voxels (24 voxels, blended over the outer 6),
+    // with an optical depth of about 2.9 along a diameter at full density.
+    let fog = add_medium_solid(
+        &mut f,
+        "fog",
+        &MediumSpec {
+            source: "sphere:720,30,6".into(),
+            grid: None,
+            density_scale: DEFAULT_FOG_DENSITY,
+            format: TexelFormat::F32,
+            placement: Transform64::IDENTITY,
+        },
+        4,
+    )?;
 
     f.add_instance(vessel, Transform64::IDENTITY, 0, 0)?;
     f.add_instance(fog, Transform64::IDENTITY, 4, 0)?;

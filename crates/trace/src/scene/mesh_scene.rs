@@ -99,6 +99,38 @@ fn add_mesh_solid(
     Ok((s.finish(identity)?, centre))
 }
 
+/// Appends one solid holding every triangle of the mesh file `path` (all its meshes in
+/// their placements, in the file's frame), its vertices stored relative to the centre of
+/// their bounds; returns the solid and that centre, which placements of the solid must
+/// apply first.
+pub fn add_mesh_file_solid(
+    f: &mut Foundry,
+    name: &str,
+    path: &Path,
+) -> anyhow::Result<(u32, [f64; 3])> {
+    let g = load_mesh_scene(path)?;
+    let mut positions = Vec::new();
+    for (inst, placement) in g.inst.iter().zip(&g.inst_tran) {
+        let placement = placement.to_transform();
+        let solid = &g.solid[inst.solid as usize];
+        for p in &g.prim[solid.prim_offset as usize..(solid.prim_offset + solid.num_prim) as usize]
+        {
+            let to_file = match p.transform {
+                0 => placement,
+                k => placement.compose(&g.tran[k as usize - 1]),
+            };
+            let tris = &g.tri[p.item_offset as usize..(p.item_offset + p.item_count) as usize];
+            positions.extend(tris.iter().flat_map(|t| {
+                t.v.map(|v| to_file.apply_point([v[0], v[1], v[2]].map(f64::from)))
+            }));
+        }
+    }
+    let indices: Vec<[usize; 3]> = (0..positions.len() / 3)
+        .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+        .collect();
+    add_mesh_solid(f, name, &positions, &indices).with_context(|| path.display().to_string())
+}
+
 /// Builds a Foundry from the bytes of an OBJ file: one solid per object or group with
 /// faces, each placed once. Material libraries are not read.
 pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {

@@ -2,6 +2,7 @@
 
 mod default;
 mod gdml_scene;
+mod media;
 mod mesh_scene;
 mod toml_scene;
 
@@ -13,7 +14,8 @@ use hytrace_foundry::Foundry;
 
 pub use default::default_scene;
 pub use gdml_scene::{gdml_to_foundry, load_gdml_scene, GDML_MESH_TOLERANCE};
-pub use mesh_scene::{gltf_to_foundry, load_mesh_scene, obj_to_foundry};
+pub use media::{add_medium_solid, grid_map_transform, open_medium, MediumSpec};
+pub use mesh_scene::{add_mesh_file_solid, gltf_to_foundry, load_mesh_scene, obj_to_foundry};
 pub use toml_scene::{load_toml_scene, scene_from_toml};
 
 /// Loads the scene named on the command line: none or `default` gives the embedded default

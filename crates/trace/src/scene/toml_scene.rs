@@ -1,32 +1,55 @@
-//! Scene files (TOML): CSG solids written as expressions (see [`hytrace_csg::expr`]) and
-//! their placements in the world.
+//! Scene files (TOML): CSG solids written as expressions (see [`hytrace_csg::expr`]), triangle
+//! meshes from files, participating media from voxel grids, and their placements.
 //!
 //! ```toml
 //! [solids.vessel]
 //! shape = "tube(0, 1000, -500, 500) - sphere(300).translate(0, 0, 200)"
 //!
+//! [meshes.bunny]
+//! file = "bunny.obj"               # .obj, .gltf or .glb, relative to the scene file
+//!
+//! [volumes.fog]
+//! source = "sphere:400,10"         # .nvdb, .vdb (relative to the scene file) or procedural
+//! grid = "density"                 # optional: grid name (default: the first)
+//! density_scale = 0.002            # extinction per mm at grid value 1
+//! format = "f32"                   # optional: bricked texel format (f32, f16, unorm16,
+//!                                  # unorm8, bc4)
+//!
 //! [[place]]
-//! solid = "vessel"
+//! solid = "vessel"                 # any solid, mesh or volume name
 //! translate = [0, 0, 100]          # mm, optional
 //! rotate = [0, 0, 1, 90]           # axis xyz and degrees, optional
 //! copy = 3                         # copy number, optional (default: placement index)
 //! ```
 //!
-//! Placements apply the rotation first, then the translation. A solid without placements is
-//! placed once at the origin. Solids are listed (and indexed) in name order.
+//! Names are shared by solids, meshes and volumes. Placements apply the rotation first, then
+//! the translation. Anything without placements is placed once at the origin. The Foundry
+//! lists CSG solids, then meshes, then volumes, each in name order. Media need a grid with a
+//! zero background; their bricks are made in the given texel format, which the tracers
+//! sample.
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::str::FromStr;
 
 use anyhow::{bail, Context};
 use hytrace_csg::{parse_shape, to_tree};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
+use hytrace_volume::{is_procedural, TexelFormat};
 use serde::Deserialize;
+
+use super::media::{add_medium_solid, MediumSpec};
+use super::mesh_scene::add_mesh_file_solid;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SceneFile {
+    #[serde(default)]
     solids: BTreeMap<String, SolidEntry>,
+    #[serde(default)]
+    meshes: BTreeMap<String, MeshEntry>,
+    #[serde(default)]
+    volumes: BTreeMap<String, VolumeEntry>,
     #[serde(default)]
     place: Vec<Placement>,
 }
@@ -35,6 +58,23 @@ struct SceneFile {
 #[serde(deny_unknown_fields)]
 struct SolidEntry {
     shape: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshEntry {
+    file: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VolumeEntry {
+    source: String,
+    #[serde(default)]
+    grid: Option<String>,
+    density_scale: f64,
+    #[serde(default)]
+    format: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -69,36 +109,62 @@ fn placement_transform(p: &Placement) -> anyhow::Result<Transform64> {
     Ok(t)
 }
 
-/// Builds a Foundry from the text of a scene file; `source` names it in errors.
-pub fn scene_from_toml(text: &str, source: &str) -> anyhow::Result<Foundry> {
+/// Builds a Foundry from the text of a scene file; `source` names it in errors and `dir` is
+/// where relative mesh and grid paths start.
+pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> anyhow::Result<Foundry> {
     let file: SceneFile =
         toml::from_str(text).with_context(|| format!("{source}: not a valid scene file"))?;
-    if file.solids.is_empty() {
-        bail!("{source}: no [solids.NAME] entries");
+    if file.solids.is_empty() && file.meshes.is_empty() && file.volumes.is_empty() {
+        bail!("{source}: no [solids.NAME], [meshes.NAME] or [volumes.NAME] entries");
     }
     let mut f = Foundry::new();
-    let mut index = BTreeMap::new();
-    for (i, (name, entry)) in file.solids.iter().enumerate() {
+    // Name -> (solid, centre its vertices are relative to).
+    let mut index: BTreeMap<String, (u32, [f64; 3])> = BTreeMap::new();
+    let mut claim = |name: &String, entry: (u32, [f64; 3])| {
+        if index.insert(name.clone(), entry).is_some() {
+            bail!("{source}: `{name}` names two entries (solids, meshes and volumes share names)");
+        }
+        Ok(())
+    };
+    for (name, entry) in &file.solids {
+        let identity = f.solid.len() as u32;
         let shape = parse_shape(&entry.shape)
             .with_context(|| format!("{source}: solid `{name}`: shape `{}`", entry.shape))?;
         let tree = to_tree(&shape).with_context(|| format!("{source}: solid `{name}`"))?;
         let mut s = f.begin_solid(name);
-        s.add_csg(tree, i as u32, UNSET)?;
-        let solid = s.finish(i as u32)?;
-        index.insert(name.clone(), solid);
+        s.add_csg(tree, identity, UNSET)?;
+        claim(name, (s.finish(identity)?, [0.0; 3]))?;
     }
-    let mut placed = vec![false; index.len()];
+    for (name, entry) in &file.meshes {
+        let solid = add_mesh_file_solid(&mut f, name, &dir.join(&entry.file))
+            .with_context(|| format!("{source}: mesh `{name}`"))?;
+        claim(name, solid)?;
+    }
+    for (name, entry) in &file.volumes {
+        let spec = volume_spec(entry, dir).with_context(|| format!("{source}: volume `{name}`"))?;
+        let identity = f.solid.len() as u32;
+        let solid = add_medium_solid(&mut f, name, &spec, identity)
+            .with_context(|| format!("{source}: volume `{name}`"))?;
+        claim(name, (solid, [0.0; 3]))?;
+    }
+    let mut placed = vec![false; f.solid.len()];
+    let mut centres = vec![[0.0; 3]; f.solid.len()];
+    for &(solid, centre) in index.values() {
+        centres[solid as usize] = centre;
+    }
     for (k, p) in file.place.iter().enumerate() {
-        let &solid = index
+        let &(solid, centre) = index
             .get(&p.solid)
             .with_context(|| format!("{source}: place {k}: unknown solid `{}`", p.solid))?;
         let t = placement_transform(p).with_context(|| format!("{source}: place {k}"))?;
+        let t = t.compose(&Transform64::translation(centre));
         f.add_instance(solid, t, k as u32, p.copy.unwrap_or(k as i32))?;
         placed[solid as usize] = true;
     }
     for (solid, was_placed) in placed.iter().enumerate() {
         if !was_placed {
-            f.add_instance(solid as u32, Transform64::IDENTITY, UNSET, 0)?;
+            let t = Transform64::translation(centres[solid]);
+            f.add_instance(solid as u32, t, UNSET, 0)?;
         }
     }
     f.validate()
@@ -106,9 +172,30 @@ pub fn scene_from_toml(text: &str, source: &str) -> anyhow::Result<Foundry> {
     Ok(f)
 }
 
+/// A volume entry as a medium: file sources resolved against `dir`.
+fn volume_spec(entry: &VolumeEntry, dir: &Path) -> anyhow::Result<MediumSpec> {
+    let source = if is_procedural(&entry.source) {
+        entry.source.clone()
+    } else {
+        dir.join(&entry.source).display().to_string()
+    };
+    let format = match &entry.format {
+        Some(name) => TexelFormat::from_str(name)?,
+        None => TexelFormat::F32,
+    };
+    Ok(MediumSpec {
+        source,
+        grid: entry.grid.clone(),
+        density_scale: entry.density_scale,
+        format,
+        placement: Transform64::IDENTITY,
+    })
+}
+
 /// Reads a scene file.
 pub fn load_toml_scene(path: &Path) -> anyhow::Result<Foundry> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    scene_from_toml(&text, &path.display().to_string())
+    let dir = path.parent().unwrap_or(Path::new("."));
+    scene_from_toml(&text, &path.display().to_string(), dir)
 }

@@ -1,0 +1,210 @@
+//! Transmittance along rays through a scene's media up to the first surface: surfaces are
+//! opaque, media attenuate (`trace_transmittance`).
+//!
+//! Each medium's grid is opened again from its source and bricked in the texel format its
+//! Foundry bricks were made from, so the lookups are those of the bricked grid a GPU
+//! would sample. The instances holding media are found through their BVH, then the
+//! clusters of their bricks through the solid's BVH; the part of the ray inside a
+//! placement's clusters (widened for rounding: beyond the bricks the density is zero) is
+//! handed to the volume crate's estimators in the grid's index space, in f64. Media that
+//! overlap add their densities, so the transmittances multiply; every placement draws its
+//! own random streams, which keeps the product of the stochastic estimates unbiased.
+
+use std::collections::BTreeMap;
+use std::str::FromStr;
+
+use anyhow::Context;
+use hytrace_csg::{Ray, Real, V3};
+use hytrace_foundry::{Foundry, PrimKind, Transform64};
+use hytrace_volume::{BrickedGrid, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams};
+
+use super::{CpuScene, Hit};
+use crate::scene::{open_medium, MediumSpec};
+
+/// A medium's grid and what its transmittance needs.
+struct MediumGrid {
+    grid: BrickedGrid,
+    /// The caller's parameters with this medium's density scale folded in.
+    params: TransmittanceParams,
+}
+
+/// One ray's answer: its first surface crossing and the transmittance of the media before
+/// it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transmitted<T> {
+    /// The first surface crossing, if any.
+    pub hit: Option<Hit<T>>,
+    /// Transmittance of the media over `[tmin, hit t]` (`[tmin, tmax]` without a hit).
+    pub transmittance: f64,
+    /// Density lookups spent.
+    pub lookups: u64,
+}
+
+/// A scene's surfaces and its media opened for transmittance queries.
+pub struct SceneMedia<'a, T> {
+    scene: &'a CpuScene<T>,
+    grids: Vec<MediumGrid>,
+    /// Index space of the medium of each volume prim, from world space, per instance:
+    /// `(instance, medium) -> world-to-index`.
+    to_index: BTreeMap<(u32, u32), Transform64>,
+}
+
+/// Seed of the random streams of the `k`-th placed medium on a ray (a Weyl step keeps the
+/// streams of different placements apart).
+fn placement_seed(seed: u32, k: u32) -> u32 {
+    seed.wrapping_add(k.wrapping_mul(0x9E37_79B9))
+}
+
+impl<'a, T: Real> SceneMedia<'a, T> {
+    /// Opens every medium of `f` (the Foundry `scene` was prepared from); `params` apply to
+    /// all, their density scale multiplying each medium's own.
+    pub fn new(
+        scene: &'a CpuScene<T>,
+        f: &Foundry,
+        params: &TransmittanceParams,
+    ) -> anyhow::Result<Self> {
+        let mut grids = Vec::with_capacity(f.optics.media.len());
+        for (i, m) in f.optics.media.iter().enumerate() {
+            let spec = MediumSpec {
+                source: m.source.clone(),
+                grid: m.grid.clone(),
+                density_scale: m.density_scale,
+                format: TexelFormat::from_str(&m.format)
+                    .with_context(|| format!("medium {i}: texel format"))?,
+                placement: Transform64::IDENTITY,
+            };
+            let grid = open_medium(&spec).with_context(|| format!("medium {i}"))?;
+            let mut params = *params;
+            params.density_scale *= m.density_scale;
+            params
+                .validate(&grid, grid.ranges())
+                .with_context(|| format!("medium {i} ({})", m.source))?;
+            grids.push(MediumGrid { grid, params });
+        }
+        let mut to_index = BTreeMap::new();
+        for &instance in &scene.media.members {
+            let inst = &f.inst[instance as usize];
+            let world = f.inst_tran[instance as usize].to_transform();
+            let s = &f.solid[inst.solid as usize];
+            for p in s.prim_offset..s.prim_offset + s.num_prim {
+                let prim = &f.prim[p as usize];
+                if prim.kind != PrimKind::Volume as u32 {
+                    continue;
+                }
+                let medium = f
+                    .optics
+                    .media
+                    .iter()
+                    .position(|m| m.prim == p)
+                    .with_context(|| format!("volume prim {p} has no medium"))?;
+                let index_to_solid = match prim.transform {
+                    0 => Transform64::IDENTITY,
+                    k => f.tran[k as usize - 1],
+                };
+                let inverse = world
+                    .compose(&index_to_solid)
+                    .inverse()
+                    .with_context(|| format!("instance {instance}: singular medium transform"))?;
+                to_index.insert((instance, medium as u32), inverse);
+            }
+        }
+        Ok(SceneMedia {
+            scene,
+            grids,
+            to_index,
+        })
+    }
+
+    /// The first surface crossing of the ray `origin + t direction` (unit direction, world
+    /// space) with `tmin < t < tmax`, and the transmittance of the media before it;
+    /// `ray_index` selects the random streams of the stochastic estimators.
+    pub fn trace_transmittance(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        tmin: f64,
+        tmax: f64,
+        ray_index: u32,
+    ) -> anyhow::Result<Transmitted<T>> {
+        let ray = Ray {
+            origin: V3::from_f64(origin),
+            direction: V3::from_f64(direction),
+        };
+        let t_of = |t: f64| {
+            if t.is_finite() {
+                T::from_f64(t)
+            } else {
+                T::INFINITY
+            }
+        };
+        let hit = self.scene.trace(&ray, t_of(tmin), t_of(tmax));
+        let end = hit.map_or(tmax, |h| h.t.to_f64());
+        let mut transmittance = 1.0;
+        let mut lookups = 0;
+        for (k, ((instance, medium), (t0, t1))) in self.spans(&ray, tmin, end).iter().enumerate() {
+            let m = &self.grids[*medium as usize];
+            let w = &self.to_index[&(*instance, *medium)];
+            let o = w.apply_point(origin);
+            let d = w.apply_vector(direction);
+            let index_ray = IndexRay::new(o, d, *t0, *t1)?;
+            let mut params = m.params;
+            params.seed = placement_seed(params.seed, k as u32);
+            let e = IndexTransmittance::new(&m.grid, m.grid.ranges(), &params)?
+                .estimate(&index_ray, ray_index)?;
+            transmittance *= e.transmittance;
+            lookups += e.lookups;
+        }
+        Ok(Transmitted {
+            hit,
+            transmittance,
+            lookups,
+        })
+    }
+
+    /// The part of `[tmin, end]` inside the brick clusters of each placed medium the ray
+    /// meets, widened for the rounding of the precision `T` tests and clamped to
+    /// `[tmin, end]`: `((instance, medium), (t0, t1))` in instance order.
+    fn spans(&self, ray: &Ray<T>, tmin: f64, end: f64) -> Vec<((u32, u32), (f64, f64))> {
+        let scene = self.scene;
+        let o = ray.origin.to_f64();
+        let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+        let mut spans: BTreeMap<(u32, u32), (f64, f64)> = BTreeMap::new();
+        let (lo, hi) = (
+            T::from_f64(tmin),
+            if end.is_finite() {
+                T::from_f64(end)
+            } else {
+                T::INFINITY
+            },
+        );
+        let mut visit_instance = |i: u32| {
+            let p = &scene.placements[i as usize];
+            let local = p.frame.ray_to_local(ray);
+            scene.solids[p.solid].visit_clusters(&local, lo, hi, |c, t0, t1| {
+                let span = spans
+                    .entry((i, c.medium))
+                    .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+                span.0 = span.0.min(t0.to_f64());
+                span.1 = span.1.max(t1.to_f64());
+            });
+        };
+        let group = &scene.media;
+        match &group.bvh {
+            None => group.members.iter().for_each(|&i| visit_instance(i)),
+            Some(bvh) => bvh.visit_ray(ray, lo, hi, |i| {
+                visit_instance(i);
+                hi
+            }),
+        }
+        spans
+            .into_iter()
+            .map(|(key, (t0, t1))| {
+                // Precision-T slab tests are off by a few ulps of the larger of t and the
+                // coordinates; the density is zero just outside the clusters, so widening
+                // costs nothing but a few empty steps.
+                let slack = 64.0 * T::EPSILON.to_f64() * (t0.abs().max(t1.abs()) + reach);
+                (key, ((t0 - slack).max(tmin), (t1 + slack).min(end)))
+            })
+            .collect()
+    }
+}

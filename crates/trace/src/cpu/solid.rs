@@ -1,0 +1,199 @@
+//! One solid prepared for tracing: its surface prims (CSG trees, triangle meshes) and its
+//! volume bricks grouped into clusters, with one BVH over all of them when they are many.
+//!
+//! Bricks are grouped by the 64^3-voxel region (the coarsest range-mip block) holding them:
+//! a cluster's box is the union of its bricks' boxes, so the clusters cover every place a
+//! medium can have a non-zero density (outside its bricks a medium is its zero
+//! background). Rays asking for surfaces skip cluster leaves; rays asking for media skip
+//! surface leaves.
+
+use std::collections::BTreeMap;
+
+use anyhow::Context;
+use hytrace_csg::{
+    ray_bounds_entry, ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3,
+};
+use hytrace_foundry::{Foundry, PrimKind, Transform64};
+
+use super::bvh::BoxBvh;
+use super::{widened_bounds, BVH_MIN_MEMBERS};
+
+/// Side, in voxels, of the regions whose bricks form one cluster.
+pub const CLUSTER_SIDE: i32 = 64;
+
+/// Bricks of one medium in one 64^3-voxel region.
+#[derive(Clone, Debug)]
+pub(super) struct Cluster<T> {
+    /// Index of the medium (into the Foundry's `optics.media`).
+    pub medium: u32,
+    /// Box in the solid's frame.
+    pub bounds: Bounds<T>,
+}
+
+/// A crossing of one of a solid's surface prims, in the solid's frame.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PrimCrossing<T> {
+    pub t: T,
+    /// Outward normal, not normalized.
+    pub normal: V3<T>,
+    /// The Foundry prim crossed.
+    pub prim: u32,
+}
+
+/// A solid's prims and clusters.
+#[derive(Clone, Debug)]
+pub(super) struct SolidAccel<T> {
+    /// Surface prims.
+    pub prims: Vec<PreparedPrim<T>>,
+    /// Foundry index of each surface prim.
+    prim_ids: Vec<u32>,
+    /// Volume-brick clusters.
+    pub clusters: Vec<Cluster<T>>,
+    /// Over surface prims (ids `0..prims.len()`) then clusters (the ids after), when there
+    /// are more than [`BVH_MIN_MEMBERS`] of them.
+    bvh: Option<BoxBvh<T>>,
+}
+
+/// The prim transform of `prim` (identity for none).
+fn prim_transform(f: &Foundry, prim: usize) -> Transform64 {
+    match f.prim[prim].transform {
+        0 => Transform64::IDENTITY,
+        k => f.tran[k as usize - 1],
+    }
+}
+
+/// Clusters of volume prim `prim`, boxes in the solid's frame.
+fn clusters_of<T: Real>(f: &Foundry, prim: usize) -> anyhow::Result<Vec<Cluster<T>>> {
+    let medium = f
+        .optics
+        .media
+        .iter()
+        .position(|m| m.prim as usize == prim)
+        .with_context(|| format!("volume prim {prim} has no medium"))?;
+    let p = &f.prim[prim];
+    let to_solid = prim_transform(f, prim);
+    let mut regions: BTreeMap<[i32; 3], [f64; 6]> = BTreeMap::new();
+    for b in &f.brick[p.item_offset as usize..(p.item_offset + p.item_count) as usize] {
+        let key = b.origin.map(|c| c.div_euclid(CLUSTER_SIDE));
+        let r = regions.entry(key).or_insert([
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ]);
+        for k in 0..3 {
+            r[k] = r[k].min(f64::from(b.aabb[k]));
+            r[k + 3] = r[k + 3].max(f64::from(b.aabb[k + 3]));
+        }
+    }
+    Ok(regions
+        .values()
+        .map(|r| Cluster {
+            medium: medium as u32,
+            bounds: widened_bounds(&transform_bounds(r, &to_solid)),
+        })
+        .collect())
+}
+
+impl<T: Real> SolidAccel<T> {
+    /// Prepares solid `solid` of a validated Foundry.
+    pub fn new(f: &Foundry, solid: usize) -> anyhow::Result<Self> {
+        let s = &f.solid[solid];
+        let (mut prims, mut prim_ids, mut clusters) = (Vec::new(), Vec::new(), Vec::new());
+        for p in s.prim_offset as usize..(s.prim_offset + s.num_prim) as usize {
+            if f.prim[p].kind == PrimKind::Volume as u32 {
+                clusters.extend(clusters_of(f, p)?);
+            } else if let Some(prepared) = PreparedPrim::from_foundry(f, p)? {
+                prims.push(prepared);
+                prim_ids.push(p as u32);
+            }
+        }
+        let leaves = prims.len() + clusters.len();
+        let bvh = if leaves > BVH_MIN_MEMBERS {
+            let boxes: Vec<(u32, Bounds<T>)> = prims
+                .iter()
+                .map(|p| *p.bounds())
+                .chain(clusters.iter().map(|c| c.bounds))
+                .enumerate()
+                .map(|(i, b)| (i as u32, b))
+                .collect();
+            Some(BoxBvh::new(&boxes).map_err(anyhow::Error::msg)?)
+        } else {
+            None
+        };
+        Ok(SolidAccel {
+            prims,
+            prim_ids,
+            clusters,
+            bvh,
+        })
+    }
+
+    /// The first surface crossing in `(tmin, limit)` of a ray in the solid's frame; of
+    /// crossings at the same `t`, the lowest prim's.
+    pub fn cross(&self, ray: &Ray<T>, tmin: T, limit: T) -> Option<PrimCrossing<T>> {
+        // (local prim index, t, normal)
+        let mut best: Option<(usize, T, V3<T>)> = None;
+        let try_prim = |i: usize, best: &mut Option<(usize, T, V3<T>)>| {
+            let within = best.map_or(limit, |b| b.1);
+            let prim = &self.prims[i];
+            if ray_bounds_entry(ray, prim.bounds(), tmin, within).is_none() {
+                return;
+            }
+            let step = prim.first_crossing(ray, tmin);
+            let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
+            if step.t > tmin && (step.t < within || tie_won) {
+                *best = Some((i, step.t, step.normal));
+            }
+        };
+        match &self.bvh {
+            None => (0..self.prims.len()).for_each(|i| try_prim(i, &mut best)),
+            Some(bvh) => bvh.visit_ray(ray, tmin, limit, |id| {
+                if (id as usize) < self.prims.len() {
+                    try_prim(id as usize, &mut best);
+                }
+                best.map_or(limit, |b| b.1)
+            }),
+        }
+        best.map(|(i, t, normal)| PrimCrossing {
+            t,
+            normal,
+            prim: self.prim_ids[i],
+        })
+    }
+
+    /// Whether a point of the solid's frame is inside one of its surface prims.
+    pub fn contains(&self, x: V3<T>) -> bool {
+        self.prims.iter().any(|p| p.contains(x))
+    }
+
+    /// Calls `visit(cluster, t0, t1)` for every cluster whose box the ray (solid frame)
+    /// meets within `[tmin, tmax]`, `[t0, t1]` the part inside the box.
+    pub fn visit_clusters(
+        &self,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        mut visit: impl FnMut(&Cluster<T>, T, T),
+    ) {
+        let mut one = |c: &Cluster<T>| {
+            if let Some((t0, t1)) = ray_bounds_span(ray, &c.bounds, tmin, tmax) {
+                visit(c, t0, t1);
+            }
+        };
+        match &self.bvh {
+            None => self.clusters.iter().for_each(&mut one),
+            Some(bvh) => bvh.visit_ray(ray, tmin, tmax, |id| {
+                if let Some(c) = (id as usize)
+                    .checked_sub(self.prims.len())
+                    .and_then(|k| self.clusters.get(k))
+                {
+                    one(c);
+                }
+                tmax
+            }),
+        }
+    }
+}
