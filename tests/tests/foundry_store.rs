@@ -390,3 +390,32 @@ fn random_corruption_never_panics() {
     );
     assert_eq!(Foundry::load(&dir).unwrap(), f);
 }
+
+#[test]
+fn media_must_match_the_volume_prims() {
+    let (_tmp, dir, f) = saved_default();
+    let fog = f.optics.media[0].prim;
+    let edit = |change: &dyn Fn(&mut serde_json::Value)| {
+        let path = dir.join("optics.json");
+        let original = std::fs::read_to_string(&path).unwrap();
+        let mut json: serde_json::Value = serde_json::from_str(&original).unwrap();
+        change(&mut json);
+        std::fs::write(&path, json.to_string()).unwrap();
+        let message = load_error(&dir);
+        std::fs::write(&path, original).unwrap();
+        message
+    };
+    let message = edit(&|j| j["media"] = serde_json::json!([]));
+    assert!(message.contains(&format!("volume prim {fog} has no medium")), "{message}");
+    let message = edit(&|j| j["media"][0]["prim"] = 0.into());
+    assert!(message.contains("prim 0 is not a volume prim"), "{message}");
+    let message = edit(&|j| {
+        let m = j["media"][0].clone();
+        j["media"].as_array_mut().unwrap().push(m);
+    });
+    assert!(message.contains(&format!("both describe prim {fog}")), "{message}");
+    let message = edit(&|j| j["media"][0]["density_scale"] = (-1.0).into());
+    assert!(message.contains("density scale -1"), "{message}");
+    // Unchanged, the store loads and keeps its medium.
+    assert_eq!(Foundry::load(&dir).unwrap().optics.media, f.optics.media);
+}

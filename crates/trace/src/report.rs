@@ -38,6 +38,7 @@ pub fn summary(f: &Foundry) -> serde_json::Value {
         "materials": f.optics.materials.len(),
         "optical_surfaces": f.optics.surfaces.len(),
         "boundaries": f.optics.boundaries.len(),
+        "media": f.optics.media,
         "files": file_names(),
         "solid_list": solids,
         "placements": placements(f),
@@ -125,6 +126,13 @@ pub fn summary_text(f: &Foundry) -> String {
             "{:>8}  ... {} more (all in `info --json`)\n",
             "",
             rows.len() - LISTED_PLACEMENTS
+        ));
+    }
+    for m in &f.optics.media {
+        let grid = m.grid.as_deref().map_or(String::new(), |g| format!(" grid {g}"));
+        out.push_str(&format!(
+            "medium of prim {}: {}{grid}, {} bricks, density scale {} per unit length\n",
+            m.prim, m.source, m.format, m.density_scale
         ));
     }
     out

@@ -18,7 +18,10 @@ use hytrace_csg::{Ray, Real, V3};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{BrickedGrid, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams};
 
+use rayon::prelude::*;
+
 use super::{CpuScene, Hit};
+use crate::scan::RayRow;
 use crate::scene::{open_medium, MediumSpec};
 
 /// A medium's grid and what its transmittance needs.
@@ -159,6 +162,24 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             transmittance,
             lookups,
         })
+    }
+
+    /// [`Self::trace_transmittance`] of every ray in parallel, ray `i` with the random
+    /// streams of index `i`; an error names the first ray that fails.
+    pub fn trace_all(&self, rays: &[RayRow]) -> anyhow::Result<Vec<Transmitted<T>>> {
+        anyhow::ensure!(
+            u32::try_from(rays.len()).is_ok(),
+            "{} rays, at most {} in one batch",
+            rays.len(),
+            u32::MAX
+        );
+        rays.par_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                self.trace_transmittance(r.origin, r.direction, r.tmin, r.tmax, i as u32)
+                    .with_context(|| format!("ray {i}"))
+            })
+            .collect()
     }
 
     /// The part of `[tmin, end]` inside the brick clusters of each placed medium the ray
