@@ -4,12 +4,13 @@
 #    run on machines without a GPU;
 #  - the OpenVDB/NanoVDB references (Debian: python3-openvdb for /usr/bin/python3,
 #    libnanovdb-tools, libopenvdb-tools), oracles of the volume tests;
+#  - Embree 3 (Debian: libembree-dev), which the `embree` feature's backend links;
 #  - the Python oracle environment (.venv, from tests/requirements.txt).
 # GPU and oracle tests fail (not skip) when their dependencies are missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-apt_packages=(mesa-vulkan-drivers libvulkan1 python3-openvdb libnanovdb-tools libopenvdb-tools)
+apt_packages=(mesa-vulkan-drivers libvulkan1 python3-openvdb libnanovdb-tools libopenvdb-tools libembree-dev)
 missing=()
 for p in "${apt_packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -51,3 +52,6 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
 cargo test --workspace
+# The Embree backend (`--backend embree`): its own build of the tracer crate.
+cargo clippy -p hytrace-trace --features embree --all-targets -- -D warnings
+cargo test -p hytrace-trace --features embree

@@ -406,14 +406,20 @@ fn media_must_match_the_volume_prims() {
         message
     };
     let message = edit(&|j| j["media"] = serde_json::json!([]));
-    assert!(message.contains(&format!("volume prim {fog} has no medium")), "{message}");
+    assert!(
+        message.contains(&format!("volume prim {fog} has no medium")),
+        "{message}"
+    );
     let message = edit(&|j| j["media"][0]["prim"] = 0.into());
     assert!(message.contains("prim 0 is not a volume prim"), "{message}");
     let message = edit(&|j| {
         let m = j["media"][0].clone();
         j["media"].as_array_mut().unwrap().push(m);
     });
-    assert!(message.contains(&format!("both describe prim {fog}")), "{message}");
+    assert!(
+        message.contains(&format!("both describe prim {fog}")),
+        "{message}"
+    );
     let message = edit(&|j| j["media"][0]["density_scale"] = (-1.0).into());
     assert!(message.contains("density scale -1"), "{message}");
     // Unchanged, the store loads and keeps its medium.

@@ -5,6 +5,8 @@
 //! command line reads ([`scene`]).
 
 pub mod cpu;
+#[cfg(feature = "embree")]
+pub mod embree;
 pub mod gpu;
 pub mod report;
 pub mod scan;

@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
-use hytrace_trace::scan::{self, Precision};
+use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::volume::{self, EstimatorArg, FilterArg, Repr, Space};
 use hytrace_trace::{report, scene};
@@ -70,6 +70,9 @@ enum Command {
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
+        /// Tracer: our CPU tracer, or Embree (f32; needs a build with `--features embree`).
+        #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+        backend: Backend,
     },
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
@@ -318,6 +321,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             ids,
             precision,
             stats,
+            backend,
         } => {
             let t0 = std::time::Instant::now();
             let f = scene::load_scene(scene.as_deref(), &options)?;
@@ -336,12 +340,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 (None, None) => anyhow::bail!("give --rays RAYS.npy or --sweep KIND"),
             };
             let load_s = t0.elapsed().as_secs_f64();
-            let (result, times) = scan::scan(&f, &ray_rows, precision)?;
+            let (result, times) = scan::scan_with(&f, &ray_rows, precision, backend)?;
             scan::write_hits(&result, precision, &out, ids.as_deref())
                 .with_context(|| format!("writing {}", out.display()))?;
             let hits = result.ids.iter().filter(|i| i[0] >= 0).count();
             if stats {
-                println!("{}", scan::stats_json(ray_rows.len(), load_s, &times, hits));
+                println!(
+                    "{}",
+                    scan::stats_json(backend, ray_rows.len(), load_s, &times, hits)
+                );
             } else {
                 eprintln!(
                     "{} rays, {hits} hits, {:.3} s tracing; wrote {}",

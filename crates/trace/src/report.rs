@@ -129,7 +129,10 @@ pub fn summary_text(f: &Foundry) -> String {
         ));
     }
     for m in &f.optics.media {
-        let grid = m.grid.as_deref().map_or(String::new(), |g| format!(" grid {g}"));
+        let grid = m
+            .grid
+            .as_deref()
+            .map_or(String::new(), |g| format!(" grid {g}"));
         out.push_str(&format!(
             "medium of prim {}: {}{grid}, {} bricks, density scale {} per unit length\n",
             m.prim, m.source, m.format, m.density_scale

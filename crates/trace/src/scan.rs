@@ -20,7 +20,17 @@ use hytrace_foundry::Foundry;
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::cpu::CpuScene;
+use crate::cpu::{CpuScene, Hit};
+
+/// Which tracer answers a scan.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// Our CPU tracer ([`CpuScene`]), in f32 or f64.
+    #[default]
+    Cpu,
+    /// Embree 3 (f32; builds with the `embree` feature only).
+    Embree,
+}
 
 /// Arithmetic precision of the intersection kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -140,7 +150,12 @@ pub struct ScanResult {
 /// Number of columns of the ids array.
 pub const ID_COLUMNS: usize = 3;
 
-fn trace_all<T: Real>(f: &Foundry, scene: &CpuScene<T>, rays: &[RayRow]) -> ScanResult {
+/// Traces every ray with `trace` (a tracer's `trace`: ray, tmin, tmax).
+fn trace_all<T: Real>(
+    f: &Foundry,
+    rays: &[RayRow],
+    trace: impl Fn(&Ray<T>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
+) -> anyhow::Result<ScanResult> {
     let answers: Vec<([f64; 4], i32)> = rays
         .par_iter()
         .map(|r| {
@@ -153,25 +168,25 @@ fn trace_all<T: Real>(f: &Foundry, scene: &CpuScene<T>, rays: &[RayRow]) -> Scan
             } else {
                 T::INFINITY
             };
-            match scene.trace(&ray, T::from_f64(r.tmin), tmax) {
+            Ok(match trace(&ray, T::from_f64(r.tmin), tmax)? {
                 Some(h) => {
                     let n = h.normal.to_f64();
                     ([n[0], n[1], n[2], h.t.to_f64()], h.instance as i32)
                 }
                 None => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
-            }
+            })
         })
-        .collect();
+        .collect::<anyhow::Result<_>>()?;
     let identity = |instance: i32| -> [i32; 3] {
         match f.inst.get(instance as usize) {
             Some(inst) if instance >= 0 => [instance, inst.boundary as i32, inst.copy_number],
             _ => [-1; 3],
         }
     };
-    ScanResult {
+    Ok(ScanResult {
         hits: answers.iter().map(|a| a.0).collect(),
         ids: answers.iter().map(|a| identity(a.1)).collect(),
-    }
+    })
 }
 
 /// Timings of one scan.
@@ -183,25 +198,62 @@ pub struct ScanTimes {
     pub trace_s: f64,
 }
 
-/// Traces every ray against the scene's CSG solids in the given precision.
+/// Traces every ray against the scene's CSG and mesh solids in the given precision, on the
+/// default (CPU) backend.
 pub fn scan(
     foundry: &Foundry,
     rays: &[RayRow],
     precision: Precision,
 ) -> anyhow::Result<(ScanResult, ScanTimes)> {
-    fn run<T: Real>(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    scan_with(foundry, rays, precision, Backend::Cpu)
+}
+
+/// Traces every ray on the given backend. Embree traces in f32 only, and needs a build
+/// with the `embree` feature.
+pub fn scan_with(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+    backend: Backend,
+) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    fn cpu<T: Real>(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let build_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let result = trace_all(f, &scene, rays);
+        let result = trace_all(f, rays, |r, tmin, tmax| Ok(scene.trace(r, tmin, tmax)))?;
         let trace_s = t1.elapsed().as_secs_f64();
         Ok((result, ScanTimes { build_s, trace_s }))
     }
-    match precision {
-        Precision::F32 => run::<f32>(foundry, rays),
-        Precision::F64 => run::<f64>(foundry, rays),
+    match (backend, precision) {
+        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays),
+        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays),
+        (Backend::Embree, Precision::F64) => {
+            bail!("the Embree backend traces in f32: use --precision f32 (the default)")
+        }
+        (Backend::Embree, Precision::F32) => embree_scan(foundry, rays),
     }
+}
+
+/// The Embree backend's scan: build times include preparing the CPU scene it borrows.
+#[cfg(feature = "embree")]
+fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    let t0 = Instant::now();
+    let cpu = CpuScene::<f32>::new(f)?;
+    let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
+    let build_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let result = trace_all(f, rays, |r, tmin, tmax| scene.trace(r, tmin, tmax))?;
+    let trace_s = t1.elapsed().as_secs_f64();
+    Ok((result, ScanTimes { build_s, trace_s }))
+}
+
+#[cfg(not(feature = "embree"))]
+fn embree_scan(_: &Foundry, _: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    bail!(
+        "this hytrace was built without Embree; rebuild with \
+         `cargo build --release --features embree` (needs Debian's libembree-dev)"
+    )
 }
 
 /// Writes hits (and ids) atomically: float32 or float64 per the precision.
@@ -235,8 +287,15 @@ pub fn write_hits(
 }
 
 /// The stats line of `--stats`.
-pub fn stats_json(rays: usize, load_s: f64, times: &ScanTimes, hits: usize) -> serde_json::Value {
+pub fn stats_json(
+    backend: Backend,
+    rays: usize,
+    load_s: f64,
+    times: &ScanTimes,
+    hits: usize,
+) -> serde_json::Value {
     json!({
+        "backend": format!("{backend:?}").to_lowercase(),
         "rays": rays,
         "hits": hits,
         "load_s": load_s,

@@ -1,0 +1,68 @@
+//! Read access to the pieces of a [`CpuScene`] that other tracers build on (the Embree
+//! backend): prims per solid, placements, the search groups, and the navigator's locate and
+//! exit steps. Each accessor only forwards to the scene's own fields and methods.
+
+use hytrace_csg::kernel::Frame;
+use hytrace_csg::{PreparedPrim, Ray, Real, V3};
+
+use super::{CpuScene, Hit, Layout};
+
+impl<T: Real> CpuScene<T> {
+    /// The surface prims (CSG trees and meshes) of solid `solid`, in the solid's frame.
+    pub(crate) fn solid_prims(&self, solid: usize) -> &[PreparedPrim<T>] {
+        &self.solids[solid].prims
+    }
+
+    /// The solid instance `instance` places.
+    pub(crate) fn instance_solid(&self, instance: u32) -> usize {
+        self.placements[instance as usize].solid
+    }
+
+    /// The frame of instance `instance` (world to the solid's frame).
+    pub(crate) fn instance_frame(&self, instance: u32) -> &Frame<T> {
+        &self.placements[instance as usize].frame
+    }
+
+    /// The instances a ray located outside every instance may enter: all of a flat scene,
+    /// the roots of a hierarchical one.
+    pub(crate) fn top_members(&self) -> &[u32] {
+        match &self.layout {
+            Layout::Flat(all) => &all.members,
+            Layout::Tree(h) => &h.roots.members,
+        }
+    }
+
+    /// The daughters of instance `instance` (none in a flat scene).
+    pub(crate) fn daughter_members(&self, instance: u32) -> &[u32] {
+        match &self.layout {
+            Layout::Flat(_) => &[],
+            Layout::Tree(h) => &h.daughters[instance as usize].members,
+        }
+    }
+
+    /// The deepest instance containing `x` as the navigator locates it; `None` outside every
+    /// root and in flat scenes (which [`CpuScene::trace`] does not navigate).
+    pub(crate) fn locate_origin(&self, x: V3<T>) -> Option<u32> {
+        let Layout::Tree(h) = &self.layout else {
+            return None;
+        };
+        let (mut current, mut group, mut scratch) = (None, &h.roots, Vec::new());
+        while let Some(c) = self.locate(group, x, &mut scratch) {
+            current = Some(c);
+            group = &h.daughters[c as usize];
+        }
+        current
+    }
+
+    /// Where the ray leaves instance `instance`, the navigator's exit (normal in the
+    /// instance's frame, not normalized).
+    pub(crate) fn exit_from(
+        &self,
+        instance: u32,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+    ) -> Option<Hit<T>> {
+        self.exit(instance as usize, ray, tmin, tmax)
+    }
+}

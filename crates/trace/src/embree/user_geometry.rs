@@ -1,0 +1,179 @@
+//! CSG prims as Embree user geometry: one user geometry per solid, one user primitive per
+//! CSG prim, intersected by [`PreparedPrim::first_crossing`] as the CPU tracer does.
+//!
+//! Embree hands the intersect callback the ray already moved into the instance's frame in
+//! f32 by its own inverse. The callback instead re-derives the local ray from the world ray
+//! with the instance's [`Frame`](hytrace_csg::kernel::Frame) (origin subtracted first),
+//! exactly as the CPU tracer does, so CSG answers match it bit for bit and keep f32
+//! precision far from the world origin. The world ray travels in [`TraceContext`], which
+//! starts with the `RTCIntersectContext` Embree passes back to callbacks.
+//!
+//! The backend only calls `rtcIntersect1`, so every callback sees `N == 1`: one ray in the
+//! structure-of-arrays `RTCRayHitN`, whose layout for `N == 1` is [`ffi::RTCRayHit`]'s
+//! fields in order (checked by the layout test). Callbacks never unwind into Embree: a
+//! panic is caught and flagged in the context, and the trace reports it as an error.
+
+use std::cell::Cell;
+use std::ffi::c_void;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use anyhow::bail;
+use hytrace_csg::{PreparedPrim, Ray, V3};
+use hytrace_foundry::{Foundry, PrimKind};
+
+use super::ffi;
+use super::handle::{Device, Geometry};
+use crate::cpu::CpuScene;
+
+/// The CSG prims of one solid, with their Foundry indices: the user data of its user
+/// geometry.
+pub(crate) struct CsgPrims<'a> {
+    prims: Vec<(u32, &'a PreparedPrim<f32>)>,
+}
+
+impl<'a> CsgPrims<'a> {
+    /// The CSG prims among solid `solid`'s surface prims `prims` (in Foundry order, as
+    /// [`CpuScene`] holds them); meshes go to Embree as triangles.
+    pub(crate) fn new(
+        foundry: &Foundry,
+        solid: usize,
+        prims: &'a [PreparedPrim<f32>],
+    ) -> anyhow::Result<Self> {
+        let s = &foundry.solid[solid];
+        let surfaces: Vec<u32> = (s.prim_offset..s.prim_offset + s.num_prim)
+            .filter(|&p| {
+                let kind = foundry.prim[p as usize].kind;
+                kind == PrimKind::Csg as u32 || kind == PrimKind::Mesh as u32
+            })
+            .collect();
+        if surfaces.len() != prims.len() {
+            bail!(
+                "the Foundry has {} surface prims, the CPU scene {}",
+                surfaces.len(),
+                prims.len()
+            );
+        }
+        Ok(CsgPrims {
+            prims: surfaces
+                .into_iter()
+                .zip(prims)
+                .filter(|(_, p)| matches!(p, PreparedPrim::Csg(_)))
+                .collect(),
+        })
+    }
+
+    /// Whether the solid has no CSG prim.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.prims.is_empty()
+    }
+
+    /// A user geometry over these prims. `self` must outlive the geometry and stay at its
+    /// address (the caller keeps it, unmoved, as long as the Embree scenes).
+    pub(crate) fn geometry(&self, device: &Device) -> anyhow::Result<Geometry> {
+        let g = Geometry::new(device, ffi::RTC_GEOMETRY_TYPE_USER)?;
+        let user = self as *const CsgPrims as *mut c_void;
+        // SAFETY: `g` is a new user geometry; `user` stays valid for as long as the
+        // geometry (see above) and is only read, through `&CsgPrims`, by the callbacks.
+        unsafe {
+            ffi::rtcSetGeometryUserPrimitiveCount(g.raw(), self.prims.len() as u32);
+            ffi::rtcSetGeometryUserData(g.raw(), user);
+            ffi::rtcSetGeometryBoundsFunction(g.raw(), Some(bounds), user);
+            ffi::rtcSetGeometryIntersectFunction(g.raw(), Some(intersect));
+        }
+        device.check(|| "setting up a CSG user geometry".into())?;
+        Ok(g)
+    }
+}
+
+/// What `rtcIntersect1` is given as its context: Embree's context first, then what the
+/// callbacks need. Callbacks get a pointer to `base` back and cast it to this struct.
+#[repr(C)]
+pub(crate) struct TraceContext<'s> {
+    /// Embree's part; must stay the first field.
+    pub(crate) base: ffi::RTCIntersectContext,
+    /// The ray in world coordinates.
+    pub(crate) ray: Ray<f32>,
+    /// Instance index of each geometry id of the top-level scene traced.
+    pub(crate) members: &'s [u32],
+    /// Frames of the instances.
+    pub(crate) cpu: &'s CpuScene<f32>,
+    /// Set when a callback panicked (the answer is then not to be trusted).
+    pub(crate) panicked: Cell<bool>,
+}
+
+/// `RTCBoundsFunction`: a CSG prim's bounds in the solid's frame.
+unsafe extern "C" fn bounds(args: *const ffi::RTCBoundsFunctionArguments) {
+    // SAFETY: Embree passes valid arguments whose user pointer is the `CsgPrims` set in
+    // `CsgPrims::geometry`, alive while the geometry is.
+    let args = unsafe { &*args };
+    let prims = unsafe { &*(args.geometry_user_ptr as *const CsgPrims) };
+    // Indexing with `get` and plain arithmetic: nothing here can panic.
+    let [lo, hi] = prims
+        .prims
+        .get(args.prim_id as usize)
+        .map_or([V3::new(0.0, 0.0, 0.0); 2], |(_, p)| *p.bounds());
+    let out = ffi::RTCBounds {
+        lower_x: lo.x,
+        lower_y: lo.y,
+        lower_z: lo.z,
+        align0: 0.0,
+        upper_x: hi.x,
+        upper_y: hi.y,
+        upper_z: hi.z,
+        align1: 0.0,
+    };
+    // SAFETY: `bounds_o` points at one writable `RTCBounds`.
+    unsafe { args.bounds_o.write(out) };
+}
+
+/// Word offsets (in units of `N`) of the `RTCRayHitN` fields the callback uses.
+const TNEAR: usize = 3;
+const TFAR: usize = 8;
+const HIT: usize = 12;
+const NG_X: usize = HIT;
+const PRIM_ID: usize = HIT + 5;
+const GEOM_ID: usize = HIT + 6;
+const INST_ID: usize = HIT + 7;
+
+/// `RTCIntersectFunctionN`: the first crossing of a CSG prim, accepted when it lies in the
+/// ray's open segment `(tnear, tfar)`. The hit's `primID` is the prim's Foundry index.
+unsafe extern "C" fn intersect(args: *const ffi::RTCIntersectFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments; the user pointer is the `CsgPrims` set in
+    // `CsgPrims::geometry` and the context the `TraceContext` given to `rtcIntersect1`
+    // (the only entry point the backend uses), both alive during the call.
+    let args = unsafe { &*args };
+    let prims = unsafe { &*(args.geometry_user_ptr as *const CsgPrims) };
+    let ctx = unsafe { &*(args.context as *const TraceContext) };
+    // SAFETY: `valid` has `N` entries; `rtcIntersect1` calls with `N == 1`.
+    if args.n != 1 || unsafe { *args.valid } == 0 {
+        return;
+    }
+    let words = args.rayhit as *mut u32;
+    let floats = args.rayhit as *mut f32;
+    // SAFETY: with `N == 1` the structure of arrays has one word per field, 20 in all.
+    let (tnear, tfar) = unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) };
+    let instance = ctx.base.inst_id[0];
+    let found = catch_unwind(AssertUnwindSafe(|| {
+        let (id, prim) = prims.prims.get(args.prim_id as usize)?;
+        let index = *ctx.members.get(instance as usize)?;
+        let local = ctx.cpu.instance_frame(index).ray_to_local(&ctx.ray);
+        let step = prim.first_crossing(&local, tnear);
+        (step.t > tnear && step.t < tfar).then_some((*id, step))
+    }));
+    let Ok(found) = found else {
+        ctx.panicked.set(true);
+        return;
+    };
+    if let Some((id, step)) = found {
+        // SAFETY: as above; the callback owns lane 0 of the hit for this call.
+        unsafe {
+            *floats.add(TFAR) = step.t;
+            *floats.add(NG_X) = step.normal.x;
+            *floats.add(NG_X + 1) = step.normal.y;
+            *floats.add(NG_X + 2) = step.normal.z;
+            *words.add(PRIM_ID) = id;
+            *words.add(GEOM_ID) = args.geom_id;
+            *words.add(INST_ID) = instance;
+        }
+    }
+}
