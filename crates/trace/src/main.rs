@@ -9,7 +9,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
-use hytrace_trace::volume::{self, EstimatorArg, FilterArg, Repr, Space};
+use hytrace_trace::volume::{self, FilterArg, Repr, Space};
 use hytrace_trace::{report, scene};
 use hytrace_volume::TexelFormat;
 
@@ -73,6 +73,12 @@ enum Command {
         /// Tracer: our CPU tracer, or Embree (f32; needs a build with `--features embree`).
         #[arg(long, value_enum, default_value_t = Backend::Cpu)]
         backend: Backend,
+        /// Also write the transmittance of the scene's media along each ray up to its first
+        /// surface crossing (to tmax on a miss), (N,) float64 (CPU backend).
+        #[arg(long)]
+        transmittance: Option<PathBuf>,
+        #[command(flatten)]
+        estimate: volume::EstimatorOptions,
     },
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
@@ -133,33 +139,11 @@ enum VolumeCommand {
         /// Transmittances, (N,) float64.
         #[arg(long)]
         out: PathBuf,
-        /// Estimator.
-        #[arg(long, value_enum, default_value_t = EstimatorArg::Exact)]
-        estimator: EstimatorArg,
-        /// Step of `march`, world units.
-        #[arg(long, default_value_t = 0.5)]
-        step: f64,
-        /// Samples per ray of the trackers (delta, ratio, residual).
-        #[arg(long, default_value_t = 1)]
-        spp: u32,
-        /// Seed of the random streams (ray i uses stream i).
-        #[arg(long, default_value_t = 0)]
-        seed: u32,
-        /// Density per unit of grid value.
-        #[arg(long, default_value_t = 1.0)]
-        density_scale: f64,
-        /// Lookup filter.
-        #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
-        filter: FilterArg,
         /// Representation traced.
         #[arg(long, value_enum, default_value_t = Repr::Nanovdb)]
         repr: Repr,
-        /// Finest mip level of the local majorants (0: 8^3 bricks ... 3: 64^3).
-        #[arg(long, default_value_t = 0)]
-        level: usize,
-        /// One majorant for the whole grid instead of local ones.
-        #[arg(long)]
-        global_majorant: bool,
+        #[command(flatten)]
+        estimate: volume::EstimatorOptions,
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
@@ -218,15 +202,8 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             file,
             rays,
             out,
-            estimator,
-            step,
-            spp,
-            seed,
-            density_scale,
-            filter,
             repr,
-            level,
-            global_majorant,
+            estimate,
             grid,
             stats,
         } => {
@@ -235,15 +212,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             let rays = scan::read_rays(&rays)?;
             let g = volume::represent(g, repr)?;
             let load_s = t0.elapsed().as_secs_f64();
-            let args = volume::TransmittanceArgs {
-                estimator,
-                step,
-                spp,
-                seed,
-                density_scale,
-                filter: filter.into(),
-                level: (!global_majorant).then_some(level),
-            };
+            let args = estimate.args();
             let (estimates, mips_s, trace_s) = volume::transmittances(&g, &rays, &args)?;
             let values: Vec<f64> = estimates.iter().map(|e| e.transmittance).collect();
             volume::write_f64(&out, &values)?;
@@ -322,7 +291,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             precision,
             stats,
             backend,
+            transmittance,
+            estimate,
         } => {
+            if transmittance.is_some() && backend != Backend::Cpu {
+                anyhow::bail!(
+                    "--transmittance needs --backend cpu: the Embree backend answers surfaces only"
+                );
+            }
             let t0 = std::time::Instant::now();
             let f = scene::load_scene(scene.as_deref(), &options)?;
             let ray_rows = match (sweep_kind, &rays) {
@@ -341,14 +317,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let load_s = t0.elapsed().as_secs_f64();
             let (result, times) = scan::scan_with(&f, &ray_rows, precision, backend)?;
+            let media = match &transmittance {
+                Some(_) => Some(scan::scan_transmittance(
+                    &f,
+                    &ray_rows,
+                    precision,
+                    &estimate.args().params(),
+                )?),
+                None => None,
+            };
             scan::write_hits(&result, precision, &out, ids.as_deref())
                 .with_context(|| format!("writing {}", out.display()))?;
+            if let (Some(path), Some((values, _, _))) = (&transmittance, &media) {
+                volume::write_f64(path, values)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
             let hits = result.ids.iter().filter(|i| i[0] >= 0).count();
             if stats {
-                println!(
-                    "{}",
-                    scan::stats_json(backend, ray_rows.len(), load_s, &times, hits)
-                );
+                let mut line = scan::stats_json(backend, ray_rows.len(), load_s, &times, hits);
+                if let Some((_, open_s, media_s)) = media {
+                    line["media_open_s"] = open_s.into();
+                    line["transmittance_s"] = media_s.into();
+                }
+                println!("{line}");
             } else {
                 eprintln!(
                     "{} rays, {hits} hits, {:.3} s tracing; wrote {}",

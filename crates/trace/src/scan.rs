@@ -20,6 +20,9 @@ use hytrace_foundry::Foundry;
 use rayon::prelude::*;
 use serde_json::json;
 
+use hytrace_volume::TransmittanceParams;
+
+use crate::cpu::media::SceneMedia;
 use crate::cpu::{CpuScene, Hit};
 
 /// Which tracer answers a scan.
@@ -232,6 +235,37 @@ pub fn scan_with(
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Embree, Precision::F32) => embree_scan(foundry, rays),
+    }
+}
+
+/// Transmittance of the scene's media along every ray up to its first surface crossing
+/// (see [`crate::cpu::media::SceneMedia`]), the surfaces traced on the CPU in `precision`;
+/// with the seconds spent opening the media and tracing.
+pub fn scan_transmittance(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+    params: &TransmittanceParams,
+) -> anyhow::Result<(Vec<f64>, f64, f64)> {
+    fn run<T: Real>(
+        f: &Foundry,
+        rays: &[RayRow],
+        params: &TransmittanceParams,
+    ) -> anyhow::Result<(Vec<f64>, f64, f64)> {
+        let t0 = Instant::now();
+        let scene = CpuScene::<T>::new(f)?;
+        let media = SceneMedia::new(&scene, f, params)?;
+        let t1 = Instant::now();
+        let values = media
+            .trace_all(rays)?
+            .iter()
+            .map(|r| r.transmittance)
+            .collect();
+        Ok((values, (t1 - t0).as_secs_f64(), t1.elapsed().as_secs_f64()))
+    }
+    match precision {
+        Precision::F32 => run::<f32>(foundry, rays, params),
+        Precision::F64 => run::<f64>(foundry, rays, params),
     }
 }
 

@@ -217,6 +217,51 @@ pub fn write_f64(path: &Path, values: &[f64]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The estimator options of `hytrace volume transmittance` and `hytrace scan
+/// --transmittance`.
+#[derive(Clone, Copy, Debug, clap::Args)]
+pub struct EstimatorOptions {
+    /// Estimator.
+    #[arg(long, value_enum, default_value_t = EstimatorArg::Exact)]
+    pub estimator: EstimatorArg,
+    /// Step of `march`, world units.
+    #[arg(long, default_value_t = 0.5)]
+    pub step: f64,
+    /// Samples per ray of the trackers (delta, ratio, residual).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Seed of the random streams (ray i uses stream i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// Density per unit of grid value (for scene media: a factor on each medium's own).
+    #[arg(long, default_value_t = 1.0)]
+    pub density_scale: f64,
+    /// Lookup filter.
+    #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
+    pub filter: FilterArg,
+    /// Finest mip level of the local majorants (0: 8^3 bricks ... 3: 64^3).
+    #[arg(long, default_value_t = 0)]
+    pub level: usize,
+    /// One majorant for the whole grid instead of local ones.
+    #[arg(long)]
+    pub global_majorant: bool,
+}
+
+impl EstimatorOptions {
+    /// The options as transmittance arguments.
+    pub fn args(&self) -> TransmittanceArgs {
+        TransmittanceArgs {
+            estimator: self.estimator,
+            step: self.step,
+            spp: self.spp,
+            seed: self.seed,
+            density_scale: self.density_scale,
+            filter: self.filter.into(),
+            level: (!self.global_majorant).then_some(self.level),
+        }
+    }
+}
+
 /// Parameters of `hytrace volume transmittance`.
 #[derive(Clone, Copy, Debug)]
 pub struct TransmittanceArgs {

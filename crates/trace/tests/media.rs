@@ -8,6 +8,10 @@
 //! trapezoid sum 16 voxels = 160 mm times the density, and up to the centre 80 mm.
 
 use std::path::Path;
+use std::process::Command;
+
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
 
 use hytrace_trace::cpu::media::SceneMedia;
 use hytrace_trace::cpu::CpuScene;
@@ -217,4 +221,97 @@ fn scene_media_errors_name_the_problem() {
         "names two entries",
     );
     bad("[meshes.m]\nfile = \"missing.obj\"\n", "missing.obj");
+}
+
+/// `hytrace scan --transmittance` end to end: the analytic values for rays through two fog
+/// boxes to a wall, through half a box, beside the boxes, and clean failures.
+#[test]
+fn scan_writes_transmittance_up_to_the_first_surface() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_file = dir.path().join("fog.toml");
+    std::fs::write(
+        &scene_file,
+        scene(
+            [0.0; 3],
+            &[[0.0; 3], [400.0, 0.0, 0.0]],
+            [800.0, 0.0, 0.0],
+            0.0,
+        ),
+    )
+    .unwrap();
+    let rays = dir.path().join("rays.npy");
+    let inf = f64::INFINITY;
+    #[rustfmt::skip]
+    let rows: [f64; 32] = [
+        -500.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, inf,    // both boxes, then the wall
+        -500.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 500.0,  // stops at the first box's centre
+        -500.0, 300.0, 0.0, 0.0, 1.0, 0.0, 0.0, inf,  // beside the boxes
+        1000.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, inf,   // from behind the wall: stopped by it
+    ];
+    write_array(&rays, Scalar::F64, &[4, 8], bytemuck::cast_slice(&rows)).unwrap();
+    let (hits, trans) = (dir.path().join("h.npy"), dir.path().join("t.npy"));
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "scan".to_string(),
+            scene_file.display().to_string(),
+            "--rays".into(),
+            rays.display().to_string(),
+            "--out".into(),
+            hits.display().to_string(),
+            "--transmittance".into(),
+            trans.display().to_string(),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        Command::new(env!("CARGO_BIN_EXE_hytrace"))
+            .args(&args)
+            .output()
+            .unwrap()
+    };
+    let ok = run(&["--estimator", "exact", "--precision", "f64"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let a = read_array(&trans).unwrap();
+    assert_eq!((a.scalar, a.shape.clone()), (Scalar::F64, vec![4]));
+    let t: Vec<f64> = bytemuck::pod_collect_to_vec(&a.bytes);
+    let want = [
+        (-2.0 * TAU_ACROSS).exp(),
+        (-0.5 * TAU_ACROSS).exp(),
+        1.0,
+        1.0,
+    ];
+    for (got, want) in t.iter().zip(want) {
+        assert!((got - want).abs() < 1e-9, "{t:?} vs {want}");
+    }
+    // The density scale multiplies each medium's own.
+    let ok = run(&["--density-scale", "2"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let t: Vec<f64> = bytemuck::pod_collect_to_vec(&read_array(&trans).unwrap().bytes);
+    assert!((t[0] - (-4.0 * TAU_ACROSS).exp()).abs() < 1e-9, "{t:?}");
+    // Bad input fails naming the problem and writes nothing.
+    std::fs::remove_file(&trans).unwrap();
+    std::fs::remove_file(&hits).unwrap();
+    for (extra, needle) in [
+        (&["--spp", "0"][..], "spp must be at least 1"),
+        (&["--estimator", "march", "--step=-1"][..], "march step"),
+        (&["--level", "9"][..], "mip level 9"),
+        (&["--backend", "embree"][..], "needs --backend cpu"),
+    ] {
+        let bad = run(extra);
+        let message = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            !bad.status.success() && message.contains(needle),
+            "{extra:?}: {message}"
+        );
+        assert!(
+            !trans.exists() && !hits.exists(),
+            "{extra:?} left an output"
+        );
+    }
 }
