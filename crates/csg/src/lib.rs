@@ -26,7 +26,9 @@ pub use expr::{parse_shape, ExprError};
 pub use mesh::bvh2_depth;
 pub use mesh::MeshPrim;
 pub use prepared::PreparedPrim;
-pub use prim_tree::{ray_bounds_entry, ray_bounds_span, ray_meets_bounds, Bounds, PrimTree};
+pub use prim_tree::{
+    ray_bounds_entry, ray_bounds_span, ray_meets_bounds, Bounds, PrimTree, SlabRay,
+};
 pub use real::{Ray, Real, V3};
 pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,

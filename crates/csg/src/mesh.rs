@@ -8,7 +8,35 @@
 //! geometric normal `(v1 - v0) x (v2 - v0)` points out and classifies each crossing as an
 //! entry or an exit. Rays meet triangles by the watertight test of Woop, Benthin and Wald,
 //! so a ray through an edge or vertex shared by triangles never slips between them.
+//!
+//! The traversal visits the nearer child first (by box entry), skips subtrees entered
+//! beyond the best crossing so far, and tests boxes with the ray's reciprocal direction
+//! (rays with a zero direction component keep the exact dividing test); sibling nodes
+//! share a cache line, in depth-first order. Equal-distance ties go to the lowest triangle
+//! number, so the answers (distances, normals, sides) are bit for bit those of the
+//! unordered traversal this replaced. On the 1M-triangle heightfield of
+//! `cargo bench -p hytrace-tests --bench mesh` (2-core VM, 2026-11-22, old and new
+//! binaries run alternately) `MeshPrim::<f32>::first_crossing` went from 0.99-1.15 to
+//! 2.30-2.74 Mrays/s on coherent rays and from 0.47-0.49 to 1.00-1.04 on incoherent ones
+//! with 2 threads, about 2.2x (see BENCHMARKS.md).
+//!
+//! BVH2 or CWBVH: measured, BVH2 kept. obvhs 0.4's compressed 8-wide BVH
+//! (`build_cwbvh_from_tris`, `fast_build`, its SSE child test) traversed with this
+//! module's watertight triangle test, against this BVH2 on the same heightfield, f32,
+//! 200 704 rays per set, one thread, four runs on the shared VM: coherent
+//! 1.043 / 1.332 / 1.234 / 1.652 Mrays/s (BVH2) vs 1.098 / 1.375 / 1.391 / 1.746 (CWBVH),
+//! +3 to +13%; incoherent 0.440 / 0.588 / 0.545 / 0.701 vs 0.569 / 0.656 / 0.653 / 0.856,
+//! +12 to +29%; build 0.67-0.96 s vs 0.70-1.37 s. That is the CWBVH's best case: its
+//! node test clamps the entry to a fixed 1e-4 (our recentred rays need a signed start),
+//! its child boxes were not padded, and zero direction components and equal-distance ties
+//! were not handled. Its 8-bit child boxes are rounded outward (min floored, max ceiled,
+//! power-of-two scales) but not to the last bit: decoding all 743 600 child boxes of that
+//! tree found one smaller than its triangles by 3e-8, so adopting it means padding the
+//! boxes before quantization and a node test of our own, for f32 only. Not clearly
+//! faster, so not adopted (BENCHMARKS.md, "Triangle meshes", says what limits the ratio
+//! to Embree).
 
+use std::ops::Range;
 use std::time::Duration;
 
 use glam::Vec3A;
@@ -18,7 +46,7 @@ use obvhs::triangle::Triangle as BvhTriangle;
 use obvhs::BvhBuildParams;
 
 use crate::kernel::Step;
-use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds};
+use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
@@ -41,8 +69,10 @@ pub struct MeshPrim<T> {
 }
 
 /// A BVH node: padded bounds, then either children `first, first + 1` (`count == 0`) or
-/// triangles `first..first + count` of the reordered triangle list.
+/// triangles `first..first + count` of the reordered triangle list. Aligned so that a pair
+/// of f32 siblings, stored at an even index, fills one 64-byte cache line.
 #[derive(Clone, Debug, PartialEq)]
+#[repr(C, align(32))]
 struct MeshNode<T> {
     bounds: Bounds<T>,
     first: u32,
@@ -52,6 +82,32 @@ struct MeshNode<T> {
 /// Deepest mesh BVH the traversal's fixed stack accepts (PLOC trees over a million
 /// triangles stay far below it).
 const MAX_BVH_DEPTH: usize = 64;
+
+/// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
+/// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
+/// visited, repeats the root to keep them there).
+fn depth_first_layout<T: Real>(nodes: &[MeshNode<T>]) -> Vec<MeshNode<T>> {
+    let Some(root) = nodes.first() else {
+        return Vec::new();
+    };
+    let mut out = vec![root.clone(), root.clone()];
+    // (index in `nodes`, index in `out`) of nodes whose children are still to be placed.
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((old, new)) = stack.pop() {
+        let n = &nodes[old];
+        if n.count != 0 {
+            continue;
+        }
+        let base = out.len();
+        let (a, b) = (n.first as usize, n.first as usize + 1);
+        out.push(nodes[a].clone());
+        out.push(nodes[b].clone());
+        out[new].first = base as u32;
+        stack.push((b, base + 1));
+        stack.push((a, base));
+    }
+    out
+}
 
 /// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree): the
 /// traversal stack a tree needs.
@@ -108,6 +164,10 @@ impl<T: Real> Shear<T> {
     }
 }
 
+/// Crossings [`MeshPrim::contains`] collects in one walk before it falls back to one
+/// nearest-crossing query per crossing.
+const PARITY_BUFFER: usize = 32;
+
 /// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
 /// components, so it does not run along the edges of ordinary meshes.
 const PARITY_DIRECTION: [f64; 3] = [0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8];
@@ -150,12 +210,6 @@ impl<T: Real> MeshPrim<T> {
             BvhBuildParams::fast_build(),
             &mut Duration::default(),
         );
-        // Triangles in the BVH's leaf order, so leaves index them directly.
-        let ordered: Vec<[V3<T>; 3]> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| triangles[i as usize].map(V3::from_f64))
-            .collect();
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
         let padded =
             |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
@@ -169,7 +223,7 @@ impl<T: Real> MeshPrim<T> {
                 ),
             });
         }
-        let nodes = bvh
+        let mut nodes: Vec<MeshNode<T>> = bvh
             .nodes
             .iter()
             .map(|n| MeshNode {
@@ -178,14 +232,34 @@ impl<T: Real> MeshPrim<T> {
                 count: n.prim_count,
             })
             .collect();
+        // Triangles in leaf order, leaves met in a depth-first walk that visits second
+        // children first: the traversal breaks ties between equal distances by this
+        // numbering (see `nearest`), which keeps the answers of the unordered traversal
+        // earlier versions had.
+        let mut ordered: Vec<[V3<T>; 3]> = Vec::with_capacity(triangles.len());
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let Some(n) = bvh.nodes.get(i) else { continue };
+            let first = n.first_index as usize;
+            if n.prim_count == 0 {
+                stack.extend([first, first + 1]);
+                continue;
+            }
+            nodes[i].first = ordered.len() as u32;
+            ordered.extend(
+                bvh.primitive_indices[first..first + n.prim_count as usize]
+                    .iter()
+                    .map(|&p| triangles[p as usize].map(V3::from_f64)),
+            );
+        }
         Ok(MeshPrim {
             triangles: ordered,
+            nodes: depth_first_layout(&nodes),
             bounds: [
                 V3::from_f64(lo.map(|v| v - pad)),
                 V3::from_f64(hi.map(|v| v + pad)),
             ],
             scale: T::from_f64(0.5 * size.max(f64::MIN_POSITIVE)),
-            nodes,
         })
     }
 
@@ -241,92 +315,157 @@ impl<T: Real> MeshPrim<T> {
         (moved, shift)
     }
 
-    /// The nearest crossing after `after` of a (recentred) ray, with the triangle's
-    /// geometric, not normalized, normal.
-    fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
-        let shear = Shear::new(ray.direction);
-        let mut best: Option<(T, V3<T>)> = None;
-        // A fixed stack (no allocation per ray): depth was bounded when the mesh was built,
-        // and visiting pushes two children for each node popped.
-        let mut stack = [0u32; MAX_BVH_DEPTH + 1];
-        let mut top = usize::from(!self.nodes.is_empty());
-        while top > 0 {
-            top -= 1;
-            let node = &self.nodes[stack[top] as usize];
-            let limit = best.map_or(T::INFINITY, |(b, _)| b);
-            if !ray_meets_bounds(ray, &node.bounds, after, limit) {
-                continue;
-            }
+    /// Visits the leaves whose boxes the (recentred) ray meets within `[after, limit]`,
+    /// nearest box entry first: `leaf` gets each leaf's triangle range and the current
+    /// limit and returns the new one. Subtrees are skipped once their box entry is beyond
+    /// the limit, so a closest-hit query that lowers it to its best crossing prunes
+    /// everything behind that crossing (boxes entered exactly at the limit are still
+    /// visited: they may hold a tied crossing).
+    fn walk(
+        &self,
+        ray: &Ray<T>,
+        after: T,
+        mut limit: T,
+        mut leaf: impl FnMut(Range<usize>, T) -> T,
+    ) {
+        // Node boxes are padded by 1e-6 of the mesh's size and the ray is recentred (its
+        // origin within the mesh's bounding sphere whenever it can hit): the reciprocal slab
+        // test's position error, under 4e-7 of the mesh's size, stays inside the padding,
+        // so [`SlabRay::entry`] culls no box that holds a crossing.
+        let boxes = SlabRay::new(ray);
+        let Some(root) = self.nodes.first() else {
+            return;
+        };
+        if boxes.entry(ray, &root.bounds, after, limit).is_none() {
+            return;
+        }
+        // A fixed stack (no allocation per ray) of the farther children and their box
+        // entries: one push per level of descent, and the depth was bounded at build.
+        let mut stack = [(0u32, T::ZERO); MAX_BVH_DEPTH + 1];
+        let mut top = 0;
+        let mut node = root;
+        loop {
             if node.count == 0 {
-                stack[top] = node.first;
-                stack[top + 1] = node.first + 1;
-                top += 2;
-                continue;
+                let (a, b) = (node.first as usize, node.first as usize + 1);
+                let ea = boxes.entry(ray, &self.nodes[a].bounds, after, limit);
+                let eb = boxes.entry(ray, &self.nodes[b].bounds, after, limit);
+                match (ea, eb) {
+                    (Some(ta), Some(tb)) => {
+                        let (near, far, far_entry) = if tb < ta { (b, a, ta) } else { (a, b, tb) };
+                        stack[top] = (far as u32, far_entry);
+                        top += 1;
+                        node = &self.nodes[near];
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = &self.nodes[a];
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = &self.nodes[b];
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            } else {
+                limit = leaf(
+                    node.first as usize..(node.first + node.count) as usize,
+                    limit,
+                );
             }
-            let leaf = node.first as usize..(node.first + node.count) as usize;
-            if let Some(hit) = Self::nearest_in(&self.triangles[leaf], ray, &shear, after, limit) {
-                best = Some(hit);
+            // The nearest postponed subtree still entered within the limit.
+            loop {
+                if top == 0 {
+                    return;
+                }
+                top -= 1;
+                let (index, entry) = stack[top];
+                if entry <= limit {
+                    node = &self.nodes[index as usize];
+                    break;
+                }
             }
         }
-        best
     }
 
-    /// The nearest crossing in `(after, limit)` among `triangles`, by the watertight test
-    /// of Woop, Benthin and Wald (2013): vertices are taken relative to the origin and
-    /// sheared so the ray runs along +z, leaving a 2D point-in-triangle test at (0, 0) by
-    /// the signs of three edge functions. Adjacent triangles evaluate a shared edge's
-    /// function from the same two sheared vertices, with opposite signs, so no ray passes
-    /// between them; zeros count as inside (a ray through an edge hits both sides).
-    fn nearest_in(
-        triangles: &[[V3<T>; 3]],
-        ray: &Ray<T>,
-        shear: &Shear<T>,
-        after: T,
-        limit: T,
-    ) -> Option<(T, V3<T>)> {
-        let mut best: Option<(T, V3<T>)> = None;
-        let [kx, ky, kz] = shear.axes;
-        for [v0, v1, v2] in triangles {
-            let (a, b, c) = (*v0 - ray.origin, *v1 - ray.origin, *v2 - ray.origin);
-            let sheared = |p: V3<T>| {
-                (
-                    p.get(kx) - shear.x * p.get(kz),
-                    p.get(ky) - shear.y * p.get(kz),
-                )
-            };
-            let ((ax, ay), (bx, by), (cx, cy)) = (sheared(a), sheared(b), sheared(c));
-            let mut u = cx * by - cy * bx;
-            let mut v = ax * cy - ay * cx;
-            let mut w = bx * ay - by * ax;
-            // In f32 an edge function of exactly 0 may be a rounding artefact of the
-            // products: recompute all three from the same sheared values in f64 (the f64
-            // kernel has no wider type to fall back to).
-            if T::NAME == "f32" && (u == T::ZERO || v == T::ZERO || w == T::ZERO) {
-                let edge = |px: T, py: T, qx: T, qy: T| {
-                    T::from_f64(px.to_f64() * qy.to_f64() - py.to_f64() * qx.to_f64())
+    /// The nearest crossing after `after` of a (recentred) ray, with the triangle's
+    /// geometric, not normalized, normal. Crossings at equal distances go to the lowest
+    /// triangle index, so the answer does not depend on the order leaves are visited in
+    /// (triangles are numbered in the order a depth-first walk visiting second children
+    /// first meets them, the order earlier versions searched them in).
+    fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
+        let shear = Shear::new(ray.direction);
+        let mut best: Option<(T, usize)> = None;
+        self.walk(ray, after, T::INFINITY, |leaf, limit| {
+            let start = leaf.start;
+            for (i, tri) in self.triangles[leaf].iter().enumerate() {
+                let Some(t) = Self::crossing(tri, ray, &shear) else {
+                    continue;
                 };
-                u = edge(cx, cy, bx, by);
-                v = edge(ax, ay, cx, cy);
-                w = edge(bx, by, ax, ay);
+                let index = start + i;
+                // Strictly below the limit when nothing is found yet: an overflowed
+                // (infinite) distance is no crossing.
+                let better = match best {
+                    None => t < limit,
+                    Some((b, j)) => t < b || (t == b && index < j),
+                };
+                if t > after && better {
+                    best = Some((t, index));
+                }
             }
-            let negative = u < T::ZERO || v < T::ZERO || w < T::ZERO;
-            let positive = u > T::ZERO || v > T::ZERO || w > T::ZERO;
-            let det = u + v + w;
-            if (negative && positive) || det == T::ZERO {
-                continue;
-            }
-            // Barycentric-weighted heights along the ray, then one division.
-            let (az, bz, cz) = (
-                shear.z * a.get(kz),
-                shear.z * b.get(kz),
-                shear.z * c.get(kz),
-            );
-            let t = (u * az + v * bz + w * cz) / det;
-            if t > after && t < limit && best.is_none_or(|(b, _)| t < b) {
-                best = Some((t, (*v1 - *v0).cross(*v2 - *v0)));
-            }
+            best.map_or(limit, |(b, _)| b)
+        });
+        best.map(|(t, i)| {
+            let [v0, v1, v2] = self.triangles[i];
+            (t, (v1 - v0).cross(v2 - v0))
+        })
+    }
+
+    /// Where a ray meets one triangle, by the watertight test of Woop, Benthin and Wald
+    /// (2013): vertices are taken relative to the origin and sheared so the ray runs along
+    /// +z, leaving a 2D point-in-triangle test at (0, 0) by the signs of three edge
+    /// functions. Adjacent triangles evaluate a shared edge's function from the same two
+    /// sheared vertices, with opposite signs, so no ray passes between them; zeros count as
+    /// inside (a ray through an edge hits both sides).
+    #[inline(always)]
+    fn crossing(tri: &[V3<T>; 3], ray: &Ray<T>, shear: &Shear<T>) -> Option<T> {
+        let [kx, ky, kz] = shear.axes;
+        let [v0, v1, v2] = *tri;
+        let (a, b, c) = (v0 - ray.origin, v1 - ray.origin, v2 - ray.origin);
+        let sheared = |p: V3<T>| {
+            (
+                p.get(kx) - shear.x * p.get(kz),
+                p.get(ky) - shear.y * p.get(kz),
+            )
+        };
+        let ((ax, ay), (bx, by), (cx, cy)) = (sheared(a), sheared(b), sheared(c));
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        // In f32 an edge function of exactly 0 may be a rounding artefact of the
+        // products: recompute all three from the same sheared values in f64 (the f64
+        // kernel has no wider type to fall back to).
+        if T::NAME == "f32" && (u == T::ZERO || v == T::ZERO || w == T::ZERO) {
+            let edge = |px: T, py: T, qx: T, qy: T| {
+                T::from_f64(px.to_f64() * qy.to_f64() - py.to_f64() * qx.to_f64())
+            };
+            u = edge(cx, cy, bx, by);
+            v = edge(ax, ay, cx, cy);
+            w = edge(bx, by, ax, ay);
         }
-        best
+        let negative = u < T::ZERO || v < T::ZERO || w < T::ZERO;
+        let positive = u > T::ZERO || v > T::ZERO || w > T::ZERO;
+        let det = u + v + w;
+        if (negative && positive) || det == T::ZERO {
+            return None;
+        }
+        // Barycentric-weighted heights along the ray, then one division.
+        let (az, bz, cz) = (
+            shear.z * a.get(kz),
+            shear.z * b.get(kz),
+            shear.z * c.get(kz),
+        );
+        Some((u * az + v * bz + w * cz) / det)
     }
 
     /// The first crossing of the mesh's surface after `tmin` (crossings within the surface
@@ -359,15 +498,43 @@ impl<T: Real> MeshPrim<T> {
         if !ray_meets_bounds(&ray, &self.bounds, T::ZERO, T::INFINITY) {
             return false;
         }
-        // Count crossings in the recentred parameter; each query starts strictly after the
-        // last crossing, so the walk ends.
+        // Crossings in the recentred parameter, counted once per distinct distance (a ray
+        // through a shared edge crosses the surface once): one walk collecting them, or,
+        // past the buffer's capacity, one nearest-crossing query after another.
         let (moved, shift) = self.recentred(&ray);
-        let mut inside = false;
-        let mut after = -shift;
-        while let Some((t, _)) = self.nearest(&moved, after) {
-            inside = !inside;
-            after = t;
+        let shear = Shear::new(moved.direction);
+        let mut found = [T::ZERO; PARITY_BUFFER];
+        let mut count = 0;
+        self.walk(&moved, -shift, T::INFINITY, |leaf, limit| {
+            for tri in &self.triangles[leaf] {
+                match Self::crossing(tri, &moved, &shear) {
+                    Some(t) if t > -shift && t < T::INFINITY => {
+                        if let Some(slot) = found.get_mut(count) {
+                            *slot = t;
+                        }
+                        count += 1;
+                    }
+                    _ => {}
+                }
+            }
+            limit
+        });
+        if count > PARITY_BUFFER {
+            let mut inside = false;
+            let mut after = -shift;
+            while let Some((t, _)) = self.nearest(&moved, after) {
+                inside = !inside;
+                after = t;
+            }
+            return inside;
         }
-        inside
+        let found = &mut found[..count];
+        found.sort_unstable_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+        let distinct = found
+            .iter()
+            .enumerate()
+            .filter(|&(i, t)| i == 0 || found[i - 1] < *t)
+            .count();
+        distinct % 2 == 1
     }
 }

@@ -4,15 +4,16 @@
 //!
 //! obvhs builds the tree from f32 copies of the boxes, each rounded outward, so every node
 //! box (a union of such boxes, exact in f32) contains the exact box of every item below
-//! it. The traversal runs in the kernel's precision over those boxes with the arithmetic
-//! of [`hytrace_csg::ray_meets_bounds`], which is monotone in the box: whenever an item's
-//! own bounds test passes, so does every node above it, and no item the ray meets is
-//! culled. Items with non-finite bounds stay out of the tree and are visited every time.
+//! it. The traversal runs in the kernel's precision over those boxes with a reciprocal slab
+//! test widened to accept every box the exact test ([`hytrace_csg::ray_meets_bounds`])
+//! accepts ([`SlabRay::entry_conservative`]); the exact test is monotone in the box, so
+//! whenever an item's own exact bounds test passes, so does every node above it, and no item
+//! the ray meets is culled. Items with non-finite bounds stay out of the tree and are visited every time.
 
 use std::time::Duration;
 
 use glam::Vec3A;
-use hytrace_csg::{bvh2_depth, ray_bounds_entry, Bounds, Ray, Real, V3};
+use hytrace_csg::{bvh2_depth, Bounds, Ray, Real, SlabRay, V3};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::BvhBuildParams;
@@ -169,9 +170,12 @@ impl<T: Real> BoxBvh<T> {
         if self.nodes.is_empty() {
             return;
         }
-        // (node, entry parameter); children are pushed farther first.
+        // (node, entry parameter); children are pushed farther first. Node tests are
+        // conservative (a superset of the exact slab test), so monotonicity holds.
+        let slabs = SlabRay::new(ray);
+        let entry = |b: &Bounds<T>, limit: T| slabs.entry_conservative(ray, b, tmin, limit);
         let mut stack = Stack::new((0u32, T::ZERO));
-        if let Some(t) = ray_bounds_entry(ray, &self.nodes[0].bounds, tmin, limit) {
+        if let Some(t) = entry(&self.nodes[0].bounds, limit) {
             stack.push((0, t));
         }
         while let Some((index, t)) = stack.pop() {
@@ -189,8 +193,8 @@ impl<T: Real> BoxBvh<T> {
                 continue;
             }
             let (a, b) = (node.first, node.first + 1);
-            let ta = ray_bounds_entry(ray, &self.nodes[a as usize].bounds, tmin, limit);
-            let tb = ray_bounds_entry(ray, &self.nodes[b as usize].bounds, tmin, limit);
+            let ta = entry(&self.nodes[a as usize].bounds, limit);
+            let tb = entry(&self.nodes[b as usize].bounds, limit);
             match (ta, tb) {
                 (Some(ta), Some(tb)) if ta <= tb => {
                     stack.push((b, tb));

@@ -11,7 +11,8 @@ use std::collections::BTreeMap;
 
 use anyhow::Context;
 use hytrace_csg::{
-    ray_bounds_entry, ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real, V3,
+    ray_bounds_entry, ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real,
+    EMPTY_AABB, V3,
 };
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
@@ -75,14 +76,7 @@ fn clusters_of<T: Real>(f: &Foundry, prim: usize) -> anyhow::Result<Vec<Cluster<
     let mut regions: BTreeMap<[i32; 3], [f64; 6]> = BTreeMap::new();
     for b in &f.brick[p.item_offset as usize..(p.item_offset + p.item_count) as usize] {
         let key = b.origin.map(|c| c.div_euclid(CLUSTER_SIDE));
-        let r = regions.entry(key).or_insert([
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ]);
+        let r = regions.entry(key).or_insert(EMPTY_AABB);
         for k in 0..3 {
             r[k] = r[k].min(f64::from(b.aabb[k]));
             r[k + 3] = r[k + 3].max(f64::from(b.aabb[k + 3]));

@@ -1,0 +1,316 @@
+//! The mesh BVH traversal on rays it could get wrong: direction components exactly zero
+//! (the exact slab test, not the reciprocal one) running in the planes of the node boxes'
+//! faces and through vertices, grazing rays, and random rays checked against a brute force
+//! over every triangle, in f32 and f64.
+
+use hytrace_csg::{MeshPrim, Ray, Real, V3};
+
+mod common;
+use common::Rng;
+
+type Tri = [[f64; 3]; 3];
+
+/// An `n x n` grid of unit quads over `[0, n]^2` with heights `z(x, y)`, two triangles per
+/// quad, counter-clockwise seen from above. With integer vertex coordinates, the BVH node
+/// boxes have their faces in the planes `x = i` and `y = j`.
+fn grid(n: usize, z: impl Fn(f64, f64) -> f64) -> Vec<Tri> {
+    let p = |i: usize, j: usize| [i as f64, j as f64, z(i as f64, j as f64)];
+    let mut tris = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+            tris.push([a, b, c]);
+            tris.push([a, c, d]);
+        }
+    }
+    tris
+}
+
+fn first_hit<T: Real>(mesh: &MeshPrim<T>, o: [f64; 3], d: [f64; 3]) -> f64 {
+    let ray = Ray {
+        origin: V3::from_f64(o),
+        direction: V3::from_f64(d),
+    };
+    mesh.first_crossing(&ray, T::ZERO).t.to_f64()
+}
+
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|c| c / l)
+}
+
+/// Checks `got` against the expected distance (`inf`: a miss) within `rel` relative.
+fn check(what: &str, got: f64, want: f64, rel: f64, failures: &mut Vec<String>) {
+    let ok = if want.is_finite() {
+        (got - want).abs() <= rel * want.abs().max(1.0)
+    } else {
+        !got.is_finite()
+    };
+    if !ok {
+        failures.push(format!("{what}: got {got}, want {want}"));
+    }
+}
+
+/// Rays with zero direction components along the planes `x = i` and `y = j` (the box
+/// faces), through vertices, edge midpoints and quad centres, onto a sloped grid
+/// `z = 0.5 y` whose coordinates are exact in f32: every target on the grid (on the
+/// edges and vertices shared by its triangles too) is hit at the analytic distance, every
+/// target outside is missed.
+#[test]
+fn zero_direction_components_along_box_faces() {
+    let n = 24;
+    let tris = grid(n, |_, y| 0.5 * y);
+    let (m32, m64) = (
+        MeshPrim::<f32>::new(&tris).unwrap(),
+        MeshPrim::<f64>::new(&tris).unwrap(),
+    );
+    // Dyadic directions (not unit: `t` counts them) and origins, so every ray passes
+    // exactly through its target, in f32 as in f64.
+    let dirs = [
+        [0.0, 0.0, -1.0],
+        [0.0, 0.5, -1.0],
+        [0.0, -0.5, -1.0],
+        [0.5, 0.0, -1.0],
+        [-0.5, 0.0, -1.0],
+    ];
+    let mut failures = Vec::new();
+    let mut rays = 0;
+    for i2 in -2..=(2 * n as i32 + 2) {
+        for j2 in -2..=(2 * n as i32 + 2) {
+            // Vertices (both even), edge midpoints and quad centres, and a ring outside.
+            let (x, y) = (f64::from(i2) / 2.0, f64::from(j2) / 2.0);
+            let inside = (0.0..=n as f64).contains(&x) && (0.0..=n as f64).contains(&y);
+            // The mesh's own outer edge is the one place where hit or miss is within
+            // rounding: the ray is moved along itself (recentred) before the test.
+            if inside && (x == 0.0 || y == 0.0 || x == n as f64 || y == n as f64) {
+                continue;
+            }
+            let target = [x, y, 0.5 * y];
+            for d in dirs {
+                let o = [0, 1, 2].map(|k| target[k] - 8.0 * d[k]);
+                let want = if inside { 8.0 } else { f64::INFINITY };
+                let what = format!("target {target:?} direction {d:?}");
+                check(
+                    &format!("f64 {what}"),
+                    first_hit(&m64, o, d),
+                    want,
+                    1e-12,
+                    &mut failures,
+                );
+                check(
+                    &format!("f32 {what}"),
+                    first_hit(&m32, o, d),
+                    want,
+                    1e-5,
+                    &mut failures,
+                );
+                rays += 1;
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {rays} rays wrong:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+/// Rays along a box face plane that run exactly through a row of vertices of a flat grid
+/// at a shallow angle, and grazing rays (a thousandth of a radian) onto a sloped grid, with
+/// and without zero components.
+#[test]
+fn grazing_rays() {
+    let n = 24;
+    let flat = grid(n, |_, _| 0.0);
+    let sloped = grid(n, |_, y| 0.5 * y);
+    let mut failures = Vec::new();
+    // Flat grid, ray in the plane x = 7 (a column of vertices), descending 1 in 1000.
+    let (f32_flat, f64_flat) = (
+        MeshPrim::<f32>::new(&flat).unwrap(),
+        MeshPrim::<f64>::new(&flat).unwrap(),
+    );
+    for x in [0.0, 7.0, 7.5, n as f64] {
+        let d = unit([0.0, 1.0, -1e-3]);
+        let o = [x, -1.0, 0.012];
+        // Reaches z = 0 at y = 11.
+        let want = 12.0 / d[1];
+        check(
+            &format!("f64 flat x={x}"),
+            first_hit(&f64_flat, o, d),
+            want,
+            1e-12,
+            &mut failures,
+        );
+        check(
+            &format!("f32 flat x={x}"),
+            first_hit(&f32_flat, o, d),
+            want,
+            1e-3,
+            &mut failures,
+        );
+    }
+    let (f32_sloped, f64_sloped) = (
+        MeshPrim::<f32>::new(&sloped).unwrap(),
+        MeshPrim::<f64>::new(&sloped).unwrap(),
+    );
+    for dx in [0.0, 1e-3, -2e-3] {
+        // 0.01 above the plane at y = 0, climbing 1e-3 less steeply: meets it at y = 10.
+        let d = unit([dx, 1.0, 0.5 - 1e-3]);
+        let o = [5.25, 0.0, 0.01];
+        let want = 10.0 / d[1];
+        check(
+            &format!("f64 sloped dx={dx}"),
+            first_hit(&f64_sloped, o, d),
+            want,
+            1e-9,
+            &mut failures,
+        );
+        check(
+            &format!("f32 sloped dx={dx}"),
+            first_hit(&f32_sloped, o, d),
+            want,
+            1e-3,
+            &mut failures,
+        );
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The nearest crossing of any triangle by brute force in f64 (Moller-Trumbore), and
+/// whether the ray passes within `margin` (in barycentric terms) of an edge of a triangle
+/// it might cross there, where f32 and the watertight test may legitimately differ.
+fn brute_force(tris: &[Tri], o: [f64; 3], d: [f64; 3], margin: f64) -> (f64, bool) {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let (mut best, mut near_edge) = (f64::INFINITY, false);
+    for [v0, v1, v2] in tris {
+        let (e1, e2) = (sub(*v1, *v0), sub(*v2, *v0));
+        let p = cross(d, e2);
+        let det = dot(p, e1);
+        if det == 0.0 {
+            continue;
+        }
+        let s = sub(o, *v0);
+        let u = dot(s, p) / det;
+        let q = cross(s, e1);
+        let v = dot(d, q) / det;
+        let t = dot(q, e2) / det;
+        let w = 1.0 - u - v;
+        if t <= 0.0 || u.min(v).min(w) < -margin {
+            continue;
+        }
+        if u.min(v).min(w) < margin {
+            near_edge = true;
+        }
+        best = best.min(t);
+    }
+    (best, near_edge)
+}
+
+/// Random rays, a third of them with a zero direction component, onto a bumpy grid: the
+/// BVH traversal finds what a loop over every triangle finds.
+#[test]
+fn random_rays_match_brute_force() {
+    let n = 16;
+    let mut rng = Rng(6);
+    let heights: Vec<f64> = (0..(n + 1) * (n + 1))
+        .map(|_| rng.range(0.0, 3.0))
+        .collect();
+    let tris = grid(n, |x, y| heights[x as usize * (n + 1) + y as usize]);
+    let (m32, m64) = (
+        MeshPrim::<f32>::new(&tris).unwrap(),
+        MeshPrim::<f64>::new(&tris).unwrap(),
+    );
+    let mut failures = Vec::new();
+    let mut skipped = 0;
+    for k in 0..4000 {
+        let target = [
+            rng.range(-1.0, 17.0),
+            rng.range(-1.0, 17.0),
+            rng.range(0.0, 3.0),
+        ];
+        let mut d = rng.unit();
+        match k % 3 {
+            0 => d[k % 2] = 0.0,
+            1 => {
+                d[0] = 0.0;
+                d[1] = 0.0;
+            }
+            _ => {}
+        }
+        let d = unit(d);
+        let o = [0, 1, 2].map(|c| target[c] - 30.0 * d[c]);
+        let (want, near_edge) = brute_force(&tris, o, d, 1e-6);
+        if near_edge {
+            skipped += 1;
+            continue;
+        }
+        let what = format!("ray {k} origin {o:?} direction {d:?}");
+        check(
+            &format!("f64 {what}"),
+            first_hit(&m64, o, d),
+            want,
+            1e-9,
+            &mut failures,
+        );
+        check(
+            &format!("f32 {what}"),
+            first_hit(&m32, o, d),
+            want,
+            1e-4,
+            &mut failures,
+        );
+    }
+    assert!(skipped < 400, "{skipped} rays too close to edges");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The 12 outward-wound triangles of the cube of half side `h` about `c`.
+fn cube(c: [f64; 3], h: f64) -> Vec<Tri> {
+    let p = |i: usize| [0, 1, 2].map(|k| c[k] + if i >> k & 1 == 1 { h } else { -h });
+    // Each face as a quad counter-clockwise from outside (corner bits: x = 1, y = 2, z = 4).
+    let faces = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
+    faces
+        .iter()
+        .flat_map(|&[a, b, c, d]| [[p(a), p(b), p(c)], [p(a), p(c), p(d)]])
+        .collect()
+}
+
+/// `contains` on points whose parity ray crosses many surfaces (a row of 40 cubes along
+/// it: 80 crossings, more than one walk collects) and few, in f32 and f64.
+#[test]
+fn contains_with_many_crossings() {
+    let dir = unit([0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8]);
+    // Along `dir` each cube spans 1.62 either side of its centre: spaced 4 apart, they
+    // leave gaps.
+    let centre = |k: usize| dir.map(|c| 4.0 * k as f64 * c);
+    let tris: Vec<Tri> = (0..=40).flat_map(|k| cube(centre(k), 1.0)).collect();
+    let (m32, m64) = (
+        MeshPrim::<f32>::new(&tris).unwrap(),
+        MeshPrim::<f64>::new(&tris).unwrap(),
+    );
+    for k in [0, 1, 20, 39, 40] {
+        let inside = centre(k);
+        // Halfway between cube k and cube k + 1, outside both.
+        let between = [0, 1, 2].map(|c| inside[c] + 2.0 * dir[c]);
+        for (x, want) in [(inside, true), (between, false)] {
+            assert_eq!(m64.contains(V3::from_f64(x)), want, "f64 cube {k} {x:?}");
+            assert_eq!(m32.contains(V3::from_f64(x)), want, "f32 cube {k} {x:?}");
+        }
+    }
+}

@@ -1,0 +1,427 @@
+//! Triangle-mesh benchmark (issue 6): a 1M-triangle heightfield traced on the CPU by
+//! hytrace and by Embree 4 (the `embreex` wheel), on the same rays.
+//!
+//! `cargo bench -p hytrace-tests --bench mesh` (needs the oracle environment of
+//! `scripts/test.sh`: `HYTRACE_PYTHON=.venv/bin/python` with numpy and embreex; without it
+//! the Embree rows are skipped with a note). `HYTRACE_BENCH_GRID=N` sets the grid side
+//! (default 708: 2 x 708^2 = 1 002 528 triangles), `HYTRACE_BENCH_RAYS=N` the rays per set
+//! (default 1 000 000).
+//!
+//! The heightfield is written as an OBJ to a temporary directory and loaded through
+//! [`load_scene`], so the scene path users get is measured. Ray sets: coherent (a pinhole
+//! camera's primary rays over the field, in 8x8 pixel tiles) and incoherent (random origins
+//! above the field, uniform directions over the downward hemisphere). hytrace traces each
+//! set with rayon over all threads through [`CpuScene::trace`] (f32), and through the bare
+//! [`MeshPrim::first_crossing`] of a mesh prim built directly from the triangles. Embree
+//! gets the same float32 mesh and rays from `tests/oracle/mesh_bench.py`, which times only
+//! the intersection calls; the hit/miss and distance agreement of the two is printed.
+
+use std::io::Write;
+use std::path::Path;
+use std::process::Command;
+use std::time::Instant;
+
+use hytrace_csg::{MeshPrim, Ray, V3};
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_tests::oracle_python;
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::scene::load_scene;
+use hytrace_volume::Rng;
+use rayon::prelude::*;
+
+/// Timed runs per measurement (the best is reported).
+const RUNS: usize = 3;
+
+fn env_usize(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Best time of `RUNS` calls of `f`, in seconds, and the last result.
+fn best<T>(mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::INFINITY;
+    let mut last = None;
+    for _ in 0..RUNS {
+        let t = Instant::now();
+        let r = f();
+        best = best.min(t.elapsed().as_secs_f64());
+        last = Some(r);
+    }
+    (best, last.unwrap())
+}
+
+/// Vertices (row-major, `(n + 1)^2`) and counter-clockwise (seen from above) triangles of
+/// an `n x n` grid of unit quads with smooth pseudo-random heights: six octaves of plane
+/// waves, amplitudes halving as frequencies double.
+fn heightfield(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let mut rng = Rng::new(6, 0, 0);
+    let waves: Vec<[f64; 4]> = (0..6)
+        .map(|k| {
+            let angle = rng.next_f64() * std::f64::consts::TAU;
+            let freq = std::f64::consts::TAU * f64::from(1u32 << k) / n as f64 * 1.5;
+            let amp = 0.06 * n as f64 / f64::from(1u32 << k);
+            [
+                freq * angle.cos(),
+                freq * angle.sin(),
+                rng.next_f64() * std::f64::consts::TAU,
+                amp,
+            ]
+        })
+        .collect();
+    let mut vertices = Vec::with_capacity((n + 1) * (n + 1));
+    for i in 0..=n {
+        for j in 0..=n {
+            let (x, y) = (i as f64, j as f64);
+            let z: f64 = waves
+                .iter()
+                .map(|w| w[3] * (w[0] * x + w[1] * y + w[2]).sin())
+                .sum();
+            // Float32 vertices, what Embree and the Foundry hold.
+            vertices.push([x, y, z].map(|c| c as f32 as f64));
+        }
+    }
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let mut faces = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            faces.push([a, b, c]);
+            faces.push([a, c, d]);
+        }
+    }
+    (vertices, faces)
+}
+
+fn write_obj(path: &Path, vertices: &[[f64; 3]], faces: &[[u32; 3]]) {
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    writeln!(w, "o heightfield").unwrap();
+    for v in vertices {
+        writeln!(w, "v {} {} {}", v[0] as f32, v[1] as f32, v[2] as f32).unwrap();
+    }
+    for f in faces {
+        writeln!(w, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+    }
+    w.flush().unwrap();
+}
+
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|c| c / l)
+}
+
+/// A set of float32 rays (origins and directions, the directions unit length in f64 before
+/// rounding).
+struct RaySet {
+    name: &'static str,
+    origins: Vec<[f32; 3]>,
+    dirs: Vec<[f32; 3]>,
+}
+
+impl RaySet {
+    fn new(name: &'static str, rays: impl Iterator<Item = ([f64; 3], [f64; 3])>) -> Self {
+        let (origins, dirs) = rays
+            .map(|(o, d)| (o.map(|c| c as f32), unit(d).map(|c| c as f32)))
+            .unzip();
+        RaySet {
+            name,
+            origins,
+            dirs,
+        }
+    }
+
+    fn rays(&self) -> Vec<Ray<f32>> {
+        self.origins
+            .iter()
+            .zip(&self.dirs)
+            .map(|(o, d)| Ray {
+                origin: V3::new(o[0], o[1], o[2]),
+                direction: V3::new(d[0], d[1], d[2]),
+            })
+            .collect()
+    }
+}
+
+/// Primary rays of a pinhole camera looking over the field, pixels in 8x8 tiles, about
+/// `count` of them (a square image whose side is a multiple of 8).
+fn coherent(n: usize, zmax: f64, count: usize) -> RaySet {
+    let side = (((count as f64).sqrt() as usize) / 8).max(1) * 8;
+    let s = n as f64;
+    let eye = [0.5 * s, -0.15 * s, zmax + 0.45 * s];
+    let forward = unit([0.0, 0.65 * s, -(zmax + 0.45 * s)]);
+    let right = unit([forward[1], -forward[0], 0.0]);
+    let up = [
+        right[1] * forward[2] - right[2] * forward[1],
+        right[2] * forward[0] - right[0] * forward[2],
+        right[0] * forward[1] - right[1] * forward[0],
+    ];
+    let half = (30f64.to_radians()).tan();
+    let tiles = side / 8;
+    let pixels = (0..tiles * tiles).flat_map(move |tile| {
+        let (ty, tx) = (tile / tiles, tile % tiles);
+        (0..64).map(move |p| (tx * 8 + p % 8, ty * 8 + p / 8))
+    });
+    RaySet::new(
+        "coherent",
+        pixels.map(|(x, y)| {
+            let u = ((x as f64 + 0.5) / side as f64 * 2.0 - 1.0) * half;
+            let v = (1.0 - (y as f64 + 0.5) / side as f64 * 2.0) * half;
+            let d = std::array::from_fn(|k| forward[k] + u * right[k] + v * up[k]);
+            (eye, d)
+        }),
+    )
+}
+
+/// Random origins above the field, uniform directions over the downward hemisphere.
+fn incoherent(n: usize, zmax: f64, count: usize) -> RaySet {
+    let mut rng = Rng::new(66, 0, 0);
+    let s = n as f64;
+    RaySet::new(
+        "incoherent",
+        (0..count).map(move |_| {
+            let o = [
+                rng.next_f64() * s,
+                rng.next_f64() * s,
+                zmax + 1.0 + rng.next_f64() * 0.05 * s,
+            ];
+            let d = loop {
+                let v: [f64; 3] = std::array::from_fn(|_| rng.next_f64() * 2.0 - 1.0);
+                let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                if l2 > 1e-4 && l2 <= 1.0 {
+                    break [v[0], v[1], -v[2].abs()];
+                }
+            };
+            (o, d)
+        }),
+    )
+}
+
+fn save_f32(path: &Path, rows: &[[f32; 3]]) {
+    write_array(
+        path,
+        Scalar::F32,
+        &[rows.len() as u64, 3],
+        bytemuck::cast_slice(rows),
+    )
+    .unwrap();
+}
+
+/// Hits agreeing with Embree's: both miss, or both hit within 1e-4 relative distance.
+fn agreement(ours: &[f32], embree: &[f32]) -> (f64, usize) {
+    let same = ours
+        .iter()
+        .zip(embree)
+        .filter(|(&a, &b)| match (a.is_finite(), b.is_finite()) {
+            (true, true) => (a - b).abs() <= 1e-4 * a.abs().max(b.abs()).max(1.0),
+            (false, false) => true,
+            _ => false,
+        })
+        .count();
+    (same as f64 / ours.len() as f64, ours.len() - same)
+}
+
+fn mrays(count: usize, seconds: f64) -> f64 {
+    count as f64 / seconds / 1e6
+}
+
+fn main() {
+    let n = env_usize("HYTRACE_BENCH_GRID", 708);
+    let count = env_usize("HYTRACE_BENCH_RAYS", 1_000_000);
+    let dir = tempfile::tempdir().unwrap();
+    let (vertices, faces) = heightfield(n);
+    let zmax = vertices.iter().fold(f64::NEG_INFINITY, |a, v| a.max(v[2]));
+    let obj = dir.path().join("heightfield.obj");
+    write_obj(&obj, &vertices, &faces);
+    println!(
+        "machine: {} threads (rayon), build profile bench; heightfield {n} x {n} quads, {} triangles, {} rays per set",
+        rayon::current_num_threads(),
+        faces.len(),
+        count
+    );
+
+    let t0 = Instant::now();
+    let foundry = load_scene(Some(&obj), &GdmlOptions::default()).unwrap();
+    let load_s = t0.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let scene = CpuScene::<f32>::new(&foundry).unwrap();
+    let build_s = t0.elapsed().as_secs_f64();
+    let triangles: Vec<[[f64; 3]; 3]> = faces
+        .iter()
+        .map(|f| f.map(|i| vertices[i as usize]))
+        .collect();
+    let t0 = Instant::now();
+    let prim = MeshPrim::<f32>::new(&triangles).unwrap();
+    let prim_build_s = t0.elapsed().as_secs_f64();
+    println!(
+        "OBJ load (load_scene): {load_s:.2} s; CpuScene::<f32>::new: {build_s:.2} s; MeshPrim::<f32>::new: {prim_build_s:.2} s"
+    );
+
+    let sets = [coherent(n, zmax, count), incoherent(n, zmax, count)];
+    let mut rows = Vec::new();
+    let mut ours_t = Vec::new();
+    let mut scene_rates = Vec::new();
+    let mut prim_rates = Vec::new();
+    for set in &sets {
+        let rays = set.rays();
+        let (scene_s, hits) = best(|| {
+            rays.par_iter()
+                .map(|r| {
+                    scene
+                        .trace(r, 0.0, f32::INFINITY)
+                        .map_or(f32::INFINITY, |h| h.t)
+                })
+                .collect::<Vec<f32>>()
+        });
+        let (prim_s, prim_hits) = best(|| {
+            rays.par_iter()
+                .map(|r| prim.first_crossing(r, 0.0).t)
+                .collect::<Vec<f32>>()
+        });
+        let hit_fraction = hits.iter().filter(|t| t.is_finite()).count() as f64 / rays.len() as f64;
+        let (same, _) = agreement(&hits, &prim_hits);
+        println!(
+            "{}: {} rays, {:.1}% hit; CpuScene::trace and MeshPrim::first_crossing agree on {:.4}%",
+            set.name,
+            rays.len(),
+            100.0 * hit_fraction,
+            100.0 * same
+        );
+        scene_rates.push(mrays(rays.len(), scene_s));
+        prim_rates.push(mrays(rays.len(), prim_s));
+        ours_t.push(hits);
+    }
+    rows.push(format!(
+        "| hytrace CpuScene::<f32>::trace ({} threads) | {build_s:.2} | {:.2} | {:.2} |",
+        rayon::current_num_threads(),
+        scene_rates[0],
+        scene_rates[1]
+    ));
+    rows.push(format!(
+        "| hytrace MeshPrim::<f32>::first_crossing ({} threads) | {prim_build_s:.2} | {:.2} | {:.2} |",
+        rayon::current_num_threads(),
+        prim_rates[0],
+        prim_rates[1]
+    ));
+
+    match oracle_python(&["numpy", "embreex"]) {
+        None => println!("(no oracle Python with numpy and embreex: Embree rows skipped)"),
+        Some(python) => {
+            let d = dir.path();
+            save_f32(
+                &d.join("vertices.npy"),
+                &vertices
+                    .iter()
+                    .map(|v| v.map(|c| c as f32))
+                    .collect::<Vec<_>>(),
+            );
+            write_array(
+                &d.join("faces.npy"),
+                Scalar::I32,
+                &[faces.len() as u64, 3],
+                bytemuck::cast_slice(&faces),
+            )
+            .unwrap();
+            for set in &sets {
+                save_f32(&d.join(format!("{}_origins.npy", set.name)), &set.origins);
+                save_f32(&d.join(format!("{}_dirs.npy", set.name)), &set.dirs);
+            }
+            let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/mesh_bench.py");
+            let out = Command::new(&python)
+                .arg(&script)
+                .arg(d)
+                .output()
+                .expect("python runs");
+            assert!(
+                out.status.success(),
+                "mesh_bench.py failed:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            // One line per Embree configuration: `label|build_s|coherent_s|incoherent_s|tag`
+            // where `tag` names the distance files it wrote.
+            for line in String::from_utf8_lossy(&out.stdout).lines() {
+                let fields: Vec<&str> = line.split('|').collect();
+                if fields.len() != 5 {
+                    println!("{line}");
+                    continue;
+                }
+                let seconds: Vec<f64> = fields[1..4].iter().map(|s| s.parse().unwrap()).collect();
+                let mut agree = Vec::new();
+                for (set, ours) in sets.iter().zip(&ours_t) {
+                    let a =
+                        read_array(&d.join(format!("{}_{}_t.npy", fields[4], set.name))).unwrap();
+                    let embree: Vec<f32> = bytemuck::pod_collect_to_vec(&a.bytes);
+                    let (same, differ) = agreement(ours, &embree);
+                    agree.push(format!(
+                        "{} {:.4}% ({differ} differ)",
+                        set.name,
+                        100.0 * same
+                    ));
+                }
+                rows.push(format!(
+                    "| {} | {:.2} | {:.2} | {:.2} |",
+                    fields[0],
+                    seconds[0],
+                    mrays(sets[0].origins.len(), seconds[1]),
+                    mrays(sets[1].origins.len(), seconds[2])
+                ));
+                println!(
+                    "agreement of hytrace with {}: {}",
+                    fields[0],
+                    agree.join(", ")
+                );
+            }
+        }
+    }
+    #[cfg(feature = "embree")]
+    rows.push(embree_backend_row(&foundry, &scene, &sets, &ours_t));
+
+    println!("\n| backend | build s | coherent Mrays/s | incoherent Mrays/s |");
+    println!("|---|---:|---:|---:|");
+    for row in rows {
+        println!("{row}");
+    }
+}
+
+/// The row of Embree 3 through hytrace's own backend (`--features embree`): build (Embree's
+/// structures over the prepared scene) and both ray sets, checked against hytrace's hits.
+#[cfg(feature = "embree")]
+fn embree_backend_row(
+    foundry: &hytrace_foundry::Foundry,
+    scene: &CpuScene<f32>,
+    sets: &[RaySet],
+    ours: &[Vec<f32>],
+) -> String {
+    let t0 = Instant::now();
+    let embree = hytrace_trace::embree::EmbreeScene::new(foundry, scene).unwrap();
+    let build_s = t0.elapsed().as_secs_f64();
+    let mut rates = Vec::new();
+    for (set, ours) in sets.iter().zip(ours) {
+        let rays = set.rays();
+        let (secs, hits) = best(|| {
+            rays.par_iter()
+                .map(|r| {
+                    embree
+                        .trace(r, 0.0, f32::INFINITY)
+                        .unwrap()
+                        .map_or(f32::INFINITY, |h| h.t)
+                })
+                .collect::<Vec<f32>>()
+        });
+        let (same, differ) = agreement(ours, &hits);
+        println!(
+            "agreement of hytrace with Embree 3 (hytrace backend), {}: {:.4}% ({differ} differ)",
+            set.name,
+            100.0 * same
+        );
+        rates.push(mrays(rays.len(), secs));
+    }
+    format!(
+        "| Embree 3 through hytrace's backend ({} threads) | {build_s:.2} | {:.2} | {:.2} |",
+        rayon::current_num_threads(),
+        rates[0],
+        rates[1]
+    )
+}

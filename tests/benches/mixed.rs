@@ -1,0 +1,215 @@
+//! The mixed scene benchmark: CSG solids, a triangle mesh and a fog volume in one world,
+//! traced by hytrace's CPU backend and by its Embree backend on the same rays.
+//!
+//! `cargo bench -p hytrace-tests --bench mixed --features embree` (without the feature the
+//! Embree rows are left out). `HYTRACE_BENCH_RAYS=N` sets the rays per set (default 10^6).
+//!
+//! The scene: the open tank, rock mesh (1280 triangles) and fog box of
+//! `scenes/mixed.toml`, with a 20 x 20 grid of PMT-like sensors above the tank (400 CSG
+//! instances). Rays: "coherent", parallel rays from just below the tank's open top straight
+//! down through the fog and past the rock, on a square grid in 8x8 tiles; "incoherent",
+//! origins uniform in the tank with uniform random directions.
+
+use std::path::Path;
+use std::time::Instant;
+
+use hytrace_csg::{Ray, V3};
+use hytrace_trace::cpu::media::SceneMedia;
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::scan::RayRow;
+use hytrace_trace::scene::scene_from_toml;
+use hytrace_volume::{Estimator, Rng, TransmittanceParams};
+use rayon::prelude::*;
+
+/// The mixed scene's text: `scenes/mixed.toml` with a grid of sensors added.
+fn scene_text() -> String {
+    let mut text = std::fs::read_to_string(scenes_dir().join("mixed.toml")).unwrap();
+    for i in 0..20 {
+        for j in 0..20 {
+            let (x, y) = (-570.0 + 60.0 * i as f64, -570.0 + 60.0 * j as f64);
+            text += &format!(
+                "\n[[place]]\nsolid = \"sensor\"\ntranslate = [{x}, {y}, 700]\nrotate = [1, 0, 0, 180]\n"
+            );
+        }
+    }
+    text
+}
+
+fn scenes_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
+}
+
+fn coherent_rays(n: usize) -> Vec<RayRow> {
+    let side = (n as f64).sqrt().ceil() as usize;
+    let tiles = side.div_ceil(8);
+    let mut rows = Vec::with_capacity(side * side);
+    for tile in 0..tiles * tiles {
+        let (ti, tj) = (tile % tiles, tile / tiles);
+        for k in 0..64 {
+            let (i, j) = (ti * 8 + k % 8, tj * 8 + k / 8);
+            if i >= side || j >= side {
+                continue;
+            }
+            let u = |c: usize| -580.0 + 1160.0 * (c as f64 + 0.5) / side as f64;
+            rows.push(RayRow {
+                origin: [u(i), u(j), 390.0],
+                direction: [0.0, 0.0, -1.0],
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            });
+        }
+    }
+    rows.truncate(n);
+    rows
+}
+
+fn incoherent_rays(n: usize) -> Vec<RayRow> {
+    (0..n)
+        .map(|i| {
+            let mut rng = Rng::new(11, i as u32, 0);
+            let mut u = || rng.next_f64();
+            let origin = [
+                -580.0 + 1160.0 * u(),
+                -580.0 + 1160.0 * u(),
+                -380.0 + 760.0 * u(),
+            ];
+            let z = 2.0 * u() - 1.0;
+            let phi = std::f64::consts::TAU * u();
+            let r = (1.0 - z * z).sqrt();
+            RayRow {
+                origin,
+                direction: [r * phi.cos(), r * phi.sin(), z],
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            }
+        })
+        .collect()
+}
+
+fn ray32(r: &RayRow) -> Ray<f32> {
+    Ray {
+        origin: V3::from_f64(r.origin),
+        direction: V3::from_f64(r.direction),
+    }
+}
+
+/// Seconds of the best of three runs of `f`, and its last result.
+fn best<T>(mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut out = None;
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let t = Instant::now();
+        out = Some(f());
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    (best, out.unwrap())
+}
+
+fn main() {
+    let n: usize = std::env::var("HYTRACE_BENCH_RAYS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1_000_000);
+    let t = Instant::now();
+    let f = scene_from_toml(&scene_text(), "mixed bench scene", &scenes_dir()).unwrap();
+    let load_s = t.elapsed().as_secs_f64();
+    let (build_s, cpu) = best(|| CpuScene::<f32>::new(&f).unwrap());
+    println!(
+        "mixed scene: {} instances, {} triangles, {} bricks; load {load_s:.3} s; {} threads; {n} rays per set",
+        f.inst.len(),
+        f.tri.len(),
+        f.brick.len(),
+        rayon::current_num_threads()
+    );
+    println!("| rays | query | backend | build s | Mrays/s | hits |");
+    println!("|---|---|---|---|---|---|");
+    #[cfg(feature = "embree")]
+    let (embree_build_s, embree) =
+        best(|| hytrace_trace::embree::EmbreeScene::new(&f, &cpu).unwrap());
+    for (name, rays) in [
+        ("coherent", coherent_rays(n)),
+        ("incoherent", incoherent_rays(n)),
+    ] {
+        let row = |query: &str, backend: &str, build: f64, secs: f64, hits: usize| {
+            println!(
+                "| {name} | {query} | {backend} | {build:.3} | {:.2} | {hits} |",
+                rays.len() as f64 / secs / 1e6
+            );
+        };
+        let (secs, cpu_hits) = best(|| {
+            rays.par_iter()
+                .map(|r| {
+                    cpu.trace(&ray32(r), 0.0, f32::INFINITY)
+                        .map(|h| (h.t, h.instance))
+                })
+                .collect::<Vec<_>>()
+        });
+        row(
+            "closest hit",
+            "hytrace cpu",
+            build_s,
+            secs,
+            cpu_hits.iter().flatten().count(),
+        );
+        let (secs, occluded) = best(|| {
+            rays.par_iter()
+                .filter(|r| cpu.occluded(&ray32(r), 0.0, f32::INFINITY))
+                .count()
+        });
+        row("any hit", "hytrace cpu", build_s, secs, occluded);
+        #[cfg(feature = "embree")]
+        {
+            let (secs, embree_hits) = best(|| {
+                rays.par_iter()
+                    .map(|r| {
+                        embree
+                            .trace(&ray32(r), 0.0, f32::INFINITY)
+                            .unwrap()
+                            .map(|h| (h.t, h.instance))
+                    })
+                    .collect::<Vec<_>>()
+            });
+            row(
+                "closest hit",
+                "Embree 3 (hytrace backend)",
+                embree_build_s,
+                secs,
+                embree_hits.iter().flatten().count(),
+            );
+            let agree = cpu_hits
+                .iter()
+                .zip(&embree_hits)
+                .filter(|(a, b)| match (a, b) {
+                    (Some(a), Some(b)) => (a.0 - b.0).abs() <= 1e-4f32.max(4e-7 * a.0.abs()),
+                    (None, None) => true,
+                    _ => false,
+                })
+                .count();
+            println!(
+                "|  | agreement cpu vs Embree | {:.4}% | | | |",
+                100.0 * agree as f64 / rays.len() as f64
+            );
+        }
+        for (label, estimator) in [
+            ("transmittance exact", Estimator::Exact),
+            ("transmittance ratio 1 spp", Estimator::Ratio),
+        ] {
+            let params = TransmittanceParams::new(estimator);
+            let (open_s, media) = best(|| SceneMedia::new(&cpu, &f, &params).unwrap());
+            let (secs, out) = best(|| media.trace_all(&rays).unwrap());
+            let lookups: u64 = out.iter().map(|r| r.lookups).sum();
+            row(
+                label,
+                "hytrace cpu",
+                open_s,
+                secs,
+                out.iter().filter(|r| r.hit.is_some()).count(),
+            );
+            println!(
+                "|  | {label}: mean T {:.4}, {:.1} lookups/ray | | | | |",
+                out.iter().map(|r| r.transmittance).sum::<f64>() / out.len() as f64,
+                lookups as f64 / out.len() as f64
+            );
+        }
+    }
+}
