@@ -2,7 +2,7 @@
 //! hytrace and by Embree 4 (the `embreex` wheel), on the same rays.
 //!
 //! `cargo bench -p hytrace-tests --bench mesh` (needs the oracle environment of
-//! `scripts/test.sh`: `HYTRACE_PYTHON=.venv/bin/python` with numpy and embreex; without it
+//! `scripts/test.sh`: `HYTRACE_PYTHON=$PWD/.venv/bin/python` with numpy and embreex; without it
 //! the Embree rows are skipped with a note). `HYTRACE_BENCH_GRID=N` sets the grid side
 //! (default 708: 2 x 708^2 = 1 002 528 triangles), `HYTRACE_BENCH_RAYS=N` the rays per set
 //! (default 1 000 000).
