@@ -442,6 +442,73 @@ pub fn ruled_solid(
     }
 }
 
+/// A unit icosphere: the regular icosahedron with each triangle split in four `levels`
+/// times, new vertices projected onto the sphere. Triangles index the vertices,
+/// counter-clockwise seen from outside; neighbours share vertices exactly (test meshes for
+/// watertightness, rays through shared edges and vertices).
+pub fn icosphere(levels: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+    let unit = |a: [f64; 3]| {
+        let l = dot(a, a).sqrt();
+        a.map(|c| c / l)
+    };
+    let g = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut verts: Vec<[f64; 3]> = [
+        [-1.0, g, 0.0],
+        [1.0, g, 0.0],
+        [-1.0, -g, 0.0],
+        [1.0, -g, 0.0],
+        [0.0, -1.0, g],
+        [0.0, 1.0, g],
+        [0.0, -1.0, -g],
+        [0.0, 1.0, -g],
+        [g, 0.0, -1.0],
+        [g, 0.0, 1.0],
+        [-g, 0.0, -1.0],
+        [-g, 0.0, 1.0],
+    ]
+    .map(unit)
+    .to_vec();
+    let mut faces: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut middle: std::collections::HashMap<(usize, usize), usize> = Default::default();
+        let mut next = Vec::with_capacity(4 * faces.len());
+        for [a, b, c] in faces {
+            let mut mid = |i: usize, j: usize| {
+                *middle.entry((i.min(j), i.max(j))).or_insert_with(|| {
+                    let (p, q) = (verts[i], verts[j]);
+                    verts.push(unit([0, 1, 2].map(|k| p[k] + q[k])));
+                    verts.len() - 1
+                })
+            };
+            let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    (verts, faces)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

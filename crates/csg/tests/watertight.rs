@@ -2,9 +2,7 @@
 //! edges and vertices of closed meshes (an icosphere, a subdivided cube) always hit, in f32
 //! and f64; open meshes give first hits with the triangle's geometric normal.
 
-use std::collections::HashMap;
-
-use hytrace_csg::{MeshPrim, Ray, Real, V3};
+use hytrace_csg::{tessellate, MeshPrim, Ray, Real, V3};
 
 mod common;
 use common::Rng;
@@ -35,64 +33,7 @@ fn unit(a: [f64; 3]) -> [f64; 3] {
 /// An icosphere of radius `r` about `centre`, `levels` times subdivided, counter-clockwise
 /// from outside, vertices shared exactly between neighbours.
 fn icosphere(r: f64, centre: [f64; 3], levels: usize) -> Vec<Tri> {
-    let g = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut verts: Vec<[f64; 3]> = [
-        [-1.0, g, 0.0],
-        [1.0, g, 0.0],
-        [-1.0, -g, 0.0],
-        [1.0, -g, 0.0],
-        [0.0, -1.0, g],
-        [0.0, 1.0, g],
-        [0.0, -1.0, -g],
-        [0.0, 1.0, -g],
-        [g, 0.0, -1.0],
-        [g, 0.0, 1.0],
-        [-g, 0.0, -1.0],
-        [-g, 0.0, 1.0],
-    ]
-    .map(unit)
-    .to_vec();
-    let mut faces: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut midpoint = |a: usize, b: usize, verts: &mut Vec<[f64; 3]>| {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let (p, q) = (verts[a], verts[b]);
-                verts.push(unit([0, 1, 2].map(|k| p[k] + q[k])));
-                verts.len() - 1
-            })
-        };
-        faces = faces
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let ab = midpoint(a, b, &mut verts);
-                let bc = midpoint(b, c, &mut verts);
-                let ca = midpoint(c, a, &mut verts);
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
-    }
+    let (verts, faces) = tessellate::icosphere(levels);
     let place = |v: [f64; 3]| [0, 1, 2].map(|k| centre[k] + r * v[k]);
     faces.iter().map(|f| f.map(|i| place(verts[i]))).collect()
 }

@@ -332,7 +332,7 @@ mod with_embree {
                 }
                 base += verts.len();
             };
-        let (verts, faces) = icosphere(3);
+        let (verts, faces) = hytrace_csg::tessellate::icosphere(3);
         // Turned off the axes, so the axis-aligned sweeps do not run along its edges
         // (where either triangle's normal is right).
         let (c, s) = (0.3f64.cos(), 0.3f64.sin());
@@ -397,74 +397,6 @@ mod with_embree {
         ];
         object("far_cube", &cube, &cube_faces, &mut out);
         out
-    }
-
-    /// A unit icosphere: an icosahedron with each triangle split in four `levels` times,
-    /// counter-clockwise seen from outside.
-    fn icosphere(levels: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
-        let p = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut verts: Vec<[f64; 3]> = [
-            [-1., p, 0.],
-            [1., p, 0.],
-            [-1., -p, 0.],
-            [1., -p, 0.],
-            [0., -1., p],
-            [0., 1., p],
-            [0., -1., -p],
-            [0., 1., -p],
-            [p, 0., -1.],
-            [p, 0., 1.],
-            [-p, 0., -1.],
-            [-p, 0., 1.],
-        ]
-        .to_vec();
-        let mut faces: Vec<[usize; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        let mut midpoints = std::collections::HashMap::new();
-        for _ in 0..levels {
-            let mut next = Vec::with_capacity(faces.len() * 4);
-            for [a, b, c] in faces {
-                let mut mid = |i: usize, j: usize| {
-                    *midpoints.entry((i.min(j), i.max(j))).or_insert_with(|| {
-                        let m: [f64; 3] =
-                            std::array::from_fn(|k| 0.5 * (verts[i][k] + verts[j][k]));
-                        verts.push(m);
-                        verts.len() - 1
-                    })
-                };
-                let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
-                next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-            }
-            faces = next;
-        }
-        let unit = verts
-            .iter()
-            .map(|v| {
-                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                v.map(|c| c / l)
-            })
-            .collect();
-        (unit, faces)
     }
 
     #[test]

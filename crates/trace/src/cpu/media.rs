@@ -133,14 +133,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             origin: V3::from_f64(origin),
             direction: V3::from_f64(direction),
         };
-        let t_of = |t: f64| {
-            if t.is_finite() {
-                T::from_f64(t)
-            } else {
-                T::INFINITY
-            }
-        };
-        let hit = self.scene.trace(&ray, t_of(tmin), t_of(tmax));
+        let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
         let mut transmittance = 1.0;
         let mut lookups = 0;
@@ -189,24 +182,18 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         let scene = self.scene;
         let o = ray.origin.to_f64();
         let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
-        let mut spans: BTreeMap<(u32, u32), (f64, f64)> = BTreeMap::new();
-        let (lo, hi) = (
-            T::from_f64(tmin),
-            if end.is_finite() {
-                T::from_f64(end)
-            } else {
-                T::INFINITY
-            },
-        );
+        // ((instance, medium), (t0, t1)): a ray meets few placed media, so a list it is.
+        let mut spans: Vec<((u32, u32), (f64, f64))> = Vec::new();
+        let (lo, hi) = (T::from_f64(tmin), T::from_f64(end));
         let mut visit_instance = |i: u32| {
             let p = &scene.placements[i as usize];
             let local = p.frame.ray_to_local(ray);
             scene.solids[p.solid].visit_clusters(&local, lo, hi, |c, t0, t1| {
-                let span = spans
-                    .entry((i, c.medium))
-                    .or_insert((f64::INFINITY, f64::NEG_INFINITY));
-                span.0 = span.0.min(t0.to_f64());
-                span.1 = span.1.max(t1.to_f64());
+                let (t0, t1) = (t0.to_f64(), t1.to_f64());
+                match spans.iter_mut().find(|(key, _)| *key == (i, c.medium)) {
+                    Some((_, span)) => *span = (span.0.min(t0), span.1.max(t1)),
+                    None => spans.push(((i, c.medium), (t0, t1))),
+                }
             });
         };
         let group = &scene.media;
@@ -217,6 +204,8 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                 hi
             }),
         }
+        // Instance order, whatever order the BVH visited them in: it picks the seeds.
+        spans.sort_unstable_by_key(|(key, _)| *key);
         spans
             .into_iter()
             .map(|(key, (t0, t1))| {
