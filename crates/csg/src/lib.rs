@@ -11,6 +11,7 @@
 mod bounds;
 pub mod expr;
 pub mod geant4;
+pub mod gpu_layout;
 pub mod kernel;
 pub mod mesh;
 mod prepared;

@@ -62,10 +62,10 @@ use crate::shape::CsgError;
 /// (GDML) scenes, whose meshes are closed solids.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MeshPrim<T> {
-    triangles: Vec<[V3<T>; 3]>,
-    bounds: Bounds<T>,
-    scale: T,
-    nodes: Vec<MeshNode<T>>,
+    pub(crate) triangles: Vec<[V3<T>; 3]>,
+    pub(crate) bounds: Bounds<T>,
+    pub(crate) scale: T,
+    pub(crate) nodes: Vec<MeshNode<T>>,
 }
 
 /// A BVH node: padded bounds, then either children `first, first + 1` (`count == 0`) or
@@ -73,15 +73,15 @@ pub struct MeshPrim<T> {
 /// of f32 siblings, stored at an even index, fills one 64-byte cache line.
 #[derive(Clone, Debug, PartialEq)]
 #[repr(C, align(32))]
-struct MeshNode<T> {
-    bounds: Bounds<T>,
-    first: u32,
-    count: u32,
+pub(crate) struct MeshNode<T> {
+    pub(crate) bounds: Bounds<T>,
+    pub(crate) first: u32,
+    pub(crate) count: u32,
 }
 
 /// Deepest mesh BVH the traversal's fixed stack accepts (PLOC trees over a million
 /// triangles stay far below it).
-const MAX_BVH_DEPTH: usize = 64;
+pub(crate) const MAX_BVH_DEPTH: usize = 64;
 
 /// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
 /// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
@@ -166,11 +166,11 @@ impl<T: Real> Shear<T> {
 
 /// Crossings [`MeshPrim::contains`] collects in one walk before it falls back to one
 /// nearest-crossing query per crossing.
-const PARITY_BUFFER: usize = 32;
+pub(crate) const PARITY_BUFFER: usize = 32;
 
 /// Direction of the parity rays of [`MeshPrim::contains`]: no simple ratios between its
 /// components, so it does not run along the edges of ordinary meshes.
-const PARITY_DIRECTION: [f64; 3] = [0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8];
+pub(crate) const PARITY_DIRECTION: [f64; 3] = [0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8];
 
 impl<T: Real> MeshPrim<T> {
     /// A mesh from triangles (f64 vertices in the solid's frame).

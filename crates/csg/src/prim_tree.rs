@@ -27,7 +27,7 @@ pub type Bounds<T> = [V3<T>; 2];
 
 /// One slot of the complete binary tree.
 #[derive(Clone, Debug, PartialEq)]
-enum Slot<T> {
+pub(crate) enum Slot<T> {
     /// Below a leaf.
     Empty,
     /// Union, intersection or difference of the two children.
@@ -45,15 +45,15 @@ enum Slot<T> {
 /// A CSG prim ready for intersection and inside tests in precision `T`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PrimTree<T> {
-    slots: Vec<Slot<T>>,
-    members: Vec<(Leaf<T>, Bounds<T>)>,
-    planes: Vec<[T; 4]>,
-    height: u32,
-    bounds: Bounds<T>,
-    scale: T,
+    pub(crate) slots: Vec<Slot<T>>,
+    pub(crate) members: Vec<(Leaf<T>, Bounds<T>)>,
+    pub(crate) planes: Vec<[T; 4]>,
+    pub(crate) height: u32,
+    pub(crate) bounds: Bounds<T>,
+    pub(crate) scale: T,
     /// The surface tolerance at the farthest point of `bounds`: the most it is at a point
     /// near the surface.
-    near_max: T,
+    pub(crate) near_max: T,
 }
 
 /// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
@@ -738,11 +738,11 @@ impl<T: Real> PrimTree<T> {
 }
 
 /// How many rays decide [`PrimTree::contains`] on faces that members share.
-const SEAM_PROBES: usize = 32;
+pub(crate) const SEAM_PROBES: usize = 32;
 
 /// Unit direction `k` of [`SEAM_PROBES`] spread evenly over the sphere (a spherical
 /// Fibonacci set, turned so that none lies along an axis or a diagonal).
-fn probe_direction(k: usize) -> [f64; 3] {
+pub(crate) fn probe_direction(k: usize) -> [f64; 3] {
     let z = 1.0 - (2 * k + 1) as f64 / SEAM_PROBES as f64;
     let r = (1.0 - z * z).sqrt();
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());

@@ -14,7 +14,8 @@ use crate::validate::MAX_TREE_HEIGHT;
 /// Path of the generated file relative to the workspace root.
 pub const GENERATED_PATH: &str = "shaders/foundry.wgsl";
 
-fn push_struct<R: Record>(out: &mut String) {
+/// Appends the WGSL declaration of record `R` (one member per field, same names).
+pub fn push_struct<R: Record>(out: &mut String) {
     writeln!(out, "struct {} {{", R::NAME).unwrap();
     for f in R::fields() {
         let ty = f.wgsl_type().expect("GPU records have WGSL scalar types");

@@ -24,6 +24,8 @@ use hytrace_volume::TransmittanceParams;
 
 use crate::cpu::media::SceneMedia;
 use crate::cpu::{CpuScene, Hit};
+use crate::gpu::records::RayRecord;
+use crate::gpu::{GpuContext, GpuTracer, GPU_INF};
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -33,6 +35,10 @@ pub enum Backend {
     Cpu,
     /// Embree 3 (f32; builds with the `embree` feature only).
     Embree,
+    /// Our GPU tracer through wgpu (f32): the scan kernel, twin of the CPU's f32 tracer.
+    Gpu,
+    /// The GPU when one can be opened, else the CPU (with a note on stderr).
+    Auto,
 }
 
 /// Arithmetic precision of the intersection kernels.
@@ -180,16 +186,21 @@ fn trace_all<T: Real>(
             })
         })
         .collect::<anyhow::Result<_>>()?;
+    Ok(result_from(f, &answers))
+}
+
+/// A scan's result from `(nx ny nz t, instance)` per ray (instance -1 on a miss).
+fn result_from(f: &Foundry, answers: &[([f64; 4], i32)]) -> ScanResult {
     let identity = |instance: i32| -> [i32; 3] {
         match f.inst.get(instance as usize) {
             Some(inst) if instance >= 0 => [instance, inst.boundary as i32, inst.copy_number],
             _ => [-1; 3],
         }
     };
-    Ok(ScanResult {
+    ScanResult {
         hits: answers.iter().map(|a| a.0).collect(),
         ids: answers.iter().map(|a| identity(a.1)).collect(),
-    })
+    }
 }
 
 /// Timings of one scan.
@@ -211,8 +222,8 @@ pub fn scan(
     scan_with(foundry, rays, precision, Backend::Cpu)
 }
 
-/// Traces every ray on the given backend. Embree traces in f32 only, and needs a build
-/// with the `embree` feature.
+/// Traces every ray on the given backend. Embree and the GPU trace in f32 only; Embree
+/// needs a build with the `embree` feature.
 pub fn scan_with(
     foundry: &Foundry,
     rays: &[RayRow],
@@ -235,7 +246,66 @@ pub fn scan_with(
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Embree, Precision::F32) => embree_scan(foundry, rays),
+        (Backend::Gpu | Backend::Auto, Precision::F64) => {
+            bail!("the GPU backend traces in f32: use --precision f32 (the default)")
+        }
+        (Backend::Gpu, Precision::F32) => gpu_scan(foundry, rays, GpuContext::new()?),
+        (Backend::Auto, Precision::F32) => match GpuContext::new() {
+            Ok(ctx) => gpu_scan(foundry, rays, ctx),
+            Err(e) => {
+                eprintln!("hytrace: no usable GPU ({e}); --backend auto scans on the CPU");
+                cpu::<f32>(foundry, rays)
+            }
+        },
     }
+}
+
+/// A ray in the form the GPU kernels read: rounded to f32 as the CPU's f32 tracer rounds
+/// it, infinite `tmax` as the kernels' [`GPU_INF`].
+pub fn ray_record(r: &RayRow) -> RayRecord {
+    let f = |v: [f64; 3]| v.map(|c| c as f32);
+    RayRecord {
+        origin: f(r.origin),
+        tmin: r.tmin as f32,
+        direction: f(r.direction),
+        tmax: (r.tmax as f32).min(GPU_INF),
+    }
+}
+
+/// The GPU backend's scan: build time includes preparing the f32 CPU scene it uploads,
+/// uploading it and compiling the kernel; trace time is the rays' upload, the kernel and
+/// the readback.
+fn gpu_scan(
+    f: &Foundry,
+    rays: &[RayRow],
+    ctx: GpuContext,
+) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    let t0 = Instant::now();
+    let cpu = CpuScene::<f32>::new(f)?;
+    let tracer = GpuTracer::new(&ctx, &cpu)?;
+    let build_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
+    let (hits, _) = tracer.trace(&ctx, &records)?;
+    if let Some(i) = hits.iter().position(|h| h.status != 0) {
+        bail!(
+            "GPU scan: ray {i} was cut short (status {:#x}): the placement tree is deeper \
+             than the kernel's bound",
+            hits[i].status
+        );
+    }
+    let answers: Vec<([f64; 4], i32)> = hits
+        .iter()
+        .map(|h| match h.t < GPU_INF {
+            true => {
+                let n = h.normal.map(f64::from);
+                ([n[0], n[1], n[2], f64::from(h.t)], h.instance as i32)
+            }
+            false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
+        })
+        .collect();
+    let trace_s = t1.elapsed().as_secs_f64();
+    Ok((result_from(f, &answers), ScanTimes { build_s, trace_s }))
 }
 
 /// Transmittance of the scene's media along every ray up to its first surface crossing

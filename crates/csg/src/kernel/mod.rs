@@ -36,6 +36,14 @@ impl<T: Real> Frame<T> {
         })
     }
 
+    /// The frame packed as the GPU reads it: row `k` is `(inverse[k], origin[k])`.
+    pub fn rows(&self) -> [[T; 4]; 3] {
+        std::array::from_fn(|k| {
+            let r = self.inverse[k];
+            [r.x, r.y, r.z, self.origin.get(k)]
+        })
+    }
+
     fn linear(&self, v: V3<T>) -> V3<T> {
         V3::new(
             self.inverse[0].dot(v),

@@ -18,6 +18,8 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::BvhBuildParams;
 
+use crate::gpu::records::BoxNode;
+
 /// A node: its box, then either children `first, first + 1` (`count == 0`) or the items
 /// `first..first + count` of the leaf-ordered item list.
 #[derive(Clone, Debug)]
@@ -209,6 +211,32 @@ impl<T: Real> BoxBvh<T> {
                 (None, None) => {}
             }
         }
+    }
+
+    /// Appends the tree to the GPU's node and item arrays (indices made absolute); returns
+    /// the root node (`u32::MAX` for an empty tree) and the range of the unbounded items.
+    pub(super) fn export(
+        &self,
+        nodes: &mut Vec<BoxNode>,
+        items: &mut Vec<u32>,
+    ) -> (u32, std::ops::Range<u32>) {
+        let unbounded = items.len() as u32..(items.len() + self.unbounded.len()) as u32;
+        items.extend_from_slice(&self.unbounded);
+        if self.nodes.is_empty() {
+            return (u32::MAX, unbounded);
+        }
+        let (node_base, item_base) = (nodes.len() as u32, items.len() as u32);
+        items.extend_from_slice(&self.items);
+        nodes.extend(self.nodes.iter().map(|n| {
+            let [lo, hi] = n.bounds.map(|c| c.to_f64().map(|v| v as f32));
+            BoxNode {
+                lo,
+                first: n.first + if n.count > 0 { item_base } else { node_base },
+                hi,
+                count: n.count,
+            }
+        }));
+        (node_base, unbounded)
     }
 
     /// Appends to `out` every item whose node boxes contain `x` (a superset of those whose

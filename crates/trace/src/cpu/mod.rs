@@ -29,6 +29,7 @@ use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, Ray, Real, V3};
 use hytrace_foundry::{Foundry, UNSET};
 
 mod bvh;
+pub mod gpu_export;
 pub mod media;
 #[cfg(feature = "embree")]
 mod parts;

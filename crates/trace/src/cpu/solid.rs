@@ -47,12 +47,12 @@ pub(super) struct SolidAccel<T> {
     /// Surface prims.
     pub prims: Vec<PreparedPrim<T>>,
     /// Foundry index of each surface prim.
-    prim_ids: Vec<u32>,
+    pub prim_ids: Vec<u32>,
     /// Volume-brick clusters.
     pub clusters: Vec<Cluster<T>>,
     /// Over surface prims (ids `0..prims.len()`) then clusters (the ids after), when there
     /// are more than [`BVH_MIN_MEMBERS`] of them.
-    bvh: Option<BoxBvh<T>>,
+    pub bvh: Option<BoxBvh<T>>,
 }
 
 /// The prim transform of `prim` (identity for none).

@@ -2,8 +2,12 @@
 
 pub mod compose;
 mod context;
+pub mod oneshot;
 pub mod probe;
+pub mod records;
 mod scene;
+mod tracer;
 
 pub use context::{GpuContext, GpuError};
 pub use scene::GpuScene;
+pub use tracer::{primitive_feature, scene_features, GpuTimes, GpuTracer, GPU_INF};

@@ -1,35 +1,61 @@
-//! The generated `shaders/foundry.wgsl` is current, valid, and lays out every shared struct
-//! exactly as Rust does (naga computes WGSL's layout independently of our generator).
+//! The generated WGSL files (`shaders/foundry.wgsl` from the Foundry's records,
+//! `shaders/trace_records.wgsl` from the tracers') are current, valid, and lay out every
+//! shared struct exactly as Rust does (naga computes WGSL's layout independently of our
+//! generators).
 
 use std::path::PathBuf;
 
-use hytrace_foundry::wgsl::{generate, gpu_records, GENERATED_PATH};
+use hytrace_foundry::layout::Field;
 
-fn generated_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .join(GENERATED_PATH)
-}
+type Entry = (&'static str, usize, &'static [Field]);
 
-#[test]
-fn generated_wgsl_is_current() {
-    let path = generated_path();
-    let fresh = generate();
+/// Checks that `relative` (from the workspace root) holds `fresh`, or rewrites it when
+/// `HYTRACE_BLESS` is set.
+fn check_current(relative: &str, fresh: &str) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(relative);
     if std::env::var_os("HYTRACE_BLESS").is_some() {
-        std::fs::write(&path, &fresh).unwrap();
+        std::fs::write(&path, fresh).unwrap();
         return;
     }
     let on_disk = std::fs::read_to_string(&path).unwrap_or_default();
     assert!(
         on_disk == fresh,
-        "{} is stale: run `HYTRACE_BLESS=1 cargo test -p hytrace-foundry --test wgsl_layout`",
+        "{} is stale: run `HYTRACE_BLESS=1 cargo test -p hytrace-tests --test wgsl_layout`",
         path.display()
     );
 }
 
 #[test]
+fn generated_wgsl_is_current() {
+    check_current(
+        hytrace_foundry::wgsl::GENERATED_PATH,
+        &hytrace_foundry::wgsl::generate(),
+    );
+    check_current(
+        hytrace_trace::gpu::records::GENERATED_PATH,
+        &hytrace_trace::gpu::records::generate(),
+    );
+}
+
+#[test]
 fn naga_layout_matches_rust_layout() {
-    let module = naga::front::wgsl::parse_str(&generate()).expect("generated WGSL parses");
+    check_layouts(
+        &hytrace_foundry::wgsl::generate(),
+        &hytrace_foundry::wgsl::gpu_records(),
+    );
+    // The tracers' records follow the Foundry's (the file is read after foundry.wgsl).
+    let both = hytrace_foundry::wgsl::generate() + &hytrace_trace::gpu::records::generate();
+    let mut all = hytrace_foundry::wgsl::gpu_records();
+    all.extend(hytrace_trace::gpu::records::gpu_records());
+    check_layouts(&both, &all);
+}
+
+/// `wgsl` parses and validates, declares exactly the structs of `records`, and lays each
+/// out as Rust does.
+fn check_layouts(wgsl: &str, records: &[Entry]) {
+    let module = naga::front::wgsl::parse_str(wgsl).expect("generated WGSL parses");
     naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
         naga::valid::Capabilities::all(),
@@ -39,8 +65,7 @@ fn naga_layout_matches_rust_layout() {
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).unwrap();
 
-    let records = gpu_records();
-    for (name, size, fields) in &records {
+    for (name, size, fields) in records {
         let (handle, ty) = module
             .types
             .iter()
@@ -84,7 +109,7 @@ fn naga_layout_matches_rust_layout() {
 
 #[test]
 fn typecodes_in_wgsl_match_rust() {
-    let module = naga::front::wgsl::parse_str(&generate()).unwrap();
+    let module = naga::front::wgsl::parse_str(&hytrace_foundry::wgsl::generate()).unwrap();
     let mut seen = 0;
     for (_, c) in module.constants.iter() {
         let name = c.name.as_deref().unwrap_or("");

@@ -1,0 +1,174 @@
+//! The records the tracing kernels share with the CPU beyond the Foundry's own: prepared
+//! CSG trees and meshes ([`hytrace_csg::gpu_layout`]) and the tracer's placements, search
+//! lists, BVH nodes, rays and hits. `shaders/trace_records.wgsl` is generated from them; a
+//! test fails when it is stale or when naga lays a struct out differently from Rust.
+
+use hytrace_csg::gpu_layout::{self, entry, RecordEntry};
+use hytrace_foundry::record;
+use hytrace_foundry::wgsl::push_struct;
+
+/// Path of the generated file relative to the workspace root.
+pub const GENERATED_PATH: &str = "shaders/trace_records.wgsl";
+
+record! {
+    /// A node of the tracers' box BVHs: its box (f32, rounded outward), then either children
+    /// `first, first + 1` (`count == 0`) or the items `first..first + count` of the item list.
+    /// Indices are absolute in the uploaded arrays.
+    pub struct BoxNode {
+        /// Lower corner.
+        pub lo: [f32; 3],
+        /// First child node or first item.
+        pub first: u32,
+        /// Upper corner.
+        pub hi: [f32; 3],
+        /// Items of a leaf; 0 for an inner node.
+        pub count: u32,
+    }
+}
+
+record! {
+    /// Members searched together: a group of instances (ids in the member list) or one
+    /// solid's surface prims (`first..first + count` of the surface prims). Searched in
+    /// order, or through a BVH (`has_bvh`): root node `root` (`u32::MAX` when the tree is
+    /// empty) and the items with unbounded boxes, `unbounded_first..+unbounded_count` of the
+    /// BVH item list, visited first.
+    pub struct SearchList {
+        /// First member.
+        pub first: u32,
+        /// Number of members.
+        pub count: u32,
+        /// 1 when the members sit in a BVH.
+        pub has_bvh: u32,
+        /// Root node of the BVH.
+        pub root: u32,
+        /// First unbounded item.
+        pub unbounded_first: u32,
+        /// Number of unbounded items.
+        pub unbounded_count: u32,
+        /// Padding.
+        pub pad: [u32; 2],
+    }
+}
+
+record! {
+    /// One placement of a solid: its frame (see [`hytrace_csg::gpu_layout::FrameRecord`]) and
+    /// widened world bounds.
+    pub struct Placement {
+        /// The frame's rows, origin in `w`.
+        pub rows: [[f32; 4]; 3],
+        /// Lower corner of the world bounds.
+        pub lo: [f32; 3],
+        /// Index of the solid.
+        pub solid: u32,
+        /// Upper corner of the world bounds.
+        pub hi: [f32; 3],
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+record! {
+    /// A surface prim of a solid: its bounds in the solid's frame, and which tree or mesh.
+    pub struct SurfacePrim {
+        /// Lower corner of the bounds.
+        pub lo: [f32; 3],
+        /// `PRIM_CSG` or `PRIM_MESH` (Foundry prim kinds).
+        pub kind: u32,
+        /// Upper corner of the bounds.
+        pub hi: [f32; 3],
+        /// Index of the CSG tree or mesh.
+        pub index: u32,
+        /// Index of the Foundry prim.
+        pub foundry_prim: u32,
+        /// Padding.
+        pub pad: [u32; 3],
+    }
+}
+
+record! {
+    /// A scan's parameters.
+    pub struct ScanParams {
+        /// Number of rays.
+        pub ray_count: u32,
+        /// 1 for a hierarchical scene (the navigator's answer), 0 for a flat one.
+        pub hierarchical: u32,
+        /// Padding.
+        pub pad: [u32; 2],
+    }
+}
+
+record! {
+    /// A ray of a scan: `tmin < t < tmax` along a unit direction.
+    pub struct RayRecord {
+        /// Origin.
+        pub origin: [f32; 3],
+        /// Start of the interval.
+        pub tmin: f32,
+        /// Direction.
+        pub direction: [f32; 3],
+        /// End of the interval (`INF` in the kernels stands for infinity).
+        pub tmax: f32,
+    }
+}
+
+record! {
+    /// A scan's answer for one ray.
+    pub struct HitRecord {
+        /// Unit outward normal (world frame); 0 on a miss.
+        pub normal: [f32; 3],
+        /// Distance; `INF` (1e38) on a miss.
+        pub t: f32,
+        /// Instance crossed (`u32::MAX` on a miss).
+        pub instance: u32,
+        /// Foundry prim crossed (`u32::MAX` on a miss).
+        pub prim: u32,
+        /// 0, or the `STATUS_*` bits of a ray whose search was cut short.
+        pub status: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+/// [`HitRecord::status`] bit: the navigator's hierarchy was deeper than its loop bound.
+pub const STATUS_DEPTH_LIMIT: u32 = 1;
+
+/// The tracers' own records, in declaration order.
+fn trace_records() -> Vec<RecordEntry> {
+    vec![
+        entry::<BoxNode>(),
+        entry::<SearchList>(),
+        entry::<Placement>(),
+        entry::<SurfacePrim>(),
+        entry::<ScanParams>(),
+        entry::<RayRecord>(),
+        entry::<HitRecord>(),
+    ]
+}
+
+/// The WGSL text of the generated module.
+pub fn generate() -> String {
+    let mut out = String::from(
+        "// GENERATED by hytrace-trace (crates/trace/src/gpu/records.rs) from the Rust record\n\
+         // definitions. Do not edit: run `HYTRACE_BLESS=1 cargo test -p hytrace-tests --test\n\
+         // wgsl_layout` to regenerate. A test fails when this file is stale.\n\n",
+    );
+    gpu_layout::push_wgsl(&mut out);
+    push_struct::<BoxNode>(&mut out);
+    push_struct::<SearchList>(&mut out);
+    push_struct::<Placement>(&mut out);
+    push_struct::<SurfacePrim>(&mut out);
+    push_struct::<ScanParams>(&mut out);
+    push_struct::<RayRecord>(&mut out);
+    push_struct::<HitRecord>(&mut out);
+    out.push_str(&format!(
+        "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n"
+    ));
+    out
+}
+
+/// Every record declared in the generated module.
+pub fn gpu_records() -> Vec<RecordEntry> {
+    let mut all = gpu_layout::records();
+    all.extend(trace_records());
+    all
+}

@@ -1,0 +1,340 @@
+//! The GPU scan: the prepared f32 scene uploaded as it is ([`SceneArrays`]) and the scan
+//! kernel (`shaders/kernels/scan.wgsl`), composed with only the code the scene uses. Its
+//! CPU twin is [`CpuScene::<f32>::trace`]; `tests/gpu_scan.rs` compares them ray by ray.
+
+use std::time::Instant;
+
+use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
+use wgpu::util::DeviceExt;
+
+use super::compose::compose_with;
+use super::context::{storage_layout_entry, GpuContext, GpuError};
+use super::probe::dispatch_size;
+use super::records::{HitRecord, RayRecord, ScanParams};
+use crate::cpu::gpu_export::SceneArrays;
+use crate::cpu::CpuScene;
+
+const KERNEL: &str = "kernels/scan";
+
+/// The distance the kernels use for infinity (WGSL may assume no infinities).
+pub const GPU_INF: f32 = 1.0e38;
+
+/// Storage buffers of the scene group (group 1) and the ray group (group 2).
+const SCENE_BINDINGS: u32 = 14;
+const RAY_BINDINGS: u32 = 4;
+
+/// The `#if` feature of a primitive typecode's code in `shaders/csg/primitive.wgsl`.
+pub fn primitive_feature(code: TypeCode) -> Option<&'static str> {
+    Some(match code {
+        TypeCode::Sphere => "sphere",
+        TypeCode::ZSphere => "zsphere",
+        TypeCode::Cylinder => "cylinder",
+        TypeCode::Disc => "tube",
+        TypeCode::Cone => "cone",
+        TypeCode::Hyperboloid => "hyperboloid",
+        TypeCode::Torus => "torus",
+        TypeCode::Box3 => "box",
+        TypeCode::ConvexPolyhedron => "polyhedron",
+        TypeCode::Paraboloid => "paraboloid",
+        TypeCode::HalfSpace => "halfspace",
+        TypeCode::Slab => "slab",
+        TypeCode::PhiCut => "phicut",
+        TypeCode::ThetaCut => "thetacut",
+        _ => return None,
+    })
+}
+
+/// The composition features a scene needs: `csg` and `mesh` by the prims it has, and one
+/// per primitive type its trees use.
+pub fn scene_features(arrays: &SceneArrays) -> Vec<&'static str> {
+    let mut features = Vec::new();
+    let has = |kind: PrimKind| arrays.surface_prims.iter().any(|p| p.kind == kind as u32);
+    if has(PrimKind::Csg) {
+        features.push("csg");
+    }
+    if has(PrimKind::Mesh) {
+        features.push("mesh");
+    }
+    for node in &arrays.csg.nodes {
+        let code = TypeCode::from_u32(node.code & !COMPLEMENT_BIT);
+        if let Some(f) = code.and_then(primitive_feature) {
+            if !features.contains(&f) {
+                features.push(f);
+            }
+        }
+    }
+    features
+}
+
+/// The bytes of an array for a storage binding: an empty array becomes one zeroed record
+/// (bindings cannot be empty, nor smaller than one element), never read.
+fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
+    let mut bytes = bytemuck::cast_slice(items).to_vec();
+    if bytes.len() < size_of::<T>().max(16) {
+        bytes.resize(size_of::<T>().max(16), 0);
+    }
+    bytes
+}
+
+/// Seconds spent in each phase of a GPU scan (wall clock on the host).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuTimes {
+    /// Uploading rays.
+    pub upload_s: f64,
+    /// Running the kernel (submission to completion).
+    pub kernel_s: f64,
+    /// Reading hits back.
+    pub readback_s: f64,
+}
+
+/// A scene on the GPU with its scan pipeline.
+pub struct GpuTracer {
+    pipeline: wgpu::ComputePipeline,
+    /// The navigator's locate, for hierarchical scenes.
+    locate: Option<wgpu::ComputePipeline>,
+    ray_layout: wgpu::BindGroupLayout,
+    scene_group: wgpu::BindGroup,
+    hierarchical: bool,
+    features: Vec<&'static str>,
+    source: String,
+}
+
+impl GpuTracer {
+    /// Uploads `scene` and compiles its scan kernel. Arrays beyond the device's binding
+    /// limit, or a device with too few storage bindings, are a [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, scene: &CpuScene<f32>) -> Result<GpuTracer, GpuError> {
+        let arrays = scene
+            .gpu_arrays()
+            .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
+        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
+        if per_stage < SCENE_BINDINGS + RAY_BINDINGS {
+            return Err(GpuError::SceneTooBig(format!(
+                "the scan kernel binds {} storage buffers, the device allows {per_stage}",
+                SCENE_BINDINGS + RAY_BINDINGS
+            )));
+        }
+        let features = scene_features(&arrays);
+        let source = compose_with(KERNEL, &|f| features.contains(&f)).map_err(|problem| {
+            GpuError::Shader {
+                name: KERNEL.to_string(),
+                problem,
+            }
+        })?;
+        let m = &arrays.meshes;
+        let c = &arrays.csg;
+        let scene_arrays: [(&str, Vec<u8>); SCENE_BINDINGS as usize] = [
+            ("csg_planes", binding_bytes(&c.planes)),
+            ("csg_nodes", binding_bytes(&c.nodes)),
+            ("csg_frames", binding_bytes(&c.frames)),
+            ("csg_trees", binding_bytes(&c.trees)),
+            ("mesh_nodes", binding_bytes(&m.nodes)),
+            ("mesh_triangles", binding_bytes(&m.triangles)),
+            ("meshes", binding_bytes(&m.meshes)),
+            ("box_nodes", binding_bytes(&arrays.box_nodes)),
+            ("box_items", binding_bytes(&arrays.box_items)),
+            ("placements", binding_bytes(&arrays.placements)),
+            ("groups", binding_bytes(&arrays.groups)),
+            ("group_members", binding_bytes(&arrays.group_members)),
+            ("solids", binding_bytes(&arrays.solids)),
+            ("surface_prims", binding_bytes(&arrays.surface_prims)),
+        ];
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        if let Some((name, bytes)) = scene_arrays.iter().find(|(_, b)| b.len() as u64 > limit) {
+            return Err(GpuError::SceneTooBig(format!(
+                "array `{name}` has {} bytes, the device binds at most {limit}",
+                bytes.len()
+            )));
+        }
+        ctx.checked("building the scan kernel", || {
+            let module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(KERNEL),
+                    source: wgpu::ShaderSource::Wgsl(source.clone().into()),
+                });
+            let layout_of = |count: u32, writable: &[u32], label| {
+                let entries: Vec<_> = (0..count)
+                    .map(|b| storage_layout_entry(b, !writable.contains(&b)))
+                    .collect();
+                ctx.device
+                    .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                        label: Some(label),
+                        entries: &entries,
+                    })
+            };
+            let scene_layout = layout_of(SCENE_BINDINGS, &[], "scan scene");
+            let ray_layout = layout_of(RAY_BINDINGS, &[2, 3], "scan rays");
+            let buffers: Vec<wgpu::Buffer> = scene_arrays
+                .iter()
+                .map(|(name, bytes)| {
+                    ctx.device
+                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some(name),
+                            contents: bytes,
+                            usage: wgpu::BufferUsages::STORAGE,
+                        })
+                })
+                .collect();
+            let entries: Vec<_> = buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            let scene_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("scan scene"),
+                layout: &scene_layout,
+                entries: &entries,
+            });
+            let pipeline_layout =
+                ctx.device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("scan"),
+                        // Group 0 (the Foundry's own arrays) is not used by the scan.
+                        bind_group_layouts: &[None, Some(&scene_layout), Some(&ray_layout)],
+                        immediate_size: 0,
+                    });
+            let entry = |name: &str| {
+                ctx.device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(name),
+                        layout: Some(&pipeline_layout),
+                        module: &module,
+                        entry_point: Some(name),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+            };
+            GpuTracer {
+                pipeline: entry("scan"),
+                locate: arrays.hierarchical.then(|| entry("locate_rays")),
+                ray_layout,
+                scene_group,
+                hierarchical: arrays.hierarchical,
+                features: features.clone(),
+                source: source.clone(),
+            }
+        })
+    }
+
+    /// The composition features the scene's kernel was built with.
+    pub fn features(&self) -> &[&'static str] {
+        &self.features
+    }
+
+    /// The composed WGSL of the scene's scan kernel.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// The first crossing of every ray, in batches that fit the device's binding limit.
+    pub fn trace(
+        &self,
+        ctx: &GpuContext,
+        rays: &[RayRecord],
+    ) -> Result<(Vec<HitRecord>, GpuTimes), GpuError> {
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        let record = size_of::<HitRecord>().max(size_of::<RayRecord>()) as u64;
+        // Batches also bounded to keep one dispatch short (drivers may kill long ones).
+        let batch = (limit / record).clamp(1, 1 << 20) as usize;
+        let mut hits = Vec::with_capacity(rays.len());
+        let mut times = GpuTimes::default();
+        for chunk in rays.chunks(batch) {
+            hits.extend(self.trace_batch(ctx, chunk, &mut times)?);
+        }
+        Ok((hits, times))
+    }
+
+    fn trace_batch(
+        &self,
+        ctx: &GpuContext,
+        rays: &[RayRecord],
+        times: &mut GpuTimes,
+    ) -> Result<Vec<HitRecord>, GpuError> {
+        let n = rays.len();
+        let out_size = (n.max(1) * size_of::<HitRecord>()) as u64;
+        let t0 = Instant::now();
+        let (hits, _keep) = ctx.checked("scan dispatch", || {
+            let params = ScanParams {
+                ray_count: n as u32,
+                hierarchical: self.hierarchical as u32,
+                pad: [0; 2],
+            };
+            let input = |label, bytes: &[u8]| {
+                ctx.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents: bytes,
+                        usage: wgpu::BufferUsages::STORAGE,
+                    })
+            };
+            let params = input("scan params", &binding_bytes(&[params]));
+            let ray_buffer = input("rays", &binding_bytes(rays));
+            let hits = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("hits"),
+                size: out_size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let located = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("located"),
+                size: (n.max(4) * 4) as u64,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("scan rays"),
+                layout: &self.ray_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: ray_buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: hits.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: located.as_entire_binding(),
+                    },
+                ],
+            });
+            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_bind_group(1, &self.scene_group, &[]);
+                pass.set_bind_group(2, &group, &[]);
+                // Dispatches in one pass run in order: every origin is located first.
+                for pipeline in self.locate.iter().chain([&self.pipeline]) {
+                    pass.set_pipeline(pipeline);
+                    pass.dispatch_workgroups(x, y, 1);
+                }
+            }
+            ctx.queue.submit([encoder.finish()]);
+            (hits, (params, ray_buffer, located, group))
+        })?;
+        let t1 = Instant::now();
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Operation {
+                what: "scan kernel".to_string(),
+                problem: e.to_string(),
+            })?;
+        let t2 = Instant::now();
+        let bytes = ctx.read_buffer(&hits, out_size)?;
+        times.upload_s += (t1 - t0).as_secs_f64();
+        times.kernel_s += (t2 - t1).as_secs_f64();
+        times.readback_s += t2.elapsed().as_secs_f64();
+        let mut out: Vec<HitRecord> = bytemuck::pod_collect_to_vec(&bytes);
+        out.truncate(n);
+        Ok(out)
+    }
+}

@@ -1,0 +1,287 @@
+//! Shared by the backend comparison tests (Embree, GPU): ray sets around a scene, a mesh
+//! scene, and the ray-by-ray comparison with the CPU's f32 tracer.
+
+use hytrace_csg::{Ray, V3};
+use hytrace_foundry::Foundry;
+use hytrace_trace::cpu::{CpuScene, Hit};
+use hytrace_trace::scan::RayRow;
+use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
+
+/// A deterministic generator (SplitMix64).
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Sweeps (`axis`, `rect`, `circle`) around the scene plus `random` rays from points in
+/// its (enlarged) bounds, a quarter of them with one or two direction components zero
+/// and a fifth on a finite segment `(tmin, tmax)`.
+pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
+    let b = scene_bounds(f).expect("scene has solids");
+    let mut rays: Vec<RayRow> = [Sweep::Axis, Sweep::Rect, Sweep::Circle]
+        .into_iter()
+        .flat_map(|s| generate(s, &b, count))
+        .collect();
+    let mut rng = Rng(0x5eed_0000 + f.inst.len() as u64);
+    for i in 0..random {
+        let origin: [f64; 3] = std::array::from_fn(|k| {
+            let (lo, hi) = (b[k], b[k + 3]);
+            lo + (hi - lo) * (1.2 * rng.unit() - 0.1)
+        });
+        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        match i % 8 {
+            0 => d[(i / 8) % 3] = 0.0,
+            1 => {
+                d[(i / 8) % 3] = 0.0;
+                d[(i / 8 + 1) % 3] = 0.0;
+            }
+            _ => {}
+        }
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if len < 1e-3 {
+            continue;
+        }
+        // A fifth of them on a finite segment.
+        let (tmin, tmax) = if i % 5 == 2 {
+            let size = (0..3).fold(0.0f64, |a, k| a.max(b[k + 3] - b[k]));
+            let tmin = 0.3 * size * rng.unit();
+            (tmin, tmin + size * rng.unit())
+        } else {
+            (0.0, f64::INFINITY)
+        };
+        rays.push(RayRow {
+            origin,
+            direction: d.map(|v| v / len),
+            tmin,
+            tmax,
+        });
+    }
+    rays
+}
+
+/// How the two backends compare on a set of rays.
+#[derive(Debug, Default)]
+pub struct Agreement {
+    rays: usize,
+    hits: usize,
+    agree: usize,
+    /// Answers equal to the last bit (t, normal, instance, prim) or both misses.
+    identical: usize,
+    /// Same `t` (within tolerance) on different instances: ties broken differently.
+    ties: usize,
+    /// Agreeing hits on the same instance whose normals differ.
+    normals: usize,
+}
+
+impl Agreement {
+    pub fn percent(&self) -> f64 {
+        100.0 * self.agree as f64 / self.rays.max(1) as f64
+    }
+}
+
+/// Compares another backend's answers `got` (one per ray) with the CPU's f32 tracer: the
+/// same hit or miss, and `t` within `max(1e-4, 4e-7 * scale)` where `scale` is the size of
+/// the coordinates involved (scene extent, origin and distance). Prints the disagreements.
+pub fn compare(name: &str, f: &Foundry, rays: &[RayRow], got: &[Option<Hit<f32>>]) -> Agreement {
+    assert_eq!(rays.len(), got.len(), "{name}: one answer per ray");
+    let cpu = CpuScene::<f32>::new(f).unwrap();
+    let b = scene_bounds(f).unwrap();
+    let extent = b.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut a = Agreement {
+        rays: rays.len(),
+        ..Default::default()
+    };
+    let mut shown = 0;
+    for (i, (r, &got)) in rays.iter().zip(got).enumerate() {
+        let (ray, tmin, tmax) = f32_ray(r);
+        let want = cpu.trace(&ray, tmin, tmax);
+        a.hits += usize::from(want.is_some());
+        let ok = match (want, got) {
+            (None, None) => true,
+            (Some(w), Some(g)) => {
+                let o = r.origin.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let scale = extent.max(o + f64::from(w.t.abs()));
+                let close = f64::from((w.t - g.t).abs()) <= (4e-7 * scale).max(1e-4);
+                if close && w.instance != g.instance {
+                    a.ties += 1;
+                } else if close && w.normal.dot(g.normal) < 0.999 {
+                    a.normals += 1;
+                }
+                a.identical += usize::from(w == g);
+                close
+            }
+            _ => false,
+        };
+        a.identical += usize::from(want.is_none() && got.is_none());
+        if ok {
+            a.agree += 1;
+        } else if shown < 10 {
+            shown += 1;
+            eprintln!("{name}: ray {i} {r:?}: cpu {want:?}, other {got:?}");
+        }
+    }
+    eprintln!(
+        "{name}: {} rays, {} hits, {:.3}% agree, {:.3}% bit-identical ({} ties on different instances, {} normals differ)",
+        a.rays,
+        a.hits,
+        a.percent(),
+        100.0 * a.identical as f64 / a.rays.max(1) as f64,
+        a.ties,
+        a.normals
+    );
+    a
+}
+
+/// A ray as the f32 tracers take it: rounded, infinite `tmax` kept infinite.
+pub fn f32_ray(r: &RayRow) -> (Ray<f32>, f32, f32) {
+    let ray = Ray {
+        origin: V3::from_f64(r.origin),
+        direction: V3::from_f64(r.direction),
+    };
+    let tmax = if r.tmax.is_finite() {
+        r.tmax as f32
+    } else {
+        f32::INFINITY
+    };
+    (ray, r.tmin as f32, tmax)
+}
+
+/// Requires at least 99.9% agreement, normals agreeing on 99.9% of the hits, and some hits.
+pub fn check(name: &str, f: &Foundry, rays: &[RayRow], got: &[Option<Hit<f32>>]) {
+    let a = compare(name, f, rays, got);
+    assert!(a.hits > a.rays / 10, "{name}: too few hits: {a:?}");
+    assert!(a.percent() >= 99.9, "{name}: {a:?}");
+    assert!(a.normals * 1000 <= a.hits, "{name}: {a:?}");
+}
+
+/// OBJ text: an icosphere of radius 50 (three subdivisions), a 40 x 40 heightfield beside
+/// it, and a cube 10^5 mm out (far from the origin). Rays along a shared edge may take
+/// either triangle's normal: the sphere is turned and the grid jittered off the sweeps.
+pub fn mesh_obj() -> String {
+    let mut out = String::new();
+    let mut base = 1;
+    let mut object = |name: &str, verts: &[[f64; 3]], faces: &[[usize; 3]], out: &mut String| {
+        out.push_str(&format!("o {name}\n"));
+        for v in verts {
+            out.push_str(&format!("v {} {} {}\n", v[0], v[1], v[2]));
+        }
+        for t in faces {
+            out.push_str(&format!(
+                "f {} {} {}\n",
+                t[0] + base,
+                t[1] + base,
+                t[2] + base
+            ));
+        }
+        base += verts.len();
+    };
+    let (verts, faces) = hytrace_csg::tessellate::icosphere(3);
+    // Turned off the axes, so the axis-aligned sweeps do not run along its edges
+    // (where either triangle's normal is right).
+    let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+    let sphere: Vec<[f64; 3]> = verts
+        .iter()
+        .map(|v| {
+            [
+                c * v[0] - s * v[1],
+                s * c * v[0] + c * c * v[1] - s * v[2],
+                s * s * v[0] + s * c * v[1] + c * v[2],
+            ]
+            .map(|x| 50.0 * x)
+        })
+        .collect();
+    object("sphere", &sphere, &faces, &mut out);
+    let n = 40;
+    let mut grid = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            // Jittered, so no sweep runs along a row of edges.
+            let (i, j) = (i as f64, j as f64);
+            let (x, y) = (
+                5.0 * i + (1.7 * i).sin() + 80.0,
+                5.0 * j + (2.3 * j).sin() - 100.0,
+            );
+            grid.push([x, y, 10.0 * (x * 0.05).sin() * (y * 0.07).cos()]);
+        }
+    }
+    let mut quads = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let v = j * (n + 1) + i;
+            quads.push([v, v + 1, v + n + 2]);
+            quads.push([v, v + n + 2, v + n + 1]);
+        }
+    }
+    object("heightfield", &grid, &quads, &mut out);
+    let c = |x: f64, y: f64, z: f64| [1e5 + 30.0 * x, 30.0 * y, 30.0 * z];
+    let cube = [
+        c(0., 0., 0.),
+        c(1., 0., 0.),
+        c(1., 1., 0.),
+        c(0., 1., 0.),
+        c(0., 0., 1.),
+        c(1., 0., 1.),
+        c(1., 1., 1.),
+        c(0., 1., 1.),
+    ];
+    let cube_faces = [
+        [0, 3, 2],
+        [0, 2, 1],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ];
+    object("far_cube", &cube, &cube_faces, &mut out);
+    out
+}
+
+/// Rays for the scene of [`mesh_obj`]: sweeps around the near objects and the far cube,
+/// and random rays from inside the near objects' bounds.
+pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
+    let near = {
+        let mut g = f.clone();
+        g.inst.truncate(2);
+        g.inst_tran.truncate(2);
+        scene_bounds(&g).unwrap()
+    };
+    let mut rays: Vec<RayRow> = [Sweep::Axis, Sweep::Rect, Sweep::Circle]
+        .into_iter()
+        .flat_map(|s| generate(s, &near, 100))
+        .collect();
+    let far = [1e5, 0.0, 0.0, 1e5 + 30.0, 30.0, 30.0];
+    rays.extend(generate(Sweep::Rect, &far, 60));
+    rays.extend(generate(Sweep::Circle, &far, 2000));
+    let mut rng = Rng(7);
+    for _ in 0..20_000 {
+        let origin: [f64; 3] =
+            std::array::from_fn(|k| near[k] + (near[k + 3] - near[k]) * rng.unit());
+        let d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        rays.push(RayRow {
+            origin,
+            direction: d.map(|v| v / len),
+            tmin: 0.0,
+            tmax: f64::INFINITY,
+        });
+    }
+    rays
+}

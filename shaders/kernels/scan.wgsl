@@ -1,0 +1,55 @@
+// The scan kernels (hytrace scan --backend gpu), twins of CpuScene::<f32>::trace, compared
+// ray by ray in crates/trace/tests/gpu_scan.rs. Hierarchical scenes run `locate_rays`
+// (the navigator's locate of every origin) and then `scan`; flat scenes `scan` alone.
+// #import trace_records
+// #import trace/scene
+
+@group(2) @binding(0) var<storage, read> params: ScanParams;
+@group(2) @binding(1) var<storage, read> rays: array<RayRecord>;
+@group(2) @binding(2) var<storage, read_write> hits: array<HitRecord>;
+// The instance each ray's origin is located in (UNSET: none), from `locate_rays`.
+@group(2) @binding(3) var<storage, read_write> located: array<u32>;
+
+fn ray_index(gid: vec3<u32>, groups_: vec3<u32>) -> u32 {
+    return gid.y * groups_.x * 64u + gid.x;
+}
+
+fn ray_origin(r: RayRecord) -> vec3<f32> {
+    return vec3<f32>(r.origin[0], r.origin[1], r.origin[2]);
+}
+
+@compute @workgroup_size(64)
+fn locate_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
+    let i = ray_index(gid, groups_);
+    if i >= params.ray_count {
+        return;
+    }
+    var status = 0u;
+    located[i] = locate_point(ray_origin(rays[i]), &status);
+    hits[i].status = status;
+}
+
+@compute @workgroup_size(64)
+fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
+    let i = ray_index(gid, groups_);
+    if i >= params.ray_count {
+        return;
+    }
+    let r = rays[i];
+    let d = vec3<f32>(r.direction[0], r.direction[1], r.direction[2]);
+    var start_in = UNSET;
+    var status = 0u;
+    if params.hierarchical != 0u {
+        start_in = located[i];
+        status = hits[i].status;
+    }
+    let h = cross_from(start_in, ray_origin(r), d, r.tmin, min(r.tmax, INF));
+    var out: HitRecord;
+    out.normal = array<f32, 3>(h.normal.x, h.normal.y, h.normal.z);
+    out.t = h.t;
+    out.instance = h.instance;
+    out.prim = h.prim;
+    out.status = status;
+    out.pad = 0u;
+    hits[i] = out;
+}

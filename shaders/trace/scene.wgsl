@@ -1,0 +1,288 @@
+// The next boundary along a ray among the placed solids: twin of CpuScene::<f32>::trace
+// (crates/trace/src/cpu/mod.rs) and SolidAccel::cross / contains (cpu/solid.rs). A flat
+// scene answers the first surface crossing of any instance; a hierarchical one the
+// navigator's step (locate the origin in the deepest instance containing it, then the
+// nearer of leaving it and entering one of its daughters). Ties go where the CPU's go.
+//
+// Drivers inline every function call (Mesa does), so the code size of a kernel is the
+// product of call-site counts along each call chain. Every costly function here is called
+// from exactly one place: loops over members (with or without a BVH) go through one walk,
+// and the located instance's exit and the daughters' entries share one instance test.
+// Locating (inside tests) and crossing are separate entry points (`locate_ray`,
+// `cross_from`), so neither kernel carries the other's code.
+// #import csg/spans
+// #import csg/frame
+// #import trace/bvh
+// #if csg
+// #import csg/tree
+// #endif
+// #if mesh
+// #import mesh/mesh
+// #endif
+
+struct Hit {
+    found: bool,
+    t: f32,
+    // Outward normal in the frame of the instance's solid until `trace` maps it out.
+    normal: vec3<f32>,
+    instance: u32,
+    prim: u32,
+}
+
+fn no_hit() -> Hit {
+    return Hit(false, INF, vec3<f32>(0.0), UNSET, UNSET);
+}
+
+fn hit_limit(best: Hit, otherwise: f32) -> f32 {
+    return select(otherwise, best.t, best.found);
+}
+
+fn prim_lo(p: SurfacePrim) -> vec3<f32> {
+    return vec3<f32>(p.lo[0], p.lo[1], p.lo[2]);
+}
+
+fn prim_hi(p: SurfacePrim) -> vec3<f32> {
+    return vec3<f32>(p.hi[0], p.hi[1], p.hi[2]);
+}
+
+fn prim_first_crossing(p: SurfacePrim, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
+    // #if csg
+    if p.kind == PRIM_CSG {
+        return csg_tree_first_crossing(p.index, o, d, tmin);
+    }
+    // #endif
+    // #if mesh
+    if p.kind == PRIM_MESH {
+        return mesh_first_crossing(p.index, o, d, tmin);
+    }
+    // #endif
+    return step_miss(false);
+}
+
+fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
+    // #if csg
+    if p.kind == PRIM_CSG {
+        return csg_tree_contains(p.index, x);
+    }
+    // #endif
+    // #if mesh
+    if p.kind == PRIM_MESH {
+        return mesh_contains(p.index, x);
+    }
+    // #endif
+    return false;
+}
+
+// The first crossing in (tmin, limit) of a ray in solid `solid`'s frame; of crossings at
+// the same t, the lowest prim's (twin of SolidAccel::cross). `instance` is left unset.
+fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) -> Hit {
+    let list = solids[solid];
+    var best_index = UNSET;
+    var best_t = INF;
+    var best_normal = vec3<f32>(0.0);
+    let r = slab_ray(o, d);
+    var w = bvh_walk(list);
+    loop {
+        let found = best_index != UNSET;
+        let within = select(limit, best_t, found);
+        let i = bvh_next(&w, r, tmin, within);
+        if i == UNSET {
+            break;
+        }
+        // Ids past the surface prims are volume-brick clusters: media, not surfaces.
+        if i >= list.count {
+            continue;
+        }
+        let p = surface_prims[list.first + i];
+        if !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
+            continue;
+        }
+        let step = prim_first_crossing(p, o, d, tmin);
+        let tie_won = step.t == within && found && i < best_index;
+        if step.t > tmin && (step.t < within || tie_won) {
+            best_index = i;
+            best_t = step.t;
+            best_normal = step.normal;
+        }
+    }
+    if best_index == UNSET {
+        return no_hit();
+    }
+    return Hit(true, best_t, best_normal, UNSET, surface_prims[list.first + best_index].foundry_prim);
+}
+
+fn placement_frame(p: Placement) -> FrameRecord {
+    return FrameRecord(p.rows);
+}
+
+fn placement_lo(p: Placement) -> vec3<f32> {
+    return vec3<f32>(p.lo[0], p.lo[1], p.lo[2]);
+}
+
+fn placement_hi(p: Placement) -> vec3<f32> {
+    return vec3<f32>(p.hi[0], p.hi[1], p.hi[2]);
+}
+
+// The nearer of `best` and the first crossing of instance `index`'s surface.
+fn cross_instance(index: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
+    let p = placements[index];
+    let limit = hit_limit(best, tmax);
+    if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
+        return best;
+    }
+    let f = placement_frame(p);
+    var c = solid_cross(p.solid, frame_point_to_local(f, o), frame_linear(f, d), tmin, limit);
+    if !c.found {
+        return best;
+    }
+    c.instance = index;
+    return c;
+}
+
+// What the one instance test of `cross_from` is doing.
+const PHASE_EXIT: u32 = 0u;
+const PHASE_EXIT_BAND: u32 = 1u;
+const PHASE_ENTER: u32 = 2u;
+
+// The navigator's step from the instance the origin is located in (UNSET: none, and for
+// flat scenes): the nearer of leaving it (CpuScene::exit) and entering one of the members
+// of its group of daughters (CpuScene::enter; the roots or the whole flat scene when
+// UNSET). Ties go to the exit, then to the lowest instance index.
+fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Hit {
+    var g = 0u;
+    var phase = PHASE_ENTER;
+    if located != UNSET {
+        g = located + 1u;
+        phase = PHASE_EXIT;
+    }
+    let list = groups[g];
+    var best = no_hit();
+    // The best is the exit (or a crossing found in order): members visited out of order
+    // must then beat it, not tie it.
+    var seeded = false;
+    let r = slab_ray(o, d);
+    var w = bvh_walk(list);
+    loop {
+        var index = located;
+        var start = tmin;
+        var seed = no_hit();
+        var out_of_order = false;
+        if phase == PHASE_EXIT_BAND {
+            // An origin within the surface tolerance of the located instance's surface,
+            // moving out: the exit it starts on, found again from a start moved back.
+            let p = placements[located];
+            let size = max(p.hi[0] - p.lo[0], max(p.hi[1] - p.lo[1], p.hi[2] - p.lo[2]));
+            let scale = size + max(abs(o.x), max(abs(o.y), abs(o.z)));
+            start = tmin - 4.0 * 2.0e-6 * scale;
+        } else if phase == PHASE_ENTER {
+            let k = bvh_next(&w, r, tmin, hit_limit(best, tmax));
+            if k == UNSET {
+                break;
+            }
+            index = select(k, group_members[list.first + k], w.linear);
+            out_of_order = !w.linear && best.found && !seeded && index < best.instance;
+            if out_of_order {
+                // Visited out of order: an earlier member wins a tie with a later one.
+                let p = placements[index];
+                if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, best.t).ok {
+                    continue;
+                }
+            } else {
+                seed = best;
+            }
+        }
+        let h = cross_instance(index, o, d, start, tmax, seed);
+        if phase == PHASE_EXIT {
+            if h.found {
+                best = h;
+                seeded = true;
+                phase = PHASE_ENTER;
+            } else {
+                phase = PHASE_EXIT_BAND;
+            }
+        } else if phase == PHASE_EXIT_BAND {
+            if h.found {
+                best = h;
+                best.t = max(h.t, tmin);
+                seeded = true;
+            }
+            phase = PHASE_ENTER;
+        } else if out_of_order {
+            if h.found && h.t <= best.t {
+                best = h;
+            }
+        } else {
+            best = h;
+            if best.found && best.instance == index {
+                seeded = false;
+            }
+        }
+    }
+    if best.found {
+        let n = frame_normal_to_parent(placement_frame(placements[best.instance]), best.normal);
+        let l = sqrt(dot(n, n));
+        if l > 0.0 {
+            best.normal = n * (1.0 / l);
+        }
+    }
+    return best;
+}
+
+// Whether a point of solid `solid`'s frame is inside one of its surface prims.
+fn solid_contains(solid: u32, x: vec3<f32>) -> bool {
+    let list = solids[solid];
+    for (var i = 0u; i < list.count; i += 1u) {
+        if prim_contains(surface_prims[list.first + i], x) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// The deepest instance containing x (the navigator's locate): in each group from the
+// roots down, the last-placed member containing x. UNSET when none; `status` gets
+// STATUS_DEPTH_LIMIT if the placement tree is deeper than the instances (impossible for a
+// validated Foundry: a guard, never silent).
+fn locate_point(x: vec3<f32>, status: ptr<function, u32>) -> u32 {
+    var current = UNSET;
+    var g = 0u;
+    var list = groups[0];
+    var w = point_walk(list);
+    var found = UNSET;
+    let levels = arrayLength(&placements) + 1u;
+    var level = 0u;
+    loop {
+        let k = point_next(&w, x);
+        if k == UNSET {
+            // The group is done: descend into the daughters of the member found.
+            if found == UNSET {
+                break;
+            }
+            current = found;
+            level += 1u;
+            if level > levels {
+                *status |= STATUS_DEPTH_LIMIT;
+                break;
+            }
+            g = found + 1u;
+            list = groups[g];
+            w = point_walk(list);
+            found = UNSET;
+            continue;
+        }
+        let c = select(k, group_members[list.first + k], w.linear);
+        // Only members above the best so far need the (costly) inside test: the highest
+        // containing one is the last placed.
+        if found != UNSET && c < found {
+            continue;
+        }
+        let p = placements[c];
+        if !holds(placement_lo(p), placement_hi(p), x) {
+            continue;
+        }
+        if solid_contains(p.solid, frame_point_to_local(placement_frame(p), x)) {
+            found = c;
+        }
+    }
+    return current;
+}
