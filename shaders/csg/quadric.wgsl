@@ -23,21 +23,6 @@ fn sign_bit(x: f32) -> bool {
     return (bitcast<u32>(x) >> 31u) == 1u;
 }
 
-// `a` restricted to `w` (the later entry, the earlier exit); not ok when empty. Twin of
-// Span::clip.
-fn span_clip(a: Span, w: Span) -> MaybeSpan {
-    var c = a;
-    if w.t0 > a.t0 {
-        c.t0 = w.t0;
-        c.n0 = w.n0;
-    }
-    if w.t1 < a.t1 {
-        c.t1 = w.t1;
-        c.n1 = w.n1;
-    }
-    return MaybeSpan(c.t0 <= c.t1, c);
-}
-
 // Every span restricted to the window, or nothing without one (Spans::clip_opt).
 fn spans_clip_opt(s: Spans, w: MaybeSpan) -> Spans {
     if !w.ok {

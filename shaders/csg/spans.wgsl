@@ -49,22 +49,28 @@ fn spans_push(s: ptr<function, Spans>, span: Span) {
     }
 }
 
-// Every span restricted to `w` (the later entry, the earlier exit), empty ones dropped.
+// `a` restricted to `w` (the later entry, the earlier exit); not ok when empty. Twin of
+// Span::clip.
+fn span_clip(a: Span, w: Span) -> MaybeSpan {
+    var c = a;
+    if w.t0 > a.t0 {
+        c.t0 = w.t0;
+        c.n0 = w.n0;
+    }
+    if w.t1 < a.t1 {
+        c.t1 = w.t1;
+        c.n1 = w.n1;
+    }
+    return MaybeSpan(c.t0 <= c.t1, c);
+}
+
+// Every span restricted to `w`, empty ones dropped.
 fn spans_clip(s: Spans, w: Span) -> Spans {
     var out = spans_empty();
     for (var i = 0u; i < s.len; i += 1u) {
-        let a = s.items[i];
-        var c = a;
-        if w.t0 > a.t0 {
-            c.t0 = w.t0;
-            c.n0 = w.n0;
-        }
-        if w.t1 < a.t1 {
-            c.t1 = w.t1;
-            c.n1 = w.n1;
-        }
-        if c.t0 <= c.t1 {
-            spans_push(&out, c);
+        let c = span_clip(s.items[i], w);
+        if c.ok {
+            spans_push(&out, c.span);
         }
     }
     return out;

@@ -103,7 +103,6 @@ fn node_hi(n: BoxNode) -> vec3<f32> {
 struct BvhWalk {
     // No BVH: the members are returned as positions 0..count in order.
     linear: bool,
-    count: u32,
     nodes: array<u32, BVH_STACK>,
     entries: array<f32, BVH_STACK>,
     len: u32,
@@ -117,7 +116,6 @@ struct BvhWalk {
 fn bvh_walk(list: SearchList) -> BvhWalk {
     var w: BvhWalk;
     w.linear = list.has_bvh == 0u;
-    w.count = list.count;
     w.len = 0u;
     if w.linear {
         w.next = 0u;

@@ -70,11 +70,12 @@ enum Command {
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
-        /// Tracer: our CPU tracer, or Embree (f32; needs a build with `--features embree`).
+        /// Tracer: our CPU tracer; Embree (f32; needs a build with `--features embree`); our
+        /// GPU tracer through wgpu (f32); or `auto`: the GPU when one opens, else the CPU.
         #[arg(long, value_enum, default_value_t = Backend::Cpu)]
         backend: Backend,
         /// Also write the transmittance of the scene's media along each ray up to its first
-        /// surface crossing (to tmax on a miss), (N,) float64 (CPU backend).
+        /// surface crossing (to tmax on a miss), (N,) float64 (CPU backend only).
         #[arg(long)]
         transmittance: Option<PathBuf>,
         #[command(flatten)]
@@ -296,7 +297,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             if transmittance.is_some() && backend != Backend::Cpu {
                 anyhow::bail!(
-                    "--transmittance needs --backend cpu: the Embree backend answers surfaces only"
+                    "--transmittance needs --backend cpu: the {} backend answers surfaces only",
+                    format!("{backend:?}").to_lowercase()
                 );
             }
             let t0 = std::time::Instant::now();

@@ -25,7 +25,7 @@ use hytrace_volume::TransmittanceParams;
 use crate::cpu::media::SceneMedia;
 use crate::cpu::{CpuScene, Hit};
 use crate::gpu::records::RayRecord;
-use crate::gpu::{GpuContext, GpuTracer, GPU_INF};
+use crate::gpu::{GpuContext, GpuTimes, GpuTracer, GPU_INF};
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -204,12 +204,25 @@ fn result_from(f: &Foundry, answers: &[([f64; 4], i32)]) -> ScanResult {
 }
 
 /// Timings of one scan.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct ScanTimes {
     /// Seconds preparing the scene for the tracer.
     pub build_s: f64,
     /// Seconds tracing.
     pub trace_s: f64,
+    /// Set when the scan ran on the GPU.
+    pub gpu: Option<GpuScanInfo>,
+}
+
+/// What a GPU scan ran on and where its time went.
+#[derive(Clone, Debug, Default)]
+pub struct GpuScanInfo {
+    /// The adapter (name, type, backend, driver).
+    pub adapter: String,
+    /// The composition features of the scene's kernel.
+    pub features: Vec<&'static str>,
+    /// Upload, kernel and readback seconds (host wall clock).
+    pub times: GpuTimes,
 }
 
 /// Traces every ray against the scene's CSG and mesh solids in the given precision, on the
@@ -237,7 +250,12 @@ pub fn scan_with(
         let t1 = Instant::now();
         let result = trace_all(f, rays, |r, tmin, tmax| Ok(scene.trace(r, tmin, tmax)))?;
         let trace_s = t1.elapsed().as_secs_f64();
-        Ok((result, ScanTimes { build_s, trace_s }))
+        let times = ScanTimes {
+            build_s,
+            trace_s,
+            ..Default::default()
+        };
+        Ok((result, times))
     }
     match (backend, precision) {
         (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays),
@@ -286,7 +304,7 @@ fn gpu_scan(
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
-    let (hits, _) = tracer.trace(&ctx, &records)?;
+    let (hits, gpu_times) = tracer.trace(&ctx, &records)?;
     if let Some(i) = hits.iter().position(|h| h.status != 0) {
         bail!(
             "GPU scan: ray {i} was cut short (status {:#x}): the placement tree is deeper \
@@ -305,7 +323,17 @@ fn gpu_scan(
         })
         .collect();
     let trace_s = t1.elapsed().as_secs_f64();
-    Ok((result_from(f, &answers), ScanTimes { build_s, trace_s }))
+    let gpu = GpuScanInfo {
+        adapter: ctx.describe(),
+        features: tracer.features().to_vec(),
+        times: gpu_times,
+    };
+    let times = ScanTimes {
+        build_s,
+        trace_s,
+        gpu: Some(gpu),
+    };
+    Ok((result_from(f, &answers), times))
 }
 
 /// Transmittance of the scene's media along every ray up to its first surface crossing
@@ -349,7 +377,12 @@ fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, Scan
     let t1 = Instant::now();
     let result = trace_all(f, rays, |r, tmin, tmax| scene.trace(r, tmin, tmax))?;
     let trace_s = t1.elapsed().as_secs_f64();
-    Ok((result, ScanTimes { build_s, trace_s }))
+    let times = ScanTimes {
+        build_s,
+        trace_s,
+        ..Default::default()
+    };
+    Ok((result, times))
 }
 
 #[cfg(not(feature = "embree"))]
@@ -398,8 +431,14 @@ pub fn stats_json(
     times: &ScanTimes,
     hits: usize,
 ) -> serde_json::Value {
-    json!({
-        "backend": format!("{backend:?}").to_lowercase(),
+    // `auto` reports the backend it fell to.
+    let ran_on = match (backend, &times.gpu) {
+        (Backend::Auto, Some(_)) => Backend::Gpu,
+        (Backend::Auto, None) => Backend::Cpu,
+        (b, _) => b,
+    };
+    let mut line = json!({
+        "backend": format!("{ran_on:?}").to_lowercase(),
         "rays": rays,
         "hits": hits,
         "load_s": load_s,
@@ -407,5 +446,14 @@ pub fn stats_json(
         "trace_s": times.trace_s,
         "rays_per_s": if times.trace_s > 0.0 { rays as f64 / times.trace_s } else { 0.0 },
         "threads": rayon::current_num_threads(),
-    })
+    });
+    if let Some(g) = &times.gpu {
+        line["adapter"] = g.adapter.clone().into();
+        line["kernel_features"] = g.features.clone().into();
+        line["gpu_upload_s"] = g.times.upload_s.into();
+        line["gpu_kernel_s"] = g.times.kernel_s.into();
+        line["gpu_readback_s"] = g.times.readback_s.into();
+        line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+    }
+    line
 }

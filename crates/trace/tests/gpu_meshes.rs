@@ -14,16 +14,16 @@ use hytrace_trace::gpu::GpuContext;
 /// WGSL's stand-in for infinity (csg/spans.wgsl).
 const GPU_INF: f32 = 1.0e38;
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-struct Rng(u64);
+/// Deterministic pseudo-random numbers in [0, 1) (the volume crate's PCG generator).
+struct Rng(hytrace_volume::Rng);
 
 impl Rng {
+    fn new(seed: u32) -> Self {
+        Rng(hytrace_volume::Rng::new(seed, 0, 0))
+    }
+
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        self.0.next_f64()
     }
 
     fn range(&mut self, lo: f64, hi: f64) -> f64 {
@@ -485,7 +485,7 @@ fn gpu_meshes_match_cpu() {
         return;
     };
     let (meshes, arrays) = build_meshes();
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let cases = ray_cases(&meshes, &arrays, &mut rng);
     let points = point_cases(&meshes, &mut rng);
 
@@ -676,7 +676,7 @@ fn gpu_exact_edge_matches_f64() {
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     let mut inputs: Vec<[f32; 4]> = Vec::new();
     for i in 0..4000 {
         let scale = [1e-3, 1.0, 1e3, 1e5][i % 4];

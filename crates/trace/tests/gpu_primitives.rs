@@ -38,15 +38,14 @@ const STRIDE: usize = 13;
 /// GPU values at least this large stand for infinities.
 const GPU_INF: f32 = 1.0e38;
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-struct Rng(u64);
+/// Deterministic pseudo-random numbers in [0, 1) (the volume crate's PCG generator).
+struct Rng(hytrace_volume::Rng);
 impl Rng {
+    fn new(seed: u32) -> Self {
+        Rng(hytrace_volume::Rng::new(seed, 0, 0))
+    }
     fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64) as f32
+        self.0.next_f64() as f32
     }
     fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.next()
@@ -552,7 +551,7 @@ fn gpu_primitive_kernels_match_cpu_f32() {
     };
     let mut planes = Vec::new();
     let cases = cases(&mut planes);
-    let mut rng = Rng(42);
+    let mut rng = Rng::new(42);
     let mut items = Vec::new();
     let mut owner = Vec::new();
     for (ci, c) in cases.iter().enumerate() {

@@ -6,51 +6,22 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
-use common::{check, mesh_obj, mesh_scene_rays, rays_for};
-use hytrace_csg::V3;
+use common::{check, gpu_answers, mesh_obj, mesh_scene_rays, rays_for};
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::read_array;
 use hytrace_foundry::Foundry;
-use hytrace_trace::cpu::{CpuScene, Hit};
-use hytrace_trace::gpu::{GpuContext, GpuTracer, GPU_INF};
-use hytrace_trace::scan::{ray_record, RayRow};
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::gpu::{GpuContext, GpuTracer};
+use hytrace_trace::scan::RayRow;
 use hytrace_trace::scene::{default_scene, load_scene, obj_to_foundry};
 
 fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../..")
         .join(path)
-}
-
-/// The GPU's answer for every ray (`None` when no adapter and GPUs are not required).
-fn gpu_answers(f: &Foundry, rays: &[RayRow]) -> Option<Vec<Option<Hit<f32>>>> {
-    let ctx = GpuContext::for_tests()?;
-    let cpu = CpuScene::<f32>::new(f).unwrap();
-    let t0 = std::time::Instant::now();
-    let tracer = GpuTracer::new(&ctx, &cpu).unwrap();
-    let t1 = std::time::Instant::now();
-    let records: Vec<_> = rays.iter().map(ray_record).collect();
-    let (hits, _) = tracer.trace(&ctx, &records).unwrap();
-    eprintln!(
-        "GPU scan of {} rays: kernel built in {:.1} s, traced in {:.1} s ({:?})",
-        rays.len(),
-        (t1 - t0).as_secs_f64(),
-        t1.elapsed().as_secs_f64(),
-        tracer.features()
-    );
-    assert!(hits.iter().all(|h| h.status == 0), "a ray was cut short");
-    Some(
-        hits.iter()
-            .map(|h| {
-                (h.t < GPU_INF).then(|| Hit {
-                    t: h.t,
-                    normal: V3::new(h.normal[0], h.normal[1], h.normal[2]),
-                    instance: h.instance,
-                    prim: h.prim,
-                })
-            })
-            .collect(),
-    )
 }
 
 fn check_gpu(name: &str, f: &Foundry, rays: &[RayRow]) {
@@ -92,4 +63,187 @@ fn gpu_matches_cpu_on_a_mesh_scene() {
 fn gpu_matches_cpu_on_a_hierarchical_gdml_scene() {
     let f = scene_file("tests/data/gdml/coverage.gdml");
     check_gpu("coverage.gdml", &f, &rays_for(&f, 60, 8000));
+}
+
+/// The kernel carries only what a scene uses: no mesh code for CSG scenes, no CSG code for
+/// mesh scenes, no quartic solver without a torus, and only the primitives the trees use.
+#[test]
+fn scan_kernels_compose_only_what_the_scene_uses() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let source_of = |f: &Foundry| {
+        let cpu = CpuScene::<f32>::new(f).unwrap();
+        let tracer = GpuTracer::new(&ctx, &cpu).unwrap();
+        (tracer.features().to_vec(), tracer.source().to_string())
+    };
+    let defines = |src: &str, function: &str| src.contains(&format!("fn {function}("));
+
+    let (features, csg) = source_of(&default_scene().unwrap());
+    assert!(
+        features.contains(&"torus") && !features.contains(&"mesh"),
+        "{features:?}"
+    );
+    assert!(defines(&csg, "csg_tree_first_crossing") && defines(&csg, "torus_spans"));
+    assert!(!defines(&csg, "mesh_first_crossing") && !csg.contains("module mesh/mesh"));
+    // Primitives the trees do not use are not dispatched (so never compiled).
+    assert!(csg.contains("code == CSG_TORUS") && csg.contains("code == CSG_BOX3"));
+    for absent in ["CSG_PARABOLOID", "CSG_THETACUT", "CSG_HYPERBOLOID"] {
+        assert!(
+            !csg.contains(&format!("code == {absent}")),
+            "{absent} dispatched"
+        );
+    }
+
+    let (features, mesh) = source_of(&obj_to_foundry(mesh_obj().as_bytes()).unwrap());
+    assert_eq!(features, ["mesh"]);
+    assert!(defines(&mesh, "mesh_first_crossing"));
+    assert!(!defines(&mesh, "csg_tree_first_crossing") && !defines(&mesh, "torus_spans"));
+
+    let (features, no_torus) = source_of(&scene_file("scenes/mixed.toml"));
+    assert!(!features.contains(&"torus"), "{features:?}");
+    assert!(!defines(&no_torus, "torus_spans") && !no_torus.contains("module csg/torus"));
+    // Every composed kernel is valid WGSL.
+    for src in [&csg, &mesh, &no_torus] {
+        let module = naga::front::wgsl::parse_str(src).expect("composed kernel parses");
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(&module)
+        .expect("composed kernel validates");
+    }
+}
+
+fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap()
+}
+
+fn read_values(path: &Path) -> Vec<f64> {
+    let a = read_array(path).unwrap();
+    match a.scalar {
+        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        Scalar::I32 => bytemuck::pod_collect_to_vec::<u8, i32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        s => panic!("unexpected {s:?}"),
+    }
+}
+
+/// `scan --backend gpu` writes what `--backend cpu` writes (f32, same rays), reports its
+/// adapter and GPU timings with `--stats`; f64 is refused, and without an adapter `gpu`
+/// fails naming the problem while `auto` falls back to the CPU.
+#[test]
+fn scan_cli_on_the_gpu() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).display().to_string();
+    let scan = |backend: &str, hits: &str, ids: &str, env: &[(&str, &str)]| {
+        let args = [
+            "scan",
+            "default",
+            "--sweep",
+            "rect",
+            "--count",
+            "30",
+            "--out",
+            hits,
+            "--ids",
+            ids,
+            "--stats",
+            "--backend",
+            backend,
+        ];
+        hytrace(&args, env)
+    };
+    let cpu = scan("cpu", &p("cpu.npy"), &p("cpu_ids.npy"), &[]);
+    assert!(
+        cpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cpu.stderr)
+    );
+    let gpu = scan("gpu", &p("gpu.npy"), &p("gpu_ids.npy"), &[]);
+    assert!(
+        gpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&gpu.stderr)
+    );
+    let stats: serde_json::Value = serde_json::from_slice(&gpu.stdout).unwrap();
+    assert_eq!(stats["backend"], "gpu");
+    assert!(stats["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    assert!(stats["gpu_kernel_s"].as_f64().is_some());
+    // Timestamp queries: lavapipe and real GPUs have them (null where a device has not).
+    assert!(stats.get("gpu_kernel_timestamps_s").is_some());
+    assert_eq!(stats["kernel_features"][0], "csg");
+    let (want, got) = (
+        read_values(Path::new(&p("cpu.npy"))),
+        read_values(Path::new(&p("gpu.npy"))),
+    );
+    assert_eq!(want.len(), got.len());
+    assert!(want.len() >= 4 * 100, "{} values", want.len());
+    assert!(
+        want.iter().skip(3).step_by(4).any(|t| t.is_finite()),
+        "no hits"
+    );
+    for (i, (w, g)) in want.iter().zip(&got).enumerate() {
+        assert!(
+            w == g || (w - g).abs() <= 1e-4 * w.abs().max(1.0),
+            "value {i}: cpu {w} gpu {g}"
+        );
+    }
+    assert_eq!(
+        read_values(Path::new(&p("cpu_ids.npy"))),
+        read_values(Path::new(&p("gpu_ids.npy")))
+    );
+
+    let f64_run = hytrace(
+        &[
+            "scan",
+            "default",
+            "--sweep",
+            "axis",
+            "--count",
+            "4",
+            "--out",
+            &p("f64.npy"),
+            "--backend",
+            "gpu",
+            "--precision",
+            "f64",
+        ],
+        &[],
+    );
+    assert!(!f64_run.status.success());
+    assert!(String::from_utf8_lossy(&f64_run.stderr).contains("GPU backend traces in f32"));
+    assert!(!Path::new(&p("f64.npy")).exists());
+
+    // No adapter: WGPU_BACKEND names one this build does not have.
+    let none = [("WGPU_BACKEND", "metal")];
+    let no_gpu = scan("gpu", &p("none.npy"), &p("none_ids.npy"), &none);
+    let err = String::from_utf8_lossy(&no_gpu.stderr);
+    assert!(
+        !no_gpu.status.success() && err.contains("no GPU adapter found"),
+        "{err}"
+    );
+    assert!(!Path::new(&p("none.npy")).exists());
+    let auto = scan("auto", &p("auto.npy"), &p("auto_ids.npy"), &none);
+    assert!(
+        auto.status.success(),
+        "{}",
+        String::from_utf8_lossy(&auto.stderr)
+    );
+    assert!(String::from_utf8_lossy(&auto.stderr).contains("--backend auto scans on the CPU"));
+    let stats: serde_json::Value = serde_json::from_slice(&auto.stdout).unwrap();
+    assert_eq!(stats["backend"], "cpu");
+    assert_eq!(read_values(Path::new(&p("auto.npy"))), want);
 }

@@ -28,19 +28,18 @@ const NORMAL_TOL: f64 = 1e-4;
 const REQUIRED_RATE: f64 = 0.999;
 const PER_FAMILY: usize = 400;
 
-/// SplitMix64: deterministic pseudo-random numbers.
-struct Rng(u64);
+/// Deterministic pseudo-random numbers (the volume crate's PCG generator).
+struct Rng(hytrace_volume::Rng);
 
 impl Rng {
+    fn new(seed: u32) -> Self {
+        Rng(hytrace_volume::Rng::new(seed, 0, 0))
+    }
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        u64::from(self.0.next_u32())
     }
     fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.next_f64()
     }
     fn range(&mut self, a: f64, b: f64) -> f64 {
         a + (b - a) * self.unit()
@@ -156,7 +155,7 @@ impl Item {
 }
 
 fn families() -> Vec<Item> {
-    let mut rng = Rng(0x70_7275);
+    let mut rng = Rng::new(0x70_7275);
     let mut items = Vec::new();
     let two_pi = 2.0 * std::f64::consts::PI;
     for i in 0..PER_FAMILY {

@@ -23,16 +23,16 @@ use hytrace_foundry::TypeCode;
 use hytrace_trace::gpu::oneshot::{run, Buffer};
 use hytrace_trace::gpu::GpuContext;
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-struct Rng(u64);
+/// Deterministic pseudo-random numbers in [0, 1) (the volume crate's PCG generator).
+struct Rng(hytrace_volume::Rng);
 
 impl Rng {
+    fn new(seed: u32) -> Self {
+        Rng(hytrace_volume::Rng::new(seed, 0, 0))
+    }
+
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        self.0.next_f64()
     }
 
     fn range(&mut self, lo: f64, hi: f64) -> f64 {
@@ -330,7 +330,7 @@ fn gpu_tree_evaluators_match_cpu_f32() {
     let cases = cases();
     let mut arrays = CsgArrays::default();
     let mut trees = Vec::new();
-    let mut rng = Rng(0x7ee5);
+    let mut rng = Rng::new(0x7ee5);
     let (mut rays, mut points) = (Vec::new(), Vec::new());
     let mut ranges = Vec::new();
     for case in &cases {

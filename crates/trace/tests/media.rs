@@ -302,6 +302,7 @@ fn scan_writes_transmittance_up_to_the_first_surface() {
         (&["--estimator", "march", "--step=-1"][..], "march step"),
         (&["--level", "9"][..], "mip level 9"),
         (&["--backend", "embree"][..], "needs --backend cpu"),
+        (&["--backend", "gpu"][..], "needs --backend cpu"),
     ] {
         let bad = run(extra);
         let message = String::from_utf8_lossy(&bad.stderr);

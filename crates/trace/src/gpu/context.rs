@@ -63,6 +63,8 @@ impl GpuContext {
                 .request_device(&wgpu::DeviceDescriptor {
                     label: Some("hytrace"),
                     required_limits: limits.clone(),
+                    // GPU-side timings of kernels where the adapter has them.
+                    required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
                     ..Default::default()
                 })
                 .await
@@ -175,4 +177,22 @@ pub fn whole_buffer_entries(buffers: &[wgpu::Buffer]) -> Vec<wgpu::BindGroupEntr
             resource: b.as_entire_binding(),
         })
         .collect()
+}
+
+/// A compute pipeline of entry point `entry` of `module` with `layout`.
+pub fn compute_pipeline(
+    ctx: &GpuContext,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(layout),
+            module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
 }

@@ -4,7 +4,9 @@
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{storage_layout_entry, GpuContext, GpuError};
+use super::context::{
+    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
+};
 use super::probe::dispatch_size;
 
 /// A storage buffer of a one-shot dispatch.
@@ -79,14 +81,7 @@ pub fn run(
                     outputs.push((buf.clone(), *size));
                 }
             }
-            let bind_entries: Vec<_> = buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
+            let bind_entries = whole_buffer_entries(&buffers);
             bind_groups.push(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(module),
                 layout: &layout,
@@ -103,16 +98,7 @@ pub fn run(
                 bind_group_layouts: &layout_refs,
                 immediate_size: 0,
             });
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &shader,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+        let pipeline = compute_pipeline(ctx, &pipeline_layout, &shader, entry);
         let (x, y) = dispatch_size(invocations, ctx.limits.max_compute_workgroups_per_dimension);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {

@@ -8,7 +8,9 @@ use hytrace_foundry::{Foundry, PrimKind, TypeCode, UNSET};
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{storage_layout_entry, whole_buffer_entries, GpuContext, GpuError};
+use super::context::{
+    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
+};
 use super::scene::GpuScene;
 
 const KERNEL: &str = "kernels/foundry_probe";
@@ -120,17 +122,7 @@ impl ProbeKernels {
                     bind_group_layouts: &[Some(&scene.layout), Some(&io_layout)],
                     immediate_size: 0,
                 });
-            let pipeline = |entry: &str| {
-                ctx.device
-                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: Some(&layout),
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    })
-            };
+            let pipeline = |entry: &str| compute_pipeline(ctx, &layout, &module, entry);
             ProbeKernels {
                 apply_itra: pipeline("apply_itra"),
                 locate: pipeline("locate"),

@@ -8,7 +8,9 @@ use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
 use wgpu::util::DeviceExt;
 
 use super::compose::compose_with;
-use super::context::{storage_layout_entry, GpuContext, GpuError};
+use super::context::{
+    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
+};
 use super::probe::dispatch_size;
 use super::records::{HitRecord, RayRecord, ScanParams};
 use crate::cpu::gpu_export::SceneArrays;
@@ -76,15 +78,18 @@ fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
     bytes
 }
 
-/// Seconds spent in each phase of a GPU scan (wall clock on the host).
+/// Seconds spent in each phase of a GPU scan: wall clock on the host, and the kernels'
+/// own time from GPU timestamps where the device has timestamp queries.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuTimes {
-    /// Uploading rays.
+    /// Uploading rays (host).
     pub upload_s: f64,
-    /// Running the kernel (submission to completion).
+    /// Running the kernels, submission to completion (host).
     pub kernel_s: f64,
-    /// Reading hits back.
+    /// Reading hits back (host).
     pub readback_s: f64,
+    /// The kernels' pass on the GPU, from timestamp queries (`None` without them).
+    pub kernel_gpu_s: Option<f64>,
 }
 
 /// A scene on the GPU with its scan pipeline.
@@ -175,14 +180,7 @@ impl GpuTracer {
                         })
                 })
                 .collect();
-            let entries: Vec<_> = buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
+            let entries = whole_buffer_entries(&buffers);
             let scene_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scan scene"),
                 layout: &scene_layout,
@@ -196,17 +194,7 @@ impl GpuTracer {
                         bind_group_layouts: &[None, Some(&scene_layout), Some(&ray_layout)],
                         immediate_size: 0,
                     });
-            let entry = |name: &str| {
-                ctx.device
-                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(name),
-                        layout: Some(&pipeline_layout),
-                        module: &module,
-                        entry_point: Some(name),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    })
-            };
+            let entry = |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name);
             GpuTracer {
                 pipeline: entry("scan"),
                 locate: arrays.hierarchical.then(|| entry("locate_rays")),
@@ -256,6 +244,24 @@ impl GpuTracer {
         let n = rays.len();
         let out_size = (n.max(1) * size_of::<HitRecord>()) as u64;
         let t0 = Instant::now();
+        let timestamps = ctx
+            .device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| {
+                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("scan timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2,
+                });
+                let resolved = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("scan timestamps"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                (set, resolved)
+            });
         let (hits, _keep) = ctx.checked("scan dispatch", || {
             let params = ScanParams {
                 ray_count: n as u32,
@@ -284,32 +290,26 @@ impl GpuTracer {
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
+            let buffers = [params, ray_buffer, hits, located];
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scan rays"),
                 layout: &self.ray_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: ray_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: hits.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: located.as_entire_binding(),
-                    },
-                ],
+                entries: &whole_buffer_entries(&buffers),
             });
             let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            let timer = timestamps
+                .as_ref()
+                .map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                });
             {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("scan"),
+                    timestamp_writes: timer,
+                });
                 pass.set_bind_group(1, &self.scene_group, &[]);
                 pass.set_bind_group(2, &group, &[]);
                 // Dispatches in one pass run in order: every origin is located first.
@@ -318,8 +318,12 @@ impl GpuTracer {
                     pass.dispatch_workgroups(x, y, 1);
                 }
             }
+            if let Some((set, resolved)) = &timestamps {
+                encoder.resolve_query_set(set, 0..2, resolved, 0);
+            }
             ctx.queue.submit([encoder.finish()]);
-            (hits, (params, ray_buffer, located, group))
+            let hits = buffers[2].clone();
+            (hits, (buffers, group))
         })?;
         let t1 = Instant::now();
         ctx.device
@@ -333,6 +337,12 @@ impl GpuTracer {
         times.upload_s += (t1 - t0).as_secs_f64();
         times.kernel_s += (t2 - t1).as_secs_f64();
         times.readback_s += t2.elapsed().as_secs_f64();
+        if let Some((_, resolved)) = &timestamps {
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&ctx.read_buffer(resolved, 16)?);
+            let period_ns = f64::from(ctx.queue.get_timestamp_period());
+            let pass_s = ticks[1].saturating_sub(ticks[0]) as f64 * period_ns * 1e-9;
+            times.kernel_gpu_s = Some(times.kernel_gpu_s.unwrap_or(0.0) + pass_s);
+        }
         let mut out: Vec<HitRecord> = bytemuck::pod_collect_to_vec(&bytes);
         out.truncate(n);
         Ok(out)

@@ -1,10 +1,14 @@
 //! Shared by the backend comparison tests (Embree, GPU): ray sets around a scene, a mesh
-//! scene, and the ray-by-ray comparison with the CPU's f32 tracer.
+//! scene, the GPU scan's answers, and the ray-by-ray comparison with the CPU's f32 tracer.
+
+// Each test crate uses only some of these helpers.
+#![allow(dead_code)]
 
 use hytrace_csg::{Ray, V3};
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::{CpuScene, Hit};
-use hytrace_trace::scan::RayRow;
+use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
+use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
 
 /// A deterministic generator (SplitMix64).
@@ -71,18 +75,74 @@ pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
     rays
 }
 
+/// A GPU scan of a set of rays: its answers and the seconds it took.
+pub struct GpuRun {
+    /// The answer for every ray, as the CPU tracer gives it.
+    pub hits: Vec<Option<Hit<f32>>>,
+    /// Rays whose search was cut short (a nonzero `status`).
+    pub cut_short: usize,
+    /// Uploading the scene and compiling its scan kernel.
+    pub build_s: f64,
+    /// Tracing all the rays (uploads and readbacks included).
+    pub trace_s: f64,
+    /// The composition features the kernel was built with.
+    pub features: Vec<&'static str>,
+}
+
+/// Traces `rays` through the scene with the GPU scan kernel.
+pub fn gpu_run(ctx: &GpuContext, f: &Foundry, rays: &[RayRow]) -> Result<GpuRun, GpuError> {
+    let cpu = CpuScene::<f32>::new(f).unwrap();
+    let t0 = std::time::Instant::now();
+    let tracer = GpuTracer::new(ctx, &cpu)?;
+    let t1 = std::time::Instant::now();
+    let records: Vec<_> = rays.iter().map(ray_record).collect();
+    let (hits, _) = tracer.trace(ctx, &records)?;
+    Ok(GpuRun {
+        cut_short: hits.iter().filter(|h| h.status != 0).count(),
+        hits: hits
+            .iter()
+            .map(|h| {
+                (h.t < GPU_INF).then(|| Hit {
+                    t: h.t,
+                    normal: V3::new(h.normal[0], h.normal[1], h.normal[2]),
+                    instance: h.instance,
+                    prim: h.prim,
+                })
+            })
+            .collect(),
+        build_s: (t1 - t0).as_secs_f64(),
+        trace_s: t1.elapsed().as_secs_f64(),
+        features: tracer.features().to_vec(),
+    })
+}
+
+/// The GPU's answer for every ray (`None` when no adapter and GPUs are not required).
+pub fn gpu_answers(f: &Foundry, rays: &[RayRow]) -> Option<Vec<Option<Hit<f32>>>> {
+    let ctx = GpuContext::for_tests()?;
+    let run = gpu_run(&ctx, f, rays).unwrap();
+    eprintln!(
+        "GPU scan of {} rays: kernel built in {:.1} s, traced in {:.1} s ({:?})",
+        rays.len(),
+        run.build_s,
+        run.trace_s,
+        run.features
+    );
+    assert_eq!(run.cut_short, 0, "a ray was cut short");
+    Some(run.hits)
+}
+
 /// How the two backends compare on a set of rays.
 #[derive(Debug, Default)]
 pub struct Agreement {
-    rays: usize,
-    hits: usize,
-    agree: usize,
+    pub rays: usize,
+    pub hits: usize,
+    pub agree: usize,
     /// Answers equal to the last bit (t, normal, instance, prim) or both misses.
-    identical: usize,
+    pub identical: usize,
     /// Same `t` (within tolerance) on different instances: ties broken differently.
-    ties: usize,
+    pub ties: usize,
     /// Agreeing hits on the same instance whose normals differ.
-    normals: usize,
+    pub normals: usize,
 }
 
 impl Agreement {
