@@ -144,3 +144,7 @@ struct HitRecord {
 }
 
 const STATUS_DEPTH_LIMIT: u32 = 1u;
+// Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
+const SURFACE_TOLERANCE: f32 = 2e-6;
+// Deepest box BVH the CPU accepts when it prepares a scene.
+const BOX_BVH_MAX_DEPTH: u32 = 64u;

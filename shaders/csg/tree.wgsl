@@ -10,12 +10,10 @@
 // #import csg/tree_bindings
 // #import csg/frame
 
-// f32 relative surface tolerance (hytrace_csg::Real::SURFACE_TOLERANCE).
-const CSG_SURFACE_TOLERANCE: f32 = 2.0e-6;
 
 // Tolerance for crossings near ray parameter t in a tree of size `scale`.
 fn csg_tolerance(scale: f32, t: f32) -> f32 {
-    return CSG_SURFACE_TOLERANCE * (scale + abs(t));
+    return SURFACE_TOLERANCE * (scale + abs(t));
 }
 
 // Dot product summed in the CPU's order (x, then y, then z).

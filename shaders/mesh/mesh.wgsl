@@ -19,8 +19,6 @@
 // #import trace/bvh
 // #import mesh/bindings
 
-// f32 relative surface tolerance (hytrace_csg::Real::SURFACE_TOLERANCE).
-const MESH_SURFACE_TOLERANCE: f32 = 2.0e-6;
 // One stack slot per BVH level below the root, plus one (the CPU's stack size).
 const MESH_STACK: u32 = MESH_MAX_BVH_DEPTH + 1u;
 
@@ -468,7 +466,7 @@ fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step
     if all(d == vec3<f32>(0.0)) {
         return step_miss(false);
     }
-    let after = tmin + MESH_SURFACE_TOLERANCE * (m.scale + abs(tmin));
+    let after = tmin + SURFACE_TOLERANCE * (m.scale + abs(tmin));
     let moved = mesh_recentred(m, o, d);
     let w = mesh_nearest(m, moved.o, d, mesh_shear(d), after - moved.shift);
     if !w.found {

@@ -9,7 +9,7 @@
 // #import trace/bindings
 
 // Deepest BVH the CPU accepts (MAX_DEPTH in bvh.rs) plus the node being expanded and one.
-const BVH_STACK: u32 = 66u;
+const BVH_STACK: u32 = BOX_BVH_MAX_DEPTH + 2u;
 
 struct MaybeT {
     ok: bool,

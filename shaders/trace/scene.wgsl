@@ -173,7 +173,7 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
             let p = placements[located];
             let size = max(p.hi[0] - p.lo[0], max(p.hi[1] - p.lo[1], p.hi[2] - p.lo[2]));
             let scale = size + max(abs(o.x), max(abs(o.y), abs(o.z)));
-            start = tmin - 4.0 * 2.0e-6 * scale;
+            start = tmin - 4.0 * SURFACE_TOLERANCE * scale;
         } else if phase == PHASE_ENTER {
             let k = bvh_next(&w, r, tmin, hit_limit(best, tmax));
             if k == UNSET {

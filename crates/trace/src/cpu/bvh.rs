@@ -41,7 +41,7 @@ pub(super) struct BoxBvh<T> {
 
 /// Deepest BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
 /// stay far below it); a deeper one is an error when the scene is prepared.
-const MAX_DEPTH: usize = 64;
+pub(crate) const MAX_DEPTH: usize = 64;
 
 /// The largest f32 not above `v`.
 pub(super) fn f32_down(v: f64) -> f32 {

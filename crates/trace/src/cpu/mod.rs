@@ -38,6 +38,10 @@ mod solid;
 mod tests;
 
 use bvh::{holds, BoxBvh};
+
+/// Deepest box BVH (instances, a solid's leaves) a scene may have: the traversal stacks'
+/// size, on the CPU and in the GPU kernels.
+pub const BOX_BVH_MAX_DEPTH: usize = bvh::MAX_DEPTH;
 use solid::SolidAccel;
 
 /// Groups of more instances than this are searched through a BVH.

@@ -161,7 +161,13 @@ pub fn generate() -> String {
     push_struct::<RayRecord>(&mut out);
     push_struct::<HitRecord>(&mut out);
     out.push_str(&format!(
-        "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n"
+        "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
+         // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
+         const SURFACE_TOLERANCE: f32 = {:e};\n\
+         // Deepest box BVH the CPU accepts when it prepares a scene.\n\
+         const BOX_BVH_MAX_DEPTH: u32 = {}u;\n",
+        <f32 as hytrace_csg::Real>::SURFACE_TOLERANCE,
+        crate::cpu::BOX_BVH_MAX_DEPTH,
     ));
     out
 }
