@@ -286,7 +286,12 @@ impl GpuTracer {
             });
             let located = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("located"),
-                size: (n.max(4) * 4) as u64,
+                // Flat scenes locate nothing: a minimal binding, never read.
+                size: if self.locate.is_some() {
+                    (n.max(4) * 4) as u64
+                } else {
+                    16
+                },
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
