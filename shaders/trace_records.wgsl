@@ -143,8 +143,66 @@ struct HitRecord {
     pad: u32,
 }
 
+struct BrickEntry {
+    origin: array<i32, 3>,
+    atlas_slot: u32,
+    offset: f32,
+    scale: f32,
+    active_voxels: u32,
+    max_error: f32,
+}
+
+struct VolumeParams {
+    level_lo: array<vec4<i32>, 4>,
+    level_dims: array<vec4<u32>, 4>,
+    brick_lo: array<i32, 3>,
+    format: u32,
+    brick_dims: array<u32, 3>,
+    estimator: u32,
+    lookup_filter: u32,
+    spp: u32,
+    seed: u32,
+    finest: u32,
+    global: u32,
+    global_min: f32,
+    global_max: f32,
+    background: f32,
+    density_scale: f32,
+    march_step: f32,
+    ray_count: u32,
+    ray_offset: u32,
+}
+
+struct TransmittanceRecord {
+    transmittance: f32,
+    variance: f32,
+    lookups: u32,
+    null_collisions: u32,
+    status: u32,
+    pad: array<u32, 3>,
+}
+
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
 const SURFACE_TOLERANCE: f32 = 2e-6;
 // Deepest box BVH the CPU accepts when it prepares a scene.
 const BOX_BVH_MAX_DEPTH: u32 = 64u;
+const VOLUME_ESTIMATOR_EXACT: u32 = 0u;
+const VOLUME_ESTIMATOR_MARCH: u32 = 1u;
+const VOLUME_ESTIMATOR_DELTA: u32 = 2u;
+const VOLUME_ESTIMATOR_RATIO: u32 = 3u;
+const VOLUME_ESTIMATOR_RESIDUAL: u32 = 4u;
+const VOLUME_FILTER_NEAREST: u32 = 0u;
+const VOLUME_FILTER_TRILINEAR: u32 = 1u;
+const VOLUME_FILTER_STOCHASTIC: u32 = 2u;
+const VOLUME_FORMAT_BC4: u32 = 0u;
+const VOLUME_FORMAT_UNORM8: u32 = 1u;
+const VOLUME_FORMAT_UNORM16: u32 = 2u;
+const VOLUME_FORMAT_F16: u32 = 3u;
+const VOLUME_FORMAT_F32: u32 = 4u;
+const VOLUME_STATUS_NEGATIVE: u32 = 1u;
+const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
+const VOLUME_NO_BRICK: u32 = 4294967295u;
+const VOLUME_NO_SLOT: u32 = 4294967295u;
+// Infinity of the volume kernels (hytrace_trace::gpu::GPU_INF).
+const VOLUME_INF: f32 = 1e38;

@@ -25,12 +25,13 @@ mod heightfield;
 #[path = "common/mixed_scene.rs"]
 mod mixed_scene;
 
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::Instant;
 
 use heightfield::{coherent, heightfield, incoherent, unit, write_obj, RaySet};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_tests::gdml::{gdml_dir, gdml_files};
+use hytrace_trace::accuracy::utc_date;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::gpu::{GpuContext, GpuTracer, GPU_INF};
 use hytrace_trace::scan::{ray_record, RayRow};
@@ -199,24 +200,6 @@ fn diffuse(vertices: &[[f64; 3]], faces: &[[u32; 3]], count: usize) -> RaySet {
     )
 }
 
-/// Today's date (UTC), `YYYY-MM-DD` (Howard Hinnant's `civil_from_days`).
-fn today() -> String {
-    let secs = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_secs();
-    let z = (secs / 86_400) as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!("{year:04}-{month:02}-{day:02}")
-}
-
 /// An environment variable parsed as a count.
 fn env_usize(name: &str) -> Option<usize> {
     std::env::var(name).ok().and_then(|s| s.parse().ok())
@@ -353,7 +336,7 @@ fn main() {
     }
     command += "cargo bench -p hytrace-tests --bench gpu";
     println!("\n## GPU scan benchmark\n");
-    println!("- Date: {} (UTC)", today());
+    println!("- Date: {} (UTC)", utc_date());
     println!("- Adapter: {}", ctx.describe());
     println!("- Command: `{command}`");
     println!(

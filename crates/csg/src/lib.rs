@@ -36,4 +36,4 @@ pub use shape::{
     theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape,
 };
 pub use solid_store::add_geometry;
-pub use tree::{to_tree, LIST_MIN_MEMBERS};
+pub use tree::{to_tree, to_tree_with, TreeOptions, LIST_MIN_MEMBERS};

@@ -173,8 +173,18 @@ pub(crate) const PARITY_BUFFER: usize = 32;
 pub(crate) const PARITY_DIRECTION: [f64; 3] = [0.577_215_664_9, 0.618_033_988_7, 0.533_751_168_8];
 
 impl<T: Real> MeshPrim<T> {
-    /// A mesh from triangles (f64 vertices in the solid's frame).
+    /// A mesh from triangles (f64 vertices in the solid's frame), its BVH built with
+    /// obvhs's `fast_build` preset.
     pub fn new(triangles: &[[[f64; 3]; 3]]) -> Result<Self, CsgError> {
+        Self::with_bvh_build(triangles, BvhBuildParams::fast_build())
+    }
+
+    /// [`MeshPrim::new`] with another obvhs BVH build preset: slower builds give BVHs
+    /// that are faster to trace; the answers are the same.
+    pub fn with_bvh_build(
+        triangles: &[[[f64; 3]; 3]],
+        build: BvhBuildParams,
+    ) -> Result<Self, CsgError> {
         if triangles.is_empty() {
             return Err(CsgError {
                 primitive: "mesh",
@@ -205,11 +215,7 @@ impl<T: Real> MeshPrim<T> {
                 BvhTriangle { v0, v1, v2 }
             })
             .collect();
-        let bvh = build_bvh2_from_tris(
-            &bvh_input,
-            BvhBuildParams::fast_build(),
-            &mut Duration::default(),
-        );
+        let bvh = build_bvh2_from_tris(&bvh_input, build, &mut Duration::default());
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
         let padded =
             |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
@@ -419,6 +425,17 @@ impl<T: Real> MeshPrim<T> {
             let [v0, v1, v2] = self.triangles[i];
             (t, (v1 - v0).cross(v2 - v0))
         })
+    }
+
+    /// Bytes of the BVH nodes.
+    pub fn bvh_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+    }
+
+    /// The ray parameter where `ray` meets triangle `tri` (either side), by the
+    /// watertight test of [`MeshPrim::first_crossing`]; `None` when it misses.
+    pub fn triangle_crossing(tri: &[V3<T>; 3], ray: &Ray<T>) -> Option<T> {
+        Self::crossing(tri, ray, &Shear::new(ray.direction))
     }
 
     /// Where a ray meets one triangle, by the watertight test of Woop, Benthin and Wald

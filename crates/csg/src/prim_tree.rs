@@ -385,7 +385,15 @@ impl<T: Real> PrimTree<T> {
     /// Prepares a shape directly (one prim of a throwaway Foundry), for users of the builder
     /// API and for tests.
     pub fn from_shape(shape: &crate::Shape) -> Result<Self, CsgError> {
-        let tree = crate::to_tree(shape)?;
+        Self::from_shape_with(shape, crate::TreeOptions::default())
+    }
+
+    /// [`PrimTree::from_shape`] with a choice of regrouping (see [`crate::to_tree_with`]).
+    pub fn from_shape_with(
+        shape: &crate::Shape,
+        options: crate::TreeOptions,
+    ) -> Result<Self, CsgError> {
+        let tree = crate::to_tree_with(shape, options)?;
         let mut f = Foundry::new();
         let mut solid = f.begin_solid("shape");
         let built = solid

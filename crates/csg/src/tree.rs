@@ -24,6 +24,21 @@ use crate::shape::{CsgError, Primitive, Shape};
 /// Fewest plain primitive operands of a union or intersection that become a list node.
 pub const LIST_MIN_MEMBERS: usize = 6;
 
+/// How [`to_tree_with`] regroups chains of one operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TreeOptions {
+    /// Whether many plain operands of a union or intersection become one list node (the
+    /// default); without lists they are joined in a balanced binary tree, which has the
+    /// same surfaces but a taller tree and more nodes.
+    pub lists: bool,
+}
+
+impl Default for TreeOptions {
+    fn default() -> Self {
+        TreeOptions { lists: true }
+    }
+}
+
 /// An expression in positive form.
 #[derive(Clone, Debug)]
 enum Positive {
@@ -107,16 +122,16 @@ fn balanced(code: TypeCode, mut items: Vec<Positive>) -> Positive {
 }
 
 /// Regroups chains of one operator into lists and balanced trees (see the module docs).
-fn regroup(node: Positive) -> Positive {
+fn regroup(node: Positive, options: TreeOptions) -> Positive {
     match node {
         Positive::Op(code @ (TypeCode::Union | TypeCode::Intersection), ..) => {
             let mut items = Vec::new();
             operands(node, code, &mut items);
-            let items: Vec<Positive> = items.into_iter().map(regroup).collect();
+            let items: Vec<Positive> = items.into_iter().map(|i| regroup(i, options)).collect();
             let (plain, other): (Vec<_>, Vec<_>) =
                 items.into_iter().partition(Positive::is_plain_leaf);
             let mut joined = other;
-            if plain.len() >= LIST_MIN_MEMBERS {
+            if options.lists && plain.len() >= LIST_MIN_MEMBERS {
                 let list = if code == TypeCode::Union {
                     TypeCode::ListContiguous
                 } else {
@@ -136,11 +151,11 @@ fn regroup(node: Positive) -> Positive {
                 subtracted.push(*b);
                 left = *a;
             }
-            let minuend = regroup(left);
+            let minuend = regroup(left, options);
             let subtrahend = if subtracted.len() == 1 {
-                regroup(subtracted.pop().expect("one operand"))
+                regroup(subtracted.pop().expect("one operand"), options)
             } else {
-                regroup(balanced(TypeCode::Union, subtracted))
+                regroup(balanced(TypeCode::Union, subtracted), options)
             };
             Positive::Op(
                 TypeCode::Difference,
@@ -360,7 +375,12 @@ impl Shape {
 /// Fails when the regrouped tree is deeper than [`MAX_TREE_HEIGHT`], when the solid is
 /// unbounded (a complement or cut reaches the root) or empty (disjoint intersection).
 pub fn to_tree(shape: &Shape) -> Result<CsgTree, CsgError> {
-    let shape = regroup(positive(shape, &Transform64::IDENTITY, false));
+    to_tree_with(shape, TreeOptions::default())
+}
+
+/// [`to_tree`] with a choice of regrouping.
+pub fn to_tree_with(shape: &Shape, options: TreeOptions) -> Result<CsgTree, CsgError> {
+    let shape = regroup(positive(shape, &Transform64::IDENTITY, false), options);
     let height = shape.height();
     if height > MAX_TREE_HEIGHT {
         return Err(CsgError {

@@ -2,7 +2,7 @@
 //! touching or disjoint spheres and intersections of many spheres, walked crossing by
 //! crossing from outside and from inside.
 
-use hytrace_csg::{sphere, to_tree, PrimTree, Ray, Shape, V3};
+use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Shape, TreeOptions, V3};
 use hytrace_foundry::TypeCode;
 
 mod common;
@@ -34,6 +34,12 @@ fn boundaries(spans: &[(f64, f64)], union: bool) -> Vec<f64> {
 }
 
 fn check(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64) {
+    check_with(centres, radii, union, seed, TreeOptions::default());
+}
+
+/// Compares every crossing with the intervals; with lists on, the tree must be one list
+/// node, with lists off it must hold none.
+fn check_with(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64, options: TreeOptions) {
     let parts: Vec<Shape> = centres
         .iter()
         .zip(radii)
@@ -44,14 +50,22 @@ fn check(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64) {
         .cloned()
         .reduce(|a, b| if union { a + b } else { a * b })
         .unwrap();
-    let tree = to_tree(&shape).unwrap();
+    let tree = to_tree_with(&shape, options).unwrap();
     let want = if union {
         TypeCode::ListContiguous
     } else {
         TypeCode::ListOverlap
     };
-    assert_eq!(tree.nodes[0].typecode, want as u32, "one list node");
-    let prim = PrimTree::<f64>::from_shape(&shape).unwrap();
+    if options.lists {
+        assert_eq!(tree.nodes[0].typecode, want as u32, "one list node");
+    } else {
+        assert!(
+            tree.nodes.iter().all(|n| n.typecode != want as u32),
+            "no list node"
+        );
+        assert!(tree.members.is_empty());
+    }
+    let prim = PrimTree::<f64>::from_shape_with(&shape, options).unwrap();
     let mut rng = Rng(seed);
     for _ in 0..2000 {
         let (o, d) = rng.aimed(60.0, 20.0);
@@ -89,9 +103,10 @@ fn check(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64) {
     }
 }
 
-#[test]
-fn union_list_of_overlapping_and_disjoint_spheres_matches_intervals() {
-    let mut rng = Rng(1);
+/// 24 spheres, overlapping and disjoint, in a 60 mm cube; radii exact in f32, as the
+/// Foundry stores primitive parameters.
+fn scattered_spheres(seed: u64) -> (Vec<[f64; 3]>, Vec<f64>) {
+    let mut rng = Rng(seed);
     let centres: Vec<[f64; 3]> = (0..24)
         .map(|_| {
             [
@@ -101,9 +116,20 @@ fn union_list_of_overlapping_and_disjoint_spheres_matches_intervals() {
             ]
         })
         .collect();
-    // Radii exact in f32, as the Foundry stores primitive parameters.
     let radii: Vec<f64> = (0..24).map(|_| rng.range(3., 12.) as f32 as f64).collect();
+    (centres, radii)
+}
+
+#[test]
+fn union_list_of_overlapping_and_disjoint_spheres_matches_intervals() {
+    let (centres, radii) = scattered_spheres(1);
     check(&centres, &radii, true, 2);
+}
+
+#[test]
+fn without_lists_a_union_is_a_binary_tree_with_the_same_crossings() {
+    let (centres, radii) = scattered_spheres(6);
+    check_with(&centres, &radii, true, 7, TreeOptions { lists: false });
 }
 
 #[test]

@@ -4,6 +4,7 @@
 //! upload as eight storage buffers and the kernels with their CPU twins) and the scenes the
 //! command line reads ([`scene`]).
 
+pub mod accuracy;
 pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;

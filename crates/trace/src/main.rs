@@ -10,7 +10,7 @@ use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::volume::{self, FilterArg, Repr, Space};
-use hytrace_trace::{report, scene};
+use hytrace_trace::{accuracy, report, scene};
 use hytrace_volume::TexelFormat;
 
 /// Hybrid ray tracing of analytic CSG solids, triangle meshes and sparse volumes.
@@ -87,6 +87,24 @@ enum Command {
     /// (`sphere:RADIUS[,VOXEL[,BLEND]]`, `box:W,H,D[,VOXEL[,BLEND]]`).
     #[command(subcommand)]
     Volume(VolumeCommand),
+    /// Benchmarks.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Error against a high-precision reference and time per operation of every accuracy
+    /// knob (CSG, triangles, volumes), written as DIR/accuracy.csv, DIR/accuracy.md and one
+    /// error-versus-time plot per knob (DIR/accuracy-*.svg) with the Pareto front marked.
+    Accuracy {
+        /// Output directory (created if missing).
+        #[arg(short, long, default_value = "accuracy")]
+        out: PathBuf,
+        /// Small inputs and few repeats (well under a minute), for CI.
+        #[arg(long)]
+        quick: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -148,6 +166,10 @@ enum VolumeCommand {
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
+        /// Where to trace: the CPU (f64), the GPU (f32, bricked grids; `--repr nanovdb` is
+        /// converted to f32 bricks) or the GPU when one opens, else the CPU.
+        #[arg(long, value_enum, default_value_t = volume::VolumeBackend::Cpu)]
+        backend: volume::VolumeBackend,
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
@@ -206,6 +228,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             repr,
             estimate,
             grid,
+            backend,
             stats,
         } => {
             let t0 = std::time::Instant::now();
@@ -213,24 +236,16 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             let rays = scan::read_rays(&rays)?;
             let g = volume::represent(g, repr)?;
             let load_s = t0.elapsed().as_secs_f64();
-            let args = estimate.args();
-            let (estimates, mips_s, trace_s) = volume::transmittances(&g, &rays, &args)?;
-            let values: Vec<f64> = estimates.iter().map(|e| e.transmittance).collect();
+            let run = volume::transmittances_on(&g, &rays, &estimate.args(), backend)?;
+            let values: Vec<f64> = run.estimates.iter().map(|e| e.transmittance).collect();
             volume::write_f64(&out, &values)?;
             if stats {
-                let lookups: u64 = estimates.iter().map(|e| e.lookups).sum();
-                let nulls: u64 = estimates.iter().map(|e| e.null_collisions).sum();
-                println!(
-                    "{}",
-                    serde_json::json!({
-                        "rays": rays.len(), "load_s": load_s, "mips_s": mips_s,
-                        "trace_s": trace_s, "lookups": lookups, "null_collisions": nulls,
-                    })
-                );
+                println!("{}", volume::transmittance_stats(&run, load_s));
             } else {
                 eprintln!(
-                    "{} rays, {trace_s:.3} s; wrote {}",
+                    "{} rays, {:.3} s; wrote {}",
                     rays.len(),
+                    run.trace_s,
                     out.display()
                 );
             }
@@ -352,6 +367,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Volume(command) => run_volume(command)?,
+        Command::Bench(BenchCommand::Accuracy { out, quick }) => {
+            let settings = accuracy::Settings { quick };
+            eprintln!("measuring on {}", accuracy::machine_line(settings));
+            let rows = accuracy::run(settings, &out).map_err(anyhow::Error::msg)?;
+            eprintln!(
+                "{} rows; wrote {}/accuracy.csv, accuracy.md and the plots",
+                rows.len(),
+                out.display()
+            );
+        }
         Command::GpuInfo => {
             let ctx = GpuContext::new()?;
             println!("{}", ctx.describe());

@@ -15,6 +15,7 @@ use hytrace_volume::{
 use rayon::prelude::*;
 use serde_json::json;
 
+use crate::gpu::{GpuContext, GpuTimes, GpuVolume};
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
@@ -304,6 +305,13 @@ impl TransmittanceArgs {
     }
 }
 
+/// The rows as world rays.
+fn world_rays(rays: &[RayRow]) -> Vec<Ray> {
+    rays.iter()
+        .map(|r| Ray::new(r.origin, r.direction, r.tmin, r.tmax))
+        .collect()
+}
+
 /// Transmittance estimates along `rays` through `grid` (range mips built from the grid,
 /// or the bricked grid's own), with the time spent building mips and estimating.
 pub fn transmittances(
@@ -314,13 +322,126 @@ pub fn transmittances(
     let t0 = Instant::now();
     let mips = grid.range_mips()?;
     let t1 = Instant::now();
-    let rays: Vec<Ray> = rays
-        .iter()
-        .map(|r| Ray::new(r.origin, r.direction, r.tmin, r.tmax))
-        .collect();
+    let rays = world_rays(rays);
     let estimates = hytrace_volume::transmittance_batch(grid.grid(), &mips, &rays, &args.params())?;
     let t2 = Instant::now();
     Ok((estimates, (t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()))
+}
+
+/// Where `hytrace volume transmittance` runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum VolumeBackend {
+    /// The CPU estimators in f64, on any representation.
+    #[default]
+    Cpu,
+    /// The GPU kernel in f32 on a bricked grid (`--repr nanovdb` is converted to f32 bricks).
+    Gpu,
+    /// The GPU when an adapter opens, else the CPU (with a note on stderr).
+    Auto,
+}
+
+/// Where a GPU transmittance ran and where its time went.
+#[derive(Clone, Debug)]
+pub struct GpuVolumeInfo {
+    /// The adapter (name, type, backend, driver).
+    pub adapter: String,
+    /// The representation traced: the bricked format, and whether it was converted from
+    /// the grid as read (`--repr nanovdb`).
+    pub repr: String,
+    /// Seconds converting (for `--repr nanovdb`), uploading the grid and building the kernel.
+    pub setup_s: f64,
+    /// Upload, kernel and readback seconds of the rays' batches (host wall clock).
+    pub times: GpuTimes,
+}
+
+/// A transmittance run: the estimates, the seconds building mips (CPU) and tracing, and
+/// the GPU's details when it ran there.
+pub struct TransmittanceRun {
+    /// One estimate per ray.
+    pub estimates: Vec<Estimate>,
+    /// Seconds building range mips (CPU backend).
+    pub mips_s: f64,
+    /// Seconds tracing (GPU: upload, kernel and readback of the rays).
+    pub trace_s: f64,
+    /// Set when the run was on the GPU.
+    pub gpu: Option<GpuVolumeInfo>,
+}
+
+/// [`transmittances`] on `backend`: the GPU traces the bricked grid (a grid as read is
+/// converted to f32 bricks, exact for float grids), in f32. `gpu` without an adapter is an
+/// error; `auto` falls back to the CPU with a line on stderr.
+pub fn transmittances_on(
+    grid: &Represented,
+    rays: &[RayRow],
+    args: &TransmittanceArgs,
+    backend: VolumeBackend,
+) -> anyhow::Result<TransmittanceRun> {
+    let ctx = match backend {
+        VolumeBackend::Cpu => None,
+        VolumeBackend::Gpu => Some(GpuContext::new()?),
+        VolumeBackend::Auto => match GpuContext::new() {
+            Ok(ctx) => Some(ctx),
+            Err(e) => {
+                eprintln!("hytrace: no usable GPU ({e}); --backend auto traces on the CPU");
+                None
+            }
+        },
+    };
+    let Some(ctx) = ctx else {
+        let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
+        return Ok(TransmittanceRun {
+            estimates,
+            mips_s,
+            trace_s,
+            gpu: None,
+        });
+    };
+    let t0 = Instant::now();
+    let converted;
+    let (bricked, repr) = match grid {
+        Represented::Bricked(b) => (b.as_ref(), b.format().name().to_string()),
+        Represented::Source(v) => {
+            converted = BrickedGrid::convert(v, TexelFormat::F32)?;
+            (&converted, "f32 (converted from nanovdb)".to_string())
+        }
+    };
+    let volume = GpuVolume::new(&ctx, bricked)?;
+    let setup_s = t0.elapsed().as_secs_f64();
+    let rays = world_rays(rays);
+    let t1 = Instant::now();
+    let (estimates, times) = volume.transmittance(&ctx, &rays, &args.params())?;
+    Ok(TransmittanceRun {
+        estimates,
+        mips_s: 0.0,
+        trace_s: t1.elapsed().as_secs_f64(),
+        gpu: Some(GpuVolumeInfo {
+            adapter: ctx.describe(),
+            repr,
+            setup_s,
+            times,
+        }),
+    })
+}
+
+/// The `--stats` line of `volume transmittance`: counts and timings, and on the GPU the
+/// adapter, the representation traced and the GPU's seconds.
+pub fn transmittance_stats(run: &TransmittanceRun, load_s: f64) -> serde_json::Value {
+    let lookups: u64 = run.estimates.iter().map(|e| e.lookups).sum();
+    let nulls: u64 = run.estimates.iter().map(|e| e.null_collisions).sum();
+    let mut line = json!({
+        "backend": if run.gpu.is_some() { "gpu" } else { "cpu" },
+        "rays": run.estimates.len(), "load_s": load_s, "mips_s": run.mips_s,
+        "trace_s": run.trace_s, "lookups": lookups, "null_collisions": nulls,
+    });
+    if let Some(g) = &run.gpu {
+        line["adapter"] = g.adapter.clone().into();
+        line["gpu_repr"] = g.repr.clone().into();
+        line["gpu_setup_s"] = g.setup_s.into();
+        line["gpu_upload_s"] = g.times.upload_s.into();
+        line["gpu_kernel_s"] = g.times.kernel_s.into();
+        line["gpu_readback_s"] = g.times.readback_s.into();
+    }
+    line
 }
 
 /// Memory of one representation, for `volume info`.

@@ -7,7 +7,9 @@ pub mod probe;
 pub mod records;
 mod scene;
 mod tracer;
+mod volume;
 
 pub use context::{GpuContext, GpuError};
 pub use scene::GpuScene;
 pub use tracer::{primitive_feature, scene_features, GpuTimes, GpuTracer, GPU_INF};
+pub use volume::GpuVolume;

@@ -132,6 +132,100 @@ record! {
 /// [`HitRecord::status`] bit: the navigator's hierarchy was deeper than its loop bound.
 pub const STATUS_DEPTH_LIMIT: u32 = 1;
 
+record! {
+    /// What every ray of a GPU transmittance batch shares (`shaders/kernels/transmittance.wgsl`):
+    /// the range mips' level boxes, the bricked grid's indirection box and the estimator.
+    /// Rays come in the grid's index space as [`RayRecord`]s (direction not normalized).
+    pub struct VolumeParams {
+        /// Per mip level (finest first): first block x, y, z and the block side in voxels.
+        pub level_lo: [[i32; 4]; 4],
+        /// Per mip level: blocks along x, y, z and the level's first entry in the ranges.
+        pub level_dims: [[u32; 4]; 4],
+        /// Brick coordinate of the indirection box's first brick.
+        pub brick_lo: [i32; 3],
+        /// `VOLUME_FORMAT_*` of the atlas texels.
+        pub format: u32,
+        /// Bricks of the indirection box along x, y, z.
+        pub brick_dims: [u32; 3],
+        /// `VOLUME_ESTIMATOR_*`.
+        pub estimator: u32,
+        /// `VOLUME_FILTER_*` (`filter` is a WGSL reserved word).
+        pub lookup_filter: u32,
+        /// Samples per ray of the trackers.
+        pub spp: u32,
+        /// Seed of the random streams.
+        pub seed: u32,
+        /// Finest mip level of a local-majorant walk.
+        pub finest: u32,
+        /// 1: one global range for the whole box (global majorant, and the march).
+        pub global: u32,
+        /// The global range's minimum.
+        pub global_min: f32,
+        /// The global range's maximum.
+        pub global_max: f32,
+        /// The grid's background (outside the levels' boxes and the stored bricks).
+        pub background: f32,
+        /// Density per unit of grid value.
+        pub density_scale: f32,
+        /// Largest march step.
+        pub march_step: f32,
+        /// Rays in this batch.
+        pub ray_count: u32,
+        /// Index of the batch's first ray: ray `i` of the batch uses random stream
+        /// `ray_offset + i`.
+        pub ray_offset: u32,
+    }
+}
+
+record! {
+    /// One ray's transmittance from the GPU (the twin of `hytrace_volume::Estimate`).
+    pub struct TransmittanceRecord {
+        /// The estimate (the mean over the samples for the trackers).
+        pub transmittance: f32,
+        /// Sample variance of the per-sample values (0 for one sample).
+        pub variance: f32,
+        /// Density lookups (quadrature nodes, march steps, tentative collisions).
+        pub lookups: u32,
+        /// Tentative collisions that did not end a sample.
+        pub null_collisions: u32,
+        /// 0, or `VOLUME_STATUS_*` bits of a ray the CPU would refuse.
+        pub status: u32,
+        /// Padding.
+        pub pad: [u32; 3],
+    }
+}
+
+/// [`VolumeParams::estimator`] values.
+pub const VOLUME_ESTIMATOR_EXACT: u32 = 0;
+/// Midpoint march.
+pub const VOLUME_ESTIMATOR_MARCH: u32 = 1;
+/// Delta tracking.
+pub const VOLUME_ESTIMATOR_DELTA: u32 = 2;
+/// Ratio tracking.
+pub const VOLUME_ESTIMATOR_RATIO: u32 = 3;
+/// Residual ratio tracking.
+pub const VOLUME_ESTIMATOR_RESIDUAL: u32 = 4;
+/// [`VolumeParams::lookup_filter`] values: nearest.
+pub const VOLUME_FILTER_NEAREST: u32 = 0;
+/// Trilinear.
+pub const VOLUME_FILTER_TRILINEAR: u32 = 1;
+/// Stochastic.
+pub const VOLUME_FILTER_STOCHASTIC: u32 = 2;
+/// [`VolumeParams::format`] values: BC4 blocks.
+pub const VOLUME_FORMAT_BC4: u32 = 0;
+/// 8-bit normalized texels.
+pub const VOLUME_FORMAT_UNORM8: u32 = 1;
+/// 16-bit normalized texels.
+pub const VOLUME_FORMAT_UNORM16: u32 = 2;
+/// Half-precision texels.
+pub const VOLUME_FORMAT_F16: u32 = 3;
+/// Single-precision texels.
+pub const VOLUME_FORMAT_F32: u32 = 4;
+/// [`TransmittanceRecord::status`] bit: a tracker met a negative density (the CPU errors).
+pub const VOLUME_STATUS_NEGATIVE: u32 = 1;
+/// [`TransmittanceRecord::status`] bit: the march needs more than `u32::MAX` steps.
+pub const VOLUME_STATUS_MARCH_STEPS: u32 = 2;
+
 /// The tracers' own records, in declaration order.
 fn trace_records() -> Vec<RecordEntry> {
     vec![
@@ -142,6 +236,9 @@ fn trace_records() -> Vec<RecordEntry> {
         entry::<ScanParams>(),
         entry::<RayRecord>(),
         entry::<HitRecord>(),
+        entry::<hytrace_volume::BrickEntry>(),
+        entry::<VolumeParams>(),
+        entry::<TransmittanceRecord>(),
     ]
 }
 
@@ -160,6 +257,9 @@ pub fn generate() -> String {
     push_struct::<ScanParams>(&mut out);
     push_struct::<RayRecord>(&mut out);
     push_struct::<HitRecord>(&mut out);
+    push_struct::<hytrace_volume::BrickEntry>(&mut out);
+    push_struct::<VolumeParams>(&mut out);
+    push_struct::<TransmittanceRecord>(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
@@ -168,6 +268,32 @@ pub fn generate() -> String {
          const BOX_BVH_MAX_DEPTH: u32 = {}u;\n",
         <f32 as hytrace_csg::Real>::SURFACE_TOLERANCE,
         crate::cpu::BOX_BVH_MAX_DEPTH,
+    ));
+    let volume_consts = [
+        ("VOLUME_ESTIMATOR_EXACT", VOLUME_ESTIMATOR_EXACT),
+        ("VOLUME_ESTIMATOR_MARCH", VOLUME_ESTIMATOR_MARCH),
+        ("VOLUME_ESTIMATOR_DELTA", VOLUME_ESTIMATOR_DELTA),
+        ("VOLUME_ESTIMATOR_RATIO", VOLUME_ESTIMATOR_RATIO),
+        ("VOLUME_ESTIMATOR_RESIDUAL", VOLUME_ESTIMATOR_RESIDUAL),
+        ("VOLUME_FILTER_NEAREST", VOLUME_FILTER_NEAREST),
+        ("VOLUME_FILTER_TRILINEAR", VOLUME_FILTER_TRILINEAR),
+        ("VOLUME_FILTER_STOCHASTIC", VOLUME_FILTER_STOCHASTIC),
+        ("VOLUME_FORMAT_BC4", VOLUME_FORMAT_BC4),
+        ("VOLUME_FORMAT_UNORM8", VOLUME_FORMAT_UNORM8),
+        ("VOLUME_FORMAT_UNORM16", VOLUME_FORMAT_UNORM16),
+        ("VOLUME_FORMAT_F16", VOLUME_FORMAT_F16),
+        ("VOLUME_FORMAT_F32", VOLUME_FORMAT_F32),
+        ("VOLUME_STATUS_NEGATIVE", VOLUME_STATUS_NEGATIVE),
+        ("VOLUME_STATUS_MARCH_STEPS", VOLUME_STATUS_MARCH_STEPS),
+        ("VOLUME_NO_BRICK", hytrace_volume::NO_BRICK),
+        ("VOLUME_NO_SLOT", hytrace_volume::NO_SLOT),
+    ];
+    for (name, value) in volume_consts {
+        out.push_str(&format!("const {name}: u32 = {value}u;\n"));
+    }
+    out.push_str(&format!(
+        "// Infinity of the volume kernels (hytrace_trace::gpu::GPU_INF).\nconst VOLUME_INF: f32 = {:e};\n",
+        super::GPU_INF
     ));
     out
 }

@@ -1,0 +1,381 @@
+//! GPU transmittance through a bricked grid: the grid, its range mips and the estimator's
+//! parameters uploaded once, rays dispatched in batches under the device's binding limit
+//! (`shaders/kernels/transmittance.wgsl`). The CPU twin is
+//! [`hytrace_volume::transmittance_batch`] on the same [`BrickedGrid`]; `tests/gpu_volume.rs`
+//! compares them ray by ray.
+//!
+//! The kernel computes in f32, so the host hands it numbers of the grid's size: the index
+//! space is translated by a multiple of 64 voxels (the coarsest blocks stay aligned) to put
+//! the range mips' box near 0, and a ray whose origin lies far away is moved along itself
+//! (in f64) to its point nearest the box, its `t` counted from there. Transmittance depends
+//! only on lengths of `t`, which this keeps.
+
+use std::time::Instant;
+
+use bytemuck::Zeroable;
+use hytrace_volume::{
+    global_range, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray, TexelFormat,
+    TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, RANGE_LEVELS,
+};
+use wgpu::util::DeviceExt;
+
+use super::compose::compose;
+use super::context::{
+    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
+};
+use super::probe::dispatch_size;
+use super::records::{
+    RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA, VOLUME_ESTIMATOR_EXACT,
+    VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO, VOLUME_ESTIMATOR_RESIDUAL,
+    VOLUME_FILTER_NEAREST, VOLUME_FILTER_STOCHASTIC, VOLUME_FILTER_TRILINEAR, VOLUME_FORMAT_BC4,
+    VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_UNORM16, VOLUME_FORMAT_UNORM8,
+    VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
+};
+use super::tracer::{GpuTimes, GPU_INF};
+
+const KERNEL: &str = "kernels/transmittance";
+
+/// Storage buffers of the kernel: params, ranges, indirection, bricks, atlas, rays, results.
+const BINDINGS: u32 = 7;
+
+/// Side in voxels of the coarsest range blocks: the index space moves by multiples of it.
+const TOP_SIDE: i64 = 64;
+
+/// Rays whose origin (after the translation) lies within this many voxels of 0 are sent as
+/// they are; farther ones are moved to their point nearest the box.
+const NEAR: f64 = 65_536.0;
+
+/// A storage binding's bytes: at least 16 (bindings cannot be empty).
+fn storage_bytes(bytes: &[u8]) -> Vec<u8> {
+    let mut out = bytes.to_vec();
+    out.resize(out.len().max(16), 0);
+    out
+}
+
+/// A bricked grid on the GPU with its transmittance pipeline.
+pub struct GpuVolume<'a> {
+    grid: &'a BrickedGrid,
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    /// Ranges, indirection, bricks, atlas (bindings 1 to 4).
+    buffers: Vec<wgpu::Buffer>,
+    /// Everything of the parameters but the estimator's and the batch's.
+    base: VolumeParams,
+    /// The translation of index space (voxels, a multiple of [`TOP_SIDE`]).
+    shift: [f64; 3],
+    /// Centre of the range mips' box after the translation.
+    centre: [f64; 3],
+    upload_s: f64,
+}
+
+impl<'a> GpuVolume<'a> {
+    /// Uploads `grid` and its range mips and compiles the kernel. Arrays beyond the device's
+    /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, grid: &'a BrickedGrid) -> Result<GpuVolume<'a>, GpuError> {
+        let t0 = Instant::now();
+        let too_big = |why: String| Err(GpuError::SceneTooBig(why));
+        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
+        if per_stage < BINDINGS {
+            return too_big(format!(
+                "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
+            ));
+        }
+        let mips = grid.ranges();
+        if mips.levels.len() != RANGE_LEVELS {
+            return too_big(format!(
+                "the kernel walks {RANGE_LEVELS} range levels, the grid has {}",
+                mips.levels.len()
+            ));
+        }
+        let top = &mips.levels[RANGE_LEVELS - 1];
+        let shift_blocks = top.lo.map(i64::from);
+        // Block coordinates `lo` of blocks of `side` voxels in the translated index space.
+        let shifted = |lo: [i32; 3], side: u32| -> Result<[i32; 3], GpuError> {
+            let per_top = TOP_SIDE / i64::from(side);
+            let mut out = [0; 3];
+            for (o, (l, s)) in out.iter_mut().zip(lo.iter().zip(&shift_blocks)) {
+                *o = i32::try_from(i64::from(*l) - s * per_top).map_err(|_| {
+                    GpuError::SceneTooBig(format!("blocks of {side} voxels span too far"))
+                })?;
+            }
+            Ok(out)
+        };
+        let mut base = VolumeParams::zeroed();
+        let mut ranges: Vec<[f32; 2]> = Vec::new();
+        for (l, level) in mips.levels.iter().enumerate() {
+            let lo = shifted(level.lo, level.side)?;
+            base.level_lo[l] = [lo[0], lo[1], lo[2], level.side as i32];
+            let d = level.dims;
+            base.level_dims[l] = [d[0], d[1], d[2], ranges.len() as u32];
+            ranges.extend(level.ranges.iter().map(|r| [r.min, r.max]));
+        }
+        let (brick_lo, brick_dims) = grid.indirection_box();
+        base.brick_lo = shifted(brick_lo, BLOCK_SIDE as u32)?;
+        base.brick_dims = brick_dims;
+        base.format = match grid.format() {
+            TexelFormat::Bc4 => VOLUME_FORMAT_BC4,
+            TexelFormat::Unorm8 => VOLUME_FORMAT_UNORM8,
+            TexelFormat::Unorm16 => VOLUME_FORMAT_UNORM16,
+            TexelFormat::F16 => VOLUME_FORMAT_F16,
+            TexelFormat::F32 => VOLUME_FORMAT_F32,
+        };
+        let global = global_range(mips);
+        base.global_min = global.min;
+        base.global_max = global.max;
+        base.background = grid.background();
+        let side = TOP_SIDE as f64;
+        let shift = shift_blocks.map(|b| b as f64 * side);
+        let centre = std::array::from_fn(|k| f64::from(top.dims[k]) * side * 0.5 - 0.5);
+        let arrays: [(&str, Vec<u8>); 4] = [
+            (
+                "volume ranges",
+                storage_bytes(bytemuck::cast_slice(&ranges)),
+            ),
+            (
+                "volume indirection",
+                storage_bytes(bytemuck::cast_slice(grid.indirection())),
+            ),
+            (
+                "volume bricks",
+                storage_bytes(bytemuck::cast_slice(grid.bricks())),
+            ),
+            ("volume atlas", storage_bytes(grid.atlas())),
+        ];
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        if let Some((name, bytes)) = arrays.iter().find(|(_, b)| b.len() as u64 > limit) {
+            return too_big(format!(
+                "`{name}` has {} bytes, the device binds at most {limit}",
+                bytes.len()
+            ));
+        }
+        let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
+            name: KERNEL.to_string(),
+            problem,
+        })?;
+        let (pipeline, layout, buffers) =
+            ctx.checked("building the transmittance kernel", || {
+                let module = ctx
+                    .device
+                    .create_shader_module(wgpu::ShaderModuleDescriptor {
+                        label: Some(KERNEL),
+                        source: wgpu::ShaderSource::Wgsl(source.into()),
+                    });
+                let entries: Vec<_> = (0..BINDINGS)
+                    .map(|b| storage_layout_entry(b, b + 1 != BINDINGS))
+                    .collect();
+                let layout =
+                    ctx.device
+                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                            label: Some("transmittance"),
+                            entries: &entries,
+                        });
+                let pipeline_layout =
+                    ctx.device
+                        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                            label: Some("transmittance"),
+                            bind_group_layouts: &[Some(&layout)],
+                            immediate_size: 0,
+                        });
+                let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
+                let buffers: Vec<wgpu::Buffer> = arrays
+                    .iter()
+                    .map(|(name, bytes)| {
+                        ctx.device
+                            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                                label: Some(name),
+                                contents: bytes,
+                                usage: wgpu::BufferUsages::STORAGE,
+                            })
+                    })
+                    .collect();
+                (pipeline, layout, buffers)
+            })?;
+        Ok(GpuVolume {
+            grid,
+            pipeline,
+            layout,
+            buffers,
+            base,
+            shift,
+            centre,
+            upload_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Seconds spent uploading the grid and building the kernel (host wall clock).
+    pub fn upload_s(&self) -> f64 {
+        self.upload_s
+    }
+
+    /// The kernel's form of world ray `ray`: in the translated index space, moved near the
+    /// box when its origin is far; errors as [`IndexRay::from_world`].
+    fn kernel_ray(&self, ray: &Ray) -> Result<RayRecord, VolumeError> {
+        let r = IndexRay::from_world(ray, self.grid.map())?;
+        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.shift[k]);
+        let near = origin.iter().all(|c| c.abs() <= NEAR) && r.tmin.abs() <= NEAR;
+        let base = if near {
+            0.0
+        } else {
+            // The point nearest the box's centre, within [tmin, tmax].
+            let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            let to_centre = std::array::from_fn(|k| self.centre[k] - origin[k]);
+            (dot(to_centre, r.dir) / dot(r.dir, r.dir))
+                .min(r.tmax)
+                .max(r.tmin)
+        };
+        let gpu_f32 = f64::from(GPU_INF);
+        let local = |t: f64| (t - base).clamp(-gpu_f32, gpu_f32) as f32;
+        Ok(RayRecord {
+            origin: std::array::from_fn(|k| (origin[k] + base * r.dir[k]) as f32),
+            tmin: local(r.tmin),
+            direction: r.dir.map(|v| v as f32),
+            tmax: local(r.tmax),
+        })
+    }
+
+    /// The transmittance of every world ray (ray `i` uses the random streams of index `i`),
+    /// with the upload, kernel and readback seconds of the batches. Errors as the CPU's
+    /// [`hytrace_volume::transmittance_batch`] on bad parameters or rays (NaN, zero
+    /// direction), a march of more than `u32::MAX` steps, or a tracker meeting a negative
+    /// density.
+    pub fn transmittance(
+        &self,
+        ctx: &GpuContext,
+        rays: &[Ray],
+        params: &TransmittanceParams,
+    ) -> anyhow::Result<(Vec<Estimate>, GpuTimes)> {
+        params.validate(self.grid, self.grid.ranges())?;
+        if u32::try_from(rays.len()).is_err() {
+            anyhow::bail!(
+                "transmittance: {} rays in one batch, at most {}",
+                rays.len(),
+                u32::MAX
+            );
+        }
+        let records = rays
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                self.kernel_ray(r)
+                    .map_err(|e| VolumeError(format!("transmittance: ray {i}: {}", e.0)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut p = self.base;
+        let (estimator, step) = match params.estimator {
+            Estimator::Exact => (VOLUME_ESTIMATOR_EXACT, 0.0),
+            Estimator::March { step } => (VOLUME_ESTIMATOR_MARCH, step as f32),
+            Estimator::Delta => (VOLUME_ESTIMATOR_DELTA, 0.0),
+            Estimator::Ratio => (VOLUME_ESTIMATOR_RATIO, 0.0),
+            Estimator::Residual => (VOLUME_ESTIMATOR_RESIDUAL, 0.0),
+        };
+        p.estimator = estimator;
+        p.march_step = step;
+        p.lookup_filter = match params.filter {
+            Filter::Nearest => VOLUME_FILTER_NEAREST,
+            Filter::Trilinear => VOLUME_FILTER_TRILINEAR,
+            Filter::Stochastic => VOLUME_FILTER_STOCHASTIC,
+        };
+        (p.global, p.finest) = match params.majorant {
+            Majorant::Global => (1, 0),
+            Majorant::Local { level } => (0, level as u32),
+        };
+        p.spp = params.spp;
+        p.seed = params.seed;
+        p.density_scale = params.density_scale as f32;
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        // Batches also bounded to keep one dispatch short (drivers may kill long ones).
+        let batch = (limit / size_of::<TransmittanceRecord>() as u64).clamp(1, 1 << 20) as usize;
+        let mut out = Vec::with_capacity(rays.len());
+        let mut times = GpuTimes::default();
+        for (b, chunk) in records.chunks(batch).enumerate() {
+            p.ray_count = chunk.len() as u32;
+            p.ray_offset = (b * batch) as u32;
+            let results = self.dispatch(ctx, &p, chunk, &mut times)?;
+            for (j, r) in results.iter().enumerate() {
+                let i = b * batch + j;
+                if r.status & VOLUME_STATUS_NEGATIVE != 0 {
+                    anyhow::bail!(
+                        "transmittance: ray {i} meets values below 0; delta, ratio and residual \
+                         tracking need a density >= 0"
+                    );
+                }
+                if r.status & VOLUME_STATUS_MARCH_STEPS != 0 {
+                    anyhow::bail!(
+                        "transmittance: ray {i}: a march step of {step} needs more than {} steps",
+                        u32::MAX
+                    );
+                }
+                out.push(Estimate {
+                    transmittance: f64::from(r.transmittance),
+                    variance: f64::from(r.variance),
+                    lookups: u64::from(r.lookups),
+                    null_collisions: u64::from(r.null_collisions),
+                });
+            }
+        }
+        Ok((out, times))
+    }
+
+    /// One batch: upload, dispatch, wait, read back.
+    fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        params: &VolumeParams,
+        rays: &[RayRecord],
+        times: &mut GpuTimes,
+    ) -> Result<Vec<TransmittanceRecord>, GpuError> {
+        let n = rays.len();
+        let out_size = (n.max(1) * size_of::<TransmittanceRecord>()) as u64;
+        let t0 = Instant::now();
+        let results = ctx.checked("transmittance dispatch", || {
+            let input = |label, bytes: &[u8]| {
+                ctx.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents: &storage_bytes(bytes),
+                        usage: wgpu::BufferUsages::STORAGE,
+                    })
+            };
+            let results = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("transmittances"),
+                size: out_size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let mut buffers = vec![input("volume params", bytemuck::bytes_of(params))];
+            buffers.extend(self.buffers.iter().cloned());
+            buffers.push(input("volume rays", bytemuck::cast_slice(rays)));
+            buffers.push(results.clone());
+            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("transmittance"),
+                layout: &self.layout,
+                entries: &whole_buffer_entries(&buffers),
+            });
+            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            ctx.queue.submit([encoder.finish()]);
+            results
+        })?;
+        let t1 = Instant::now();
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Operation {
+                what: "transmittance kernel".to_string(),
+                problem: e.to_string(),
+            })?;
+        let t2 = Instant::now();
+        let bytes = ctx.read_buffer(&results, out_size)?;
+        times.upload_s += (t1 - t0).as_secs_f64();
+        times.kernel_s += (t2 - t1).as_secs_f64();
+        times.readback_s += t2.elapsed().as_secs_f64();
+        let mut out: Vec<TransmittanceRecord> = bytemuck::pod_collect_to_vec(&bytes);
+        out.truncate(n);
+        Ok(out)
+    }
+}

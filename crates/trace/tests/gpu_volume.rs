@@ -1,0 +1,577 @@
+//! The GPU transmittance kernel against its CPU twin (`transmittance_batch` in f64 on the
+//! same bricked grid), ray by ray, on lavapipe in CI: every texel format x filter x
+//! estimator x majorant, over ray families with named hard cases; bad input; and the
+//! `volume transmittance --backend gpu|auto` command line.
+//!
+//! Agreement (all printed, with every disagreement):
+//! - `exact` (any filter) is continuous in the ray's positions: every ray within
+//!   [`DETERMINISTIC_TOL`] (measured on lavapipe: at most 2.2e-6).
+//! - the others decide by comparisons: the march's step count `ceil(length / step)` (a
+//!   face-aligned ray whose length is an exact multiple of the step gets n or n + 1 steps by
+//!   rounding), a nearest lookup at a point within f32 rounding of a half-integer, a free
+//!   flight ending within rounding of a segment's end, a stochastic or collision test at its
+//!   threshold. The hard-case families put points exactly on such
+//!   ties (midpoints on voxel faces, rays through block edges and corners, where f64 keeps a
+//!   sliver segment that f32 rounds away, so the tracker's restart draws one number more and
+//!   the streams shift). There at least [`SAME_FRACTION`] of the rays agree within
+//!   [`DETERMINISTIC_TOL`] (march) or [`SAME_TOL`] (trackers: the same samples, as the same
+//!   seed streams give), and the trackers' means over all rays agree within four standard
+//!   errors.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::Rng;
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_trace::gpu::{GpuContext, GpuVolume};
+use hytrace_volume::{
+    fog_sphere, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator, Filter, GridMap,
+    Majorant, Ray, TexelFormat, TransmittanceParams, VoxelGrid,
+};
+
+/// Largest |GPU - CPU| of a deterministic estimate.
+const DETERMINISTIC_TOL: f64 = 1e-5;
+/// A tracked estimate counts as the same samples within this.
+const SAME_TOL: f64 = 1e-4;
+/// Least fraction of rays agreeing where comparisons decide.
+const SAME_FRACTION: f64 = 0.97;
+
+/// A named set of world rays.
+struct Family {
+    name: &'static str,
+    rays: Vec<Ray>,
+}
+
+fn unit(d: [f64; 3]) -> [f64; 3] {
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    d.map(|v| v / n)
+}
+
+/// A grid with noise, constant bricks (no texels), an empty hole and `background`, spanning
+/// negative and positive coordinates, placed at `map`.
+fn noisy_grid(map: GridMap, background: f32) -> DenseGrid {
+    let mut g = DenseGrid::new([-37, -21, -20], [70, 45, 52], background)
+        .unwrap()
+        .with_map(map);
+    let mut rng = Rng(7);
+    for z in -20..32i64 {
+        for y in -21..24i64 {
+            for x in -37..33i64 {
+                let v = if (0..8).contains(&x) && (0..8).contains(&y) {
+                    // A constant brick column.
+                    0.75
+                } else if x > 16 && y > 8 {
+                    // Empty space (the background).
+                    continue;
+                } else {
+                    (rng.unit() * 2.0) as f32
+                };
+                g.set([x, y, z], v);
+            }
+        }
+    }
+    g
+}
+
+/// Ray families in the index space of a grid whose box spans about `lo..hi`, mapped to
+/// world space by `map`.
+fn families(map: &GridMap, lo: [f64; 3], hi: [f64; 3], random: usize) -> Vec<Family> {
+    let mut rng = Rng(0xbeef);
+    let inside = |rng: &mut Rng| -> [f64; 3] {
+        std::array::from_fn(|k| lo[k] - 6.0 + (hi[k] - lo[k] + 12.0) * rng.unit())
+    };
+    let world = |o: [f64; 3], d: [f64; 3], tmin: f64, tmax: f64| {
+        // Index direction d, scaled so that t is world length along it.
+        let wd = map.index_to_world(d);
+        let w0 = map.index_to_world([0.0; 3]);
+        let wd: [f64; 3] = std::array::from_fn(|k| wd[k] - w0[k]);
+        let n = (wd[0] * wd[0] + wd[1] * wd[1] + wd[2] * wd[2]).sqrt();
+        Ray::new(map.index_to_world(o), wd.map(|v| v / n), tmin * n, tmax * n)
+    };
+    let mut out = Vec::new();
+    let mut random_rays = Vec::new();
+    for i in 0..random {
+        let o = inside(&mut rng);
+        let d = unit(std::array::from_fn(|_| 2.0 * rng.unit() - 1.0));
+        let tmax = if i % 3 == 0 {
+            20.0 * rng.unit()
+        } else {
+            f64::INFINITY
+        };
+        random_rays.push(world(o, d, 0.0, tmax));
+    }
+    out.push(Family {
+        name: "random",
+        rays: random_rays,
+    });
+    let mut zero = Vec::new();
+    for i in 0..random / 2 {
+        let o = inside(&mut rng);
+        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        d[i % 3] = 0.0;
+        if i % 2 == 0 {
+            d[(i + 1) % 3] = 0.0;
+        }
+        if d.iter().all(|v| *v == 0.0) {
+            continue;
+        }
+        zero.push(world(o, unit(d), -3.0, f64::INFINITY));
+    }
+    out.push(Family {
+        name: "zero direction components",
+        rays: zero,
+    });
+    // Along brick and block faces (x = 8j - 0.5), voxel planes (integers) and cell centres.
+    let mut faces = Vec::new();
+    for (j, plane) in [-24.5, -0.5, 7.5, 15.5, 0.0, 8.0, 3.25]
+        .into_iter()
+        .enumerate()
+    {
+        for d in [
+            [0.0, 1.0, 0.0],
+            [0.0, 0.6, 0.8],
+            [0.0, -0.28, 0.96],
+            [0.0, 0.0, -1.0],
+        ] {
+            let y = lo[1] + (j as f64 * 5.3) % (hi[1] - lo[1]);
+            let o = [plane, y - 40.0 * d[1], 3.0 - 40.0 * d[2]];
+            faces.push(world(o, d, 0.0, f64::INFINITY));
+            // The same along an edge (x and z on faces).
+            faces.push(world(
+                [plane, lo[1] - 10.0, 7.5],
+                [0.0, 1.0, 0.0],
+                0.0,
+                200.0,
+            ));
+        }
+    }
+    out.push(Family {
+        name: "along brick faces",
+        rays: faces,
+    });
+    // Starting exactly on faces, leaving, entering, along them; and through block corners.
+    let mut starts = Vec::new();
+    for o in [
+        [7.5, 3.0, 3.0],
+        [-0.5, -0.5, -0.5],
+        [15.5, 7.5, 2.0],
+        [0.0, 8.0, 7.5],
+    ] {
+        for d in [
+            [1.0, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.6, 0.8, 0.0],
+            [-0.48, 0.6, 0.64],
+            [0.0, 0.0, 1.0],
+        ] {
+            starts.push(world(o, d, 0.0, 60.0));
+        }
+    }
+    starts.push(world(
+        [-40.5, -24.5, -24.5],
+        unit([1.0, 1.0, 1.0]),
+        0.0,
+        f64::INFINITY,
+    ));
+    out.push(Family {
+        name: "starting on a boundary",
+        rays: starts,
+    });
+    // Origins far away (1e6 voxels), aimed through the box.
+    let mut far = Vec::new();
+    for _ in 0..random / 4 {
+        let target = inside(&mut rng);
+        let d = unit(std::array::from_fn(|_| 2.0 * rng.unit() - 1.0));
+        let o = std::array::from_fn(|k| target[k] - 1e6 * d[k]);
+        far.push(world(o, d, 0.0, f64::INFINITY));
+    }
+    far.push(world([-1e6, 3.0, 2.5], [1.0, 0.0, 0.0], 0.0, f64::INFINITY));
+    out.push(Family {
+        name: "far origins",
+        rays: far,
+    });
+    let mut empty = Vec::new();
+    for (tmin, tmax) in [(5.0, 5.0), (10.0, 2.0), (0.0, 0.0), (30.0, -30.0)] {
+        empty.push(world([0.0, 1.0, 2.0], unit([1.0, 0.5, 0.25]), tmin, tmax));
+    }
+    out.push(Family {
+        name: "empty and reversed",
+        rays: empty,
+    });
+    let mut miss = Vec::new();
+    for k in 0..3 {
+        let mut o = [0.0; 3];
+        o[k] = hi[k] + 80.0;
+        let mut d = [0.0; 3];
+        d[(k + 1) % 3] = 1.0;
+        miss.push(world(o, d, -100.0, 100.0));
+        miss.push(world(o, unit([0.3, 0.4, 0.5]), 0.0, f64::INFINITY));
+    }
+    out.push(Family {
+        name: "missing the box",
+        rays: miss,
+    });
+    out
+}
+
+/// What one comparison found.
+#[derive(Default)]
+struct Tally {
+    rays: usize,
+    /// Largest |GPU - CPU| over the agreeing rays.
+    max_same_diff: f64,
+    same: usize,
+    disagreements: usize,
+}
+
+/// Whether the estimate is continuous in the positions along the ray (no comparison
+/// decides it), so every ray must agree.
+fn continuous(params: &TransmittanceParams) -> bool {
+    params.estimator == Estimator::Exact
+}
+
+/// The GPU's and CPU's estimates for `rays` under `params`, and a line of their agreement;
+/// prints every disagreement beyond `tol`.
+fn compare(
+    label: &str,
+    gpu: &GpuVolume,
+    ctx: &GpuContext,
+    grid: &BrickedGrid,
+    families: &[Family],
+    params: &TransmittanceParams,
+) -> (Tally, f64, f64, f64) {
+    let rays: Vec<Ray> = families.iter().flat_map(|f| f.rays.clone()).collect();
+    let want = transmittance_batch(grid, grid.ranges(), &rays, params).unwrap();
+    let (got, _) = gpu.transmittance(ctx, &rays, params).unwrap();
+    assert_eq!(want.len(), got.len());
+    let tol = match params.estimator {
+        Estimator::Exact | Estimator::March { .. } => DETERMINISTIC_TOL,
+        _ => SAME_TOL,
+    };
+    let mut tally = Tally::default();
+    let (mut sum_w, mut sum_g, mut var) = (0.0, 0.0, 0.0);
+    let mut i = 0;
+    for fam in families {
+        for ray in &fam.rays {
+            let (w, g): (&Estimate, &Estimate) = (&want[i], &got[i]);
+            let diff = (w.transmittance - g.transmittance).abs();
+            tally.rays += 1;
+            if diff <= tol {
+                tally.same += 1;
+                tally.max_same_diff = tally.max_same_diff.max(diff);
+            } else {
+                tally.disagreements += 1;
+                println!(
+                    "{label}: {} ray {i} {ray:?}: cpu {} gpu {} (|diff| {diff:.3e})",
+                    fam.name, w.transmittance, g.transmittance
+                );
+            }
+            sum_w += w.transmittance;
+            sum_g += g.transmittance;
+            var += (w.variance + g.variance) / f64::from(params.spp);
+            i += 1;
+        }
+    }
+    let n = tally.rays as f64;
+    (tally, sum_w / n, sum_g / n, var.sqrt() / n)
+}
+
+fn params(
+    estimator: Estimator,
+    filter: Filter,
+    majorant: Majorant,
+    scale: f64,
+) -> TransmittanceParams {
+    TransmittanceParams {
+        estimator,
+        density_scale: scale,
+        spp: 4,
+        seed: 17,
+        filter,
+        majorant,
+    }
+}
+
+const ESTIMATORS: [Estimator; 5] = [
+    Estimator::Exact,
+    Estimator::March { step: 0.7 },
+    Estimator::Delta,
+    Estimator::Ratio,
+    Estimator::Residual,
+];
+const FILTERS: [Filter; 3] = [Filter::Nearest, Filter::Trilinear, Filter::Stochastic];
+const MAJORANTS: [Majorant; 3] = [
+    Majorant::Local { level: 0 },
+    Majorant::Local { level: 2 },
+    Majorant::Global,
+];
+
+/// Every estimator x filter x majorant on `grid` over `families`, asserted as the module
+/// documentation says.
+fn check_grid(name: &str, ctx: &GpuContext, grid: &BrickedGrid, families: &[Family], scale: f64) {
+    let gpu = GpuVolume::new(ctx, grid).unwrap();
+    for estimator in ESTIMATORS {
+        let (mut max_diff, mut least, mut disagreements) = (0.0f64, 1.0f64, 0);
+        for filter in FILTERS {
+            for majorant in MAJORANTS {
+                let p = params(estimator, filter, majorant, scale);
+                let label = format!("{name} {estimator:?} {filter:?} {majorant:?}");
+                let (t, mean_w, mean_g, se) = compare(&label, &gpu, ctx, grid, families, &p);
+                let fraction = t.same as f64 / t.rays as f64;
+                println!(
+                    "{label}: {} rays, same {:.4}, max |diff| of those {:.3e}, means cpu {mean_w:.6} gpu {mean_g:.6}",
+                    t.rays, fraction, t.max_same_diff
+                );
+                (max_diff, least) = (max_diff.max(t.max_same_diff), least.min(fraction));
+                disagreements += t.disagreements;
+                if continuous(&p) {
+                    assert_eq!(t.disagreements, 0, "{label}: see the lines above");
+                    continue;
+                }
+                assert!(fraction >= SAME_FRACTION, "{label}: same {fraction}");
+                if !matches!(estimator, Estimator::March { .. }) {
+                    assert!(
+                        (mean_w - mean_g).abs() <= 4.0 * se + 1e-6,
+                        "{label}: means {mean_w} {mean_g} (standard error {se})"
+                    );
+                }
+            }
+        }
+        println!(
+            "SUMMARY {name} {estimator:?}: over filters and majorants max |diff| {max_diff:.3e} \
+             on agreeing rays, least fraction agreeing {least:.4}, {disagreements} disagreements"
+        );
+    }
+}
+
+fn bounds(grid: &BrickedGrid) -> ([f64; 3], [f64; 3]) {
+    let (lo, dims) = grid.indirection_box();
+    (
+        lo.map(|c| f64::from(c) * 8.0),
+        std::array::from_fn(|k| f64::from(lo[k] + dims[k] as i32) * 8.0),
+    )
+}
+
+#[test]
+fn every_format_filter_estimator_and_majorant_matches_the_cpu() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let source = noisy_grid(GridMap::IDENTITY, 0.0);
+    for format in TexelFormat::ALL {
+        let grid = BrickedGrid::convert(&source, format).unwrap();
+        let (lo, hi) = bounds(&grid);
+        let fams = families(grid.map(), lo, hi, 160);
+        check_grid(&format!("noisy {format}"), &ctx, &grid, &fams, 0.02);
+    }
+}
+
+/// A fog sphere with half-voxel world units placed 1e5 world units out, and the noisy grid
+/// with a background of 0.01 moved 2^20 voxels out in index space: the host's translations
+/// keep the kernel's f32 numbers grid-sized.
+#[test]
+fn far_placements_match_the_cpu() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let map = GridMap::uniform(0.5, [1e5, -3.0, 2.0]).unwrap();
+    let sphere = fog_sphere(14.0, 3.0).unwrap().with_map(map);
+    let grid = BrickedGrid::convert(&sphere, TexelFormat::F16).unwrap();
+    let (lo, hi) = bounds(&grid);
+    let fams = families(grid.map(), lo, hi, 120);
+    check_grid("sphere at 1e5", &ctx, &grid, &fams, 0.3);
+
+    let mut moved = noisy_grid(GridMap::IDENTITY, 0.01);
+    moved.origin = [1 << 20, -(1 << 20), 3 << 18];
+    let grid = BrickedGrid::convert(&moved, TexelFormat::Unorm16).unwrap();
+    let (lo, hi) = bounds(&grid);
+    let fams = families(grid.map(), lo, hi, 120);
+    check_grid("noisy at 2^20", &ctx, &grid, &fams, 0.02);
+}
+
+/// Drivers inline every call: the kernel's costly functions each have one call site.
+#[test]
+fn costly_functions_are_called_once() {
+    let source = hytrace_trace::gpu::compose::compose("kernels/transmittance").unwrap();
+    for f in [
+        "walk_start",
+        "walk_next",
+        "cells_start",
+        "cells_next",
+        "grid_fetch",
+        "grid_voxel",
+        "atlas_texel",
+        "bc4_texel",
+        "trilinear_lerp",
+        "trilinear_sum",
+    ] {
+        let calls = source.matches(&format!("{f}(")).count();
+        let definitions = source.matches(&format!("fn {f}(")).count();
+        assert_eq!((definitions, calls - definitions), (1, 1), "{f}");
+    }
+}
+
+#[test]
+fn bad_input_is_refused_clearly() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let grid = BrickedGrid::convert(&fog_sphere(6.0, 2.0).unwrap(), TexelFormat::F32).unwrap();
+    let gpu = GpuVolume::new(&ctx, &grid).unwrap();
+    let good = Ray::new([-20.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0, f64::INFINITY);
+    let nan = Ray::new([f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0, 1.0);
+    let zero = Ray::new([0.0; 3], [0.0; 3], 0.0, 1.0);
+    let p = params(
+        Estimator::Ratio,
+        Filter::Trilinear,
+        Majorant::Local { level: 0 },
+        1.0,
+    );
+    for (bad, why) in [(nan, "origin must be finite"), (zero, "non-zero")] {
+        let err = gpu
+            .transmittance(&ctx, &[good, bad], &p)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ray 1") && err.contains(why), "{err}");
+    }
+    let zero_spp = TransmittanceParams { spp: 0, ..p };
+    let err = gpu
+        .transmittance(&ctx, &[good], &zero_spp)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("spp must be at least 1"), "{err}");
+    // Negative densities: refused by the trackers, as on the CPU.
+    let mut negative = DenseGrid::new([0; 3], [4, 4, 4], 0.0).unwrap();
+    negative.set([1, 1, 1], -1.0);
+    let grid = BrickedGrid::convert(&negative, TexelFormat::F32).unwrap();
+    let gpu = GpuVolume::new(&ctx, &grid).unwrap();
+    let through = Ray::new([-5.0, 1.0, 1.0], [1.0, 0.0, 0.0], 0.0, f64::INFINITY);
+    assert!(transmittance_batch(&grid, grid.ranges(), &[through], &p).is_err());
+    let err = gpu
+        .transmittance(&ctx, &[through], &p)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("density >= 0"), "{err}");
+    let exact = TransmittanceParams {
+        estimator: Estimator::Exact,
+        ..p
+    };
+    let (t, _) = gpu.transmittance(&ctx, &[through], &exact).unwrap();
+    assert!(t[0].transmittance > 1.0, "{}", t[0].transmittance);
+    assert!(grid.background() == 0.0);
+}
+
+fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap()
+}
+
+fn read_f64(path: &Path) -> Vec<f64> {
+    let a = read_array(path).unwrap();
+    assert_eq!(a.scalar, Scalar::F64);
+    bytemuck::pod_collect_to_vec(&a.bytes)
+}
+
+/// `volume transmittance --backend gpu` writes what the CPU writes (within f32), on a
+/// bricked representation and on `--repr nanovdb` (converted to f32 bricks, as `--stats`
+/// says); without an adapter `gpu` fails and writes nothing, `auto` falls back to the CPU.
+#[test]
+fn transmittance_cli_on_the_gpu() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).display().to_string();
+    let mut rows: Vec<f64> = Vec::new();
+    for i in 0..40 {
+        let a = f64::from(i) * 0.157;
+        rows.extend([-30.0, a.sin() * 5.0, a.cos() * 3.0, 0.0, 1.0, 0.0, 0.0]);
+        rows.push(if i % 2 == 0 { f64::INFINITY } else { 35.0 });
+    }
+    write_array(
+        Path::new(&p("rays.npy")),
+        Scalar::F64,
+        &[40, 8],
+        bytemuck::cast_slice(&rows),
+    )
+    .unwrap();
+    let run = |backend: &str, repr: &str, out: &str, env: &[(&str, &str)]| {
+        let args = [
+            "volume",
+            "transmittance",
+            "sphere:12,0.5",
+            "--rays",
+            &p("rays.npy"),
+            "--out",
+            out,
+            "--repr",
+            repr,
+            "--density-scale",
+            "0.05",
+            "--stats",
+            "--backend",
+            backend,
+        ];
+        hytrace(&args, env)
+    };
+    for repr in ["unorm8", "nanovdb"] {
+        let cpu = run("cpu", repr, &p("cpu.npy"), &[]);
+        assert!(
+            cpu.status.success(),
+            "{}",
+            String::from_utf8_lossy(&cpu.stderr)
+        );
+        let gpu = run("gpu", repr, &p("gpu.npy"), &[]);
+        assert!(
+            gpu.status.success(),
+            "{}",
+            String::from_utf8_lossy(&gpu.stderr)
+        );
+        let stats: serde_json::Value = serde_json::from_slice(&gpu.stdout).unwrap();
+        assert_eq!(stats["backend"], "gpu");
+        assert!(stats["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+        assert!(stats["gpu_kernel_s"].as_f64().is_some());
+        let want_repr = if repr == "nanovdb" {
+            "f32 (converted from nanovdb)"
+        } else {
+            repr
+        };
+        assert_eq!(stats["gpu_repr"], want_repr);
+        let (want, got) = (
+            read_f64(Path::new(&p("cpu.npy"))),
+            read_f64(Path::new(&p("gpu.npy"))),
+        );
+        assert_eq!(want.len(), 40);
+        assert!(want.iter().any(|t| *t < 0.9), "{want:?}");
+        for (i, (w, g)) in want.iter().zip(&got).enumerate() {
+            assert!(
+                (w - g).abs() <= DETERMINISTIC_TOL,
+                "ray {i}: cpu {w} gpu {g}"
+            );
+        }
+    }
+    // No adapter: WGPU_BACKEND names one this build does not have.
+    let none = [("WGPU_BACKEND", "metal")];
+    let no_gpu = run("gpu", "f32", &p("none.npy"), &none);
+    let err = String::from_utf8_lossy(&no_gpu.stderr);
+    assert!(
+        !no_gpu.status.success() && err.contains("no GPU adapter found"),
+        "{err}"
+    );
+    assert!(!Path::new(&p("none.npy")).exists());
+    let auto = run("auto", "f32", &p("auto.npy"), &none);
+    assert!(
+        auto.status.success(),
+        "{}",
+        String::from_utf8_lossy(&auto.stderr)
+    );
+    assert!(String::from_utf8_lossy(&auto.stderr).contains("--backend auto traces on the CPU"));
+    let stats: serde_json::Value = serde_json::from_slice(&auto.stdout).unwrap();
+    assert_eq!(stats["backend"], "cpu");
+}

@@ -1,0 +1,139 @@
+// Voxel reads of the bricked grid (twin of hytrace_volume::BrickedGrid::voxel): indirection,
+// brick table, atlas texel, decode `offset + t * scale`; and the two trilinear blends of the
+// CPU (the lookup's weighted sum and the exact estimator's nested lerps), in its order of
+// operations. No hardware filtering.
+// #import volume/bindings
+
+// Code-unit value of texel `j` (4 * row + column) of a BC4 block at atlas word `w`
+// (hytrace_volume bc4.rs: endpoints in bytes 0 and 1, 3-bit indices from bit 16).
+fn bc4_texel(w: u32, j: u32) -> f32 {
+    let lo = atlas[w];
+    let hi = atlas[w + 1u];
+    let b = 16u + 3u * j;
+    var index: u32;
+    if b + 3u <= 32u {
+        index = (lo >> b) & 7u;
+    } else if b >= 32u {
+        index = (hi >> (b - 32u)) & 7u;
+    } else {
+        index = ((lo >> b) | (hi << (32u - b))) & 7u;
+    }
+    let r0 = lo & 255u;
+    let r1 = (lo >> 8u) & 255u;
+    let a = f32(r0);
+    let c = f32(r1);
+    if index == 0u {
+        return a;
+    }
+    if index == 1u {
+        return c;
+    }
+    if r0 > r1 {
+        return (f32(8u - index) * a + f32(index - 1u) * c) / 7.0;
+    }
+    if index == 6u {
+        return 0.0;
+    }
+    if index == 7u {
+        return 255.0;
+    }
+    return (f32(6u - index) * a + f32(index - 1u) * c) / 5.0;
+}
+
+// The IEEE half in the low 16 bits of `h` as f32, exactly (in integer arithmetic: no
+// float16 capability needed). The bricked format never stores infinities or NaNs.
+fn half_to_f32(h: u32) -> f32 {
+    let sign = (h & 0x8000u) << 16u;
+    let e = (h >> 10u) & 31u;
+    let m = h & 1023u;
+    if e == 0u {
+        // Zero or subnormal: m * 2^-24, exact in f32.
+        return bitcast<f32>(sign | bitcast<u32>(f32(m) * (1.0 / 16777216.0)));
+    }
+    return bitcast<f32>(sign | ((e + 112u) << 23u) | (m << 13u));
+}
+
+// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot`.
+fn atlas_texel(slot: u32, i: u32) -> f32 {
+    switch vparams.format {
+        case VOLUME_FORMAT_F32: {
+            return bitcast<f32>(atlas[slot * 512u + i]);
+        }
+        case VOLUME_FORMAT_F16: {
+            return half_to_f32(atlas[slot * 256u + (i >> 1u)] >> (16u * (i & 1u)));
+        }
+        case VOLUME_FORMAT_UNORM16: {
+            return f32((atlas[slot * 256u + (i >> 1u)] >> (16u * (i & 1u))) & 0xffffu);
+        }
+        case VOLUME_FORMAT_UNORM8: {
+            return f32((atlas[slot * 128u + (i >> 2u)] >> (8u * (i & 3u))) & 0xffu);
+        }
+        default: {
+            // BC4: per z slice four 4x4 blocks of two words, by block row then column.
+            let x = i & 7u;
+            let y = (i >> 3u) & 7u;
+            let z = i >> 6u;
+            let block = 4u * z + 2u * (y >> 2u) + (x >> 2u);
+            return bc4_texel(slot * 64u + 2u * block, 4u * (y & 3u) + (x & 3u));
+        }
+    }
+}
+
+// Voxel `c`: the background outside the stored bricks, `offset` for a constant brick.
+fn grid_voxel(c: vec3<i32>) -> f32 {
+    let local = (c >> vec3<u32>(3u)) - vec3<i32>(vparams.brick_lo[0], vparams.brick_lo[1], vparams.brick_lo[2]);
+    let dims = vec3<i32>(vec3<u32>(vparams.brick_dims[0], vparams.brick_dims[1], vparams.brick_dims[2]));
+    if any(local < vec3<i32>(0)) || any(local >= dims) {
+        return vparams.background;
+    }
+    let l = vec3<u32>(local);
+    let d = vec3<u32>(dims);
+    let e = indirection[(l.z * d.y + l.y) * d.x + l.x];
+    if e == VOLUME_NO_BRICK {
+        return vparams.background;
+    }
+    let entry = bricks[e];
+    if entry.atlas_slot == VOLUME_NO_SLOT {
+        return entry.offset;
+    }
+    let b = vec3<u32>(c & vec3<i32>(7));
+    return entry.offset + atlas_texel(entry.atlas_slot, b.x | (b.y << 3u) | (b.z << 6u)) * entry.scale;
+}
+
+// Voxels `cell + (c & 1, c >> 1 & 1, c >> 2)` for c < count (1 or 8): the one read place.
+fn grid_fetch(cell: vec3<i32>, count: u32) -> array<f32, 8> {
+    var v: array<f32, 8>;
+    for (var c = 0u; c < count; c++) {
+        v[c] = grid_voxel(cell + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)));
+    }
+    return v;
+}
+
+// The trilinear lookup's blend (hytrace_volume::sample_trilinear): the sum over the corners
+// of the product of the per-axis weights, zero weights skipped.
+fn trilinear_sum(v: array<f32, 8>, f: vec3<f32>) -> f32 {
+    var sum = 0.0;
+    for (var c = 0u; c < 8u; c++) {
+        var w = 1.0;
+        for (var k = 0u; k < 3u; k++) {
+            w *= select(1.0 - f[k], f[k], ((c >> k) & 1u) == 1u);
+        }
+        if w != 0.0 {
+            sum += w * v[c];
+        }
+    }
+    return sum;
+}
+
+fn lerp1(a: f32, b: f32, w: f32) -> f32 {
+    return a + (b - a) * w;
+}
+
+// The exact estimator's blend (transmittance.rs `trilinear`): lerps along x, y, then z.
+fn trilinear_lerp(v: array<f32, 8>, f: vec3<f32>) -> f32 {
+    let x0 = lerp1(v[0], v[1], f.x);
+    let x1 = lerp1(v[2], v[3], f.x);
+    let x2 = lerp1(v[4], v[5], f.x);
+    let x3 = lerp1(v[6], v[7], f.x);
+    return lerp1(lerp1(x0, x1, f.y), lerp1(x2, x3, f.y), f.z);
+}
