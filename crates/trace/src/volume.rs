@@ -440,6 +440,7 @@ pub fn transmittance_stats(run: &TransmittanceRun, load_s: f64) -> serde_json::V
         line["gpu_upload_s"] = g.times.upload_s.into();
         line["gpu_kernel_s"] = g.times.kernel_s.into();
         line["gpu_readback_s"] = g.times.readback_s.into();
+        line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
     }
     line
 }

@@ -6,10 +6,12 @@ pub mod oneshot;
 pub mod probe;
 pub mod records;
 mod scene;
+mod timing;
 mod tracer;
 mod volume;
 
 pub use context::{GpuContext, GpuError};
 pub use scene::GpuScene;
-pub use tracer::{primitive_feature, scene_features, GpuTimes, GpuTracer, GPU_INF};
+pub use timing::GpuTimes;
+pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};
 pub use volume::GpuVolume;

@@ -13,6 +13,7 @@ use super::context::{
 };
 use super::probe::dispatch_size;
 use super::records::{HitRecord, RayRecord, ScanParams};
+use super::timing::{finish_batch, GpuTimes, PassTimer};
 use crate::cpu::gpu_export::SceneArrays;
 use crate::cpu::CpuScene;
 
@@ -76,20 +77,6 @@ fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
         bytes.resize(size_of::<T>().max(16), 0);
     }
     bytes
-}
-
-/// Seconds spent in each phase of a GPU scan: wall clock on the host, and the kernels'
-/// own time from GPU timestamps where the device has timestamp queries.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct GpuTimes {
-    /// Uploading rays (host).
-    pub upload_s: f64,
-    /// Running the kernels, submission to completion (host).
-    pub kernel_s: f64,
-    /// Reading hits back (host).
-    pub readback_s: f64,
-    /// The kernels' pass on the GPU, from timestamp queries (`None` without them).
-    pub kernel_gpu_s: Option<f64>,
 }
 
 /// A scene on the GPU with its scan pipeline.
@@ -244,24 +231,7 @@ impl GpuTracer {
         let n = rays.len();
         let out_size = (n.max(1) * size_of::<HitRecord>()) as u64;
         let t0 = Instant::now();
-        let timestamps = ctx
-            .device
-            .features()
-            .contains(wgpu::Features::TIMESTAMP_QUERY)
-            .then(|| {
-                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("scan timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: 2,
-                });
-                let resolved = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("scan timestamps"),
-                    size: 16,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                });
-                (set, resolved)
-            });
+        let timer = PassTimer::new(ctx, "scan timestamps");
         let (hits, _keep) = ctx.checked("scan dispatch", || {
             let params = ScanParams {
                 ray_count: n as u32,
@@ -303,17 +273,10 @@ impl GpuTracer {
             });
             let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            let timer = timestamps
-                .as_ref()
-                .map(|(set, _)| wgpu::ComputePassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                });
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("scan"),
-                    timestamp_writes: timer,
+                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
                 });
                 pass.set_bind_group(1, &self.scene_group, &[]);
                 pass.set_bind_group(2, &group, &[]);
@@ -323,31 +286,22 @@ impl GpuTracer {
                     pass.dispatch_workgroups(x, y, 1);
                 }
             }
-            if let Some((set, resolved)) = &timestamps {
-                encoder.resolve_query_set(set, 0..2, resolved, 0);
+            if let Some(timer) = &timer {
+                timer.resolve(&mut encoder);
             }
             ctx.queue.submit([encoder.finish()]);
             let hits = buffers[2].clone();
             (hits, (buffers, group))
         })?;
-        let t1 = Instant::now();
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Operation {
-                what: "scan kernel".to_string(),
-                problem: e.to_string(),
-            })?;
-        let t2 = Instant::now();
-        let bytes = ctx.read_buffer(&hits, out_size)?;
-        times.upload_s += (t1 - t0).as_secs_f64();
-        times.kernel_s += (t2 - t1).as_secs_f64();
-        times.readback_s += t2.elapsed().as_secs_f64();
-        if let Some((_, resolved)) = &timestamps {
-            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&ctx.read_buffer(resolved, 16)?);
-            let period_ns = f64::from(ctx.queue.get_timestamp_period());
-            let pass_s = ticks[1].saturating_sub(ticks[0]) as f64 * period_ns * 1e-9;
-            times.kernel_gpu_s = Some(times.kernel_gpu_s.unwrap_or(0.0) + pass_s);
-        }
+        let bytes = finish_batch(
+            ctx,
+            "scan kernel",
+            t0,
+            &hits,
+            out_size,
+            timer.as_ref(),
+            times,
+        )?;
         let mut out: Vec<HitRecord> = bytemuck::pod_collect_to_vec(&bytes);
         out.truncate(n);
         Ok(out)

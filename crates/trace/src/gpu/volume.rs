@@ -31,7 +31,8 @@ use super::records::{
     VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_UNORM16, VOLUME_FORMAT_UNORM8,
     VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
 };
-use super::tracer::{GpuTimes, GPU_INF};
+use super::timing::{finish_batch, GpuTimes, PassTimer};
+use super::tracer::GPU_INF;
 
 const KERNEL: &str = "kernels/transmittance";
 
@@ -327,6 +328,7 @@ impl<'a> GpuVolume<'a> {
         let n = rays.len();
         let out_size = (n.max(1) * size_of::<TransmittanceRecord>()) as u64;
         let t0 = Instant::now();
+        let timer = PassTimer::new(ctx, "transmittance timestamps");
         let results = ctx.checked("transmittance dispatch", || {
             let input = |label, bytes: &[u8]| {
                 ctx.device
@@ -354,26 +356,29 @@ impl<'a> GpuVolume<'a> {
             let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("transmittance"),
+                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
+                });
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             }
+            if let Some(timer) = &timer {
+                timer.resolve(&mut encoder);
+            }
             ctx.queue.submit([encoder.finish()]);
             results
         })?;
-        let t1 = Instant::now();
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Operation {
-                what: "transmittance kernel".to_string(),
-                problem: e.to_string(),
-            })?;
-        let t2 = Instant::now();
-        let bytes = ctx.read_buffer(&results, out_size)?;
-        times.upload_s += (t1 - t0).as_secs_f64();
-        times.kernel_s += (t2 - t1).as_secs_f64();
-        times.readback_s += t2.elapsed().as_secs_f64();
+        let bytes = finish_batch(
+            ctx,
+            "transmittance kernel",
+            t0,
+            &results,
+            out_size,
+            timer.as_ref(),
+            times,
+        )?;
         let mut out: Vec<TransmittanceRecord> = bytemuck::pod_collect_to_vec(&bytes);
         out.truncate(n);
         Ok(out)
