@@ -1,6 +1,6 @@
 //! Adapter and device acquisition, error capture and buffer readback.
 
-use std::sync::mpsc;
+use std::sync::{mpsc, Arc, Mutex};
 
 /// What went wrong on the GPU path.
 #[derive(Debug, thiserror::Error)]
@@ -14,6 +14,10 @@ pub enum GpuError {
     /// The scene does not fit the device's limits.
     #[error("scene too big for this GPU: {0}")]
     SceneTooBig(String),
+    /// The device stopped working: a driver reset (a kernel that ran too long, another
+    /// process, a removed GPU) or `destroy`.
+    #[error("the GPU device was lost ({0}); nothing it computed is used")]
+    DeviceLost(String),
     /// A shader failed to compose or compile.
     #[error("shader `{name}`: {problem}")]
     Shader {
@@ -42,6 +46,8 @@ pub struct GpuContext {
     pub adapter_info: wgpu::AdapterInfo,
     /// The limits the device was created with (the adapter's maximum).
     pub limits: wgpu::Limits,
+    /// Why the device was lost, once it is (set by wgpu's device-lost callback).
+    lost: Arc<Mutex<Option<String>>>,
 }
 
 impl GpuContext {
@@ -69,11 +75,19 @@ impl GpuContext {
                 })
                 .await
                 .map_err(|e| GpuError::Device(e.to_string()))?;
+            let lost = Arc::new(Mutex::new(None));
+            let record = Arc::clone(&lost);
+            device.set_device_lost_callback(move |reason, message| {
+                if let Ok(mut lost) = record.lock() {
+                    *lost = Some(format!("{reason:?}: {message}"));
+                }
+            });
             Ok(GpuContext {
                 device,
                 queue,
                 adapter_info: adapter.get_info(),
                 limits,
+                lost,
             })
         })
     }
@@ -105,12 +119,21 @@ impl GpuContext {
         )
     }
 
-    /// Runs `f`, turning any validation or out-of-memory error it causes into a [`GpuError`].
+    /// [`GpuError::DeviceLost`] once the device is lost, with wgpu's reason.
+    pub fn check_not_lost(&self) -> Result<(), GpuError> {
+        let lost = self.lost.lock().map(|l| l.clone()).unwrap_or(None);
+        lost.map_or(Ok(()), |reason| Err(GpuError::DeviceLost(reason)))
+    }
+
+    /// Runs `f`, turning any validation or out-of-memory error it causes into a [`GpuError`]
+    /// (a lost device first, as such).
     pub fn checked<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        self.check_not_lost()?;
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let value = f();
         let errors = pollster::block_on(async { (validation.pop().await, oom.pop().await) });
+        self.check_not_lost()?;
         match errors {
             (Some(e), _) | (None, Some(e)) => Err(GpuError::Operation {
                 what: what.to_string(),
@@ -135,9 +158,13 @@ impl GpuContext {
         staging.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);
         });
-        let failed = |problem: String| GpuError::Operation {
-            what: "readback".to_string(),
-            problem,
+        // A lost device fails every step; its reason is the better message.
+        let failed = |problem: String| match self.check_not_lost() {
+            Err(lost) => lost,
+            Ok(()) => GpuError::Operation {
+                what: "readback".to_string(),
+                problem,
+            },
         };
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
@@ -149,6 +176,7 @@ impl GpuContext {
             .get_mapped_range(..)
             .map_err(|e| failed(e.to_string()))?
             .to_vec();
+        self.check_not_lost()?;
         Ok(bytes)
     }
 }

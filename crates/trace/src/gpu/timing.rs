@@ -83,9 +83,11 @@ pub fn finish_batch(
     let submitted = Instant::now();
     ctx.device
         .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Operation {
-            what: what.to_string(),
-            problem: e.to_string(),
+        .map_err(|e| {
+            ctx.check_not_lost().err().unwrap_or(GpuError::Operation {
+                what: what.to_string(),
+                problem: e.to_string(),
+            })
         })?;
     let done = Instant::now();
     let bytes = ctx.read_buffer(out, size)?;
