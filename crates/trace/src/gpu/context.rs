@@ -2,6 +2,8 @@
 
 use std::sync::{mpsc, Arc, Mutex};
 
+use wgpu::util::DeviceExt;
+
 /// What went wrong on the GPU path.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -143,6 +145,61 @@ impl GpuContext {
         }
     }
 
+    /// A shader module compiled from WGSL `source`.
+    pub fn wgsl_module(&self, label: &str, source: &str) -> wgpu::ShaderModule {
+        self.device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            })
+    }
+
+    /// A bind group layout of storage buffers at bindings `0..count`, read-only but for
+    /// the bindings in `writable`.
+    pub fn storage_layout(
+        &self,
+        label: &str,
+        count: u32,
+        writable: &[u32],
+    ) -> wgpu::BindGroupLayout {
+        let entries: Vec<_> = (0..count)
+            .map(|b| storage_layout_entry(b, !writable.contains(&b)))
+            .collect();
+        self.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
+    /// Named arrays uploaded as read-only storage buffers, in order;
+    /// [`GpuError::SceneTooBig`] names the first array above the device's binding limit.
+    pub fn storage_buffers(
+        &self,
+        arrays: &[(&str, Vec<u8>)],
+    ) -> Result<Vec<wgpu::Buffer>, GpuError> {
+        let limit = self.limits.max_storage_buffer_binding_size;
+        if let Some((name, bytes)) = arrays.iter().find(|(_, b)| b.len() as u64 > limit) {
+            return Err(GpuError::SceneTooBig(format!(
+                "array `{name}` has {} bytes, the device binds at most {limit}",
+                bytes.len()
+            )));
+        }
+        self.checked("uploading arrays", || {
+            arrays
+                .iter()
+                .map(|(name, bytes)| {
+                    self.device
+                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some(name),
+                            contents: bytes,
+                            usage: wgpu::BufferUsages::STORAGE,
+                        })
+                })
+                .collect()
+        })
+    }
+
     /// Copies `size` bytes of a storage buffer back to the CPU.
     pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -182,7 +239,7 @@ impl GpuContext {
 }
 
 /// Layout entry of a storage buffer visible to compute shaders.
-pub fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,

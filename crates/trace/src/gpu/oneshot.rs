@@ -4,9 +4,7 @@
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{
-    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
-};
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::probe::dispatch_size;
 
 /// A storage buffer of a one-shot dispatch.
@@ -33,28 +31,16 @@ pub fn run(
         problem,
     })?;
     let (buffers, outputs) = ctx.checked(module, || {
-        let shader = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(module),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            });
+        let shader = ctx.wgsl_module(module, &source);
         let mut layouts = Vec::new();
         let mut bind_groups = Vec::new();
         let mut outputs = Vec::new();
         let mut all = Vec::new();
         for group in groups {
-            let entries: Vec<_> = group
-                .iter()
-                .enumerate()
-                .map(|(b, buf)| storage_layout_entry(b as u32, matches!(buf, Buffer::Input(_))))
+            let writable: Vec<u32> = (0..group.len() as u32)
+                .filter(|&b| matches!(group[b as usize], Buffer::Output(_)))
                 .collect();
-            let layout = ctx
-                .device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some(module),
-                    entries: &entries,
-                });
+            let layout = ctx.storage_layout(module, group.len() as u32, &writable);
             let buffers: Vec<wgpu::Buffer> = group
                 .iter()
                 .map(|buf| match buf {

@@ -8,9 +8,7 @@ use hytrace_foundry::{Foundry, PrimKind, TypeCode, UNSET};
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{
-    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
-};
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::scene::GpuScene;
 
 const KERNEL: &str = "kernels/foundry_probe";
@@ -98,23 +96,8 @@ impl ProbeKernels {
             problem,
         })?;
         ctx.checked("compiling the probe kernels", || {
-            let module = ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(KERNEL),
-                    source: wgpu::ShaderSource::Wgsl(source.into()),
-                });
-            let io_layout = ctx
-                .device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("probe io"),
-                    entries: &[
-                        storage_layout_entry(0, true),
-                        storage_layout_entry(1, true),
-                        storage_layout_entry(2, false),
-                        storage_layout_entry(3, false),
-                    ],
-                });
+            let module = ctx.wgsl_module(KERNEL, &source);
+            let io_layout = ctx.storage_layout("probe io", 4, &[2, 3]);
             let layout = ctx
                 .device
                 .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -3,7 +3,7 @@
 use hytrace_foundry::{gpu_arrays, Foundry};
 use wgpu::util::DeviceExt;
 
-use super::context::{storage_layout_entry, whole_buffer_entries, GpuContext, GpuError};
+use super::context::{whole_buffer_entries, GpuContext, GpuError};
 
 /// A Foundry uploaded to the GPU.
 pub struct GpuScene {
@@ -51,15 +51,7 @@ impl GpuScene {
                         })
                 })
                 .collect();
-            let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..buffers.len() as u32)
-                .map(|binding| storage_layout_entry(binding, true))
-                .collect();
-            let layout = ctx
-                .device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("foundry"),
-                    entries: &entries,
-                });
+            let layout = ctx.storage_layout("foundry", buffers.len() as u32, &[]);
             let bind_entries = whole_buffer_entries(&buffers);
             let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("foundry"),

@@ -8,9 +8,7 @@ use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
 use wgpu::util::DeviceExt;
 
 use super::compose::compose_with;
-use super::context::{
-    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
-};
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::probe::dispatch_size;
 use super::records::{HitRecord, RayRecord, ScanParams};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
@@ -130,43 +128,11 @@ impl GpuTracer {
             ("solids", binding_bytes(&arrays.solids)),
             ("surface_prims", binding_bytes(&arrays.surface_prims)),
         ];
-        let limit = ctx.limits.max_storage_buffer_binding_size;
-        if let Some((name, bytes)) = scene_arrays.iter().find(|(_, b)| b.len() as u64 > limit) {
-            return Err(GpuError::SceneTooBig(format!(
-                "array `{name}` has {} bytes, the device binds at most {limit}",
-                bytes.len()
-            )));
-        }
+        let buffers = ctx.storage_buffers(&scene_arrays)?;
         ctx.checked("building the scan kernel", || {
-            let module = ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(KERNEL),
-                    source: wgpu::ShaderSource::Wgsl(source.clone().into()),
-                });
-            let layout_of = |count: u32, writable: &[u32], label| {
-                let entries: Vec<_> = (0..count)
-                    .map(|b| storage_layout_entry(b, !writable.contains(&b)))
-                    .collect();
-                ctx.device
-                    .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                        label: Some(label),
-                        entries: &entries,
-                    })
-            };
-            let scene_layout = layout_of(SCENE_BINDINGS, &[], "scan scene");
-            let ray_layout = layout_of(RAY_BINDINGS, &[2, 3], "scan rays");
-            let buffers: Vec<wgpu::Buffer> = scene_arrays
-                .iter()
-                .map(|(name, bytes)| {
-                    ctx.device
-                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some(name),
-                            contents: bytes,
-                            usage: wgpu::BufferUsages::STORAGE,
-                        })
-                })
-                .collect();
+            let module = ctx.wgsl_module(KERNEL, &source);
+            let scene_layout = ctx.storage_layout("scan scene", SCENE_BINDINGS, &[]);
+            let ray_layout = ctx.storage_layout("scan rays", RAY_BINDINGS, &[2, 3]);
             let entries = whole_buffer_entries(&buffers);
             let scene_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scan scene"),

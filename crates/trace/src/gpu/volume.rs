@@ -20,9 +20,7 @@ use hytrace_volume::{
 use wgpu::util::DeviceExt;
 
 use super::compose::compose;
-use super::context::{
-    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
-};
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::probe::dispatch_size;
 use super::records::{
     RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA, VOLUME_ESTIMATOR_EXACT,
@@ -142,55 +140,25 @@ impl<'a> GpuVolume<'a> {
             ),
             ("volume atlas", storage_bytes(grid.atlas())),
         ];
-        let limit = ctx.limits.max_storage_buffer_binding_size;
-        if let Some((name, bytes)) = arrays.iter().find(|(_, b)| b.len() as u64 > limit) {
-            return too_big(format!(
-                "`{name}` has {} bytes, the device binds at most {limit}",
-                bytes.len()
-            ));
-        }
+        let buffers = ctx.storage_buffers(&arrays)?;
         let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
         })?;
-        let (pipeline, layout, buffers) =
-            ctx.checked("building the transmittance kernel", || {
-                let module = ctx
-                    .device
-                    .create_shader_module(wgpu::ShaderModuleDescriptor {
-                        label: Some(KERNEL),
-                        source: wgpu::ShaderSource::Wgsl(source.into()),
+        let (pipeline, layout) = ctx.checked("building the transmittance kernel", || {
+            let module = ctx.wgsl_module(KERNEL, &source);
+            // Every binding is read-only but the results, the last.
+            let layout = ctx.storage_layout("transmittance", BINDINGS, &[BINDINGS - 1]);
+            let pipeline_layout =
+                ctx.device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("transmittance"),
+                        bind_group_layouts: &[Some(&layout)],
+                        immediate_size: 0,
                     });
-                let entries: Vec<_> = (0..BINDINGS)
-                    .map(|b| storage_layout_entry(b, b + 1 != BINDINGS))
-                    .collect();
-                let layout =
-                    ctx.device
-                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                            label: Some("transmittance"),
-                            entries: &entries,
-                        });
-                let pipeline_layout =
-                    ctx.device
-                        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                            label: Some("transmittance"),
-                            bind_group_layouts: &[Some(&layout)],
-                            immediate_size: 0,
-                        });
-                let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
-                let buffers: Vec<wgpu::Buffer> = arrays
-                    .iter()
-                    .map(|(name, bytes)| {
-                        ctx.device
-                            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                                label: Some(name),
-                                contents: bytes,
-                                usage: wgpu::BufferUsages::STORAGE,
-                            })
-                    })
-                    .collect();
-                (pipeline, layout, buffers)
-            })?;
+            let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
+            (pipeline, layout)
+        })?;
         Ok(GpuVolume {
             grid,
             pipeline,
