@@ -75,7 +75,7 @@ enum Command {
         #[arg(long, value_enum, default_value_t = Backend::Cpu)]
         backend: Backend,
         /// Also write the transmittance of the scene's media along each ray up to its first
-        /// surface crossing (to tmax on a miss), (N,) float64 (CPU backend only).
+        /// surface crossing (to tmax on a miss), (N,) float64 (not with Embree).
         #[arg(long)]
         transmittance: Option<PathBuf>,
         #[command(flatten)]
@@ -310,10 +310,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             transmittance,
             estimate,
         } => {
-            if transmittance.is_some() && backend != Backend::Cpu {
+            if transmittance.is_some() && backend == Backend::Embree {
                 anyhow::bail!(
-                    "--transmittance needs --backend cpu: the {} backend answers surfaces only",
-                    format!("{backend:?}").to_lowercase()
+                    "--transmittance needs --backend cpu, gpu or auto: the embree backend \
+                     answers surfaces only"
                 );
             }
             let t0 = std::time::Instant::now();
@@ -334,27 +334,32 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let load_s = t0.elapsed().as_secs_f64();
             let (result, times) = scan::scan_with(&f, &ray_rows, precision, backend)?;
+            // The media on the backend the surfaces ran on (`auto` has chosen already).
+            let media_backend = match times.gpu {
+                Some(_) => Backend::Gpu,
+                None => Backend::Cpu,
+            };
             let media = match &transmittance {
-                Some(_) => Some(scan::scan_transmittance(
+                Some(_) => Some(scan::scan_transmittance_on(
                     &f,
                     &ray_rows,
                     precision,
                     &estimate.args().params(),
+                    media_backend,
                 )?),
                 None => None,
             };
             scan::write_hits(&result, precision, &out, ids.as_deref())
                 .with_context(|| format!("writing {}", out.display()))?;
-            if let (Some(path), Some((values, _, _))) = (&transmittance, &media) {
-                volume::write_f64(path, values)
+            if let (Some(path), Some(run)) = (&transmittance, &media) {
+                volume::write_f64(path, &run.values)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             let hits = result.ids.iter().filter(|i| i[0] >= 0).count();
             if stats {
                 let mut line = scan::stats_json(backend, ray_rows.len(), load_s, &times, hits);
-                if let Some((_, open_s, media_s)) = media {
-                    line["media_open_s"] = open_s.into();
-                    line["transmittance_s"] = media_s.into();
+                if let Some(run) = &media {
+                    run.add_stats(&mut line);
                 }
                 println!("{line}");
             } else {

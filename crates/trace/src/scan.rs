@@ -22,10 +22,10 @@ use serde_json::json;
 
 use hytrace_volume::TransmittanceParams;
 
-use crate::cpu::media::SceneMedia;
+use crate::cpu::media::{MediumSegment, SceneMedia};
 use crate::cpu::{CpuScene, Hit};
 use crate::gpu::records::RayRecord;
-use crate::gpu::{GpuContext, GpuTimes, GpuTracer, GPU_INF};
+use crate::gpu::{gpu_or_cpu, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -268,13 +268,11 @@ pub fn scan_with(
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Gpu, Precision::F32) => gpu_scan(foundry, rays, GpuContext::new()?),
-        (Backend::Auto, Precision::F32) => match GpuContext::new() {
-            Ok(ctx) => gpu_scan(foundry, rays, ctx),
-            Err(e) => {
-                eprintln!("hytrace: no usable GPU ({e}); --backend auto scans on the CPU");
-                cpu::<f32>(foundry, rays)
-            }
-        },
+        (Backend::Auto, Precision::F32) => gpu_or_cpu(
+            "scans",
+            |ctx| gpu_scan(foundry, rays, ctx),
+            || cpu::<f32>(foundry, rays),
+        ),
     }
 }
 
@@ -303,25 +301,7 @@ fn gpu_scan(
     let tracer = GpuTracer::new(&ctx, &cpu)?;
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
-    let (hits, gpu_times) = tracer.trace(&ctx, &records)?;
-    if let Some(i) = hits.iter().position(|h| h.status != 0) {
-        bail!(
-            "GPU scan: ray {i} was cut short (status {:#x}): the placement tree is deeper \
-             than the kernel's bound",
-            hits[i].status
-        );
-    }
-    let answers: Vec<([f64; 4], i32)> = hits
-        .iter()
-        .map(|h| match h.t < GPU_INF {
-            true => {
-                let n = h.normal.map(f64::from);
-                ([n[0], n[1], n[2], f64::from(h.t)], h.instance as i32)
-            }
-            false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
-        })
-        .collect();
+    let (answers, gpu_times) = gpu_trace(&ctx, &tracer, rays)?;
     let trace_s = t1.elapsed().as_secs_f64();
     let gpu = GpuScanInfo {
         adapter: ctx.describe(),
@@ -336,20 +316,96 @@ fn gpu_scan(
     Ok((result_from(f, &answers), times))
 }
 
+/// A ray's answer: `nx ny nz t` and the instance crossed (-1 on a miss).
+type Answer = ([f64; 4], i32);
+
+/// Every ray through the GPU scan kernel: `(nx ny nz t, instance)` per ray (`t = inf`,
+/// instance -1 on a miss) and the kernel's times; a ray cut short is an error.
+fn gpu_trace(
+    ctx: &GpuContext,
+    tracer: &GpuTracer,
+    rays: &[RayRow],
+) -> anyhow::Result<(Vec<Answer>, GpuTimes)> {
+    let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
+    let (hits, times) = tracer.trace(ctx, &records)?;
+    if let Some(i) = hits.iter().position(|h| h.status != 0) {
+        bail!(
+            "GPU scan: ray {i} was cut short (status {:#x}): the placement tree is deeper \
+             than the kernel's bound",
+            hits[i].status
+        );
+    }
+    let answers = hits
+        .iter()
+        .map(|h| match h.t < GPU_INF {
+            true => {
+                let n = h.normal.map(f64::from);
+                ([n[0], n[1], n[2], f64::from(h.t)], h.instance as i32)
+            }
+            false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
+        })
+        .collect();
+    Ok((answers, times))
+}
+
+/// The transmittances of `scan --transmittance` and where their time went.
+#[derive(Clone, Debug, Default)]
+pub struct TransmittanceRun {
+    /// Transmittance of the media along each ray up to its first surface crossing.
+    pub values: Vec<f64>,
+    /// Seconds preparing the surfaces and opening the media (on the GPU also uploading the
+    /// scene and the grids and building the kernels).
+    pub open_s: f64,
+    /// Seconds tracing the surfaces and estimating the media.
+    pub transmittance_s: f64,
+    /// Set when it ran on the GPU: the adapter, the scan kernel's features and the seconds
+    /// of the scan and transmittance kernels together.
+    pub gpu: Option<GpuScanInfo>,
+}
+
+impl TransmittanceRun {
+    /// Adds this run's timings to a `--stats` line: `media_open_s` and `transmittance_s`,
+    /// and after a GPU run `transmittance_gpu_upload_s`, `_kernel_s`, `_readback_s` and
+    /// `_kernel_timestamps_s` (null without timestamp queries).
+    pub fn add_stats(&self, line: &mut serde_json::Value) {
+        line["media_open_s"] = self.open_s.into();
+        line["transmittance_s"] = self.transmittance_s.into();
+        if let Some(g) = &self.gpu {
+            line["transmittance_gpu_upload_s"] = g.times.upload_s.into();
+            line["transmittance_gpu_kernel_s"] = g.times.kernel_s.into();
+            line["transmittance_gpu_readback_s"] = g.times.readback_s.into();
+            line["transmittance_gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+        }
+    }
+}
+
 /// Transmittance of the scene's media along every ray up to its first surface crossing
-/// (see [`crate::cpu::media::SceneMedia`]), the surfaces traced on the CPU in `precision`;
-/// with the seconds spent opening the media and tracing.
+/// (see [`crate::cpu::media::SceneMedia`]), the surfaces traced on the CPU in `precision`.
 pub fn scan_transmittance(
     foundry: &Foundry,
     rays: &[RayRow],
     precision: Precision,
     params: &TransmittanceParams,
-) -> anyhow::Result<(Vec<f64>, f64, f64)> {
-    fn run<T: Real>(
+) -> anyhow::Result<TransmittanceRun> {
+    scan_transmittance_on(foundry, rays, precision, params, Backend::Cpu)
+}
+
+/// [`scan_transmittance`] on `backend`. On the GPU (f32 only) the scan kernel finds the
+/// surfaces and the transmittance kernel estimates every medium on the very index-space
+/// segments and random streams the CPU would; `auto` falls back to the CPU with a line on
+/// stderr when no adapter opens. Embree answers surfaces only.
+pub fn scan_transmittance_on(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+    params: &TransmittanceParams,
+    backend: Backend,
+) -> anyhow::Result<TransmittanceRun> {
+    fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         params: &TransmittanceParams,
-    ) -> anyhow::Result<(Vec<f64>, f64, f64)> {
+    ) -> anyhow::Result<TransmittanceRun> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let media = SceneMedia::new(&scene, f, params)?;
@@ -359,12 +415,120 @@ pub fn scan_transmittance(
             .iter()
             .map(|r| r.transmittance)
             .collect();
-        Ok((values, (t1 - t0).as_secs_f64(), t1.elapsed().as_secs_f64()))
+        Ok(TransmittanceRun {
+            values,
+            open_s: (t1 - t0).as_secs_f64(),
+            transmittance_s: t1.elapsed().as_secs_f64(),
+            gpu: None,
+        })
     }
-    match precision {
-        Precision::F32 => run::<f32>(foundry, rays, params),
-        Precision::F64 => run::<f64>(foundry, rays, params),
+    match (backend, precision) {
+        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, params),
+        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, params),
+        (Backend::Embree, _) => {
+            bail!("the Embree backend answers surfaces only: transmittance needs cpu, gpu or auto")
+        }
+        (Backend::Gpu | Backend::Auto, Precision::F64) => {
+            bail!("the GPU backend traces in f32: use --precision f32 (the default)")
+        }
+        (Backend::Gpu, Precision::F32) => {
+            gpu_transmittance(foundry, rays, params, GpuContext::new()?)
+        }
+        (Backend::Auto, Precision::F32) => gpu_or_cpu(
+            "computes transmittance",
+            |ctx| gpu_transmittance(foundry, rays, params, ctx),
+            || cpu::<f32>(foundry, rays, params),
+        ),
     }
+}
+
+/// The GPU's transmittance: the scan kernel gives every ray's first surface crossing; the
+/// CPU's f32 scene clips the ray to each placed medium's bricks (as
+/// [`SceneMedia::segments`], over the GPU's `[tmin, t]`); then one transmittance batch per
+/// segment position and medium, each of all `N` rays so that ray `i` draws the random
+/// streams of index `i` (rays without such a segment go as empty rays, their estimates
+/// unused), with that placement's seed. The estimates multiply per ray in segment order,
+/// as on the CPU. Each medium's grid is uploaded once.
+fn gpu_transmittance(
+    f: &Foundry,
+    rays: &[RayRow],
+    params: &TransmittanceParams,
+    ctx: GpuContext,
+) -> anyhow::Result<TransmittanceRun> {
+    let t0 = Instant::now();
+    let cpu = CpuScene::<f32>::new(f)?;
+    let media = SceneMedia::new(&cpu, f, params)?;
+    let tracer = GpuTracer::new(&ctx, &cpu)?;
+    let volumes = (0..media.medium_count() as u32)
+        .map(|m| GpuVolume::new(&ctx, media.grid(m)).with_context(|| format!("medium {m}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let open_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let (answers, mut times) = gpu_trace(&ctx, &tracer, rays)?;
+    let segments: Vec<Vec<MediumSegment>> = rays
+        .par_iter()
+        .zip(&answers)
+        .enumerate()
+        .map(|(i, (r, (hit, _)))| {
+            let end = if hit[3].is_finite() { hit[3] } else { r.tmax };
+            media
+                .segments(r.origin, r.direction, r.tmin, end)
+                .with_context(|| format!("ray {i}"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    // (placement, medium) in order: per ray, the segments' order on the CPU.
+    let batches: std::collections::BTreeSet<(u32, u32)> = segments
+        .iter()
+        .flatten()
+        .map(|s| (s.placement, s.medium))
+        .collect();
+    let mut values = vec![1.0; rays.len()];
+    for (placement, medium) in batches {
+        let find = |ray: &[MediumSegment]| {
+            ray.iter()
+                .find(|s| (s.placement, s.medium) == (placement, medium))
+                .copied()
+        };
+        let batch: Vec<hytrace_volume::Ray> = segments
+            .iter()
+            .map(|ray| match find(ray) {
+                Some(s) => {
+                    hytrace_volume::Ray::new(s.ray.origin, s.ray.dir, s.ray.tmin, s.ray.tmax)
+                }
+                None => hytrace_volume::Ray::new([0.0; 3], [1.0, 0.0, 0.0], 0.0, 0.0),
+            })
+            .collect();
+        let (estimates, t) = volumes[medium as usize]
+            .transmittance(&ctx, &batch, &media.params(medium, placement))
+            .with_context(|| format!("medium {medium}"))?;
+        add_times(&mut times, &t);
+        for ((v, ray), e) in values.iter_mut().zip(&segments).zip(&estimates) {
+            if find(ray).is_some() {
+                *v *= e.transmittance;
+            }
+        }
+    }
+    Ok(TransmittanceRun {
+        values,
+        open_s,
+        transmittance_s: t1.elapsed().as_secs_f64(),
+        gpu: Some(GpuScanInfo {
+            adapter: ctx.describe(),
+            features: tracer.features().to_vec(),
+            times,
+        }),
+    })
+}
+
+/// Adds the seconds of `more` to `total` (kernel timestamps only where both have them).
+fn add_times(total: &mut GpuTimes, more: &GpuTimes) {
+    total.upload_s += more.upload_s;
+    total.kernel_s += more.kernel_s;
+    total.readback_s += more.readback_s;
+    total.kernel_gpu_s = total
+        .kernel_gpu_s
+        .zip(more.kernel_gpu_s)
+        .map(|(a, b)| a + b);
 }
 
 /// The Embree backend's scan: build times include preparing the CPU scene it borrows.

@@ -15,7 +15,7 @@ use hytrace_volume::{
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::gpu::{GpuContext, GpuTimes, GpuVolume};
+use crate::gpu::{gpu_or_cpu, GpuContext, GpuTimes, GpuVolume};
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
@@ -369,33 +369,40 @@ pub struct TransmittanceRun {
 
 /// [`transmittances`] on `backend`: the GPU traces the bricked grid (a grid as read is
 /// converted to f32 bricks, exact for float grids), in f32. `gpu` without an adapter is an
-/// error; `auto` falls back to the CPU with a line on stderr.
+/// error; `auto` falls back to the CPU with a line on stderr when the GPU fails.
 pub fn transmittances_on(
     grid: &Represented,
     rays: &[RayRow],
     args: &TransmittanceArgs,
     backend: VolumeBackend,
 ) -> anyhow::Result<TransmittanceRun> {
-    let ctx = match backend {
-        VolumeBackend::Cpu => None,
-        VolumeBackend::Gpu => Some(GpuContext::new()?),
-        VolumeBackend::Auto => match GpuContext::new() {
-            Ok(ctx) => Some(ctx),
-            Err(e) => {
-                eprintln!("hytrace: no usable GPU ({e}); --backend auto traces on the CPU");
-                None
-            }
-        },
-    };
-    let Some(ctx) = ctx else {
+    let cpu = || {
         let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
-        return Ok(TransmittanceRun {
+        Ok(TransmittanceRun {
             estimates,
             mips_s,
             trace_s,
             gpu: None,
-        });
+        })
     };
+    match backend {
+        VolumeBackend::Cpu => cpu(),
+        VolumeBackend::Gpu => gpu_transmittances(GpuContext::new()?, grid, rays, args),
+        VolumeBackend::Auto => gpu_or_cpu(
+            "traces",
+            |ctx| gpu_transmittances(ctx, grid, rays, args),
+            cpu,
+        ),
+    }
+}
+
+/// The GPU side of [`transmittances_on`].
+fn gpu_transmittances(
+    ctx: GpuContext,
+    grid: &Represented,
+    rays: &[RayRow],
+    args: &TransmittanceArgs,
+) -> anyhow::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let converted;
     let (bricked, repr) = match grid {

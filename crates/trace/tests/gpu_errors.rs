@@ -2,7 +2,7 @@
 //! reset loses it) fails the scan and the volume transmittance with a device-lost error.
 
 use hytrace_trace::cpu::CpuScene;
-use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GpuVolume};
+use hytrace_trace::gpu::{gpu_or_cpu, GpuContext, GpuError, GpuTracer, GpuVolume};
 use hytrace_trace::scan::ray_record;
 use hytrace_trace::scene::default_scene;
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
@@ -47,4 +47,25 @@ fn a_lost_device_fails_scans_and_transmittances_clearly() {
         "transmittance",
         volume.transmittance(&ctx, &through, &exact),
     );
+}
+
+/// `--backend auto` falls back to the CPU on the GPU's failures (a lost device here), not on
+/// the input's.
+#[test]
+fn auto_falls_back_on_gpu_failures_only() {
+    let lost = gpu_or_cpu(
+        "scans",
+        |_| -> anyhow::Result<u32> { Err(GpuError::DeviceLost("Unknown: reset".into()).into()) },
+        || Ok(7),
+    );
+    assert_eq!(lost.unwrap(), 7);
+    let bad_input = gpu_or_cpu(
+        "scans",
+        |_| -> anyhow::Result<u32> { Err(anyhow::anyhow!("rays.npy: wrong shape")) },
+        || Ok(7),
+    );
+    // Without an adapter the GPU closure never runs and the CPU answers.
+    if GpuContext::new().is_ok() {
+        assert!(bad_input.unwrap_err().to_string().contains("wrong shape"));
+    }
 }

@@ -5,24 +5,15 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-use common::{check, gpu_answers, mesh_obj, mesh_scene_rays, rays_for};
+use common::{check, gpu_answers, hytrace, mesh_obj, mesh_scene_rays, rays_for, read_values, repo};
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_foundry::layout::Scalar;
-use hytrace_foundry::npy::read_array;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::gpu::{GpuContext, GpuTracer};
 use hytrace_trace::scan::RayRow;
 use hytrace_trace::scene::{default_scene, load_scene, obj_to_foundry};
-
-fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .join(path)
-}
 
 fn check_gpu(name: &str, f: &Foundry, rays: &[RayRow]) {
     if let Some(got) = gpu_answers(f, rays) {
@@ -112,29 +103,6 @@ fn scan_kernels_compose_only_what_the_scene_uses() {
         )
         .validate(&module)
         .expect("composed kernel validates");
-    }
-}
-
-fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytrace"))
-        .args(args)
-        .envs(env.iter().copied())
-        .output()
-        .unwrap()
-}
-
-fn read_values(path: &Path) -> Vec<f64> {
-    let a = read_array(path).unwrap();
-    match a.scalar {
-        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
-            .into_iter()
-            .map(f64::from)
-            .collect(),
-        Scalar::I32 => bytemuck::pod_collect_to_vec::<u8, i32>(&a.bytes)
-            .into_iter()
-            .map(f64::from)
-            .collect(),
-        s => panic!("unexpected {s:?}"),
     }
 }
 

@@ -21,11 +21,10 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Output};
 
-use common::Rng;
+use common::{hytrace, read_f64, unit, Rng};
 use hytrace_foundry::layout::Scalar;
-use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_foundry::npy::write_array;
 use hytrace_trace::gpu::{GpuContext, GpuVolume};
 use hytrace_volume::{
     fog_sphere, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator, Filter, GridMap,
@@ -43,11 +42,6 @@ const SAME_FRACTION: f64 = 0.97;
 struct Family {
     name: &'static str,
     rays: Vec<Ray>,
-}
-
-fn unit(d: [f64; 3]) -> [f64; 3] {
-    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    d.map(|v| v / n)
 }
 
 /// A grid with noise, constant bricks (no texels), an empty hole and `background`, spanning
@@ -464,20 +458,6 @@ fn bad_input_is_refused_clearly() {
     assert!(grid.background() == 0.0);
 }
 
-fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytrace"))
-        .args(args)
-        .envs(env.iter().copied())
-        .output()
-        .unwrap()
-}
-
-fn read_f64(path: &Path) -> Vec<f64> {
-    let a = read_array(path).unwrap();
-    assert_eq!(a.scalar, Scalar::F64);
-    bytemuck::pod_collect_to_vec(&a.bytes)
-}
-
 /// `volume transmittance --backend gpu` writes what the CPU writes (within f32), on a
 /// bricked representation and on `--repr nanovdb` (converted to f32 bricks, as `--stats`
 /// says); without an adapter `gpu` fails and writes nothing, `auto` falls back to the CPU.
@@ -540,7 +520,10 @@ fn transmittance_cli_on_the_gpu() {
         // The kernel's own time from timestamp queries, which lavapipe has.
         let stamps = &stats["gpu_kernel_timestamps_s"];
         assert!(stats.get("gpu_kernel_timestamps_s").is_some());
-        if stats["adapter"].as_str().is_some_and(|a| a.contains("llvmpipe")) {
+        if stats["adapter"]
+            .as_str()
+            .is_some_and(|a| a.contains("llvmpipe"))
+        {
             assert!(stamps.as_f64().is_some_and(|s| s >= 0.0), "{stamps}");
         }
         let want_repr = if repr == "nanovdb" {

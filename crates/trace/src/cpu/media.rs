@@ -9,6 +9,11 @@
 //! handed to the volume crate's estimators in the grid's index space, in f64. Media that
 //! overlap add their densities, so the transmittances multiply; every placement draws its
 //! own random streams, which keeps the product of the stochastic estimates unbiased.
+//!
+//! The grids are kept with an identity map (index space is their world space; the
+//! placement lives in the scene's transforms), so a GPU volume handed a segment's
+//! [`MediumSegment::ray`] as its world ray estimates the very index ray the CPU does
+//! (`crate::scan::scan_transmittance_on`).
 
 use std::collections::BTreeMap;
 use std::str::FromStr;
@@ -16,7 +21,9 @@ use std::str::FromStr;
 use anyhow::Context;
 use hytrace_csg::{Ray, Real, V3};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
-use hytrace_volume::{BrickedGrid, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams};
+use hytrace_volume::{
+    BrickedGrid, GridMap, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams,
+};
 
 use rayon::prelude::*;
 
@@ -43,6 +50,20 @@ pub struct Transmitted<T> {
     pub lookups: u64,
 }
 
+/// One placed medium's part of a ray: the medium, the part in its index space and the
+/// random streams it draws.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MediumSegment {
+    /// The medium (index into the Foundry's `optics.media`).
+    pub medium: u32,
+    /// Position of the placement among the ray's segments (instance order); its random
+    /// streams are those of [`SceneMedia::params`] for it.
+    pub placement: u32,
+    /// The part of the ray inside the placement, in the medium's index space, with the
+    /// world ray's `t`.
+    pub ray: IndexRay,
+}
+
 /// A scene's surfaces and its media opened for transmittance queries.
 pub struct SceneMedia<'a, T> {
     scene: &'a CpuScene<T>,
@@ -56,6 +77,14 @@ pub struct SceneMedia<'a, T> {
 /// streams of different placements apart).
 fn placement_seed(seed: u32, k: u32) -> u32 {
     seed.wrapping_add(k.wrapping_mul(0x9E37_79B9))
+}
+
+/// The world ray `origin + t direction` in precision `T`, as the surfaces are traced.
+fn ray_in<T: Real>(origin: [f64; 3], direction: [f64; 3]) -> Ray<T> {
+    Ray {
+        origin: V3::from_f64(origin),
+        direction: V3::from_f64(direction),
+    }
 }
 
 impl<'a, T: Real> SceneMedia<'a, T> {
@@ -76,7 +105,9 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                     .with_context(|| format!("medium {i}: texel format"))?,
                 placement: Transform64::IDENTITY,
             };
-            let grid = open_medium(&spec).with_context(|| format!("medium {i}"))?;
+            let grid = open_medium(&spec)
+                .with_context(|| format!("medium {i}"))?
+                .with_map(GridMap::IDENTITY);
             let mut params = *params;
             params.density_scale *= m.density_scale;
             params
@@ -129,24 +160,16 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmax: f64,
         ray_index: u32,
     ) -> anyhow::Result<Transmitted<T>> {
-        let ray = Ray {
-            origin: V3::from_f64(origin),
-            direction: V3::from_f64(direction),
-        };
+        let ray = ray_in::<T>(origin, direction);
         let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
         let mut transmittance = 1.0;
         let mut lookups = 0;
-        for (k, ((instance, medium), (t0, t1))) in self.spans(&ray, tmin, end).iter().enumerate() {
-            let m = &self.grids[*medium as usize];
-            let w = &self.to_index[&(*instance, *medium)];
-            let o = w.apply_point(origin);
-            let d = w.apply_vector(direction);
-            let index_ray = IndexRay::new(o, d, *t0, *t1)?;
-            let mut params = m.params;
-            params.seed = placement_seed(params.seed, k as u32);
-            let e = IndexTransmittance::new(&m.grid, m.grid.ranges(), &params)?
-                .estimate(&index_ray, ray_index)?;
+        for s in self.segments(origin, direction, tmin, end)? {
+            let params = self.params(s.medium, s.placement);
+            let grid = self.grid(s.medium);
+            let e = IndexTransmittance::new(grid, grid.ranges(), &params)?
+                .estimate(&s.ray, ray_index)?;
             transmittance *= e.transmittance;
             lookups += e.lookups;
         }
@@ -171,6 +194,51 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .map(|(i, r)| {
                 self.trace_transmittance(r.origin, r.direction, r.tmin, r.tmax, i as u32)
                     .with_context(|| format!("ray {i}"))
+            })
+            .collect()
+    }
+
+    /// Number of media (the Foundry's `optics.media`).
+    pub fn medium_count(&self) -> usize {
+        self.grids.len()
+    }
+
+    /// The grid of `medium`, bricked in its Foundry texel format, with an identity map: its
+    /// world space is its index space.
+    pub fn grid(&self, medium: u32) -> &BrickedGrid {
+        &self.grids[medium as usize].grid
+    }
+
+    /// The parameters of `medium` on the `placement`-th segment of a ray: the caller's, with
+    /// the medium's density scale folded in and the placement's seed.
+    pub fn params(&self, medium: u32, placement: u32) -> TransmittanceParams {
+        let mut params = self.grids[medium as usize].params;
+        params.seed = placement_seed(params.seed, placement);
+        params
+    }
+
+    /// The segments of the ray `origin + t direction` (unit direction, world space) over
+    /// `[tmin, end]` (`end` being its first surface crossing or its `tmax`) inside each
+    /// placed medium, in instance order; errors on a ray the estimators refuse.
+    pub fn segments(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        tmin: f64,
+        end: f64,
+    ) -> anyhow::Result<Vec<MediumSegment>> {
+        let ray = ray_in::<T>(origin, direction);
+        self.spans(&ray, tmin, end)
+            .into_iter()
+            .enumerate()
+            .map(|(k, ((instance, medium), (t0, t1)))| {
+                let w = &self.to_index[&(instance, medium)];
+                let ray = IndexRay::new(w.apply_point(origin), w.apply_vector(direction), t0, t1)?;
+                Ok(MediumSegment {
+                    medium,
+                    placement: k as u32,
+                    ray,
+                })
             })
             .collect()
     }

@@ -238,6 +238,24 @@ impl GpuContext {
     }
 }
 
+/// What `--backend auto` runs: `gpu` on a new context, or, when that fails on the GPU's
+/// side (no adapter, a lost device, a scene too big for it, out of memory), a line on
+/// stderr naming the failure and `cpu`. Failures that are not the GPU's (bad input) are
+/// returned as they are.
+pub fn gpu_or_cpu<R>(
+    doing: &str,
+    gpu: impl FnOnce(GpuContext) -> anyhow::Result<R>,
+    cpu: impl FnOnce() -> anyhow::Result<R>,
+) -> anyhow::Result<R> {
+    match GpuContext::new().map_err(anyhow::Error::from).and_then(gpu) {
+        Err(e) if e.downcast_ref::<GpuError>().is_some() => {
+            eprintln!("hytrace: no usable GPU ({e:#}); --backend auto {doing} on the CPU");
+            cpu()
+        }
+        result => result,
+    }
+}
+
 /// Layout entry of a storage buffer visible to compute shaders.
 fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {

@@ -10,7 +10,7 @@ mod timing;
 mod tracer;
 mod volume;
 
-pub use context::{GpuContext, GpuError};
+pub use context::{gpu_or_cpu, GpuContext, GpuError};
 pub use scene::GpuScene;
 pub use timing::GpuTimes;
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};

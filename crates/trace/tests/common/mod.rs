@@ -4,7 +4,12 @@
 // Each test crate uses only some of these helpers.
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
 use hytrace_csg::{Ray, V3};
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::read_array;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::{CpuScene, Hit};
 use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
@@ -27,6 +32,52 @@ impl Rng {
     pub fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
+}
+
+/// A path in the repository.
+pub fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(path)
+}
+
+/// `v` scaled to unit length.
+pub fn unit(d: [f64; 3]) -> [f64; 3] {
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    d.map(|v| v / n)
+}
+
+/// Runs the `hytrace` binary with `args` and extra environment variables.
+pub fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap()
+}
+
+/// The values of a float32, float64 or int32 `.npy` file, as f64.
+pub fn read_values(path: &Path) -> Vec<f64> {
+    let a = read_array(path).unwrap();
+    match a.scalar {
+        Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        Scalar::F64 => bytemuck::pod_collect_to_vec(&a.bytes),
+        Scalar::I32 => bytemuck::pod_collect_to_vec::<u8, i32>(&a.bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        s => panic!("{}: unexpected {s:?}", path.display()),
+    }
+}
+
+/// The values of a `.npy` file that must be float64.
+pub fn read_f64(path: &Path) -> Vec<f64> {
+    let a = read_array(path).unwrap();
+    assert_eq!(a.scalar, Scalar::F64, "{}", path.display());
+    bytemuck::pod_collect_to_vec(&a.bytes)
 }
 
 /// Sweeps (`axis`, `rect`, `circle`) around the scene plus `random` rays from points in

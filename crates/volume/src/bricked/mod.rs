@@ -97,6 +97,13 @@ pub struct BrickedGrid {
 }
 
 impl BrickedGrid {
+    /// The same grid placed in world space by `map` (bricks, atlas and ranges live in index
+    /// space and stay as they are).
+    pub fn with_map(mut self, map: GridMap) -> BrickedGrid {
+        self.map = map;
+        self
+    }
+
     /// The texel format.
     pub fn format(&self) -> TexelFormat {
         self.format
