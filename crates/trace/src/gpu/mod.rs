@@ -2,6 +2,7 @@
 
 pub mod compose;
 mod context;
+pub mod nanovdb;
 pub mod oneshot;
 pub mod probe;
 pub mod records;
