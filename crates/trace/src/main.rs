@@ -334,15 +334,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let load_s = t0.elapsed().as_secs_f64();
             let (result, times) = scan::scan_with(&f, &ray_rows, precision, backend)?;
-            // The media on the backend the surfaces ran on (`auto` has chosen already).
+            // The media where the surfaces ran (`auto` on the GPU may still fall back).
             let media_backend = match times.gpu {
-                Some(_) => Backend::Gpu,
+                Some(_) => backend,
                 None => Backend::Cpu,
             };
             let media = match &transmittance {
-                Some(_) => Some(scan::scan_transmittance_on(
+                Some(_) => Some(scan::media_transmittance(
                     &f,
                     &ray_rows,
+                    &scan::ray_ends(&result, &ray_rows),
                     precision,
                     &estimate.args().params(),
                     media_backend,

@@ -390,10 +390,8 @@ pub fn scan_transmittance(
     scan_transmittance_on(foundry, rays, precision, params, Backend::Cpu)
 }
 
-/// [`scan_transmittance`] on `backend`. On the GPU (f32 only) the scan kernel finds the
-/// surfaces and the transmittance kernel estimates every medium on the very index-space
-/// segments and random streams the CPU would; `auto` falls back to the CPU with a line on
-/// stderr when no adapter opens. Embree answers surfaces only.
+/// [`scan_transmittance`] on `backend`: the surfaces scanned there ([`scan_with`]), then
+/// the media estimated where the scan ran ([`media_transmittance`]).
 pub fn scan_transmittance_on(
     foundry: &Foundry,
     rays: &[RayRow],
@@ -401,20 +399,54 @@ pub fn scan_transmittance_on(
     params: &TransmittanceParams,
     backend: Backend,
 ) -> anyhow::Result<TransmittanceRun> {
+    if backend == Backend::Embree {
+        bail!("the Embree backend answers surfaces only: transmittance needs cpu, gpu or auto");
+    }
+    let (result, times) = scan_with(foundry, rays, precision, backend)?;
+    let ends = ray_ends(&result, rays);
+    let ran_on = if times.gpu.is_some() {
+        Backend::Gpu
+    } else {
+        Backend::Cpu
+    };
+    media_transmittance(foundry, rays, &ends, precision, params, ran_on)
+}
+
+/// Where each ray's media end: its first surface crossing in `result`, or its `tmax` on a
+/// miss.
+pub fn ray_ends(result: &ScanResult, rays: &[RayRow]) -> Vec<f64> {
+    result
+        .hits
+        .iter()
+        .zip(rays)
+        .map(|(h, r)| if h[3].is_finite() { h[3] } else { r.tmax })
+        .collect()
+}
+
+/// Transmittance of the scene's media along every ray over `[tmin, ends[i]]` (the ends a
+/// scan found, [`ray_ends`]), on `backend`. On the GPU (f32 only) the transmittance kernel
+/// estimates every medium on the very index-space segments and random streams the CPU
+/// would; `auto` falls back to the CPU with a line on stderr when the GPU fails. Embree
+/// answers surfaces only.
+pub fn media_transmittance(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    ends: &[f64],
+    precision: Precision,
+    params: &TransmittanceParams,
+    backend: Backend,
+) -> anyhow::Result<TransmittanceRun> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
+        ends: &[f64],
         params: &TransmittanceParams,
     ) -> anyhow::Result<TransmittanceRun> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let media = SceneMedia::new(&scene, f, params)?;
         let t1 = Instant::now();
-        let values = media
-            .trace_all(rays)?
-            .iter()
-            .map(|r| r.transmittance)
-            .collect();
+        let values = media.transmittances_to(rays, ends)?;
         Ok(TransmittanceRun {
             values,
             open_s: (t1 - t0).as_secs_f64(),
@@ -423,8 +455,8 @@ pub fn scan_transmittance_on(
         })
     }
     match (backend, precision) {
-        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, params),
-        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, params),
+        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, ends, params),
+        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, ends, params),
         (Backend::Embree, _) => {
             bail!("the Embree backend answers surfaces only: transmittance needs cpu, gpu or auto")
         }
@@ -432,19 +464,19 @@ pub fn scan_transmittance_on(
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Gpu, Precision::F32) => {
-            gpu_transmittance(foundry, rays, params, GpuContext::new()?)
+            gpu_transmittance(foundry, rays, ends, params, GpuContext::new()?)
         }
         (Backend::Auto, Precision::F32) => gpu_or_cpu(
             "computes transmittance",
-            |ctx| gpu_transmittance(foundry, rays, params, ctx),
-            || cpu::<f32>(foundry, rays, params),
+            |ctx| gpu_transmittance(foundry, rays, ends, params, ctx),
+            || cpu::<f32>(foundry, rays, ends, params),
         ),
     }
 }
 
-/// The GPU's transmittance: the scan kernel gives every ray's first surface crossing; the
-/// CPU's f32 scene clips the ray to each placed medium's bricks (as
-/// [`SceneMedia::segments`], over the GPU's `[tmin, t]`); then one transmittance batch per
+/// The GPU's transmittance over each ray's `[tmin, end]`: the CPU's f32 scene clips the
+/// ray to each placed medium's bricks (as [`SceneMedia::segments`]); then one
+/// transmittance batch per
 /// segment position and medium, each of all `N` rays so that ray `i` draws the random
 /// streams of index `i` (rays without such a segment go as empty rays, their estimates
 /// unused), with that placement's seed. The estimates multiply per ray in segment order,
@@ -452,25 +484,30 @@ pub fn scan_transmittance_on(
 fn gpu_transmittance(
     f: &Foundry,
     rays: &[RayRow],
+    ends: &[f64],
     params: &TransmittanceParams,
     ctx: GpuContext,
 ) -> anyhow::Result<TransmittanceRun> {
+    anyhow::ensure!(
+        rays.len() == ends.len(),
+        "{} rays and {} ends",
+        rays.len(),
+        ends.len()
+    );
     let t0 = Instant::now();
     let cpu = CpuScene::<f32>::new(f)?;
     let media = SceneMedia::new(&cpu, f, params)?;
-    let tracer = GpuTracer::new(&ctx, &cpu)?;
     let volumes = (0..media.medium_count() as u32)
         .map(|m| GpuVolume::new(&ctx, media.grid(m)).with_context(|| format!("medium {m}")))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let open_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let (answers, mut times) = gpu_trace(&ctx, &tracer, rays)?;
+    let mut times = GpuTimes::default();
     let segments: Vec<Vec<MediumSegment>> = rays
         .par_iter()
-        .zip(&answers)
+        .zip(ends)
         .enumerate()
-        .map(|(i, (r, (hit, _)))| {
-            let end = if hit[3].is_finite() { hit[3] } else { r.tmax };
+        .map(|(i, (r, &end))| {
             media
                 .segments(r.origin, r.direction, r.tmin, end)
                 .with_context(|| format!("ray {i}"))
@@ -514,7 +551,7 @@ fn gpu_transmittance(
         transmittance_s: t1.elapsed().as_secs_f64(),
         gpu: Some(GpuScanInfo {
             adapter: ctx.describe(),
-            features: tracer.features().to_vec(),
+            features: vec!["transmittance"],
             times,
         }),
     })

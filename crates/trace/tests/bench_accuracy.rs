@@ -122,6 +122,15 @@ fn quick_run_fills_every_row_and_ranks_worse_variants_worse() {
         let gpu = get(&rows, "gpu vs cpu scan", "GPU f32 on");
         assert!(gpu.error < 1e-5, "GPU error {}", gpu.error);
         assert!(gpu.ns > 0.0);
+        // The GPU's exact transmittance is the CPU's to f32 rounding, and its ratio
+        // tracking draws the same samples, so both errors match the CPU's.
+        let t = "gpu vs cpu transmittance";
+        assert!(err(t, "exact, GPU f32") < 1e-5);
+        let (cpu, gpu) = (err(t, "ratio, 4 spp, CPU"), err(t, "ratio, 4 spp, GPU"));
+        assert!(
+            (cpu - gpu).abs() < 1e-3 * cpu,
+            "ratio: CPU {cpu}, GPU {gpu}"
+        );
     }
     // One plot per component, and the Markdown table.
     let components: std::collections::HashSet<&String> = rows.keys().map(|k| &k.0).collect();

@@ -334,16 +334,20 @@ fn filter_rows(settings: Settings, timer: Timer) -> Result<Vec<Row>, String> {
 }
 
 /// The grid, ranges, rays and reference transmittances of the estimator and majorant rows.
-struct Fog {
-    grid: DenseGrid,
+/// The transmittance rows' grid, rays and references (shared with the GPU rows).
+pub(super) struct Fog {
+    /// The grid sampled from [`field`], identity map.
+    pub(super) grid: DenseGrid,
     mips: RangeMips,
-    rays: Vec<IndexRay>,
+    /// The rays (index space is world space).
+    pub(super) rays: Vec<IndexRay>,
     /// `exp(-tau)` of each ray by [`Lattice::optical_depth`].
-    reference: Vec<f64>,
+    pub(super) reference: Vec<f64>,
 }
 
 impl Fog {
-    fn new(settings: Settings) -> Result<Fog, String> {
+    /// The grid, its range mips, the rays and their references.
+    pub(super) fn new(settings: Settings) -> Result<Fog, String> {
         let grid = field_grid()?;
         let mips = RangeMips::build(&grid).map_err(|e| e.to_string())?;
         let rays = fog_rays(settings.size(16_000, 400))?;
@@ -361,7 +365,7 @@ impl Fog {
     }
 
     /// Every ray's estimate under `params` (one thread) and the time per ray.
-    fn trace(
+    pub(super) fn trace(
         &self,
         params: &TransmittanceParams,
         timer: Timer,
@@ -405,7 +409,11 @@ fn fog_rays(count: usize) -> Result<Vec<IndexRay>, String> {
 }
 
 /// Transmittance parameters on the fog rays: trilinear lookups, [`DENSITY_SCALE`].
-fn fog_params(estimator: Estimator, spp: u32, majorant: Majorant) -> TransmittanceParams {
+pub(super) fn fog_params(
+    estimator: Estimator,
+    spp: u32,
+    majorant: Majorant,
+) -> TransmittanceParams {
     TransmittanceParams {
         estimator,
         density_scale: DENSITY_SCALE,

@@ -163,6 +163,26 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         let ray = ray_in::<T>(origin, direction);
         let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
+        let (transmittance, lookups) =
+            self.transmittance_to(origin, direction, tmin, end, ray_index)?;
+        Ok(Transmitted {
+            hit,
+            transmittance,
+            lookups,
+        })
+    }
+
+    /// The transmittance of the media along the ray over `[tmin, end]`, `end` being its
+    /// first surface crossing already found (or its `tmax`), and the density lookups it
+    /// took.
+    pub fn transmittance_to(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        tmin: f64,
+        end: f64,
+        ray_index: u32,
+    ) -> anyhow::Result<(f64, u64)> {
         let mut transmittance = 1.0;
         let mut lookups = 0;
         for s in self.segments(origin, direction, tmin, end)? {
@@ -173,11 +193,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             transmittance *= e.transmittance;
             lookups += e.lookups;
         }
-        Ok(Transmitted {
-            hit,
-            transmittance,
-            lookups,
-        })
+        Ok((transmittance, lookups))
     }
 
     /// [`Self::trace_transmittance`] of every ray in parallel, ray `i` with the random
@@ -193,6 +209,27 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .enumerate()
             .map(|(i, r)| {
                 self.trace_transmittance(r.origin, r.direction, r.tmin, r.tmax, i as u32)
+                    .with_context(|| format!("ray {i}"))
+            })
+            .collect()
+    }
+
+    /// The transmittance along every ray up to its end (`ends[i]`: its first surface
+    /// crossing from a scan, or its `tmax`), ray `i` drawing the streams of index `i`.
+    pub fn transmittances_to(&self, rays: &[RayRow], ends: &[f64]) -> anyhow::Result<Vec<f64>> {
+        anyhow::ensure!(
+            rays.len() == ends.len() && u32::try_from(rays.len()).is_ok(),
+            "{} rays and {} ends: need as many, at most {}",
+            rays.len(),
+            ends.len(),
+            u32::MAX
+        );
+        rays.par_iter()
+            .zip(ends)
+            .enumerate()
+            .map(|(i, (r, &end))| {
+                self.transmittance_to(r.origin, r.direction, r.tmin, end, i as u32)
+                    .map(|(t, _)| t)
                     .with_context(|| format!("ray {i}"))
             })
             .collect()
