@@ -430,7 +430,7 @@ pub fn ruled_solid(
         }
         // A twisted patch's centre deviates by about (twist) x width x height, so either
         // split reduces it: split the patch's longer side, which keeps triangles from
-        // becoming slivers (a twisted face split only across made 500 mm x 14 µm ones,
+        // becoming slivers (a twisted face split only across made 500 mm x 30 µm ones,
         // which also made BVH builds crawl).
         let patch_height = (z2 - z1) / nz as f64;
         let patch_width = levels
@@ -720,7 +720,7 @@ mod tests {
 
     /// A generic trap whose top face has one corner moved (celeritas/solids.gdml's arb8):
     /// its twisted side faces must become well-shaped triangles within the tolerance, not
-    /// face-high slivers (refining across only once gave 500 mm x 14 µm triangles).
+    /// face-high slivers (refining across only once gave 500 mm x 30 µm triangles).
     #[test]
     fn twisted_faces_tessellate_into_well_shaped_triangles() {
         let bottom = [
