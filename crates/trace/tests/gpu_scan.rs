@@ -7,7 +7,9 @@ mod common;
 
 use std::path::Path;
 
-use common::{check, gpu_answers, hytrace, mesh_obj, mesh_scene_rays, rays_for, read_values, repo};
+use common::{
+    check, gpu_answers, gpu_stats, hytrace, mesh_obj, mesh_scene_rays, rays_for, read_values, repo,
+};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::CpuScene;
@@ -141,17 +143,7 @@ fn scan_cli_on_the_gpu() {
         String::from_utf8_lossy(&cpu.stderr)
     );
     let gpu = scan("gpu", &p("gpu.npy"), &p("gpu_ids.npy"), &[]);
-    assert!(
-        gpu.status.success(),
-        "{}",
-        String::from_utf8_lossy(&gpu.stderr)
-    );
-    let stats: serde_json::Value = serde_json::from_slice(&gpu.stdout).unwrap();
-    assert_eq!(stats["backend"], "gpu");
-    assert!(stats["adapter"].as_str().is_some_and(|a| !a.is_empty()));
-    assert!(stats["gpu_kernel_s"].as_f64().is_some());
-    // Timestamp queries: lavapipe and real GPUs have them (null where a device has not).
-    assert!(stats.get("gpu_kernel_timestamps_s").is_some());
+    let stats = gpu_stats(&gpu);
     assert_eq!(stats["kernel_features"][0], "csg");
     let (want, got) = (
         read_values(Path::new(&p("cpu.npy"))),

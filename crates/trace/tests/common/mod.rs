@@ -56,6 +56,24 @@ pub fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
         .unwrap()
 }
 
+/// The `--stats` line of a GPU run, after checking that the command succeeded (its stderr
+/// shown otherwise) and reported what every GPU command reports: backend `gpu`, the
+/// adapter, host kernel seconds and the timestamp field (null where a device has no
+/// timestamp queries).
+pub fn gpu_stats(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stats: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(stats["backend"], "gpu");
+    assert!(stats["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    assert!(stats["gpu_kernel_s"].as_f64().is_some());
+    assert!(stats.get("gpu_kernel_timestamps_s").is_some());
+    stats
+}
+
 /// The values of a float32, float64 or int32 `.npy` file, as f64.
 pub fn read_values(path: &Path) -> Vec<f64> {
     let a = read_array(path).unwrap();
