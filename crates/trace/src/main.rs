@@ -81,6 +81,9 @@ enum Command {
         #[command(flatten)]
         estimate: volume::EstimatorOptions,
     },
+    /// Render a scene (the embedded default scene when SCENE is omitted) to a PNG or NumPy
+    /// image, simulating only the effects the scene calls for.
+    Render(hytrace_trace::render::run::RenderArgs),
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
     /// Sparse volumes: NanoVDB (.nvdb), OpenVDB (.vdb) or procedural grids
@@ -373,6 +376,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Volume(command) => run_volume(command)?,
+        Command::Render(args) => hytrace_trace::render::run::run(args, &options)?,
         Command::Bench(BenchCommand::Accuracy { out, quick }) => {
             let settings = accuracy::Settings { quick };
             eprintln!("measuring on {}", accuracy::machine_line(settings));

@@ -46,6 +46,6 @@ pub use ranges::{RangeLevel, RangeMips, ValueRange, MAX_RANGE_BLOCKS, RANGE_LEVE
 pub use rng::{pcg4d, Rng};
 pub use source::{open_volume, select_grid, world_bbox, GridSummary, NamedVolume, Volume};
 pub use transmittance::{
-    transmittance, transmittance_batch, Estimate, Estimator, IndexTransmittance, Majorant,
-    TransmittanceParams,
+    transmittance, transmittance_batch, Collision, Estimate, Estimator, IndexTransmittance,
+    Majorant, TransmittanceParams,
 };

@@ -192,6 +192,59 @@ impl<'a, G: VoxelGrid + ?Sized> IndexTransmittance<'a, G> {
     pub fn estimate(&self, ray: &IndexRay, ray_index: u32) -> Result<Estimate, VolumeError> {
         self.0.estimate_index(ray, ray_index)
     }
+
+    /// The density (lookup times scale) at index-space point `p`; the stochastic filter
+    /// draws from `rng`.
+    pub fn density(&self, p: [f64; 3], rng: &mut Rng) -> f64 {
+        self.0.density(p, rng)
+    }
+
+    /// The first real collision along `ray` by delta tracking under the local (or global)
+    /// majorants: free-flight distance sampling, as a path tracer needs it. `None` when the
+    /// ray leaves `[tmin, tmax]` without one, which happens with probability equal to the
+    /// transmittance. Errors as the trackers do on negative densities.
+    pub fn collision(
+        &self,
+        ray: &IndexRay,
+        rng: &mut Rng,
+    ) -> Result<Option<Collision>, VolumeError> {
+        let ctx = &self.0;
+        let segments = ctx.segments(ray)?;
+        ctx.check_trackable(&segments, 0)?;
+        let scale = ctx.params.density_scale;
+        for s in &segments {
+            let (low, high) = (s.range.min as f64 * scale, s.range.max as f64 * scale);
+            if high <= 0.0 {
+                continue;
+            }
+            let mut t = s.t0;
+            loop {
+                t += free_flight(rng, high);
+                if t >= s.t1 {
+                    break;
+                }
+                // A constant segment collides wherever the first flight lands.
+                let density = if low == high {
+                    low
+                } else {
+                    ctx.density(ray.at(t), rng)
+                };
+                if low == high || rng.next_f64() * high < density {
+                    return Ok(Some(Collision { t, density }));
+                }
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// A real collision found by [`IndexTransmittance::collision`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Collision {
+    /// Where, in the ray's `t`.
+    pub t: f64,
+    /// The density there.
+    pub density: f64,
 }
 
 /// The transmittances of `rays`, in parallel; ray `i` uses the random streams of index `i`.
@@ -269,12 +322,17 @@ impl<'a, G: VoxelGrid + ?Sized> Context<'a, G> {
         self.estimate_index(&IndexRay::from_world(ray, self.grid.map())?, ray_index)
     }
 
+    /// The ray's segments under local or global majorants.
+    fn segments(&self, ray: &IndexRay) -> Result<Vec<Segment>, VolumeError> {
+        Ok(match self.global {
+            Some(range) => SegmentWalk::global(self.mips, ray, range)?.collect(),
+            None => SegmentWalk::new(self.mips, ray, self.level)?.collect(),
+        })
+    }
+
     fn estimate_index(&self, ray: &IndexRay, ray_index: u32) -> Result<Estimate, VolumeError> {
         let ray = *ray;
-        let segments: Vec<Segment> = match self.global {
-            Some(range) => SegmentWalk::global(self.mips, &ray, range)?.collect(),
-            None => SegmentWalk::new(self.mips, &ray, self.level)?.collect(),
-        };
+        let segments = self.segments(&ray)?;
         let deterministic = |(tau, lookups): (f64, u64)| Estimate {
             transmittance: (-tau).exp(),
             variance: 0.0,
@@ -386,14 +444,9 @@ impl<'a, G: VoxelGrid + ?Sized> Context<'a, G> {
         Ok((tau, n as u64))
     }
 
-    /// The mean and sample variance over `spp` tracked samples.
-    fn track(
-        &self,
-        ray: &IndexRay,
-        segments: &[Segment],
-        ray_index: u32,
-        tracker: Tracker,
-    ) -> Result<Estimate, VolumeError> {
+    /// Errors when a segment may hold a negative (or NaN) density: the trackers need
+    /// densities >= 0.
+    fn check_trackable(&self, segments: &[Segment], ray_index: u32) -> Result<(), VolumeError> {
         let scale = self.params.density_scale;
         for s in segments {
             let low = s.range.min as f64 * scale;
@@ -405,6 +458,18 @@ impl<'a, G: VoxelGrid + ?Sized> Context<'a, G> {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The mean and sample variance over `spp` tracked samples.
+    fn track(
+        &self,
+        ray: &IndexRay,
+        segments: &[Segment],
+        ray_index: u32,
+        tracker: Tracker,
+    ) -> Result<Estimate, VolumeError> {
+        self.check_trackable(segments, ray_index)?;
         let mut counts = Counts::default();
         // Welford's running mean and sum of squared deviations.
         let (mut mean, mut m2) = (0.0, 0.0);

@@ -362,4 +362,18 @@ impl<T: Real> CpuScene<T> {
     pub fn instances(&self) -> usize {
         self.placements.len()
     }
+
+    /// World bounds (min, max) of the placed solids, `None` without any.
+    pub fn world_bounds(&self) -> Option<[[f64; 3]; 2]> {
+        self.placements.iter().fold(None, |acc, p| {
+            let [lo, hi] = [p.bounds[0].to_f64(), p.bounds[1].to_f64()];
+            Some(match acc {
+                None => [lo, hi],
+                Some([a, b]) => [
+                    std::array::from_fn(|k| a[k].min(lo[k])),
+                    std::array::from_fn(|k| b[k].max(hi[k])),
+                ],
+            })
+        })
+    }
 }

@@ -12,6 +12,8 @@ use hytrace_foundry::{Foundry, Transform64, UNSET};
 use hytrace_volume::TexelFormat;
 
 use super::media::{add_medium_solid, MediumSpec};
+use crate::render::camera::CameraSpec;
+use crate::render::spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec};
 
 /// Number of PMT-like instances in the default scene.
 pub const DEFAULT_PMT_COUNT: usize = 48;
@@ -100,4 +102,80 @@ pub fn default_scene() -> anyhow::Result<Foundry> {
     }
     f.validate()?;
     Ok(f)
+}
+
+/// How the default scene renders: an acrylic vessel (index 1.49, 2 m absorption length)
+/// holding the scattering fog, a mirror support ring, PMTs with brownish photocathodes, a
+/// grey floor, lit by a point light above, a low sun and a dim sky.
+pub fn default_render_spec() -> RenderSpec {
+    let materials = [
+        (
+            "acrylic",
+            Material::Dielectric {
+                ior: 1.49,
+                absorption_length: Some(2000.0),
+            },
+        ),
+        (
+            "steel",
+            Material::Mirror {
+                colour: [0.8, 0.8, 0.82],
+            },
+        ),
+        (
+            "photocathode",
+            Material::Diffuse {
+                colour: [0.55, 0.4, 0.2],
+            },
+        ),
+        (
+            "concrete",
+            Material::Diffuse {
+                colour: [0.45, 0.45, 0.42],
+            },
+        ),
+    ];
+    let assignments = [
+        ("vessel", "acrylic"),
+        ("support_ring", "steel"),
+        ("pmt", "photocathode"),
+        ("floor", "concrete"),
+    ];
+    RenderSpec {
+        camera: Some(CameraSpec {
+            eye: [3600.0, -4300.0, 1500.0],
+            target: [0.0, 0.0, -250.0],
+            up: [0.0, 0.0, 1.0],
+            fov: Some(38.0),
+            orthographic: None,
+        }),
+        materials: materials.map(|(n, m)| (n.to_string(), m)).into(),
+        solid_materials: assignments
+            .map(|(s, m)| (s.to_string(), m.to_string()))
+            .into(),
+        lights: vec![
+            Light::Point {
+                position: [0.0, 0.0, 3000.0],
+                intensity: [6.0e6, 5.6e6, 5.0e6],
+            },
+            Light::Directional {
+                direction: [-0.5, 0.8, -0.6],
+                irradiance: [1.2, 1.2, 1.1],
+            },
+            Light::Environment {
+                radiance: [0.12, 0.14, 0.18],
+            },
+        ],
+        media: [(
+            "fog".to_string(),
+            MediumOptics {
+                albedo: 0.9,
+                g: 0.3,
+                emission: [0.0; 3],
+            },
+        )]
+        .into(),
+        settings: RenderSettings::default(),
+        transparent_solids: Vec::new(),
+    }
 }

@@ -10,13 +10,17 @@ use std::path::Path;
 
 use anyhow::{bail, Context};
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_foundry::Foundry;
+use hytrace_foundry::{Foundry, UNSET};
 
-pub use default::default_scene;
+use crate::render::spec::RenderSpec;
+
+pub use default::{default_render_spec, default_scene};
 pub use gdml_scene::{gdml_to_foundry, load_gdml_scene, GDML_MESH_TOLERANCE};
 pub use media::{add_medium_solid, grid_map_transform, open_medium, MediumSpec};
 pub use mesh_scene::{add_mesh_file_solid, gltf_to_foundry, load_mesh_scene, obj_to_foundry};
-pub use toml_scene::{load_toml_scene, scene_from_toml};
+pub use toml_scene::{
+    load_toml_render_scene, load_toml_scene, render_scene_from_toml, scene_from_toml,
+};
 
 /// Loads the scene named on the command line: none or `default` gives the embedded default
 /// scene; a directory is read as a Foundry written by `hytrace foundry`; a `.toml` file is a
@@ -47,4 +51,33 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<F
             p.display()
         ),
     }
+}
+
+/// Loads a scene as [`load_scene`] does, with its render description: a scene file's own
+/// (camera, materials, lights, media, settings), the default scene's, or for other scenes
+/// the defaults (an automatic camera, grey diffuse solids, default lights), with a GDML
+/// world (the instances without a mother) rendered transparent so the detector shows.
+pub fn load_render_scene(
+    arg: Option<&Path>,
+    options: &GdmlOptions,
+) -> anyhow::Result<(Foundry, RenderSpec)> {
+    let is_default = arg.is_none_or(|p| p.as_os_str() == "default");
+    if is_default {
+        return Ok((default_scene()?, default_render_spec()));
+    }
+    if let Some(p) = arg.filter(|p| p.extension().is_some_and(|e| e == "toml") && !p.is_dir()) {
+        return load_toml_render_scene(p);
+    }
+    let f = load_scene(arg, options)?;
+    let mut spec = RenderSpec::default();
+    let hierarchical = f.inst_mother.iter().any(|m| m.index != UNSET);
+    if hierarchical {
+        for (i, m) in f.inst_mother.iter().enumerate() {
+            if m.index == UNSET {
+                let solid = f.inst[i].solid as usize;
+                spec.transparent_solids.push(f.solid_names[solid].clone());
+            }
+        }
+    }
+    Ok((f, spec))
 }

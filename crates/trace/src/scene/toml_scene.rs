@@ -22,6 +22,10 @@
 //! copy = 3                         # copy number, optional (default: placement index)
 //! ```
 //!
+//! Rendering adds `[camera]`, `[materials.NAME]`, `[[lights]]` and `[render]` tables, a
+//! `material` on solids and meshes and `albedo`, `g` and `emission` on volumes (see
+//! [`crate::render::spec`]); scans ignore them.
+//!
 //! Names are shared by solids, meshes and volumes. Placements apply the rotation first, then
 //! the translation. Anything without placements is placed once at the origin. The Foundry
 //! lists CSG solids, then meshes, then volumes, each in name order. Media need a grid with a
@@ -40,6 +44,8 @@ use serde::Deserialize;
 
 use super::media::{add_medium_solid, MediumSpec};
 use super::mesh_scene::add_mesh_file_solid;
+use crate::render::camera::CameraSpec;
+use crate::render::spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -52,18 +58,30 @@ struct SceneFile {
     volumes: BTreeMap<String, VolumeEntry>,
     #[serde(default)]
     place: Vec<Placement>,
+    #[serde(default)]
+    camera: Option<CameraSpec>,
+    #[serde(default)]
+    materials: BTreeMap<String, Material>,
+    #[serde(default)]
+    lights: Vec<Light>,
+    #[serde(default)]
+    render: Option<RenderSettings>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SolidEntry {
     shape: String,
+    #[serde(default)]
+    material: Option<String>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MeshEntry {
     file: String,
+    #[serde(default)]
+    material: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -75,6 +93,12 @@ struct VolumeEntry {
     density_scale: f64,
     #[serde(default)]
     format: Option<String>,
+    #[serde(default)]
+    albedo: f64,
+    #[serde(default)]
+    g: f64,
+    #[serde(default)]
+    emission: [f64; 3],
 }
 
 #[derive(Deserialize)]
@@ -112,8 +136,57 @@ fn placement_transform(p: &Placement) -> anyhow::Result<Transform64> {
 /// Builds a Foundry from the text of a scene file; `source` names it in errors and `dir` is
 /// where relative mesh and grid paths start.
 pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> anyhow::Result<Foundry> {
+    render_scene_from_toml(text, source, dir).map(|(f, _)| f)
+}
+
+/// The render description of a parsed scene file, checked.
+fn render_spec(file: &SceneFile, source: &str) -> anyhow::Result<RenderSpec> {
+    let mut solid_materials = BTreeMap::new();
+    let named = file
+        .solids
+        .iter()
+        .map(|(n, e)| (n, &e.material))
+        .chain(file.meshes.iter().map(|(n, e)| (n, &e.material)));
+    for (name, material) in named {
+        if let Some(m) = material {
+            solid_materials.insert(name.clone(), m.clone());
+        }
+    }
+    let media = file
+        .volumes
+        .iter()
+        .map(|(name, v)| {
+            let optics = MediumOptics {
+                albedo: v.albedo,
+                g: v.g,
+                emission: v.emission,
+            };
+            (name.clone(), optics)
+        })
+        .collect();
+    let spec = RenderSpec {
+        camera: file.camera.clone(),
+        materials: file.materials.clone(),
+        solid_materials,
+        lights: file.lights.clone(),
+        media,
+        settings: file.render.clone().unwrap_or_default(),
+        transparent_solids: Vec::new(),
+    };
+    spec.validate().with_context(|| source.to_string())?;
+    Ok(spec)
+}
+
+/// A scene file's Foundry and its render description (camera, materials, lights, media
+/// optics, settings).
+pub fn render_scene_from_toml(
+    text: &str,
+    source: &str,
+    dir: &Path,
+) -> anyhow::Result<(Foundry, RenderSpec)> {
     let file: SceneFile =
         toml::from_str(text).with_context(|| format!("{source}: not a valid scene file"))?;
+    let spec = render_spec(&file, source)?;
     if file.solids.is_empty() && file.meshes.is_empty() && file.volumes.is_empty() {
         bail!("{source}: no [solids.NAME], [meshes.NAME] or [volumes.NAME] entries");
     }
@@ -169,7 +242,7 @@ pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> anyhow::Result<F
     }
     f.validate()
         .with_context(|| format!("{source}: built an invalid Foundry"))?;
-    Ok(f)
+    Ok((f, spec))
 }
 
 /// A volume entry as a medium: file sources resolved against `dir`.
@@ -194,8 +267,13 @@ fn volume_spec(entry: &VolumeEntry, dir: &Path) -> anyhow::Result<MediumSpec> {
 
 /// Reads a scene file.
 pub fn load_toml_scene(path: &Path) -> anyhow::Result<Foundry> {
+    load_toml_render_scene(path).map(|(f, _)| f)
+}
+
+/// Reads a scene file with its render description.
+pub fn load_toml_render_scene(path: &Path) -> anyhow::Result<(Foundry, RenderSpec)> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    scene_from_toml(&text, &path.display().to_string(), dir)
+    render_scene_from_toml(&text, &path.display().to_string(), dir)
 }

@@ -1,0 +1,370 @@
+//! Rendering of scenes that mix CSG solids, GDML detectors, meshes and sparse volumes,
+//! simulating only the effects a scene calls for.
+//!
+//! A [`RenderSpec`] (camera, materials, lights, media optics, settings) comes with the
+//! scene ([`crate::scene::load_render_scene`]); [`Effects::of`] decides from it and the
+//! Foundry which effects the scene needs, and [`Renderer::render`] runs the CPU path
+//! compiled for exactly that set (see [`integrator`]). Pixel `(i, j)`'s sample `s` draws
+//! the random stream `(seed, j * width + i, s)` of [`hytrace_volume::Rng`]; with one
+//! sample per pixel the ray goes through the pixel centre.
+
+pub mod camera;
+mod integrator;
+pub mod optics;
+pub mod output;
+pub mod run;
+pub mod spec;
+mod views;
+mod volumes;
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use anyhow::{ensure, Context};
+use glam::DVec3;
+use hytrace_foundry::{Foundry, UNSET};
+use hytrace_volume::{Estimator, Rng, TransmittanceParams};
+use rayon::prelude::*;
+
+use crate::cpu::media::SceneMedia;
+use crate::cpu::{CpuScene, Hit};
+use camera::{Camera, CameraSpec};
+use integrator::{EMISSION_ABSORPTION, MULTIPLE_SCATTERING, NO_VOLUMES, SINGLE_SCATTERING};
+pub use output::{write_image, Image};
+use spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec, View, VolumeMode};
+use volumes::Media;
+
+/// The effects a render simulates: each only when the scene calls for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Effects {
+    /// What the image shows (a geometry view needs nothing below).
+    pub view: View,
+    /// Direct light and hard shadows on diffuse surfaces (the scene has lights and diffuse
+    /// surfaces).
+    pub shading: bool,
+    /// Mirror and dielectric surfaces (a placed solid is made of one).
+    pub specular: bool,
+    /// Media (the scene places a medium), rendered in this mode.
+    pub volumes: Option<VolumeMode>,
+}
+
+impl Effects {
+    /// The effects `spec` calls for in the scene `f`.
+    pub fn of(f: &Foundry, spec: &RenderSpec) -> Effects {
+        let settings = &spec.settings;
+        if settings.view != View::Shaded {
+            return Effects {
+                view: settings.view,
+                shading: false,
+                specular: false,
+                volumes: None,
+            };
+        }
+        let placed: Vec<usize> = {
+            let mut s: Vec<usize> = f.inst.iter().map(|i| i.solid as usize).collect();
+            s.sort_unstable();
+            s.dedup();
+            s
+        };
+        let material_of = |solid: usize| solid_material(f, spec, solid);
+        let has_media = !f.optics.media.is_empty() && !f.brick.is_empty();
+        let scatters = spec.media.values().any(|m| m.albedo > 0.0);
+        Effects {
+            view: View::Shaded,
+            shading: placed
+                .iter()
+                .any(|&s| matches!(material_of(s), Material::Diffuse { .. })),
+            specular: placed.iter().any(|&s| material_of(s).is_specular()),
+            volumes: has_media.then(|| {
+                settings.volumes.unwrap_or(if scatters {
+                    VolumeMode::MultipleScattering
+                } else {
+                    VolumeMode::EmissionAbsorption
+                })
+            }),
+        }
+    }
+
+    /// One line per effect and the CPU path and GPU modules it brings in, as
+    /// `hytrace render --explain` prints them.
+    pub fn explain(&self) -> Vec<String> {
+        if self.view != View::Shaded {
+            return vec![format!(
+                "view {:?}: first hits only (scan kernel and camera rays); no shading, no media",
+                self.view
+            )
+            .to_lowercase()];
+        }
+        let yes_no = |b: bool| if b { "yes" } else { "no (not compiled in)" };
+        vec![
+            "view shaded: light transport".to_string(),
+            format!(
+                "direct light and hard shadows on diffuse surfaces: {}",
+                yes_no(self.shading)
+            ),
+            format!(
+                "mirror and dielectric surfaces (Fresnel): {}",
+                yes_no(self.specular)
+            ),
+            match self.volumes {
+                None => "media: no (not compiled in)".to_string(),
+                Some(VolumeMode::EmissionAbsorption) => {
+                    "media: emission-absorption (exact transmittance, marched emission)".into()
+                }
+                Some(VolumeMode::SingleScattering) => {
+                    "media: single scattering (delta tracking, ratio-tracked shadow rays)".into()
+                }
+                Some(VolumeMode::MultipleScattering) => {
+                    "media: multiple scattering (delta tracking with local majorants, ratio-tracked shadow rays)".into()
+                }
+            },
+        ]
+    }
+}
+
+/// The material of `solid` under `spec` (a named material, transparent, or the default).
+fn solid_material(f: &Foundry, spec: &RenderSpec, solid: usize) -> Material {
+    let name = f.solid_names.get(solid).map(String::as_str).unwrap_or("");
+    if spec.transparent_solids.iter().any(|s| s == name) {
+        return Material::Transparent;
+    }
+    spec.solid_materials
+        .get(name)
+        .and_then(|m| spec.materials.get(m))
+        .copied()
+        .unwrap_or(spec::DEFAULT_MATERIAL)
+}
+
+/// A scene prepared for rendering with one set of effects.
+pub struct Renderer<'a> {
+    scene: &'a CpuScene<f32>,
+    media: Option<Media<'a>>,
+    camera: Camera,
+    /// Material, solid and boundary of each instance.
+    instance_material: Vec<Material>,
+    instance_solid: Vec<u32>,
+    instance_boundary: Vec<u32>,
+    /// Point and directional lights (the environment is kept apart).
+    lights: Vec<Light>,
+    environment: DVec3,
+    /// Whether some surface lets shadow rays through (transparent or dielectric).
+    see_through: bool,
+    /// Depth view: distances mapped from white (near) to black (far).
+    depth_range: [f64; 2],
+    settings: RenderSettings,
+    effects: Effects,
+}
+
+/// A camera looking at the scene's bounds from the front right, above (the default when a
+/// scene file has no `[camera]`).
+pub fn auto_camera(bounds: Option<[[f64; 3]; 2]>) -> CameraSpec {
+    let [lo, hi] = bounds.unwrap_or([[-1.0; 3], [1.0; 3]]);
+    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let radius = (0..3)
+        .map(|k| (hi[k] - lo[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        .max(1e-3)
+        * 0.5;
+    let fov: f64 = 40.0;
+    let distance = radius / (0.5 * fov.to_radians()).sin();
+    let dir = DVec3::new(0.55, -0.75, 0.45).normalize();
+    CameraSpec {
+        eye: (DVec3::from(centre) + distance * dir).into(),
+        target: centre,
+        up: [0.0, 0.0, 1.0],
+        fov: Some(fov),
+        orthographic: None,
+    }
+}
+
+impl<'a> Renderer<'a> {
+    /// Prepares a render of `f` (traced through `scene`, prepared from it) under `spec`.
+    pub fn new(scene: &'a CpuScene<f32>, f: &Foundry, spec: &RenderSpec) -> anyhow::Result<Self> {
+        spec.validate()?;
+        let settings = spec.settings.clone();
+        let effects = Effects::of(f, spec);
+        let bounds = scene.world_bounds();
+        let camera_spec = spec.camera.clone().unwrap_or_else(|| auto_camera(bounds));
+        let camera = Camera::new(&camera_spec, settings.size)?;
+        let instance_material: Vec<Material> = f
+            .inst
+            .iter()
+            .map(|i| solid_material(f, spec, i.solid as usize))
+            .collect();
+        let mut lights = Vec::new();
+        let mut environment = DVec3::ZERO;
+        for l in spec.lights_or_default() {
+            match l {
+                Light::Environment { radiance } => environment += DVec3::from(radiance),
+                other => lights.push(other),
+            }
+        }
+        let see_through = instance_material
+            .iter()
+            .any(|m| matches!(m, Material::Transparent | Material::Dielectric { .. }));
+        let media = match effects.volumes {
+            None => None,
+            Some(mode) => {
+                let estimator = match mode {
+                    VolumeMode::EmissionAbsorption => Estimator::Exact,
+                    _ => Estimator::Ratio,
+                };
+                let mut params = TransmittanceParams::new(estimator);
+                params.seed = settings.seed;
+                let scene_media = SceneMedia::new(scene, f, &params)?;
+                let optics = f
+                    .optics
+                    .media
+                    .iter()
+                    .map(|m| {
+                        let solid = f
+                            .solid
+                            .iter()
+                            .position(|s| {
+                                (s.prim_offset..s.prim_offset + s.num_prim).contains(&m.prim)
+                            })
+                            .context("a medium's prim belongs to no solid")?;
+                        let name = &f.solid_names[solid];
+                        Ok(spec.media.get(name).copied().unwrap_or_default())
+                    })
+                    .collect::<anyhow::Result<Vec<MediumOptics>>>()?;
+                Some(Media {
+                    scene: scene_media,
+                    optics,
+                    step: settings.step,
+                })
+            }
+        };
+        let depth_range = match bounds {
+            None => [0.0, 1.0],
+            Some([lo, hi]) => {
+                let centre = 0.5 * (DVec3::from(lo) + DVec3::from(hi));
+                let radius = 0.5 * (DVec3::from(hi) - DVec3::from(lo)).length();
+                let d = (centre - camera.eye).length();
+                [(d - radius).max(0.0), (d + radius).max(1e-9)]
+            }
+        };
+        Ok(Renderer {
+            scene,
+            media,
+            camera,
+            instance_material,
+            instance_solid: f.inst.iter().map(|i| i.solid).collect(),
+            instance_boundary: f.inst.iter().map(|i| i.boundary).collect(),
+            lights,
+            environment,
+            see_through,
+            depth_range,
+            settings,
+            effects,
+        })
+    }
+
+    /// The effects this render simulates.
+    pub fn effects(&self) -> Effects {
+        self.effects
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    fn material(&self, hit: &Hit<f32>) -> Material {
+        self.instance_material[hit.instance as usize]
+    }
+
+    /// The camera ray of pixel `(i, j)`'s sample drawn from `rng`.
+    fn camera_ray(&self, i: u32, j: u32, rng: &mut Rng) -> (DVec3, DVec3) {
+        let offset = if self.settings.spp == 1 {
+            [0.5, 0.5]
+        } else {
+            [rng.next_f64(), rng.next_f64()]
+        };
+        self.camera.ray(i, j, offset)
+    }
+
+    /// Renders the image on the CPU (rayon over rows); `progress` is called with the
+    /// number of rows finished so far. Errors name the pixel that failed.
+    pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> anyhow::Result<Image> {
+        let fx = self.effects;
+        let vm = match fx.volumes {
+            None => NO_VOLUMES,
+            Some(VolumeMode::EmissionAbsorption) => EMISSION_ABSORPTION,
+            Some(VolumeMode::SingleScattering) => SINGLE_SCATTERING,
+            Some(VolumeMode::MultipleScattering) => MULTIPLE_SCATTERING,
+        };
+        // One instantiation per effect set.
+        macro_rules! shaded {
+            ($($s:literal, $p:literal, $v:ident);* $(;)?) => {
+                match (fx.shading, fx.specular, vm) {
+                    $(($s, $p, $v) => self.render_with(progress, |o, d, rng| {
+                        self.radiance::<$s, $p, $v>(o, d, rng)
+                    }),)*
+                    _ => unreachable!("volume modes are 0..=3"),
+                }
+            };
+        }
+        if fx.view != View::Shaded {
+            return self.render_with(progress, |o, d, _| Ok(self.geometry_view(o, d)));
+        }
+        shaded!(
+            false, false, NO_VOLUMES; false, false, EMISSION_ABSORPTION;
+            false, false, SINGLE_SCATTERING; false, false, MULTIPLE_SCATTERING;
+            false, true, NO_VOLUMES; false, true, EMISSION_ABSORPTION;
+            false, true, SINGLE_SCATTERING; false, true, MULTIPLE_SCATTERING;
+            true, false, NO_VOLUMES; true, false, EMISSION_ABSORPTION;
+            true, false, SINGLE_SCATTERING; true, false, MULTIPLE_SCATTERING;
+            true, true, NO_VOLUMES; true, true, EMISSION_ABSORPTION;
+            true, true, SINGLE_SCATTERING; true, true, MULTIPLE_SCATTERING;
+        )
+    }
+
+    /// The image whose pixel samples `sample` gives.
+    fn render_with<F>(&self, progress: &(dyn Fn(u64) + Sync), sample: F) -> anyhow::Result<Image>
+    where
+        F: Fn(DVec3, DVec3, &mut Rng) -> anyhow::Result<DVec3> + Sync,
+    {
+        let [width, height] = self.settings.size;
+        let spp = self.settings.spp;
+        ensure!(
+            (width as u64) * (height as u64) <= u32::MAX as u64,
+            "{width}x{height} pixels: at most 2^32 - 1"
+        );
+        let done = AtomicU64::new(0);
+        let rows: Vec<Vec<[f32; 3]>> = (0..height)
+            .into_par_iter()
+            .map(|j| {
+                let row = (0..width)
+                    .map(|i| {
+                        let pixel = j * width + i;
+                        let mut sum = DVec3::ZERO;
+                        for s in 0..spp {
+                            let mut rng = Rng::new(self.settings.seed, pixel, s);
+                            let (o, d) = self.camera_ray(i, j, &mut rng);
+                            sum += sample(o, d, &mut rng)
+                                .with_context(|| format!("pixel ({i}, {j}), sample {s}"))?;
+                        }
+                        Ok((sum / spp as f64).as_vec3().to_array())
+                    })
+                    .collect::<anyhow::Result<Vec<_>>>()?;
+                progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                Ok(row)
+            })
+            .collect::<anyhow::Result<_>>()?;
+        Ok(Image {
+            width,
+            height,
+            pixels: rows.into_iter().flatten().collect(),
+        })
+    }
+
+    /// Solid, boundary (or `UNSET`) of an instance.
+    fn identity(&self, instance: u32) -> (u32, u32) {
+        let i = instance as usize;
+        (
+            self.instance_solid.get(i).copied().unwrap_or(UNSET),
+            self.instance_boundary.get(i).copied().unwrap_or(UNSET),
+        )
+    }
+}

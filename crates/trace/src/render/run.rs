@@ -1,0 +1,165 @@
+//! `hytrace render`: options, progress bar and output.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use hytrace_foundry::gdml::GdmlOptions;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::spec::{View, VolumeMode};
+use super::{write_image, Effects, Renderer};
+use crate::cpu::CpuScene;
+use crate::scene::load_render_scene;
+
+/// Where a render runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RenderBackend {
+    /// Our CPU path (rayon over rows).
+    Cpu,
+}
+
+/// The options of `hytrace render`; each overrides the scene file's `[render]` table.
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// `default` (or nothing) for the embedded default scene, a .toml scene file, a .gdml
+    /// file, a mesh or a Foundry directory.
+    pub scene: Option<PathBuf>,
+    /// The image: .png (8-bit sRGB) or .npy (float32 linear radiance, height x width x 3).
+    #[arg(short, long, default_value = "out/render.png")]
+    pub out: PathBuf,
+    /// Where it renders.
+    #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
+    pub backend: RenderBackend,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<[u32; 2]>,
+    /// Samples per pixel (1: pixel centres).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// What the image shows.
+    #[arg(long, value_enum)]
+    pub view: Option<View>,
+    /// How media are rendered.
+    #[arg(long, value_enum)]
+    pub volumes: Option<VolumeMode>,
+    /// Longest path (surface and medium scattering events).
+    #[arg(long)]
+    pub max_bounces: Option<u32>,
+    /// Emission-absorption march step in voxels.
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Seed of the random streams.
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// Print which effects and kernels the scene uses, and render nothing.
+    #[arg(long)]
+    pub explain: bool,
+    /// Print one JSON line of timings.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+/// Parses `WIDTHxHEIGHT`.
+fn parse_size(text: &str) -> Result<[u32; 2], String> {
+    let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|v| *v > 0);
+    match text.split_once(['x', 'X']) {
+        Some((w, h)) => match (parse(w), parse(h)) {
+            (Some(w), Some(h)) => Ok([w, h]),
+            _ => Err(format!(
+                "`{text}`: expected WIDTHxHEIGHT, both positive integers"
+            )),
+        },
+        None => Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 1280x720")),
+    }
+}
+
+/// Runs `hytrace render`.
+pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
+    let ext = args.out.extension().and_then(|e| e.to_str());
+    if !matches!(ext, Some("png" | "npy")) && !args.explain {
+        bail!(
+            "{}: the image must be a .png or .npy file",
+            args.out.display()
+        );
+    }
+    let t0 = Instant::now();
+    let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
+    let s = &mut spec.settings;
+    s.size = args.size.unwrap_or(s.size);
+    s.spp = args.spp.unwrap_or(s.spp);
+    s.view = args.view.unwrap_or(s.view);
+    s.volumes = args.volumes.or(s.volumes);
+    s.max_bounces = args.max_bounces.unwrap_or(s.max_bounces);
+    s.step = args.step.unwrap_or(s.step);
+    s.seed = args.seed.unwrap_or(s.seed);
+    spec.validate().context("render settings")?;
+    if args.explain {
+        for line in Effects::of(&f, &spec).explain() {
+            println!("{line}");
+        }
+        println!(
+            "backend: {:?} (CPU path monomorphised over these effects)",
+            args.backend
+        );
+        return Ok(());
+    }
+    let load_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let scene = CpuScene::<f32>::new(&f)?;
+    let renderer = Renderer::new(&scene, &f, &spec)?;
+    let build_s = t1.elapsed().as_secs_f64();
+    let [width, height] = spec.settings.size;
+    let bar = ProgressBar::new(height as u64).with_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} rows, {eta} left")
+            .expect("a valid progress template")
+            .progress_chars("=> "),
+    );
+    bar.set_message("rendering");
+    let t2 = Instant::now();
+    let image = renderer.render(&|rows| bar.set_position(rows))?;
+    bar.finish_and_clear();
+    let render_s = t2.elapsed().as_secs_f64();
+    write_image(&image, &args.out)?;
+    let samples = width as f64 * height as f64 * spec.settings.spp as f64;
+    if args.stats {
+        let fx = renderer.effects();
+        let line = serde_json::json!({
+            "backend": "cpu",
+            "width": width,
+            "height": height,
+            "spp": spec.settings.spp,
+            "view": format!("{:?}", fx.view).to_lowercase(),
+            "shading": fx.shading,
+            "specular": fx.specular,
+            "volumes": fx.volumes.map(|v| format!("{v:?}")),
+            "load_s": load_s,
+            "build_s": build_s,
+            "render_s": render_s,
+            "samples_per_s": samples / render_s.max(1e-9),
+            "threads": rayon::current_num_threads(),
+        });
+        println!("{line}");
+    }
+    eprintln!(
+        "{width}x{height}, {} spp in {render_s:.2} s; wrote {}",
+        spec.settings.spp,
+        args.out.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_size;
+
+    #[test]
+    fn sizes_parse_and_bad_ones_are_refused() {
+        assert_eq!(parse_size("1280x720"), Ok([1280, 720]));
+        assert_eq!(parse_size("64X48"), Ok([64, 48]));
+        for bad in ["1280", "0x10", "ax3", "12x", "-3x4"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+    }
+}
