@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use anyhow::{bail, ensure};
 use serde::Deserialize;
 
-use super::camera::CameraSpec;
+use super::camera::{Camera, CameraSpec};
 
 /// A surface material.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
@@ -340,7 +340,11 @@ impl RenderSpec {
             m.validate()
                 .map_err(|e| e.context(format!("volume `{name}`")))?;
         }
-        self.settings.validate()
+        self.settings.validate()?;
+        if let Some(camera) = &self.camera {
+            Camera::new(camera, self.settings.size)?;
+        }
+        Ok(())
     }
 
     /// The lights, or the default ones when the scene names none: sunlight from above
