@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::{ensure, Context};
 use glam::DVec3;
-use hytrace_foundry::{Foundry, UNSET};
+use hytrace_foundry::{Foundry, PrimKind, UNSET};
 use hytrace_volume::{Estimator, Rng, TransmittanceParams};
 use rayon::prelude::*;
 
@@ -59,8 +59,15 @@ impl Effects {
                 volumes: None,
             };
         }
+        // Placed solids with surfaces (a volume-only solid is a medium, not a surface).
+        let volume_only = 1u32 << PrimKind::Volume as u32;
         let placed: Vec<usize> = {
-            let mut s: Vec<usize> = f.inst.iter().map(|i| i.solid as usize).collect();
+            let mut s: Vec<usize> = f
+                .inst
+                .iter()
+                .map(|i| i.solid as usize)
+                .filter(|&s| f.solid[s].content & !volume_only != 0)
+                .collect();
             s.sort_unstable();
             s.dedup();
             s
