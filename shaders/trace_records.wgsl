@@ -182,6 +182,45 @@ struct TransmittanceRecord {
     pad: array<u32, 3>,
 }
 
+struct RenderParams {
+    eye: array<f32, 3>,
+    view: u32,
+    w: array<f32, 3>,
+    orthographic: u32,
+    u: array<f32, 3>,
+    extent: f32,
+    v: array<f32, 3>,
+    width: u32,
+    environment: array<f32, 3>,
+    height: u32,
+    spp: u32,
+    seed: u32,
+    max_bounces: u32,
+    effects: u32,
+    depth_near: f32,
+    depth_far: f32,
+    light_count: u32,
+    light_first: u32,
+    hierarchical: u32,
+    row_offset: u32,
+    row_count: u32,
+    pad: u32,
+}
+
+struct RenderItem {
+    kind: u32,
+    pad: array<u32, 3>,
+    a: vec4<f32>,
+    b: vec4<f32>,
+}
+
+struct RenderInstance {
+    material: u32,
+    solid: u32,
+    boundary: u32,
+    pad: u32,
+}
+
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
 const SURFACE_TOLERANCE: f32 = 2e-6;
@@ -204,5 +243,21 @@ const VOLUME_STATUS_NEGATIVE: u32 = 1u;
 const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
 const VOLUME_NO_BRICK: u32 = 4294967295u;
 const VOLUME_NO_SLOT: u32 = 4294967295u;
+const RENDER_VIEW_SHADED: u32 = 0u;
+const RENDER_VIEW_DEPTH: u32 = 1u;
+const RENDER_VIEW_NORMAL: u32 = 2u;
+const RENDER_VIEW_SOLID: u32 = 3u;
+const RENDER_VIEW_PRIM: u32 = 4u;
+const RENDER_VIEW_INSTANCE: u32 = 5u;
+const RENDER_VIEW_BOUNDARY: u32 = 6u;
+const RENDER_EFFECT_SHADING: u32 = 1u;
+const RENDER_EFFECT_SPECULAR: u32 = 2u;
+const RENDER_MATERIAL_DIFFUSE: u32 = 0u;
+const RENDER_MATERIAL_MIRROR: u32 = 1u;
+const RENDER_MATERIAL_DIELECTRIC: u32 = 2u;
+const RENDER_MATERIAL_EMITTER: u32 = 3u;
+const RENDER_MATERIAL_TRANSPARENT: u32 = 4u;
+const RENDER_LIGHT_POINT: u32 = 16u;
+const RENDER_LIGHT_DIRECTIONAL: u32 = 17u;
 // Infinity of the volume kernels (hytrace_trace::gpu::GPU_INF).
 const VOLUME_INF: f32 = 1e38;

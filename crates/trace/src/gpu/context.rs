@@ -28,6 +28,9 @@ pub enum GpuError {
         /// What failed.
         problem: String,
     },
+    /// The GPU path does not do this yet (the CPU does).
+    #[error("not on the GPU yet: {0}")]
+    Unsupported(String),
     /// wgpu reported a validation or out-of-memory error.
     #[error("GPU error during {what}: {problem}")]
     Operation {
@@ -249,7 +252,7 @@ pub fn gpu_or_cpu<R>(
 ) -> anyhow::Result<R> {
     match GpuContext::new().map_err(anyhow::Error::from).and_then(gpu) {
         Err(e) if e.downcast_ref::<GpuError>().is_some() => {
-            eprintln!("hytrace: no usable GPU ({e:#}); --backend auto {doing} on the CPU");
+            eprintln!("hytrace: not on the GPU ({e:#}); --backend auto {doing} on the CPU");
             cpu()
         }
         result => result,

@@ -6,12 +6,14 @@ pub mod nanovdb;
 pub mod oneshot;
 pub mod probe;
 pub mod records;
+mod render;
 mod scene;
 mod timing;
 mod tracer;
 mod volume;
 
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
+pub use render::{compose_render_kernel, GpuRenderer};
 pub use scene::GpuScene;
 pub use timing::GpuTimes;
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};

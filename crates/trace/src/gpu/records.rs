@@ -195,6 +195,123 @@ record! {
     }
 }
 
+record! {
+    /// What every pixel of a GPU render shares (`shaders/kernels/render.wgsl`): the camera
+    /// (see [`crate::render::camera`]), the image, the effects and where the materials
+    /// and lights start in the item list.
+    pub struct RenderParams {
+        /// Eye position.
+        pub eye: [f32; 3],
+        /// `RENDER_VIEW_*`.
+        pub view: u32,
+        /// Forward unit vector.
+        pub w: [f32; 3],
+        /// 1: orthographic, 0: perspective.
+        pub orthographic: u32,
+        /// Right unit vector.
+        pub u: [f32; 3],
+        /// `tan(fov / 2)` (perspective) or half the view height (orthographic).
+        pub extent: f32,
+        /// True up unit vector.
+        pub v: [f32; 3],
+        /// Image width in pixels.
+        pub width: u32,
+        /// Environment radiance.
+        pub environment: [f32; 3],
+        /// Image height in pixels.
+        pub height: u32,
+        /// Samples per pixel.
+        pub spp: u32,
+        /// Seed of the random streams.
+        pub seed: u32,
+        /// Longest path.
+        pub max_bounces: u32,
+        /// `RENDER_EFFECT_*` bits compiled into this render.
+        pub effects: u32,
+        /// Depth view: distance shown white.
+        pub depth_near: f32,
+        /// Depth view: distance shown black.
+        pub depth_far: f32,
+        /// Number of point and directional lights (items after the materials).
+        pub light_count: u32,
+        /// First light in the item list.
+        pub light_first: u32,
+        /// 1 for a hierarchical scene (the navigator's answers).
+        pub hierarchical: u32,
+        /// First pixel row of this batch.
+        pub row_offset: u32,
+        /// Rows in this batch.
+        pub row_count: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+record! {
+    /// A material or a light (`kind`: `RENDER_MATERIAL_*` or `RENDER_LIGHT_*`) with two
+    /// vectors of parameters: a material's colour (or radiance) in `a`, a dielectric's
+    /// index and absorption length (0: none) in `b`; a light's position or travel
+    /// direction in `a` and intensity or irradiance in `b`.
+    pub struct RenderItem {
+        /// What it is.
+        pub kind: u32,
+        /// Padding.
+        pub pad: [u32; 3],
+        /// First parameters.
+        pub a: [f32; 4],
+        /// Second parameters.
+        pub b: [f32; 4],
+    }
+}
+
+record! {
+    /// What a render needs of an instance: its material (index into the items), solid and
+    /// boundary (`u32::MAX`: none).
+    pub struct RenderInstance {
+        /// Material item.
+        pub material: u32,
+        /// Solid.
+        pub solid: u32,
+        /// Boundary.
+        pub boundary: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+/// [`RenderParams::view`] values (the order of [`crate::render::spec::View`]).
+pub const RENDER_VIEW_SHADED: u32 = 0;
+/// Depth.
+pub const RENDER_VIEW_DEPTH: u32 = 1;
+/// Normal.
+pub const RENDER_VIEW_NORMAL: u32 = 2;
+/// Solid identity.
+pub const RENDER_VIEW_SOLID: u32 = 3;
+/// Prim identity.
+pub const RENDER_VIEW_PRIM: u32 = 4;
+/// Instance identity.
+pub const RENDER_VIEW_INSTANCE: u32 = 5;
+/// Boundary identity.
+pub const RENDER_VIEW_BOUNDARY: u32 = 6;
+/// [`RenderParams::effects`] bit: direct light and hard shadows on diffuse surfaces.
+pub const RENDER_EFFECT_SHADING: u32 = 1;
+/// Mirrors and dielectrics.
+pub const RENDER_EFFECT_SPECULAR: u32 = 2;
+/// [`RenderItem::kind`] of materials: diffuse.
+pub const RENDER_MATERIAL_DIFFUSE: u32 = 0;
+/// Mirror.
+pub const RENDER_MATERIAL_MIRROR: u32 = 1;
+/// Dielectric.
+pub const RENDER_MATERIAL_DIELECTRIC: u32 = 2;
+/// Emitter.
+pub const RENDER_MATERIAL_EMITTER: u32 = 3;
+/// Transparent.
+pub const RENDER_MATERIAL_TRANSPARENT: u32 = 4;
+/// [`RenderItem::kind`] of lights: point.
+pub const RENDER_LIGHT_POINT: u32 = 16;
+/// Directional.
+pub const RENDER_LIGHT_DIRECTIONAL: u32 = 17;
+
 /// [`VolumeParams::estimator`] values.
 pub const VOLUME_ESTIMATOR_EXACT: u32 = 0;
 /// Midpoint march.
@@ -239,6 +356,9 @@ fn trace_records() -> Vec<RecordEntry> {
         entry::<hytrace_volume::BrickEntry>(),
         entry::<VolumeParams>(),
         entry::<TransmittanceRecord>(),
+        entry::<RenderParams>(),
+        entry::<RenderItem>(),
+        entry::<RenderInstance>(),
     ]
 }
 
@@ -260,6 +380,9 @@ pub fn generate() -> String {
     push_struct::<hytrace_volume::BrickEntry>(&mut out);
     push_struct::<VolumeParams>(&mut out);
     push_struct::<TransmittanceRecord>(&mut out);
+    push_struct::<RenderParams>(&mut out);
+    push_struct::<RenderItem>(&mut out);
+    push_struct::<RenderInstance>(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
@@ -269,7 +392,7 @@ pub fn generate() -> String {
         <f32 as hytrace_csg::Real>::SURFACE_TOLERANCE,
         crate::cpu::BOX_BVH_MAX_DEPTH,
     ));
-    let volume_consts = [
+    let consts = [
         ("VOLUME_ESTIMATOR_EXACT", VOLUME_ESTIMATOR_EXACT),
         ("VOLUME_ESTIMATOR_MARCH", VOLUME_ESTIMATOR_MARCH),
         ("VOLUME_ESTIMATOR_DELTA", VOLUME_ESTIMATOR_DELTA),
@@ -287,8 +410,24 @@ pub fn generate() -> String {
         ("VOLUME_STATUS_MARCH_STEPS", VOLUME_STATUS_MARCH_STEPS),
         ("VOLUME_NO_BRICK", hytrace_volume::NO_BRICK),
         ("VOLUME_NO_SLOT", hytrace_volume::NO_SLOT),
+        ("RENDER_VIEW_SHADED", RENDER_VIEW_SHADED),
+        ("RENDER_VIEW_DEPTH", RENDER_VIEW_DEPTH),
+        ("RENDER_VIEW_NORMAL", RENDER_VIEW_NORMAL),
+        ("RENDER_VIEW_SOLID", RENDER_VIEW_SOLID),
+        ("RENDER_VIEW_PRIM", RENDER_VIEW_PRIM),
+        ("RENDER_VIEW_INSTANCE", RENDER_VIEW_INSTANCE),
+        ("RENDER_VIEW_BOUNDARY", RENDER_VIEW_BOUNDARY),
+        ("RENDER_EFFECT_SHADING", RENDER_EFFECT_SHADING),
+        ("RENDER_EFFECT_SPECULAR", RENDER_EFFECT_SPECULAR),
+        ("RENDER_MATERIAL_DIFFUSE", RENDER_MATERIAL_DIFFUSE),
+        ("RENDER_MATERIAL_MIRROR", RENDER_MATERIAL_MIRROR),
+        ("RENDER_MATERIAL_DIELECTRIC", RENDER_MATERIAL_DIELECTRIC),
+        ("RENDER_MATERIAL_EMITTER", RENDER_MATERIAL_EMITTER),
+        ("RENDER_MATERIAL_TRANSPARENT", RENDER_MATERIAL_TRANSPARENT),
+        ("RENDER_LIGHT_POINT", RENDER_LIGHT_POINT),
+        ("RENDER_LIGHT_DIRECTIONAL", RENDER_LIGHT_DIRECTIONAL),
     ];
-    for (name, value) in volume_consts {
+    for (name, value) in consts {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }
     out.push_str(&format!(

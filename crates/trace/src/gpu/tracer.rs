@@ -69,7 +69,7 @@ pub fn scene_features(arrays: &SceneArrays) -> Vec<&'static str> {
 
 /// The bytes of an array for a storage binding: an empty array becomes one zeroed record
 /// (bindings cannot be empty, nor smaller than one element), never read.
-fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
+pub(super) fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
     let mut bytes = bytemuck::cast_slice(items).to_vec();
     if bytes.len() < size_of::<T>().max(16) {
         bytes.resize(size_of::<T>().max(16), 0);
@@ -77,39 +77,37 @@ fn binding_bytes<T: bytemuck::Pod>(items: &[T]) -> Vec<u8> {
     bytes
 }
 
-/// A scene on the GPU with its scan pipeline.
-pub struct GpuTracer {
-    pipeline: wgpu::ComputePipeline,
-    /// The navigator's locate, for hierarchical scenes.
-    locate: Option<wgpu::ComputePipeline>,
-    ray_layout: wgpu::BindGroupLayout,
-    scene_group: wgpu::BindGroup,
-    hierarchical: bool,
-    features: Vec<&'static str>,
-    source: String,
+/// A prepared f32 scene uploaded as the scene group (group 1) of a kernel, with the
+/// composition features it needs.
+pub(super) struct SceneUpload {
+    /// Layout of group 1.
+    pub layout: wgpu::BindGroupLayout,
+    /// Group 1.
+    pub group: wgpu::BindGroup,
+    /// `csg`, `mesh` and the primitive types the scene uses.
+    pub features: Vec<&'static str>,
+    /// Whether the scene is hierarchical (the navigator's answers).
+    pub hierarchical: bool,
 }
 
-impl GpuTracer {
-    /// Uploads `scene` and compiles its scan kernel. Arrays beyond the device's binding
-    /// limit, or a device with too few storage bindings, are a [`GpuError::SceneTooBig`].
-    pub fn new(ctx: &GpuContext, scene: &CpuScene<f32>) -> Result<GpuTracer, GpuError> {
+impl SceneUpload {
+    /// Uploads `scene` for a kernel that binds `kernel_bindings` more storage buffers.
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &CpuScene<f32>,
+        kernel: &str,
+        kernel_bindings: u32,
+    ) -> Result<SceneUpload, GpuError> {
         let arrays = scene
             .gpu_arrays()
             .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < SCENE_BINDINGS + RAY_BINDINGS {
+        if per_stage < SCENE_BINDINGS + kernel_bindings {
             return Err(GpuError::SceneTooBig(format!(
-                "the scan kernel binds {} storage buffers, the device allows {per_stage}",
-                SCENE_BINDINGS + RAY_BINDINGS
+                "the {kernel} kernel binds {} storage buffers, the device allows {per_stage}",
+                SCENE_BINDINGS + kernel_bindings
             )));
         }
-        let features = scene_features(&arrays);
-        let source = compose_with(KERNEL, &|f| features.contains(&f)).map_err(|problem| {
-            GpuError::Shader {
-                name: KERNEL.to_string(),
-                problem,
-            }
-        })?;
         let m = &arrays.meshes;
         let c = &arrays.csg;
         let scene_arrays: [(&str, Vec<u8>); SCENE_BINDINGS as usize] = [
@@ -129,32 +127,68 @@ impl GpuTracer {
             ("surface_prims", binding_bytes(&arrays.surface_prims)),
         ];
         let buffers = ctx.storage_buffers(&scene_arrays)?;
+        ctx.checked("uploading the scene", || {
+            let layout = ctx.storage_layout("scene", SCENE_BINDINGS, &[]);
+            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("scene"),
+                layout: &layout,
+                entries: &whole_buffer_entries(&buffers),
+            });
+            SceneUpload {
+                layout,
+                group,
+                features: scene_features(&arrays),
+                hierarchical: arrays.hierarchical,
+            }
+        })
+    }
+}
+
+/// The composed source of `kernel` with `features` on, or a [`GpuError::Shader`].
+pub(super) fn kernel_source(kernel: &str, features: &[&str]) -> Result<String, GpuError> {
+    compose_with(kernel, &|f| features.contains(&f)).map_err(|problem| GpuError::Shader {
+        name: kernel.to_string(),
+        problem,
+    })
+}
+
+/// A scene on the GPU with its scan pipeline.
+pub struct GpuTracer {
+    pipeline: wgpu::ComputePipeline,
+    /// The navigator's locate, for hierarchical scenes.
+    locate: Option<wgpu::ComputePipeline>,
+    ray_layout: wgpu::BindGroupLayout,
+    scene_group: wgpu::BindGroup,
+    hierarchical: bool,
+    features: Vec<&'static str>,
+    source: String,
+}
+
+impl GpuTracer {
+    /// Uploads `scene` and compiles its scan kernel. Arrays beyond the device's binding
+    /// limit, or a device with too few storage bindings, are a [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, scene: &CpuScene<f32>) -> Result<GpuTracer, GpuError> {
+        let upload = SceneUpload::new(ctx, scene, "scan", RAY_BINDINGS)?;
+        let source = kernel_source(KERNEL, &upload.features)?;
         ctx.checked("building the scan kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
-            let scene_layout = ctx.storage_layout("scan scene", SCENE_BINDINGS, &[]);
             let ray_layout = ctx.storage_layout("scan rays", RAY_BINDINGS, &[2, 3]);
-            let entries = whole_buffer_entries(&buffers);
-            let scene_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("scan scene"),
-                layout: &scene_layout,
-                entries: &entries,
-            });
             let pipeline_layout =
                 ctx.device
                     .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                         label: Some("scan"),
                         // Group 0 (the Foundry's own arrays) is not used by the scan.
-                        bind_group_layouts: &[None, Some(&scene_layout), Some(&ray_layout)],
+                        bind_group_layouts: &[None, Some(&upload.layout), Some(&ray_layout)],
                         immediate_size: 0,
                     });
             let entry = |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name);
             GpuTracer {
                 pipeline: entry("scan"),
-                locate: arrays.hierarchical.then(|| entry("locate_rays")),
+                locate: upload.hierarchical.then(|| entry("locate_rays")),
                 ray_layout,
-                scene_group,
-                hierarchical: arrays.hierarchical,
-                features: features.clone(),
+                scene_group: upload.group.clone(),
+                hierarchical: upload.hierarchical,
+                features: upload.features.clone(),
                 source: source.clone(),
             }
         })

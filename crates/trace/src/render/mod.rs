@@ -143,22 +143,22 @@ fn solid_material(f: &Foundry, spec: &RenderSpec, solid: usize) -> Material {
 
 /// A scene prepared for rendering with one set of effects.
 pub struct Renderer<'a> {
-    scene: &'a CpuScene<f32>,
-    media: Option<Media<'a>>,
-    camera: Camera,
+    pub(crate) scene: &'a CpuScene<f32>,
+    pub(crate) media: Option<Media<'a>>,
+    pub(crate) camera: Camera,
     /// Material, solid and boundary of each instance.
-    instance_material: Vec<Material>,
-    instance_solid: Vec<u32>,
-    instance_boundary: Vec<u32>,
+    pub(crate) instance_material: Vec<Material>,
+    pub(crate) instance_solid: Vec<u32>,
+    pub(crate) instance_boundary: Vec<u32>,
     /// Point and directional lights (the environment is kept apart).
-    lights: Vec<Light>,
-    environment: DVec3,
+    pub(crate) lights: Vec<Light>,
+    pub(crate) environment: DVec3,
     /// Whether some surface lets shadow rays through (transparent or dielectric).
-    see_through: bool,
+    pub(crate) see_through: bool,
     /// Depth view: distances mapped from white (near) to black (far).
-    depth_range: [f64; 2],
-    settings: RenderSettings,
-    effects: Effects,
+    pub(crate) depth_range: [f64; 2],
+    pub(crate) settings: RenderSettings,
+    pub(crate) effects: Effects,
 }
 
 /// A camera looking at the scene's bounds from the front right, above (the default when a

@@ -9,8 +9,9 @@ use hytrace_foundry::gdml::GdmlOptions;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::spec::{View, VolumeMode};
-use super::{write_image, Effects, Renderer};
+use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
+use crate::gpu::{gpu_or_cpu, GpuContext, GpuError, GpuRenderer, GpuTimes};
 use crate::scene::load_render_scene;
 
 /// Where a render runs.
@@ -18,6 +19,36 @@ use crate::scene::load_render_scene;
 pub enum RenderBackend {
     /// Our CPU path (rayon over rows).
     Cpu,
+    /// Our WGSL render kernel through wgpu (f32; geometry views and surfaces: media are
+    /// not on the GPU yet).
+    Gpu,
+    /// The GPU when one opens and the render is one it does, else the CPU.
+    Auto,
+}
+
+/// What the GPU side of a render reports.
+struct GpuRun {
+    adapter: String,
+    features: Vec<&'static str>,
+    times: GpuTimes,
+}
+
+/// Renders on the GPU of `ctx`.
+fn render_gpu(
+    ctx: &GpuContext,
+    renderer: &Renderer,
+    progress: &dyn Fn(u64),
+) -> Result<(Image, GpuRun), GpuError> {
+    let gpu = GpuRenderer::new(ctx, renderer)?;
+    let (image, times) = gpu.render(ctx, renderer, progress)?;
+    Ok((
+        image,
+        GpuRun {
+            adapter: ctx.describe(),
+            features: gpu.features().to_vec(),
+            times,
+        },
+    ))
 }
 
 /// The options of `hytrace render`; each overrides the scene file's `[render]` table.
@@ -118,15 +149,26 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     );
     bar.set_message("rendering");
     let t2 = Instant::now();
-    let image = renderer.render(&|rows| bar.set_position(rows))?;
+    let progress = |rows| bar.set_position(rows);
+    let cpu = || renderer.render(&progress).map(|image| (image, None));
+    let gpu = |ctx: GpuContext| {
+        render_gpu(&ctx, &renderer, &progress)
+            .map(|(image, run)| (image, Some(run)))
+            .map_err(anyhow::Error::from)
+    };
+    let (image, gpu_run) = match args.backend {
+        RenderBackend::Cpu => cpu()?,
+        RenderBackend::Gpu => gpu(GpuContext::new()?)?,
+        RenderBackend::Auto => gpu_or_cpu("renders", gpu, cpu)?,
+    };
     bar.finish_and_clear();
     let render_s = t2.elapsed().as_secs_f64();
     write_image(&image, &args.out)?;
     let samples = width as f64 * height as f64 * spec.settings.spp as f64;
     if args.stats {
         let fx = renderer.effects();
-        let line = serde_json::json!({
-            "backend": "cpu",
+        let mut line = serde_json::json!({
+            "backend": if gpu_run.is_some() { "gpu" } else { "cpu" },
             "width": width,
             "height": height,
             "spp": spec.settings.spp,
@@ -140,6 +182,14 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "samples_per_s": samples / render_s.max(1e-9),
             "threads": rayon::current_num_threads(),
         });
+        if let Some(g) = &gpu_run {
+            line["adapter"] = g.adapter.clone().into();
+            line["kernel_features"] = g.features.clone().into();
+            line["gpu_upload_s"] = g.times.upload_s.into();
+            line["gpu_kernel_s"] = g.times.kernel_s.into();
+            line["gpu_readback_s"] = g.times.readback_s.into();
+            line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+        }
         println!("{line}");
     }
     eprintln!(

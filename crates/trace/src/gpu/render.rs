@@ -1,0 +1,369 @@
+//! The GPU renderer: the render kernel (`shaders/kernels/render.wgsl`) over the scene
+//! uploaded as the scan uploads it, composed with only the effects the render calls for.
+//! Its CPU twin is [`Renderer::render`]; `tests/gpu_render.rs` compares them pixel by
+//! pixel. Media are not rendered on the GPU yet: such renders are refused with
+//! [`GpuError::Unsupported`] (so `--backend auto` falls back to the CPU).
+
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
+use super::probe::dispatch_size;
+use super::records::{
+    RenderInstance, RenderItem, RenderParams, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR,
+    RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC,
+    RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER, RENDER_MATERIAL_MIRROR,
+    RENDER_MATERIAL_TRANSPARENT,
+};
+use super::timing::{finish_batch, GpuTimes, PassTimer};
+use super::tracer::{binding_bytes, kernel_source, SceneUpload};
+use crate::render::camera::Projection;
+use crate::render::spec::{Light, Material, View};
+use crate::render::{Image, Renderer};
+
+const KERNEL: &str = "kernels/render";
+/// Storage buffers of the render group (group 2).
+const RENDER_BINDINGS: u32 = 4;
+/// Samples (pixels x spp) per dispatch: drivers may kill long dispatches.
+const SAMPLES_PER_BATCH: u64 = 1 << 20;
+
+/// A scene's render kernel on the GPU, compiled for one set of effects; it renders any
+/// view of the scene ([`GpuRenderer::render`]) with those effects.
+pub struct GpuRenderer {
+    pipeline: wgpu::ComputePipeline,
+    render_layout: wgpu::BindGroupLayout,
+    scene_group: wgpu::BindGroup,
+    hierarchical: bool,
+    features: Vec<&'static str>,
+    source: String,
+}
+
+/// The per-render inputs of the kernel.
+struct RenderInputs {
+    params: RenderParams,
+    items: Vec<RenderItem>,
+    instances: Vec<RenderInstance>,
+}
+
+fn item(kind: u32, a: [f32; 4], b: [f32; 4]) -> RenderItem {
+    RenderItem {
+        kind,
+        pad: [0; 3],
+        a,
+        b,
+    }
+}
+
+fn rgb(c: [f64; 3], w: f64) -> [f32; 4] {
+    [c[0] as f32, c[1] as f32, c[2] as f32, w as f32]
+}
+
+/// A material as a render item.
+fn material_item(m: &Material) -> RenderItem {
+    match *m {
+        Material::Diffuse { colour } => item(RENDER_MATERIAL_DIFFUSE, rgb(colour, 0.0), [0.0; 4]),
+        Material::Mirror { colour } => item(RENDER_MATERIAL_MIRROR, rgb(colour, 0.0), [0.0; 4]),
+        Material::Dielectric {
+            ior,
+            absorption_length,
+        } => item(
+            RENDER_MATERIAL_DIELECTRIC,
+            [0.0; 4],
+            [
+                ior as f32,
+                absorption_length.unwrap_or(0.0) as f32,
+                0.0,
+                0.0,
+            ],
+        ),
+        Material::Emitter { radiance } => {
+            item(RENDER_MATERIAL_EMITTER, rgb(radiance, 0.0), [0.0; 4])
+        }
+        Material::Transparent => item(RENDER_MATERIAL_TRANSPARENT, [0.0; 4], [0.0; 4]),
+    }
+}
+
+/// Refuses what the kernel does not do yet.
+fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
+    if renderer.effects.volumes.is_some() {
+        return Err(GpuError::Unsupported(
+            "the GPU renderer does not render media yet (render with --backend cpu)".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The effect features and `RENDER_EFFECT_*` bits of a render.
+fn effect_features(renderer: &Renderer) -> (Vec<&'static str>, u32) {
+    let fx = renderer.effects;
+    let (mut features, mut bits) = (Vec::new(), 0);
+    if fx.shading {
+        features.push("shading");
+        bits |= RENDER_EFFECT_SHADING;
+    }
+    if fx.specular {
+        features.push("specular");
+        bits |= RENDER_EFFECT_SPECULAR;
+    }
+    (features, bits)
+}
+
+/// The composition features (the scene's, then the effects') and the composed WGSL of
+/// the render kernel for `renderer`, without a device.
+pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, String), GpuError> {
+    check_supported(renderer)?;
+    let arrays = renderer
+        .scene
+        .gpu_arrays()
+        .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
+    let mut features = super::tracer::scene_features(&arrays);
+    features.extend(effect_features(renderer).0);
+    let source = kernel_source(KERNEL, &features)?;
+    Ok((features, source))
+}
+
+/// The kernel's inputs for `renderer` (materials deduplicated, then the lights).
+fn inputs(renderer: &Renderer, hierarchical: bool) -> RenderInputs {
+    let mut items: Vec<RenderItem> = Vec::new();
+    let mut instances = Vec::with_capacity(renderer.instance_material.len());
+    for (i, m) in renderer.instance_material.iter().enumerate() {
+        let it = material_item(m);
+        let index = match items.iter().position(|x| *x == it) {
+            Some(k) => k,
+            None => {
+                items.push(it);
+                items.len() - 1
+            }
+        };
+        instances.push(RenderInstance {
+            material: index as u32,
+            solid: renderer.instance_solid[i],
+            boundary: renderer.instance_boundary[i],
+            pad: 0,
+        });
+    }
+    let light_first = items.len() as u32;
+    for l in &renderer.lights {
+        items.push(match *l {
+            Light::Point {
+                position,
+                intensity,
+            } => item(RENDER_LIGHT_POINT, rgb(position, 0.0), rgb(intensity, 0.0)),
+            Light::Directional {
+                direction,
+                irradiance,
+            } => item(
+                RENDER_LIGHT_DIRECTIONAL,
+                rgb(direction, 0.0),
+                rgb(irradiance, 0.0),
+            ),
+            Light::Environment { .. } => unreachable!("kept apart by Renderer::new"),
+        });
+    }
+    let cam = &renderer.camera;
+    let v3 = |v: glam::DVec3| v.as_vec3().to_array();
+    let (orthographic, extent) = match cam.projection {
+        Projection::Perspective { tan_half_fov } => (0, tan_half_fov),
+        Projection::Orthographic { half_height } => (1, half_height),
+    };
+    let s = &renderer.settings;
+    let params = RenderParams {
+        eye: v3(cam.eye),
+        view: view_code(renderer.effects.view),
+        w: v3(cam.w),
+        orthographic,
+        u: v3(cam.u),
+        extent: extent as f32,
+        v: v3(cam.v),
+        width: s.size[0],
+        environment: v3(renderer.environment),
+        height: s.size[1],
+        spp: s.spp,
+        seed: s.seed,
+        max_bounces: s.max_bounces,
+        effects: effect_features(renderer).1,
+        depth_near: renderer.depth_range[0] as f32,
+        depth_far: renderer.depth_range[1] as f32,
+        light_count: renderer.lights.len() as u32,
+        light_first,
+        hierarchical: hierarchical as u32,
+        row_offset: 0,
+        row_count: 0,
+        pad: 0,
+    };
+    RenderInputs {
+        params,
+        items,
+        instances,
+    }
+}
+
+impl GpuRenderer {
+    /// Uploads the scene of `renderer` and compiles its render kernel with the effects it
+    /// calls for.
+    pub fn new(ctx: &GpuContext, renderer: &Renderer) -> Result<GpuRenderer, GpuError> {
+        let (features, source) = compose_render_kernel(renderer)?;
+        let upload = SceneUpload::new(ctx, renderer.scene, "render", RENDER_BINDINGS)?;
+        ctx.checked("building the render kernel", || {
+            let module = ctx.wgsl_module(KERNEL, &source);
+            let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
+            let pipeline_layout =
+                ctx.device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("render"),
+                        bind_group_layouts: &[None, Some(&upload.layout), Some(&render_layout)],
+                        immediate_size: 0,
+                    });
+            GpuRenderer {
+                pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render"),
+                render_layout,
+                scene_group: upload.group.clone(),
+                hierarchical: upload.hierarchical,
+                features: features.clone(),
+                source: source.clone(),
+            }
+        })
+    }
+
+    /// The composition features of the kernel (the scene's, `shading`, `specular`).
+    pub fn features(&self) -> &[&'static str] {
+        &self.features
+    }
+
+    /// The composed WGSL of the kernel.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// Renders the image `renderer` describes (the scene and effects this kernel was
+    /// built for; any view, camera, lights and settings), in batches of rows; `progress`
+    /// gets the rows finished so far.
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        renderer: &Renderer,
+        progress: &dyn Fn(u64),
+    ) -> Result<(Image, GpuTimes), GpuError> {
+        let (features, _) = compose_render_kernel(renderer)?;
+        if features != self.features {
+            return Err(GpuError::Operation {
+                what: "render".into(),
+                problem: format!(
+                    "the kernel was built for features {:?}, this render needs {features:?}",
+                    self.features
+                ),
+            });
+        }
+        let inputs = inputs(renderer, self.hierarchical);
+        let (width, height) = (inputs.params.width, inputs.params.height);
+        let per_row = width as u64 * inputs.params.spp as u64;
+        let limit_rows = (ctx.limits.max_storage_buffer_binding_size / (16 * width as u64)).max(1);
+        let rows_per_batch = (SAMPLES_PER_BATCH / per_row).clamp(1, limit_rows) as u32;
+        let mut pixels = Vec::with_capacity(width as usize * height as usize);
+        let mut times = GpuTimes::default();
+        let mut row = 0;
+        while row < height {
+            let rows = rows_per_batch.min(height - row);
+            pixels.extend(self.render_rows(ctx, &inputs, row, rows, &mut times)?);
+            row += rows;
+            progress(row as u64);
+        }
+        Ok((
+            Image {
+                width,
+                height,
+                pixels,
+            },
+            times,
+        ))
+    }
+
+    fn render_rows(
+        &self,
+        ctx: &GpuContext,
+        inputs: &RenderInputs,
+        row_offset: u32,
+        row_count: u32,
+        times: &mut GpuTimes,
+    ) -> Result<Vec<[f32; 3]>, GpuError> {
+        let n = (inputs.params.width * row_count) as usize;
+        let out_size = (n * 16) as u64;
+        let t0 = Instant::now();
+        let timer = PassTimer::new(ctx, "render timestamps");
+        let (out, _keep) = ctx.checked("render dispatch", || {
+            let params = RenderParams {
+                row_offset,
+                row_count,
+                ..inputs.params
+            };
+            let input = |label, bytes: &[u8]| {
+                ctx.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents: bytes,
+                        usage: wgpu::BufferUsages::STORAGE,
+                    })
+            };
+            let image = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("image"),
+                size: out_size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let buffers = [
+                input("render params", &binding_bytes(&[params])),
+                input("render items", &binding_bytes(&inputs.items)),
+                input("render instances", &binding_bytes(&inputs.instances)),
+                image,
+            ];
+            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("render"),
+                layout: &self.render_layout,
+                entries: &whole_buffer_entries(&buffers),
+            });
+            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("render"),
+                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(1, &self.scene_group, &[]);
+                pass.set_bind_group(2, &group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            if let Some(timer) = &timer {
+                timer.resolve(&mut encoder);
+            }
+            ctx.queue.submit([encoder.finish()]);
+            (buffers[3].clone(), (buffers, group))
+        })?;
+        let bytes = finish_batch(
+            ctx,
+            "render kernel",
+            t0,
+            &out,
+            out_size,
+            timer.as_ref(),
+            times,
+        )?;
+        let texels: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
+        Ok(texels.iter().map(|t| [t[0], t[1], t[2]]).collect())
+    }
+}
+
+/// The kernel's code of a view.
+fn view_code(view: View) -> u32 {
+    use super::records::*;
+    match view {
+        View::Shaded => RENDER_VIEW_SHADED,
+        View::Depth => RENDER_VIEW_DEPTH,
+        View::Normal => RENDER_VIEW_NORMAL,
+        View::Solid => RENDER_VIEW_SOLID,
+        View::Prim => RENDER_VIEW_PRIM,
+        View::Instance => RENDER_VIEW_INSTANCE,
+        View::Boundary => RENDER_VIEW_BOUNDARY,
+    }
+}

@@ -1,0 +1,259 @@
+//! The GPU render kernel against its CPU twin (`Renderer::render`), pixel by pixel on
+//! lavapipe in CI: geometry views (deterministic: within 1e-4), and surface light transport
+//! (direct light, shadows, mirrors, dielectrics: the same random streams, so the same
+//! paths but where f32 and f64 round a decision apart). Camera rays are made in f32 on the
+//! GPU and in f64 on the CPU, so a pixel whose ray grazes a silhouette may see another
+//! surface: at least 99.5% of pixels must agree, and every disagreement is printed.
+//! Also: the composed kernel holds only the effects the scene calls for (and validates),
+//! media are refused as not on the GPU yet, and `render --backend gpu|auto` from the
+//! command line.
+
+mod common;
+
+use common::{hytrace, repo};
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::gpu::{compose_render_kernel, GpuContext, GpuError, GpuRenderer};
+use hytrace_trace::render::spec::{RenderSpec, View};
+use hytrace_trace::render::{Image, Renderer};
+use hytrace_trace::scene::load_render_scene;
+
+fn load(scene: &str) -> (hytrace_foundry::Foundry, RenderSpec) {
+    let arg = if scene == "default" {
+        None
+    } else {
+        Some(repo(scene))
+    };
+    load_render_scene(arg.as_deref(), &GdmlOptions::default()).unwrap()
+}
+
+/// A change of a render's settings.
+type Tweak<'a> = dyn Fn(&mut RenderSpec) + 'a;
+
+/// Renders `scene` on both sides in each of `tweaks`, with one kernel built for the first
+/// (the tweaks change views and settings, not the effects); `None` without a GPU.
+fn both(scene: &str, tweaks: &[&Tweak]) -> Option<Vec<(Image, Image, Vec<&'static str>)>> {
+    let ctx = GpuContext::for_tests()?;
+    let (f, spec) = load(scene);
+    let cpu_scene = CpuScene::<f32>::new(&f).unwrap();
+    let mut kernel: Option<GpuRenderer> = None;
+    let mut out = Vec::new();
+    for tweak in tweaks {
+        let mut spec = spec.clone();
+        tweak(&mut spec);
+        let renderer = Renderer::new(&cpu_scene, &f, &spec).unwrap();
+        let cpu = renderer.render(&|_| {}).unwrap();
+        let gpu = kernel.get_or_insert_with(|| GpuRenderer::new(&ctx, &renderer).unwrap());
+        let (image, _) = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
+        out.push((cpu, image, gpu.features().to_vec()));
+    }
+    Some(out)
+}
+
+/// Pixels of `a` and `b` that differ by more than `tolerance` in a channel; prints them.
+fn compare(name: &str, a: &Image, b: &Image, tolerance: f32) -> f64 {
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    let mut bad = 0;
+    for (k, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
+        if (0..3).any(|c| (p[c] - q[c]).abs() > tolerance || !q[c].is_finite()) {
+            bad += 1;
+            let (i, j) = (k as u32 % a.width, k as u32 / a.width);
+            eprintln!("{name}: pixel ({i}, {j}) CPU {p:?} GPU {q:?}");
+        }
+    }
+    let agree = 1.0 - bad as f64 / a.pixels.len() as f64;
+    eprintln!(
+        "{name}: {:.3}% of {} pixels agree",
+        100.0 * agree,
+        a.pixels.len()
+    );
+    agree
+}
+
+fn small(spec: &mut RenderSpec, view: View, spp: u32) {
+    spec.settings.size = [48, 32];
+    spec.settings.spp = spp;
+    spec.settings.view = view;
+}
+
+#[test]
+fn geometry_views_match_the_cpu_pixel_by_pixel() {
+    let views = [
+        View::Depth,
+        View::Normal,
+        View::Solid,
+        View::Prim,
+        View::Instance,
+        View::Boundary,
+    ];
+    let closures: Vec<_> = views
+        .iter()
+        .map(|&v| move |s: &mut RenderSpec| small(s, v, 1))
+        .collect();
+    let tweaks: Vec<&Tweak> = closures.iter().map(|t| t as &Tweak).collect();
+    for scene in ["scenes/render/views.toml", "default"] {
+        let Some(images) = both(scene, &tweaks) else {
+            return;
+        };
+        for ((cpu, gpu, _), view) in images.iter().zip(views) {
+            let agree = compare(&format!("{scene} {view:?}"), cpu, gpu, 1e-4);
+            assert!(
+                agree >= 0.995,
+                "{scene} {view:?}: {:.3}% agree",
+                100.0 * agree
+            );
+        }
+    }
+}
+
+#[test]
+fn gdml_boundary_view_sees_through_the_world_as_the_cpu_does() {
+    let scene = "tests/data/gdml/coverage.gdml";
+    let Some(images) = both(scene, &[&|s| small(s, View::Boundary, 1)]) else {
+        return;
+    };
+    let (cpu, gpu, _) = &images[0];
+    let agree = compare("gdml boundary", cpu, gpu, 1e-4);
+    assert!(agree >= 0.995);
+    assert!(
+        cpu.pixels.iter().any(|p| *p != [0.0; 3]),
+        "the detector shows"
+    );
+}
+
+#[test]
+fn shaded_surfaces_match_the_cpu_sample_for_sample() {
+    for (scene, spp) in [
+        ("scenes/render/shading.toml", 2),
+        ("scenes/render/glass.toml", 2),
+    ] {
+        let Some(images) = both(scene, &[&|s| small(s, View::Shaded, spp)]) else {
+            return;
+        };
+        let (cpu, gpu, features) = &images[0];
+        assert!(features.contains(&"shading"), "{features:?}");
+        let agree = compare(scene, cpu, gpu, 1e-4);
+        assert!(agree >= 0.995, "{scene}: {:.3}% agree", 100.0 * agree);
+    }
+}
+
+#[test]
+fn the_kernel_holds_only_the_effects_the_scene_calls_for() {
+    let kernel = |scene: &str, view: View| {
+        let (f, mut spec) = load(scene);
+        small(&mut spec, view, 1);
+        let cpu_scene = CpuScene::<f32>::new(&f).unwrap();
+        let renderer = Renderer::new(&cpu_scene, &f, &spec).unwrap();
+        compose_render_kernel(&renderer)
+    };
+    let mut sources = Vec::new();
+    let (features, source) = kernel("scenes/render/views.toml", View::Solid).unwrap();
+    sources.push(source.clone());
+    assert!(!features.contains(&"shading") && !features.contains(&"specular"));
+    assert!(!source.contains("fn next_shadow") && !source.contains("refraction(d, facing"));
+    let (features, source) = kernel("scenes/render/shading.toml", View::Shaded).unwrap();
+    sources.push(source.clone());
+    assert!(features.contains(&"shading") && !features.contains(&"specular"));
+    assert!(source.contains("fn next_shadow") && !source.contains("refraction(d, facing"));
+    let (features, source) = kernel("scenes/render/glass.toml", View::Shaded).unwrap();
+    assert!(features.contains(&"specular"), "{features:?}");
+    assert!(source.contains("refraction(d, facing"));
+    sources.push(source);
+    // Every composition is valid WGSL.
+    for src in &sources {
+        let module = naga::front::wgsl::parse_str(src).expect("the render kernel parses");
+        naga::valid::Validator::new(Default::default(), naga::valid::Capabilities::all())
+            .validate(&module)
+            .expect("the render kernel validates");
+    }
+    // Media are not on the GPU yet: refused as such, so `auto` can fall back.
+    assert!(matches!(
+        kernel("scenes/render/fog-single.toml", View::Shaded),
+        Err(GpuError::Unsupported(_))
+    ));
+}
+
+#[test]
+fn render_backend_gpu_and_auto_from_the_command_line() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("gpu.npy");
+    let o = out.to_str().unwrap();
+    let views = repo("scenes/render/views.toml");
+    let v = views.to_str().unwrap();
+    let run = |args: &[&str]| {
+        let r = hytrace(args, &[]);
+        assert!(
+            r.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&r.stdout).unwrap()
+    };
+    let stats = run(&[
+        "render",
+        v,
+        "--backend",
+        "gpu",
+        "--size",
+        "24x16",
+        "--spp",
+        "1",
+        "-o",
+        o,
+        "--stats",
+    ]);
+    assert_eq!(stats["backend"], "gpu");
+    assert!(stats["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    assert!(stats.get("gpu_kernel_timestamps_s").is_some());
+    let gpu = common::read_values(&out);
+    let cpu_out = dir.path().join("cpu.npy");
+    run(&[
+        "render",
+        v,
+        "--size",
+        "24x16",
+        "--spp",
+        "1",
+        "-o",
+        cpu_out.to_str().unwrap(),
+        "--stats",
+    ]);
+    let cpu = common::read_values(&cpu_out);
+    let close = gpu
+        .iter()
+        .zip(&cpu)
+        .filter(|(a, b)| (*a - *b).abs() <= 1e-4)
+        .count();
+    assert!(
+        close as f64 >= 0.995 * cpu.len() as f64,
+        "{close} of {} values",
+        cpu.len()
+    );
+    // A scene with media: `gpu` refuses clearly, `auto` falls back to the CPU.
+    let fog = repo("scenes/render/fog-single.toml");
+    let f = fog.to_str().unwrap();
+    let refused = hytrace(
+        &["render", f, "--backend", "gpu", "--size", "8x8", "-o", o],
+        &[],
+    );
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("media"), "{err}");
+    let stats = run(&[
+        "render",
+        f,
+        "--backend",
+        "auto",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "-o",
+        o,
+        "--stats",
+    ]);
+    assert_eq!(stats["backend"], "cpu");
+}

@@ -1,0 +1,384 @@
+// The render kernel (hytrace render --backend gpu): twin of the CPU renderer's geometry
+// views and surface light transport (crates/trace/src/render/{views,integrator}.rs),
+// compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each pixel runs its
+// samples; a sample is one loop whose every iteration traces one ray, the path's or a
+// shadow ray's, so the scene traversal is inlined once. Shading and specular code is
+// composed in only when the scene calls for it.
+// #import trace_records
+// #import trace/scene
+// #import volume/rng
+// #import render/optics
+
+@group(2) @binding(0) var<storage, read> rparams: RenderParams;
+@group(2) @binding(1) var<storage, read> items: array<RenderItem>;
+@group(2) @binding(2) var<storage, read> instances: array<RenderInstance>;
+@group(2) @binding(3) var<storage, read_write> image: array<vec4<f32>>;
+
+const MODE_PATH: u32 = 0u;
+const MODE_SHADOW: u32 = 1u;
+const MODE_DONE: u32 = 2u;
+// Most transparent surfaces a geometry view passes, crossings of a shadow ray.
+const MAX_TRANSPARENT: u32 = 256u;
+const MAX_SHADOW_CROSSINGS: u32 = 64u;
+
+struct Sample {
+    mode: u32,
+    // The path.
+    o: vec3<f32>,
+    d: vec3<f32>,
+    beta: vec3<f32>,
+    radiance: vec3<f32>,
+    inside: f32,
+    events: u32,
+    travelled: f32,
+    // The diffuse point being lit, its lights' cursor and its environment direction.
+    p: vec3<f32>,
+    n: vec3<f32>,
+    facing: vec3<f32>,
+    tint: vec3<f32>,
+    env_dir: vec3<f32>,
+    next_light: u32,
+    // The shadow ray.
+    so: vec3<f32>,
+    sd: vec3<f32>,
+    left: f32,
+    weight: f32,
+    sinside: f32,
+    crossings: u32,
+    contribution: vec3<f32>,
+}
+
+fn v3(a: vec4<f32>) -> vec3<f32> {
+    return vec3<f32>(a.x, a.y, a.z);
+}
+
+fn item_a(i: u32) -> vec4<f32> {
+    let a = items[i].a;
+    return vec4<f32>(a[0], a[1], a[2], a[3]);
+}
+
+fn item_b(i: u32) -> vec4<f32> {
+    let b = items[i].b;
+    return vec4<f32>(b[0], b[1], b[2], b[3]);
+}
+
+// `p` moved off the surface with normal `n` to the side `w` leaves toward.
+fn spawn(p: vec3<f32>, n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
+    let side = select(-1.0, 1.0, dot(w, n) >= 0.0);
+    let scale = 1.0 + max(abs(p.x), max(abs(p.y), abs(p.z)));
+    return p + side * (64.0 * 1.1920929e-7 * scale) * n;
+}
+
+// The colour of identity `id` (twin of render::views::id_colour).
+fn id_colour(id: u32) -> vec3<f32> {
+    if id == UNSET {
+        return vec3<f32>(0.5);
+    }
+    let h = pcg4d(vec4<u32>(id, 0x68797472u, 0u, 0u));
+    return vec3<f32>(0.15) + 0.85 * vec3<f32>(vec3<u32>(h.x >> 24u, h.y >> 24u, h.z >> 24u)) / 255.0;
+}
+
+// The scene's first crossing along a ray from its origin (the one traversal call site).
+fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
+    var located = UNSET;
+    if rparams.hierarchical != 0u {
+        var status = 0u;
+        located = locate_point(o, &status);
+    }
+    return cross_from(located, o, d, 0.0, tmax);
+}
+
+// Geometry views: the colour of the first non-transparent surface.
+fn view_step(s: ptr<function, Sample>, h: Hit) {
+    if !h.found {
+        (*s).mode = MODE_DONE;
+        return;
+    }
+    let inst = instances[h.instance];
+    if items[inst.material].kind == RENDER_MATERIAL_TRANSPARENT && (*s).events < MAX_TRANSPARENT {
+        let next = spawn((*s).o + h.t * (*s).d, h.normal, (*s).d);
+        (*s).travelled += length(next - (*s).o);
+        (*s).o = next;
+        (*s).events += 1u;
+        return;
+    }
+    (*s).mode = MODE_DONE;
+    if items[inst.material].kind == RENDER_MATERIAL_TRANSPARENT {
+        return;
+    }
+    let view = rparams.view;
+    var c = vec3<f32>(0.0);
+    if view == RENDER_VIEW_DEPTH {
+        let range = max(rparams.depth_far - rparams.depth_near, 1e-12);
+        c = vec3<f32>(clamp((rparams.depth_far - ((*s).travelled + h.t)) / range, 0.0, 1.0));
+    } else if view == RENDER_VIEW_NORMAL {
+        c = 0.5 * (h.normal + vec3<f32>(1.0));
+    } else if view == RENDER_VIEW_SOLID {
+        c = id_colour(inst.solid);
+    } else if view == RENDER_VIEW_PRIM {
+        c = id_colour(h.prim);
+    } else if view == RENDER_VIEW_INSTANCE {
+        c = id_colour(h.instance);
+    } else {
+        c = id_colour(inst.boundary);
+    }
+    (*s).radiance = c;
+}
+
+// #if shading
+// Starts the next shadow ray of the diffuse point (lights in order, then the environment),
+// or ends the sample when none is left.
+fn next_shadow(s: ptr<function, Sample>) {
+    loop {
+        let k = (*s).next_light;
+        (*s).next_light = k + 1u;
+        var w = (*s).env_dir;
+        var dist = INF;
+        var power = v3a(rparams.environment);
+        var f = 1.0;
+        if k < rparams.light_count {
+            let item = rparams.light_first + k;
+            if items[item].kind == RENDER_LIGHT_POINT {
+                let to = v3(item_a(item)) - (*s).p;
+                let d2 = dot(to, to);
+                if d2 == 0.0 {
+                    continue;
+                }
+                dist = sqrt(d2);
+                w = to / dist;
+                power = v3(item_b(item)) / d2;
+            } else {
+                w = -normalize(v3(item_a(item)));
+                power = v3(item_b(item));
+            }
+            f = dot((*s).facing, w) / RENDER_PI;
+        } else if k > rparams.light_count || all(power == vec3<f32>(0.0)) {
+            (*s).mode = MODE_DONE;
+            return;
+        }
+        if f <= 0.0 || all(power == vec3<f32>(0.0)) {
+            continue;
+        }
+        let o = spawn((*s).p, (*s).n, w);
+        var reach = dist;
+        if dist < INF {
+            reach = max(dist - length(o - (*s).p), 0.0);
+        }
+        (*s).so = o;
+        (*s).sd = w;
+        (*s).left = reach;
+        (*s).weight = 1.0;
+        (*s).sinside = 0.0;
+        (*s).crossings = 0u;
+        (*s).contribution = (*s).tint * power * f;
+        (*s).mode = MODE_SHADOW;
+        return;
+    }
+}
+
+// One crossing of a shadow ray: light arrives, passes a see-through surface, or is blocked.
+fn shadow_step(s: ptr<function, Sample>, h: Hit) {
+    var t = (*s).left;
+    if h.found {
+        t = h.t;
+    }
+    if (*s).sinside > 0.0 {
+        (*s).weight *= exp(-t / (*s).sinside);
+    }
+    if !h.found {
+        (*s).radiance += (*s).contribution * (*s).weight;
+        next_shadow(s);
+        return;
+    }
+    let m = instances[h.instance].material;
+    let kind = items[m].kind;
+    if kind == RENDER_MATERIAL_DIELECTRIC {
+        let entering = dot((*s).sd, h.normal) < 0.0;
+        let ior = item_b(m).x;
+        let eta = select(1.0 / ior, ior, entering);
+        (*s).weight *= 1.0 - fresnel(abs(dot((*s).sd, h.normal)), eta);
+        (*s).sinside = select(0.0, item_b(m).y, entering);
+    } else if kind != RENDER_MATERIAL_TRANSPARENT {
+        next_shadow(s);
+        return;
+    }
+    (*s).crossings += 1u;
+    if (*s).weight == 0.0 || (*s).crossings >= MAX_SHADOW_CROSSINGS {
+        next_shadow(s);
+        return;
+    }
+    (*s).so = spawn((*s).so + t * (*s).sd, h.normal, (*s).sd);
+    (*s).left -= t;
+    if (*s).left <= 0.0 {
+        (*s).radiance += (*s).contribution * (*s).weight;
+        next_shadow(s);
+    }
+}
+// #endif
+
+// One surface of the path (twin of Renderer::radiance without media).
+fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
+    var t_end = INF;
+    if h.found {
+        t_end = h.t;
+    }
+    if (*s).inside > 0.0 {
+        (*s).beta *= exp(-t_end / (*s).inside);
+    }
+    if !h.found {
+        (*s).radiance += (*s).beta * v3a(rparams.environment);
+        (*s).mode = MODE_DONE;
+        return;
+    }
+    let d = (*s).d;
+    let p = (*s).o + t_end * d;
+    let n = h.normal;
+    let facing = select(-n, n, dot(d, n) < 0.0);
+    let m = instances[h.instance].material;
+    let kind = items[m].kind;
+    (*s).events += 1u;
+    if kind == RENDER_MATERIAL_EMITTER {
+        (*s).radiance += (*s).beta * v3(item_a(m));
+        (*s).mode = MODE_DONE;
+        return;
+    }
+    if kind == RENDER_MATERIAL_TRANSPARENT {
+        (*s).o = spawn(p, n, d);
+        return;
+    }
+    // #if specular
+    if kind == RENDER_MATERIAL_MIRROR {
+        (*s).beta *= v3(item_a(m));
+        (*s).d = mirror(d, facing);
+        (*s).o = spawn(p, n, (*s).d);
+        return;
+    }
+    if kind == RENDER_MATERIAL_DIELECTRIC {
+        let entering = dot(d, n) < 0.0;
+        let ior = item_b(m).x;
+        let eta = select(1.0 / ior, ior, entering);
+        let reflectance = fresnel(-dot(d, facing), eta);
+        let r = refraction(d, facing, eta);
+        var through = false;
+        if r.ok {
+            through = rng_next(rng) >= reflectance;
+        }
+        if through {
+            (*s).inside = select(0.0, item_b(m).y, entering);
+            (*s).d = r.d;
+        } else {
+            (*s).d = mirror(d, facing);
+        }
+        (*s).o = spawn(p, n, (*s).d);
+        return;
+    }
+    // #endif
+    var colour = vec3<f32>(1.0);
+    if kind == RENDER_MATERIAL_DIFFUSE || kind == RENDER_MATERIAL_MIRROR {
+        colour = v3(item_a(m));
+    }
+    // #if shading
+    let u = vec2<f32>(rng_next(rng), rng_next(rng));
+    (*s).env_dir = cosine_direction(facing, u);
+    (*s).p = p;
+    (*s).n = n;
+    (*s).facing = facing;
+    (*s).tint = (*s).beta * colour;
+    (*s).next_light = 0u;
+    next_shadow(s);
+    return;
+    // #endif
+    (*s).radiance += (*s).beta * colour;
+    (*s).mode = MODE_DONE;
+}
+
+// One sample of the pixel's light along the camera ray `o + t d`.
+fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) -> vec3<f32> {
+    var s: Sample;
+    s.mode = MODE_PATH;
+    s.o = o;
+    s.d = d;
+    s.beta = vec3<f32>(1.0);
+    s.radiance = vec3<f32>(0.0);
+    s.inside = 0.0;
+    s.events = 0u;
+    s.travelled = 0.0;
+    let shaded = rparams.view == RENDER_VIEW_SHADED;
+    loop {
+        if s.mode == MODE_DONE || (shaded && s.mode == MODE_PATH && s.events > rparams.max_bounces) {
+            break;
+        }
+        var ro = s.o;
+        var rd = s.d;
+        var tmax = INF;
+        if s.mode == MODE_SHADOW {
+            ro = s.so;
+            rd = s.sd;
+            tmax = s.left;
+        }
+        let h = trace_scene(ro, rd, tmax);
+        if !shaded {
+            view_step(&s, h);
+        } else if s.mode == MODE_PATH {
+            path_step(&s, h, rng);
+        } else {
+            // #if shading
+            shadow_step(&s, h);
+            // #endif
+        }
+    }
+    return s.radiance;
+}
+
+// The camera ray of pixel (i, j) at sample offset `offset` (render::camera::Camera::ray).
+fn camera_origin(i: u32, j: u32, offset: vec2<f32>) -> vec3<f32> {
+    let eye = vec3<f32>(rparams.eye[0], rparams.eye[1], rparams.eye[2]);
+    if rparams.orthographic == 0u {
+        return eye;
+    }
+    let xy = screen(i, j, offset);
+    return eye + rparams.extent * (xy.x * v3a(rparams.u) + xy.y * v3a(rparams.v));
+}
+
+fn camera_direction(i: u32, j: u32, offset: vec2<f32>) -> vec3<f32> {
+    let w = v3a(rparams.w);
+    if rparams.orthographic != 0u {
+        return w;
+    }
+    let xy = screen(i, j, offset);
+    return normalize(w + rparams.extent * (xy.x * v3a(rparams.u) + xy.y * v3a(rparams.v)));
+}
+
+fn v3a(a: array<f32, 3>) -> vec3<f32> {
+    return vec3<f32>(a[0], a[1], a[2]);
+}
+
+fn screen(i: u32, j: u32, offset: vec2<f32>) -> vec2<f32> {
+    let width = f32(rparams.width);
+    let height = f32(rparams.height);
+    let x = (2.0 * (f32(i) + offset.x) / width - 1.0) * (width / height);
+    let y = 1.0 - 2.0 * (f32(j) + offset.y) / height;
+    return vec2<f32>(x, y);
+}
+
+@compute @workgroup_size(64)
+fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
+    let k = gid.y * groups_.x * 64u + gid.x;
+    if k >= rparams.width * rparams.row_count {
+        return;
+    }
+    let i = k % rparams.width;
+    let j = rparams.row_offset + k / rparams.width;
+    let pixel = j * rparams.width + i;
+    var sum = vec3<f32>(0.0);
+    for (var s = 0u; s < rparams.spp; s += 1u) {
+        var rng = rng_new(rparams.seed, pixel, s);
+        var offset = vec2<f32>(0.5);
+        if rparams.spp != 1u {
+            offset.x = rng_next(&rng);
+            offset.y = rng_next(&rng);
+        }
+        sum += radiance_sample(camera_origin(i, j, offset), camera_direction(i, j, offset), &rng);
+    }
+    image[k] = vec4<f32>(sum / f32(rparams.spp), 0.0);
+}
