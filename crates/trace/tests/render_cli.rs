@@ -184,6 +184,12 @@ fn bad_input_is_refused_with_a_clear_error_and_no_image() {
         assert!(err.contains(why), "{all:?}: expected `{why}` in:\n{err}");
         assert!(!out.exists());
     }
+    let err = run_err(&["render", "--transparent", "no_such_solid", "-o", o]);
+    assert!(
+        err.contains("no_such_solid") && err.contains("no solid of that name"),
+        "{err}"
+    );
+    assert!(!out.exists());
     let err = run_err(&["render", "-o", dir.path().join("x.jpg").to_str().unwrap()]);
     assert!(
         err.contains("x.jpg") && err.contains(".png or .npy"),

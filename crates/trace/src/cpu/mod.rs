@@ -365,7 +365,13 @@ impl<T: Real> CpuScene<T> {
 
     /// World bounds (min, max) of the placed solids, `None` without any.
     pub fn world_bounds(&self) -> Option<[[f64; 3]; 2]> {
-        self.placements.iter().fold(None, |acc, p| {
+        self.bounds_of(|_| true)
+    }
+
+    /// World bounds (min, max) of the instances `keep` accepts, `None` without any.
+    pub fn bounds_of(&self, keep: impl Fn(usize) -> bool) -> Option<[[f64; 3]; 2]> {
+        let kept = self.placements.iter().enumerate().filter(|(i, _)| keep(*i));
+        kept.fold(None, |acc, (_, p)| {
             let [lo, hi] = [p.bounds[0].to_f64(), p.bounds[1].to_f64()];
             Some(match acc {
                 None => [lo, hi],

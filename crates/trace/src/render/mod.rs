@@ -33,6 +33,10 @@ pub use output::{write_image, Image};
 use spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec, View, VolumeMode};
 use volumes::Media;
 
+/// Why a build without the `media` feature refuses a render with media.
+const NO_MEDIA_BUILD: &str =
+    "this build renders no media: it was built without the `media` feature (on by default)";
+
 /// The effects a render simulates: each only when the scene calls for it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Effects {
@@ -190,14 +194,21 @@ impl<'a> Renderer<'a> {
         spec.validate()?;
         let settings = spec.settings.clone();
         let effects = Effects::of(f, spec);
-        let bounds = scene.world_bounds();
-        let camera_spec = spec.camera.clone().unwrap_or_else(|| auto_camera(bounds));
-        let camera = Camera::new(&camera_spec, settings.size)?;
+        anyhow::ensure!(
+            cfg!(feature = "media") || effects.volumes.is_none(),
+            "{NO_MEDIA_BUILD}"
+        );
         let instance_material: Vec<Material> = f
             .inst
             .iter()
             .map(|i| solid_material(f, spec, i.solid as usize))
             .collect();
+        // What is seen: transparent instances (a GDML world) do not count.
+        let bounds = scene
+            .bounds_of(|i| instance_material[i] != Material::Transparent)
+            .or_else(|| scene.world_bounds());
+        let camera_spec = spec.camera.clone().unwrap_or_else(|| auto_camera(bounds));
+        let camera = Camera::new(&camera_spec, settings.size)?;
         let mut lights = Vec::new();
         let mut environment = DVec3::ZERO;
         for l in spec.lights_or_default() {
@@ -301,28 +312,35 @@ impl<'a> Renderer<'a> {
             Some(VolumeMode::SingleScattering) => SINGLE_SCATTERING,
             Some(VolumeMode::MultipleScattering) => MULTIPLE_SCATTERING,
         };
-        // One instantiation per effect set.
+        if fx.view != View::Shaded {
+            return self.render_with(progress, |o, d, _| Ok(self.geometry_view(o, d)));
+        }
+        // One instantiation per effect set; those with media only in builds with the
+        // `media` feature (on by default), so a build without it holds no media code.
         macro_rules! shaded {
-            ($($s:literal, $p:literal, $v:ident);* $(;)?) => {
+            (always: $($s:literal, $p:literal, $v:ident);* ; media: $($ms:literal, $mp:literal, $mv:ident);* $(;)?) => {
                 match (fx.shading, fx.specular, vm) {
                     $(($s, $p, $v) => self.render_with(progress, |o, d, rng| {
                         self.radiance::<$s, $p, $v>(o, d, rng)
                     }),)*
-                    _ => unreachable!("volume modes are 0..=3"),
+                    $(#[cfg(feature = "media")]
+                    ($ms, $mp, $mv) => self.render_with(progress, |o, d, rng| {
+                        self.radiance::<$ms, $mp, $mv>(o, d, rng)
+                    }),)*
+                    _ => anyhow::bail!("{NO_MEDIA_BUILD}"),
                 }
             };
         }
-        if fx.view != View::Shaded {
-            return self.render_with(progress, |o, d, _| Ok(self.geometry_view(o, d)));
-        }
         shaded!(
-            false, false, NO_VOLUMES; false, false, EMISSION_ABSORPTION;
-            false, false, SINGLE_SCATTERING; false, false, MULTIPLE_SCATTERING;
-            false, true, NO_VOLUMES; false, true, EMISSION_ABSORPTION;
+            always:
+            false, false, NO_VOLUMES; false, true, NO_VOLUMES;
+            true, false, NO_VOLUMES; true, true, NO_VOLUMES;
+            media:
+            false, false, EMISSION_ABSORPTION; false, false, SINGLE_SCATTERING;
+            false, false, MULTIPLE_SCATTERING; false, true, EMISSION_ABSORPTION;
             false, true, SINGLE_SCATTERING; false, true, MULTIPLE_SCATTERING;
-            true, false, NO_VOLUMES; true, false, EMISSION_ABSORPTION;
-            true, false, SINGLE_SCATTERING; true, false, MULTIPLE_SCATTERING;
-            true, true, NO_VOLUMES; true, true, EMISSION_ABSORPTION;
+            true, false, EMISSION_ABSORPTION; true, false, SINGLE_SCATTERING;
+            true, false, MULTIPLE_SCATTERING; true, true, EMISSION_ABSORPTION;
             true, true, SINGLE_SCATTERING; true, true, MULTIPLE_SCATTERING;
         )
     }

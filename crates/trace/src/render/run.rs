@@ -84,6 +84,10 @@ pub struct RenderArgs {
     /// Seed of the random streams.
     #[arg(long)]
     pub seed: Option<u32>,
+    /// Render the solid of this name transparent (repeatable): to see inside a detector's
+    /// enclosures (`hytrace info` lists the solids).
+    #[arg(long)]
+    pub transparent: Vec<String>,
     /// Print which effects and kernels the scene uses, and render nothing.
     #[arg(long)]
     pub explain: bool,
@@ -125,6 +129,12 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     s.max_bounces = args.max_bounces.unwrap_or(s.max_bounces);
     s.step = args.step.unwrap_or(s.step);
     s.seed = args.seed.unwrap_or(s.seed);
+    for name in &args.transparent {
+        if !f.solid_names.contains(name) {
+            bail!("--transparent {name}: the scene has no solid of that name");
+        }
+        spec.transparent_solids.push(name.clone());
+    }
     spec.validate().context("render settings")?;
     if args.explain {
         for line in Effects::of(&f, &spec).explain() {
