@@ -649,12 +649,7 @@ pub fn stats_json(
         "threads": rayon::current_num_threads(),
     });
     if let Some(g) = &times.gpu {
-        line["adapter"] = g.adapter.clone().into();
-        line["kernel_features"] = g.features.clone().into();
-        line["gpu_upload_s"] = g.times.upload_s.into();
-        line["gpu_kernel_s"] = g.times.kernel_s.into();
-        line["gpu_readback_s"] = g.times.readback_s.into();
-        line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+        crate::gpu::add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
     }
     line
 }

@@ -4,6 +4,9 @@ use std::sync::{mpsc, Arc, Mutex};
 
 use wgpu::util::DeviceExt;
 
+use super::probe::dispatch_size;
+use super::timing::PassTimer;
+
 /// What went wrong on the GPU path.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -191,16 +194,62 @@ impl GpuContext {
         self.checked("uploading arrays", || {
             arrays
                 .iter()
-                .map(|(name, bytes)| {
-                    self.device
-                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some(name),
-                            contents: bytes,
-                            usage: wgpu::BufferUsages::STORAGE,
-                        })
-                })
+                .map(|(name, bytes)| self.input_buffer(name, bytes))
                 .collect()
         })
+    }
+
+    /// A read-only storage buffer holding `bytes`.
+    pub fn input_buffer(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+    }
+
+    /// A storage buffer of `size` bytes for a kernel to write and the CPU to read back.
+    pub fn output_buffer(&self, label: &str, size: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Records one compute pass over `items` invocations (64 per workgroup) that runs
+    /// `pipelines` in order with the bind `groups` (index, group), timed by `timer` when
+    /// given, and submits it.
+    pub fn submit_pass(
+        &self,
+        label: &str,
+        pipelines: &[&wgpu::ComputePipeline],
+        groups: &[(u32, &wgpu::BindGroup)],
+        items: u32,
+        timer: Option<&PassTimer>,
+    ) {
+        let (x, y) = dispatch_size(items, self.limits.max_compute_workgroups_per_dimension);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: timer.map(PassTimer::writes),
+            });
+            for (index, group) in groups {
+                pass.set_bind_group(*index, *group, &[]);
+            }
+            // Dispatches in one pass run in order.
+            for pipeline in pipelines {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+        }
+        if let Some(timer) = timer {
+            timer.resolve(&mut encoder);
+        }
+        self.queue.submit([encoder.finish()]);
     }
 
     /// Copies `size` bytes of a storage buffer back to the CPU.

@@ -6,10 +6,7 @@
 
 use std::time::Instant;
 
-use wgpu::util::DeviceExt;
-
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
-use super::probe::dispatch_size;
 use super::records::{
     RenderInstance, RenderItem, RenderParams, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR,
     RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC,
@@ -297,47 +294,24 @@ impl GpuRenderer {
                 row_count,
                 ..inputs.params
             };
-            let input = |label, bytes: &[u8]| {
-                ctx.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some(label),
-                        contents: bytes,
-                        usage: wgpu::BufferUsages::STORAGE,
-                    })
-            };
-            let image = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("image"),
-                size: out_size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
             let buffers = [
-                input("render params", &binding_bytes(&[params])),
-                input("render items", &binding_bytes(&inputs.items)),
-                input("render instances", &binding_bytes(&inputs.instances)),
-                image,
+                ctx.input_buffer("render params", &binding_bytes(&[params])),
+                ctx.input_buffer("render items", &binding_bytes(&inputs.items)),
+                ctx.input_buffer("render instances", &binding_bytes(&inputs.instances)),
+                ctx.output_buffer("image", out_size),
             ];
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("render"),
                 layout: &self.render_layout,
                 entries: &whole_buffer_entries(&buffers),
             });
-            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("render"),
-                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(1, &self.scene_group, &[]);
-                pass.set_bind_group(2, &group, &[]);
-                pass.dispatch_workgroups(x, y, 1);
-            }
-            if let Some(timer) = &timer {
-                timer.resolve(&mut encoder);
-            }
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit_pass(
+                "render",
+                &[&self.pipeline],
+                &[(1, &self.scene_group), (2, &group)],
+                n as u32,
+                timer.as_ref(),
+            );
             (buffers[3].clone(), (buffers, group))
         })?;
         let bytes = finish_batch(

@@ -99,3 +99,20 @@ pub fn finish_batch(
     }
     Ok(bytes)
 }
+
+/// Adds what every GPU command's `--stats` line reports: the adapter, the kernel's
+/// composition features and the times (`gpu_upload_s`, `gpu_kernel_s`, `gpu_readback_s`,
+/// `gpu_kernel_timestamps_s`: null where the device has no timestamp queries).
+pub fn add_gpu_stats(
+    line: &mut serde_json::Value,
+    adapter: &str,
+    features: &[&str],
+    times: &GpuTimes,
+) {
+    line["adapter"] = adapter.into();
+    line["kernel_features"] = features.into();
+    line["gpu_upload_s"] = times.upload_s.into();
+    line["gpu_kernel_s"] = times.kernel_s.into();
+    line["gpu_readback_s"] = times.readback_s.into();
+    line["gpu_kernel_timestamps_s"] = times.kernel_gpu_s.into();
+}

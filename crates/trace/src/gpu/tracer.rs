@@ -5,11 +5,9 @@
 use std::time::Instant;
 
 use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
-use wgpu::util::DeviceExt;
 
 use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
-use super::probe::dispatch_size;
 use super::records::{HitRecord, RayRecord, ScanParams};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use crate::cpu::gpu_export::SceneArrays;
@@ -238,22 +236,6 @@ impl GpuTracer {
                 hierarchical: self.hierarchical as u32,
                 pad: [0; 2],
             };
-            let input = |label, bytes: &[u8]| {
-                ctx.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some(label),
-                        contents: bytes,
-                        usage: wgpu::BufferUsages::STORAGE,
-                    })
-            };
-            let params = input("scan params", &binding_bytes(&[params]));
-            let ray_buffer = input("rays", &binding_bytes(rays));
-            let hits = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("hits"),
-                size: out_size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
             let located = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("located"),
                 // Flat scenes locate nothing: a minimal binding, never read.
@@ -265,31 +247,26 @@ impl GpuTracer {
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
-            let buffers = [params, ray_buffer, hits, located];
+            let buffers = [
+                ctx.input_buffer("scan params", &binding_bytes(&[params])),
+                ctx.input_buffer("rays", &binding_bytes(rays)),
+                ctx.output_buffer("hits", out_size),
+                located,
+            ];
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scan rays"),
                 layout: &self.ray_layout,
                 entries: &whole_buffer_entries(&buffers),
             });
-            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("scan"),
-                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
-                });
-                pass.set_bind_group(1, &self.scene_group, &[]);
-                pass.set_bind_group(2, &group, &[]);
-                // Dispatches in one pass run in order: every origin is located first.
-                for pipeline in self.locate.iter().chain([&self.pipeline]) {
-                    pass.set_pipeline(pipeline);
-                    pass.dispatch_workgroups(x, y, 1);
-                }
-            }
-            if let Some(timer) = &timer {
-                timer.resolve(&mut encoder);
-            }
-            ctx.queue.submit([encoder.finish()]);
+            // Every origin is located before the scan runs.
+            let pipelines: Vec<_> = self.locate.iter().chain([&self.pipeline]).collect();
+            ctx.submit_pass(
+                "scan",
+                &pipelines,
+                &[(1, &self.scene_group), (2, &group)],
+                n as u32,
+                timer.as_ref(),
+            );
             let hits = buffers[2].clone();
             (hits, (buffers, group))
         })?;

@@ -17,11 +17,9 @@ use hytrace_volume::{
     global_range, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray, TexelFormat,
     TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, RANGE_LEVELS,
 };
-use wgpu::util::DeviceExt;
 
 use super::compose::compose;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
-use super::probe::dispatch_size;
 use super::records::{
     RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA, VOLUME_ESTIMATOR_EXACT,
     VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO, VOLUME_ESTIMATOR_RESIDUAL,
@@ -298,20 +296,8 @@ impl<'a> GpuVolume<'a> {
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "transmittance timestamps");
         let results = ctx.checked("transmittance dispatch", || {
-            let input = |label, bytes: &[u8]| {
-                ctx.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some(label),
-                        contents: &storage_bytes(bytes),
-                        usage: wgpu::BufferUsages::STORAGE,
-                    })
-            };
-            let results = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("transmittances"),
-                size: out_size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+            let input = |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes));
+            let results = ctx.output_buffer("transmittances", out_size);
             let mut buffers = vec![input("volume params", bytemuck::bytes_of(params))];
             buffers.extend(self.buffers.iter().cloned());
             buffers.push(input("volume rays", bytemuck::cast_slice(rays)));
@@ -321,21 +307,13 @@ impl<'a> GpuVolume<'a> {
                 layout: &self.layout,
                 entries: &whole_buffer_entries(&buffers),
             });
-            let (x, y) = dispatch_size(n as u32, ctx.limits.max_compute_workgroups_per_dimension);
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("transmittance"),
-                    timestamp_writes: timer.as_ref().map(PassTimer::writes),
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(x, y, 1);
-            }
-            if let Some(timer) = &timer {
-                timer.resolve(&mut encoder);
-            }
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit_pass(
+                "transmittance",
+                &[&self.pipeline],
+                &[(0, &group)],
+                n as u32,
+                timer.as_ref(),
+            );
             results
         })?;
         let bytes = finish_batch(

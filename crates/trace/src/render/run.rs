@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::spec::{View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{gpu_or_cpu, GpuContext, GpuError, GpuRenderer, GpuTimes};
+use crate::gpu::{add_gpu_stats, gpu_or_cpu, GpuContext, GpuError, GpuRenderer, GpuTimes};
 use crate::scene::load_render_scene;
 
 /// Where a render runs.
@@ -193,12 +193,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "threads": rayon::current_num_threads(),
         });
         if let Some(g) = &gpu_run {
-            line["adapter"] = g.adapter.clone().into();
-            line["kernel_features"] = g.features.clone().into();
-            line["gpu_upload_s"] = g.times.upload_s.into();
-            line["gpu_kernel_s"] = g.times.kernel_s.into();
-            line["gpu_readback_s"] = g.times.readback_s.into();
-            line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
         }
         println!("{line}");
     }
