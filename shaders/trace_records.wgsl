@@ -204,7 +204,10 @@ struct RenderParams {
     hierarchical: u32,
     row_offset: u32,
     row_count: u32,
-    pad: u32,
+    medium: u32,
+    medium_rows: array<vec4<f32>, 3>,
+    medium_emission: array<f32, 3>,
+    medium_step: f32,
 }
 
 struct RenderItem {

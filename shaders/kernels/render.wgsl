@@ -2,12 +2,17 @@
 // views and surface light transport (crates/trace/src/render/{views,integrator}.rs),
 // compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each pixel runs its
 // samples; a sample is one loop whose every iteration traces one ray, the path's or a
-// shadow ray's, so the scene traversal is inlined once. Shading and specular code is
-// composed in only when the scene calls for it.
+// shadow ray's, so the scene traversal is inlined once. Shading, specular and media code
+// is composed in only when the scene calls for it; of media, one placed medium rendered by
+// emission-absorption (twin of render::volumes::Media::emission_absorption).
 // #import trace_records
 // #import trace/scene
 // #import volume/rng
 // #import render/optics
+// #if media
+// #import volume/walk
+// #import volume/grid
+// #endif
 
 @group(2) @binding(0) var<storage, read> rparams: RenderParams;
 @group(2) @binding(1) var<storage, read> items: array<RenderItem>;
@@ -216,12 +221,56 @@ fn shadow_step(s: ptr<function, Sample>, h: Hit) {
 }
 // #endif
 
+// #if media
+struct Emitted {
+    radiance: vec3<f32>,
+    transmittance: f32,
+}
+
+// Emission-absorption of the medium over [0, t1] of the world ray o + t d: midpoint
+// compositing over the ray's part inside the range mips' box, in steps of
+// `medium_step` voxels.
+fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> Emitted {
+    var out = Emitted(vec3<f32>(0.0), 1.0);
+    let m = rparams.medium_rows;
+    let oi = vec3<f32>(dot(m[0].xyz, o) + m[0].w, dot(m[1].xyz, o) + m[1].w, dot(m[2].xyz, o) + m[2].w);
+    let di = vec3<f32>(dot(m[0].xyz, d), dot(m[1].xyz, d), dot(m[2].xyz, d));
+    var w = walk_start(oi, di, 0.0, t1, true);
+    let a = w.base;
+    let b = walk_absolute(&w, w.t_end);
+    if !(a < b) {
+        return out;
+    }
+    let n = max(ceil((b - a) / (rparams.medium_step / length(di))), 1.0);
+    let h = (b - a) / n;
+    let emission = vec3<f32>(rparams.medium_emission[0], rparams.medium_emission[1], rparams.medium_emission[2]);
+    for (var k = 0u; k < u32(n); k++) {
+        let p = oi + (a + (f32(k) + 0.5) * h) * di;
+        let cell = floor(p);
+        let value = trilinear_sum(grid_fetch(vec3<i32>(cell), 8u), p - cell);
+        let density = value * vparams.density_scale;
+        if density <= 0.0 {
+            continue;
+        }
+        let step_t = exp(-density * h);
+        out.radiance += out.transmittance * value * emission * (1.0 - step_t);
+        out.transmittance *= step_t;
+    }
+    return out;
+}
+// #endif
+
 // One surface of the path (twin of Renderer::radiance without media).
 fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     var t_end = INF;
     if h.found {
         t_end = h.t;
     }
+    // #if media
+    let emitted = emission_absorption((*s).o, (*s).d, t_end);
+    (*s).radiance += (*s).beta * emitted.radiance;
+    (*s).beta *= emitted.transmittance;
+    // #endif
     if (*s).inside > 0.0 {
         (*s).beta *= exp(-t_end / (*s).inside);
     }
@@ -322,6 +371,10 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
         } else if s.mode == MODE_PATH {
             path_step(&s, h, rng);
         } else {
+            // #if media
+            // The media along this piece of the shadow ray (before shadow_step weighs it).
+            s.weight *= emission_absorption(s.so, s.sd, select(s.left, h.t, h.found)).transmittance;
+            // #endif
             // #if shading
             shadow_step(&s, h);
             // #endif

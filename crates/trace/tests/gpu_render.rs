@@ -166,7 +166,10 @@ fn the_kernel_holds_only_the_effects_the_scene_calls_for() {
             .validate(&module)
             .expect("the render kernel validates");
     }
-    // Media are not on the GPU yet: refused as such, so `auto` can fall back.
+    let (features, source) = kernel("scenes/render/fog-emission.toml", View::Shaded).unwrap();
+    assert!(features.contains(&"media") && source.contains("fn emission_absorption"));
+    assert!(!sources.iter().any(|s| s.contains("fn emission_absorption")));
+    // Scattering media are not on the GPU yet: refused as such, so `auto` can fall back.
     assert!(matches!(
         kernel("scenes/render/fog-single.toml", View::Shaded),
         Err(GpuError::Unsupported(_))
@@ -256,4 +259,22 @@ fn render_backend_gpu_and_auto_from_the_command_line() {
         "--stats",
     ]);
     assert_eq!(stats["backend"], "cpu");
+}
+
+#[test]
+fn emission_absorption_media_match_the_cpu_pixel_by_pixel() {
+    // The NanoVDB fog alone, and the mixed scene (diffuse surfaces, shadow rays through an
+    // absorbing fog box).
+    for (scene, spp) in [
+        ("scenes/render/fog-emission.toml", 1),
+        ("scenes/mixed.toml", 1),
+    ] {
+        let Some(images) = both(scene, &[&|s| small(s, View::Shaded, spp)]) else {
+            return;
+        };
+        let (cpu, gpu, features) = &images[0];
+        assert!(features.contains(&"media"), "{features:?}");
+        let agree = compare(scene, cpu, gpu, 1e-4);
+        assert!(agree >= 0.995, "{scene}: {:.3}% agree", 100.0 * agree);
+    }
 }

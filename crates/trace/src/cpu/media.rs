@@ -235,6 +235,12 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .collect()
     }
 
+    /// The placed media: `(instance, medium)` with the transform from world space to the
+    /// medium's index space, in instance order.
+    pub fn placements(&self) -> impl Iterator<Item = ((u32, u32), &Transform64)> {
+        self.to_index.iter().map(|(k, t)| (*k, t))
+    }
+
     /// Number of media (the Foundry's `optics.media`).
     pub fn medium_count(&self) -> usize {
         self.grids.len()

@@ -242,8 +242,16 @@ record! {
         pub row_offset: u32,
         /// Rows in this batch.
         pub row_count: u32,
-        /// Padding.
-        pub pad: u32,
+        /// 1 when the render marches a medium (emission-absorption; the volume group is
+        /// bound), else 0.
+        pub medium: u32,
+        /// World to the medium's index space (translated as the volume upload's): the rows
+        /// of a 3x4 affine.
+        pub medium_rows: [[f32; 4]; 3],
+        /// Emission colour of the medium.
+        pub medium_emission: [f32; 3],
+        /// March step in voxels.
+        pub medium_step: f32,
     }
 }
 

@@ -1,8 +1,9 @@
 //! The GPU renderer: the render kernel (`shaders/kernels/render.wgsl`) over the scene
 //! uploaded as the scan uploads it, composed with only the effects the render calls for.
 //! Its CPU twin is [`Renderer::render`]; `tests/gpu_render.rs` compares them pixel by
-//! pixel. Media are not rendered on the GPU yet: such renders are refused with
-//! [`GpuError::Unsupported`] (so `--backend auto` falls back to the CPU).
+//! pixel. Of media, the kernel marches one placed medium by emission-absorption; scattering
+//! media and several media are refused with [`GpuError::Unsupported`] (so `--backend auto`
+//! falls back to the CPU).
 
 use std::time::Instant;
 
@@ -11,17 +12,20 @@ use super::records::{
     RenderInstance, RenderItem, RenderParams, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR,
     RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC,
     RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER, RENDER_MATERIAL_MIRROR,
-    RENDER_MATERIAL_TRANSPARENT,
+    RENDER_MATERIAL_TRANSPARENT, VOLUME_FILTER_TRILINEAR,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
+use super::volume::VolumeUpload;
 use crate::render::camera::Projection;
-use crate::render::spec::{Light, Material, View};
+use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
 const RENDER_BINDINGS: u32 = 4;
+/// Storage buffers of the medium group (group 0: `shaders/volume/bindings.wgsl`).
+const MEDIUM_BINDINGS: u32 = 5;
 /// Samples (pixels x spp) per dispatch: drivers may kill long dispatches.
 const SAMPLES_PER_BATCH: u64 = 1 << 20;
 
@@ -31,6 +35,8 @@ pub struct GpuRenderer {
     pipeline: wgpu::ComputePipeline,
     render_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
+    /// The medium's group 0 (emission-absorption), with its translation of index space.
+    medium: Option<(wgpu::BindGroup, [f64; 3])>,
     hierarchical: bool,
     features: Vec<&'static str>,
     source: String,
@@ -81,14 +87,21 @@ fn material_item(m: &Material) -> RenderItem {
     }
 }
 
-/// Refuses what the kernel does not do yet.
+/// Refuses what the kernel does not do yet: scattering media, or more than one placed
+/// medium.
 fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
-    if renderer.effects.volumes.is_some() {
-        return Err(GpuError::Unsupported(
-            "the GPU renderer does not render media yet (render with --backend cpu)".into(),
-        ));
+    match (renderer.effects.volumes, &renderer.media) {
+        (None, _) => Ok(()),
+        (Some(VolumeMode::EmissionAbsorption), Some(m)) if m.scene.placements().count() == 1 => {
+            Ok(())
+        }
+        (Some(VolumeMode::EmissionAbsorption), _) => Err(GpuError::Unsupported(
+            "the GPU renderer marches one placed medium; this scene places several (render with --backend cpu)".into(),
+        )),
+        (Some(mode), _) => Err(GpuError::Unsupported(format!(
+            "the GPU renderer does not render media by {mode:?} yet, only emission-absorption (render with --backend cpu)"
+        ))),
     }
-    Ok(())
 }
 
 /// The effect features and `RENDER_EFFECT_*` bits of a render.
@@ -102,6 +115,9 @@ fn effect_features(renderer: &Renderer) -> (Vec<&'static str>, u32) {
     if fx.specular {
         features.push("specular");
         bits |= RENDER_EFFECT_SPECULAR;
+    }
+    if fx.volumes.is_some() {
+        features.push("media");
     }
     (features, bits)
 }
@@ -120,8 +136,9 @@ pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, 
     Ok((features, source))
 }
 
-/// The kernel's inputs for `renderer` (materials deduplicated, then the lights).
-fn inputs(renderer: &Renderer, hierarchical: bool) -> RenderInputs {
+/// The kernel's inputs for `renderer` (materials deduplicated, then the lights), with the
+/// medium's index space translated by `shift`.
+fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> RenderInputs {
     let mut items: Vec<RenderItem> = Vec::new();
     let mut instances = Vec::with_capacity(renderer.instance_material.len());
     for (i, m) in renderer.instance_material.iter().enumerate() {
@@ -187,8 +204,27 @@ fn inputs(renderer: &Renderer, hierarchical: bool) -> RenderInputs {
         hierarchical: hierarchical as u32,
         row_offset: 0,
         row_count: 0,
-        pad: 0,
+        medium: 0,
+        medium_rows: [[0.0; 4]; 3],
+        medium_emission: [0.0; 3],
+        medium_step: s.step as f32,
     };
+    let mut params = params;
+    if let (Some(media), Some(shift)) = (&renderer.media, shift) {
+        if let Some(((_, medium), to_index)) = media.scene.placements().next() {
+            params.medium = 1;
+            params.medium_rows = std::array::from_fn(|r| {
+                let row = to_index.rows[r];
+                [
+                    row[0] as f32,
+                    row[1] as f32,
+                    row[2] as f32,
+                    (row[3] - shift[r]) as f32,
+                ]
+            });
+            params.medium_emission = media.optics[medium as usize].emission.map(|c| c as f32);
+        }
+    }
     RenderInputs {
         params,
         items,
@@ -201,21 +237,63 @@ impl GpuRenderer {
     /// calls for.
     pub fn new(ctx: &GpuContext, renderer: &Renderer) -> Result<GpuRenderer, GpuError> {
         let (features, source) = compose_render_kernel(renderer)?;
-        let upload = SceneUpload::new(ctx, renderer.scene, "render", RENDER_BINDINGS)?;
+        let medium_bindings = if renderer.media.is_some() {
+            MEDIUM_BINDINGS
+        } else {
+            0
+        };
+        let upload = SceneUpload::new(
+            ctx,
+            renderer.scene,
+            "render",
+            RENDER_BINDINGS + medium_bindings,
+        )?;
+        // The one placed medium (check_supported): its grid and the estimator's parameters.
+        let medium = match &renderer.media {
+            None => None,
+            Some(media) => {
+                let ((_, m), _) = media
+                    .scene
+                    .placements()
+                    .next()
+                    .expect("check_supported admits one placed medium");
+                let grid = media.scene.grid(m);
+                let volume = VolumeUpload::new(ctx, grid)?;
+                let mut params = volume.base;
+                params.density_scale = media.scene.params(m, 0).density_scale as f32;
+                params.lookup_filter = VOLUME_FILTER_TRILINEAR;
+                params.global = 1;
+                let mut buffers =
+                    vec![ctx.input_buffer("medium params", bytemuck::bytes_of(&params))];
+                buffers.extend(volume.buffers.iter().cloned());
+                Some((buffers, volume.shift))
+            }
+        };
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
+            let medium_layout = ctx.storage_layout("medium", MEDIUM_BINDINGS, &[]);
+            let medium_group = medium.as_ref().map(|(buffers, shift)| {
+                let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("medium"),
+                    layout: &medium_layout,
+                    entries: &whole_buffer_entries(buffers),
+                });
+                (group, *shift)
+            });
+            let group0 = medium_group.as_ref().map(|_| &medium_layout);
             let pipeline_layout =
                 ctx.device
                     .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                         label: Some("render"),
-                        bind_group_layouts: &[None, Some(&upload.layout), Some(&render_layout)],
+                        bind_group_layouts: &[group0, Some(&upload.layout), Some(&render_layout)],
                         immediate_size: 0,
                     });
             GpuRenderer {
                 pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render"),
                 render_layout,
                 scene_group: upload.group.clone(),
+                medium: medium_group,
                 hierarchical: upload.hierarchical,
                 features: features.clone(),
                 source: source.clone(),
@@ -252,7 +330,11 @@ impl GpuRenderer {
                 ),
             });
         }
-        let inputs = inputs(renderer, self.hierarchical);
+        let inputs = inputs(
+            renderer,
+            self.hierarchical,
+            self.medium.as_ref().map(|(_, shift)| *shift),
+        );
         let (width, height) = (inputs.params.width, inputs.params.height);
         let per_row = width as u64 * inputs.params.spp as u64;
         let limit_rows = (ctx.limits.max_storage_buffer_binding_size / (16 * width as u64)).max(1);
@@ -305,10 +387,14 @@ impl GpuRenderer {
                 layout: &self.render_layout,
                 entries: &whole_buffer_entries(&buffers),
             });
+            let mut groups = vec![(1, &self.scene_group), (2, &group)];
+            if let Some((medium, _)) = &self.medium {
+                groups.push((0, medium));
+            }
             ctx.submit_pass(
                 "render",
                 &[&self.pipeline],
-                &[(1, &self.scene_group), (2, &group)],
+                &groups,
                 n as u32,
                 timer.as_ref(),
             );

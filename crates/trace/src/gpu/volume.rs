@@ -54,29 +54,29 @@ pub struct GpuVolume<'a> {
     grid: &'a BrickedGrid,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    /// Ranges, indirection, bricks, atlas (bindings 1 to 4).
-    buffers: Vec<wgpu::Buffer>,
-    /// Everything of the parameters but the estimator's and the batch's.
-    base: VolumeParams,
-    /// The translation of index space (voxels, a multiple of [`TOP_SIDE`]).
-    shift: [f64; 3],
-    /// Centre of the range mips' box after the translation.
-    centre: [f64; 3],
+    upload: VolumeUpload,
     upload_s: f64,
 }
 
-impl<'a> GpuVolume<'a> {
-    /// Uploads `grid` and its range mips and compiles the kernel. Arrays beyond the device's
-    /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
-    pub fn new(ctx: &GpuContext, grid: &'a BrickedGrid) -> Result<GpuVolume<'a>, GpuError> {
-        let t0 = Instant::now();
+/// A bricked grid on the GPU: the arrays of `shaders/volume/bindings.wgsl` but the
+/// parameters, and the translation of its index space.
+pub(super) struct VolumeUpload {
+    /// Ranges, indirection, bricks, atlas (bindings 1 to 4).
+    pub buffers: Vec<wgpu::Buffer>,
+    /// Everything of the parameters but the estimator's and the batch's.
+    pub base: VolumeParams,
+    /// The translation of index space (voxels, a multiple of [`TOP_SIDE`]): the kernels'
+    /// index space is the grid's minus `shift`.
+    pub shift: [f64; 3],
+    /// Centre of the range mips' box after the translation.
+    pub centre: [f64; 3],
+}
+
+impl VolumeUpload {
+    /// Uploads `grid` and its range mips. Arrays beyond the device's binding limit are a
+    /// [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, grid: &BrickedGrid) -> Result<VolumeUpload, GpuError> {
         let too_big = |why: String| Err(GpuError::SceneTooBig(why));
-        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < BINDINGS {
-            return too_big(format!(
-                "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
-            ));
-        }
         let mips = grid.ranges();
         if mips.levels.len() != RANGE_LEVELS {
             return too_big(format!(
@@ -139,6 +139,27 @@ impl<'a> GpuVolume<'a> {
             ("volume atlas", storage_bytes(grid.atlas())),
         ];
         let buffers = ctx.storage_buffers(&arrays)?;
+        Ok(VolumeUpload {
+            buffers,
+            base,
+            shift,
+            centre,
+        })
+    }
+}
+
+impl<'a> GpuVolume<'a> {
+    /// Uploads `grid` and its range mips and compiles the kernel. Arrays beyond the device's
+    /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, grid: &'a BrickedGrid) -> Result<GpuVolume<'a>, GpuError> {
+        let t0 = Instant::now();
+        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
+        if per_stage < BINDINGS {
+            return Err(GpuError::SceneTooBig(format!(
+                "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
+            )));
+        }
+        let upload = VolumeUpload::new(ctx, grid)?;
         let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
@@ -161,10 +182,7 @@ impl<'a> GpuVolume<'a> {
             grid,
             pipeline,
             layout,
-            buffers,
-            base,
-            shift,
-            centre,
+            upload,
             upload_s: t0.elapsed().as_secs_f64(),
         })
     }
@@ -178,14 +196,14 @@ impl<'a> GpuVolume<'a> {
     /// box when its origin is far; errors as [`IndexRay::from_world`].
     fn kernel_ray(&self, ray: &Ray) -> Result<RayRecord, VolumeError> {
         let r = IndexRay::from_world(ray, self.grid.map())?;
-        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.shift[k]);
+        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.upload.shift[k]);
         let near = origin.iter().all(|c| c.abs() <= NEAR) && r.tmin.abs() <= NEAR;
         let base = if near {
             0.0
         } else {
             // The point nearest the box's centre, within [tmin, tmax].
             let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            let to_centre = std::array::from_fn(|k| self.centre[k] - origin[k]);
+            let to_centre = std::array::from_fn(|k| self.upload.centre[k] - origin[k]);
             (dot(to_centre, r.dir) / dot(r.dir, r.dir))
                 .min(r.tmax)
                 .max(r.tmin)
@@ -227,7 +245,7 @@ impl<'a> GpuVolume<'a> {
                     .map_err(|e| VolumeError(format!("transmittance: ray {i}: {}", e.0)))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let mut p = self.base;
+        let mut p = self.upload.base;
         let (estimator, step) = match params.estimator {
             Estimator::Exact => (VOLUME_ESTIMATOR_EXACT, 0.0),
             Estimator::March { step } => (VOLUME_ESTIMATOR_MARCH, step as f32),
@@ -299,7 +317,7 @@ impl<'a> GpuVolume<'a> {
             let input = |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes));
             let results = ctx.output_buffer("transmittances", out_size);
             let mut buffers = vec![input("volume params", bytemuck::bytes_of(params))];
-            buffers.extend(self.buffers.iter().cloned());
+            buffers.extend(self.upload.buffers.iter().cloned());
             buffers.push(input("volume rays", bytemuck::cast_slice(rays)));
             buffers.push(results.clone());
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -78,7 +78,7 @@ impl Renderer<'_> {
     ) -> anyhow::Result<f64> {
         let media_t = |o: DVec3, t1: f64, rng: &mut Rng| -> anyhow::Result<f64> {
             match &self.media {
-                Some(m) if VM != NO_VOLUMES => m.transmittance(o, dir, 0.0, t1, rng.next_u32()),
+                Some(m) if VM != NO_VOLUMES => m.transmittance(o, dir, 0.0, t1, rng),
                 _ => Ok(1.0),
             }
         };

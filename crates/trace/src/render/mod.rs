@@ -119,7 +119,7 @@ impl Effects {
             match self.volumes {
                 None => "media: no (not compiled in)".to_string(),
                 Some(VolumeMode::EmissionAbsorption) => {
-                    "media: emission-absorption (exact transmittance, marched emission)".into()
+                    "media: emission-absorption (marched emission and transmittance)".into()
                 }
                 Some(VolumeMode::SingleScattering) => {
                     "media: single scattering (delta tracking, ratio-tracked shadow rays)".into()
@@ -250,6 +250,7 @@ impl<'a> Renderer<'a> {
                     scene: scene_media,
                     optics,
                     step: settings.step,
+                    march: mode == VolumeMode::EmissionAbsorption,
                 })
             }
         };

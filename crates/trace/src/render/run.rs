@@ -19,8 +19,8 @@ use crate::scene::load_render_scene;
 pub enum RenderBackend {
     /// Our CPU path (rayon over rows).
     Cpu,
-    /// Our WGSL render kernel through wgpu (f32; geometry views and surfaces: media are
-    /// not on the GPU yet).
+    /// Our WGSL render kernel through wgpu (f32; geometry views, surfaces and one medium
+    /// by emission-absorption: scattering media are not on the GPU yet).
     Gpu,
     /// The GPU when one opens and the render is one it does, else the CPU.
     Auto,
@@ -141,8 +141,9 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             println!("{line}");
         }
         println!(
-            "backend: {:?} (CPU path monomorphised over these effects)",
-            args.backend
+            "backends: the CPU path is monomorphised over these effects; the GPU kernel \
+             composes only their WGSL (geometry views, surfaces, one medium by \
+             emission-absorption; scattering media on the CPU only)"
         );
         return Ok(());
     }

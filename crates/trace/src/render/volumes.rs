@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use glam::DVec3;
-use hytrace_volume::{IndexTransmittance, Rng};
+use hytrace_volume::{global_range, IndexRay, IndexTransmittance, Rng, SegmentWalk, LEVEL_GLOBAL};
 
 use super::spec::MediumOptics;
 use crate::cpu::media::SceneMedia;
@@ -26,6 +26,8 @@ pub struct Media<'a> {
     pub optics: Vec<MediumOptics>,
     /// Emission-absorption march step in voxels.
     pub step: f64,
+    /// Emission-absorption: shadow rays take the march's transmittance.
+    pub march: bool,
 }
 
 impl Media<'_> {
@@ -61,12 +63,26 @@ impl Media<'_> {
                 IndexTransmittance::new(grid, grid.ranges(), p).map(|e| (e, p))
             })
             .collect::<Result<_, _>>()?;
-        let (mut a, mut b, mut h) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+        // Each medium's part: the ray over [t0, t1] inside its range mips' box (where its
+        // values can differ from the zero background), as the GPU's walk finds it.
+        let mut spans = Vec::with_capacity(segments.len());
         for s in &segments {
-            a = a.min(s.ray.tmin);
-            b = b.max(s.ray.tmax);
+            let full = IndexRay::new(s.ray.origin, s.ray.dir, t0, t1)?;
+            let mips = self.scene.grid(s.medium).ranges();
+            let inside = SegmentWalk::global(mips, &full, global_range(mips))?
+                .find(|piece| piece.level == LEVEL_GLOBAL);
+            spans.push(inside.map(|piece| (piece.t0, piece.t1)));
+        }
+        let (mut a, mut b, mut h) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+        for (s, span) in segments.iter().zip(&spans) {
+            let Some((s0, s1)) = *span else { continue };
+            a = a.min(s0);
+            b = b.max(s1);
             let voxels_per_t = DVec3::from(s.ray.dir).length();
             h = h.min(self.step / voxels_per_t);
+        }
+        if a >= b {
+            return Ok((DVec3::ZERO, 1.0));
         }
         let n = ((b - a) / h).ceil().max(1.0);
         anyhow::ensure!(
@@ -80,9 +96,10 @@ impl Media<'_> {
         for k in 0..n as u64 {
             let t = a + (k as f64 + 0.5) * h;
             let (mut sigma, mut source) = (0.0, DVec3::ZERO);
-            for (s, (lookup, params)) in segments.iter().zip(&lookups) {
-                if t < s.ray.tmin || t > s.ray.tmax {
-                    continue;
+            for ((s, span), (lookup, params)) in segments.iter().zip(&spans).zip(&lookups) {
+                match span {
+                    Some((s0, s1)) if (*s0..=*s1).contains(&t) => {}
+                    _ => continue,
                 }
                 let density = lookup.density(s.ray.at(t), &mut rng);
                 let optics = &self.optics[s.medium as usize];
@@ -129,23 +146,26 @@ impl Media<'_> {
         Ok(best)
     }
 
-    /// Transmittance of the media over `[t0, t1]` of the ray with the estimator the media
-    /// were opened with (exact for emission-absorption, ratio tracking when scattering);
-    /// `stream` picks the random streams.
+    /// Transmittance of the media over `[t0, t1]` of the ray: the emission-absorption
+    /// march's own when `march` (so shadow rays see the media the camera sees), else by the
+    /// estimator the media were opened with (ratio tracking) on a stream drawn from `rng`.
     pub fn transmittance(
         &self,
         origin: DVec3,
         dir: DVec3,
         t0: f64,
         t1: f64,
-        stream: u32,
+        rng: &mut Rng,
     ) -> anyhow::Result<f64> {
         if t1 <= t0 {
             return Ok(1.0);
         }
+        if self.march {
+            return Ok(self.emission_absorption(origin, dir, t0, t1)?.1);
+        }
         Ok(self
             .scene
-            .transmittance_to(origin.into(), dir.into(), t0, t1, stream)?
+            .transmittance_to(origin.into(), dir.into(), t0, t1, rng.next_u32())?
             .0)
     }
 }
