@@ -32,8 +32,9 @@ pub struct Media<'a> {
 
 impl Media<'_> {
     /// Emitted radiance reaching the origin from the media over `[t0, t1]` of the ray and
-    /// their transmittance, by midpoint compositing in steps of `step` voxels of the finest
-    /// medium: each step of extinction `sigma` and source `j` adds
+    /// their transmittance, by midpoint compositing over the ray's part inside each
+    /// medium's range-mips box (the GPU kernel marches the same points), in steps of `step`
+    /// voxels of the finest medium: each step of extinction `sigma` and source `j` adds
     /// `T * j / sigma * (1 - exp(-sigma h))` and multiplies `T` by `exp(-sigma h)`
     /// (exact for piecewise-constant media; the error falls as the step squared).
     /// Overlapping media add their extinctions and sources.
