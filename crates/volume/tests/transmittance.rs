@@ -5,8 +5,8 @@
 use hytrace_volume::{
     fog_sphere, global_range, sample_nearest, sample_stochastic, sample_trilinear, transmittance,
     transmittance_batch, CellWalk, Coord, DenseGrid, Estimate, Estimator, Filter, GridMap,
-    IndexRay, Majorant, RangeMips, Ray, Rng, Segment, SegmentWalk, TransmittanceParams, VoxelGrid,
-    LEVEL_GLOBAL, LEVEL_OUTSIDE,
+    IndexRay, IndexTransmittance, Majorant, RangeMips, Ray, Rng, Segment, SegmentWalk,
+    TransmittanceParams, VoxelGrid, LEVEL_GLOBAL, LEVEL_OUTSIDE,
 };
 
 /// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
@@ -1018,4 +1018,49 @@ fn bad_parameters_are_errors() {
     let mut other = g.clone();
     other.background = 1.0;
     assert!(transmittance(&other, &mips, &ray, 0, &good).is_err());
+}
+
+/// Free-flight sampling (`IndexTransmittance::collision`, what path tracers draw): a ray
+/// leaves without a collision with probability equal to the exact transmittance, and
+/// collides before `t` with probability `1 - T(t)`, within four standard errors.
+#[test]
+fn collision_sampling_follows_the_exact_transmittance() {
+    let g = fog_sphere(12.0, 4.0).unwrap();
+    let mips = RangeMips::build(&g).unwrap();
+    let mut p = params(Estimator::Exact);
+    p.density_scale = 0.06;
+    let exact = IndexTransmittance::new(&g, &mips, &p).unwrap();
+    // The sampler ignores the estimator: the same parameters serve.
+    let tracker = &exact;
+    let ray =
+        |t1: f64| IndexRay::new([-20.0, 0.5, -0.25], unit([1.0, 0.1, 0.05]), 0.0, t1).unwrap();
+    let t_of = |t1: f64| exact.estimate(&ray(t1), 0).unwrap().transmittance;
+    let (t_mid, t_end) = (18.0, 40.0);
+    let (all, half) = (t_of(t_end), t_of(t_mid));
+    assert!(all > 0.1 && all < 0.9 && half > all, "T = {all}, {half}");
+    let n = 20_000;
+    let (mut escaped, mut early) = (0, 0);
+    for i in 0..n {
+        let mut r = Rng::new(7, i, 0);
+        match tracker.collision(&ray(t_end), &mut r).unwrap() {
+            None => escaped += 1,
+            Some(c) => {
+                assert!(c.t > 0.0 && c.t < t_end && c.density > 0.0, "{c:?}");
+                if c.t < t_mid {
+                    early += 1;
+                }
+            }
+        }
+    }
+    for (what, count, expect) in [
+        ("escape", escaped, all),
+        ("collide before t_mid", early, 1.0 - half),
+    ] {
+        let f = count as f64 / n as f64;
+        let sigma = (expect * (1.0 - expect) / n as f64).sqrt();
+        assert!(
+            (f - expect).abs() < 4.0 * sigma,
+            "{what}: sampled {f:.4}, exact {expect:.4} (sigma {sigma:.4})"
+        );
+    }
 }
