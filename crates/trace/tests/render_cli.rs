@@ -117,6 +117,8 @@ fn explain_names_only_the_effects_a_scene_calls_for() {
         default.contains("dielectric surfaces (Fresnel): yes"),
         "{default}"
     );
+    let off = text(run_ok(&["render", "--explain", "--volumes", "off"]));
+    assert!(off.contains("media: no (not compiled in)"), "{off}");
     let view = text(run_ok(&["render", "--explain", "--view", "boundary"]));
     assert!(view.contains("view boundary: first hits only"), "{view}");
 }

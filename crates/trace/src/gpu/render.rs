@@ -91,7 +91,7 @@ fn material_item(m: &Material) -> RenderItem {
 /// medium.
 fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
     match (renderer.effects.volumes, &renderer.media) {
-        (None, _) => Ok(()),
+        (None | Some(VolumeMode::Off), _) => Ok(()),
         (Some(VolumeMode::EmissionAbsorption), Some(m)) if m.scene.placements().count() == 1 => {
             Ok(())
         }

@@ -47,7 +47,7 @@ pub struct Effects {
     pub shading: bool,
     /// Mirror and dielectric surfaces (a placed solid is made of one).
     pub specular: bool,
-    /// Media (the scene places a medium), rendered in this mode.
+    /// Media (the scene places a medium and does not turn them off), rendered in this mode.
     pub volumes: Option<VolumeMode>,
 }
 
@@ -85,13 +85,13 @@ impl Effects {
                 .iter()
                 .any(|&s| matches!(material_of(s), Material::Diffuse { .. })),
             specular: placed.iter().any(|&s| material_of(s).is_specular()),
-            volumes: has_media.then(|| {
-                settings.volumes.unwrap_or(if scatters {
-                    VolumeMode::MultipleScattering
-                } else {
-                    VolumeMode::EmissionAbsorption
-                })
-            }),
+            volumes: match settings.volumes {
+                _ if !has_media => None,
+                Some(VolumeMode::Off) => None,
+                Some(mode) => Some(mode),
+                None if scatters => Some(VolumeMode::MultipleScattering),
+                None => Some(VolumeMode::EmissionAbsorption),
+            },
         }
     }
 
@@ -117,7 +117,7 @@ impl Effects {
                 yes_no(self.specular)
             ),
             match self.volumes {
-                None => "media: no (not compiled in)".to_string(),
+                None | Some(VolumeMode::Off) => "media: no (not compiled in)".to_string(),
                 Some(VolumeMode::EmissionAbsorption) => {
                     "media: emission-absorption (marched emission and transmittance)".into()
                 }
@@ -308,7 +308,7 @@ impl<'a> Renderer<'a> {
     pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> anyhow::Result<Image> {
         let fx = self.effects;
         let vm = match fx.volumes {
-            None => NO_VOLUMES,
+            None | Some(VolumeMode::Off) => NO_VOLUMES,
             Some(VolumeMode::EmissionAbsorption) => EMISSION_ABSORPTION,
             Some(VolumeMode::SingleScattering) => SINGLE_SCATTERING,
             Some(VolumeMode::MultipleScattering) => MULTIPLE_SCATTERING,

@@ -208,6 +208,8 @@ pub enum View {
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum VolumeMode {
+    /// Media are left out: the render sees the surfaces only.
+    Off,
     /// Emission and absorption only (no scattering): exact transmittance, marched emission.
     EmissionAbsorption,
     /// Light scattered once toward the lights (transmittance to them by ratio tracking).
