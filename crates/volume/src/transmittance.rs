@@ -193,12 +193,6 @@ impl<'a, G: VoxelGrid + ?Sized> IndexTransmittance<'a, G> {
         self.0.estimate_index(ray, ray_index)
     }
 
-    /// The density (lookup times scale) at index-space point `p`; the stochastic filter
-    /// draws from `rng`.
-    pub fn density(&self, p: [f64; 3], rng: &mut Rng) -> f64 {
-        self.0.density(p, rng)
-    }
-
     /// The first real collision along `ray` by delta tracking under the local (or global)
     /// majorants: free-flight distance sampling, as a path tracer needs it. `None` when the
     /// ray leaves `[tmin, tmax]` without one, which happens with probability equal to the

@@ -39,6 +39,8 @@ pub struct GpuRenderer {
     medium: Option<(wgpu::BindGroup, [f64; 3])>,
     hierarchical: bool,
     features: Vec<&'static str>,
+    /// The effect part of `features`, which every render must call for exactly.
+    effects: Vec<&'static str>,
     source: String,
 }
 
@@ -296,6 +298,7 @@ impl GpuRenderer {
                 medium: medium_group,
                 hierarchical: upload.hierarchical,
                 features: features.clone(),
+                effects: effect_features(renderer).0,
                 source: source.clone(),
             }
         })
@@ -320,12 +323,14 @@ impl GpuRenderer {
         renderer: &Renderer,
         progress: &dyn Fn(u64),
     ) -> Result<(Image, GpuTimes), GpuError> {
-        let (features, _) = compose_render_kernel(renderer)?;
-        if features != self.features {
+        // The scene is the caller's promise; the effects are checked.
+        check_supported(renderer)?;
+        let effects = effect_features(renderer).0;
+        if effects != self.effects {
             return Err(GpuError::Operation {
                 what: "render".into(),
                 problem: format!(
-                    "the kernel was built for features {:?}, this render needs {features:?}",
+                    "the kernel was built for features {:?}, this render needs the effects {effects:?}",
                     self.features
                 ),
             });

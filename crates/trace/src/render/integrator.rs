@@ -45,7 +45,7 @@ fn surface_offset(p: DVec3) -> f64 {
 }
 
 /// `p` moved off the surface with normal `n` to the side `w` leaves toward.
-fn spawn(p: DVec3, n: DVec3, w: DVec3) -> DVec3 {
+pub(super) fn spawn(p: DVec3, n: DVec3, w: DVec3) -> DVec3 {
     let side = if w.dot(n) >= 0.0 { 1.0 } else { -1.0 };
     p + side * surface_offset(p) * n
 }

@@ -223,11 +223,9 @@ impl<'a> Renderer<'a> {
         let media = match effects.volumes {
             None => None,
             Some(mode) => {
-                let estimator = match mode {
-                    VolumeMode::EmissionAbsorption => Estimator::Exact,
-                    _ => Estimator::Ratio,
-                };
-                let mut params = TransmittanceParams::new(estimator);
+                // Shadow rays ratio-track scattering media; emission-absorption marches them
+                // (Media::transmittance), so the estimator serves the trackers only.
+                let mut params = TransmittanceParams::new(Estimator::Ratio);
                 params.seed = settings.seed;
                 let scene_media = SceneMedia::new(scene, f, &params)?;
                 let optics = f

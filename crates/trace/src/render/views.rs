@@ -6,6 +6,7 @@ use glam::DVec3;
 use hytrace_foundry::UNSET;
 use hytrace_volume::pcg4d;
 
+use super::integrator::spawn;
 use super::spec::{Material, View};
 use super::Renderer;
 
@@ -34,10 +35,7 @@ impl Renderer<'_> {
             let t = hit.t as f64;
             if self.material(&hit) == Material::Transparent {
                 let n = DVec3::from(hit.normal.to_f64());
-                let p = origin + t * dir;
-                let side = if dir.dot(n) >= 0.0 { 1.0 } else { -1.0 };
-                let next =
-                    p + side * 64.0 * f32::EPSILON as f64 * (1.0 + p.abs().max_element()) * n;
+                let next = spawn(origin + t * dir, n, dir);
                 travelled += (next - origin).length();
                 origin = next;
                 continue;

@@ -3,7 +3,9 @@
 
 use anyhow::Context;
 use glam::DVec3;
-use hytrace_volume::{global_range, IndexRay, IndexTransmittance, Rng, SegmentWalk, LEVEL_GLOBAL};
+use hytrace_volume::{
+    global_range, sample_trilinear, IndexRay, IndexTransmittance, Rng, SegmentWalk, LEVEL_GLOBAL,
+};
 
 use super::spec::MediumOptics;
 use crate::cpu::media::SceneMedia;
@@ -52,18 +54,6 @@ impl Media<'_> {
         if segments.is_empty() {
             return Ok((DVec3::ZERO, 1.0));
         }
-        let params: Vec<_> = segments
-            .iter()
-            .map(|s| self.scene.params(s.medium, s.placement))
-            .collect();
-        let lookups: Vec<_> = segments
-            .iter()
-            .zip(&params)
-            .map(|(s, p)| {
-                let grid = self.scene.grid(s.medium);
-                IndexTransmittance::new(grid, grid.ranges(), p).map(|e| (e, p))
-            })
-            .collect::<Result<_, _>>()?;
         // Each medium's part: the ray over [t0, t1] inside its range mips' box (where its
         // values can differ from the zero background), as the GPU's walk finds it.
         let mut spans = Vec::with_capacity(segments.len());
@@ -91,22 +81,20 @@ impl Media<'_> {
             "emission-absorption: {n} steps of {h} over [{a}, {b}]: the step is too small"
         );
         let h = (b - a) / n;
-        // The filters used here are deterministic; the stream is unused.
-        let mut rng = Rng::new(0, 0, 0);
         let (mut radiance, mut transmittance) = (DVec3::ZERO, 1.0);
         for k in 0..n as u64 {
             let t = a + (k as f64 + 0.5) * h;
             let (mut sigma, mut source) = (0.0, DVec3::ZERO);
-            for ((s, span), (lookup, params)) in segments.iter().zip(&spans).zip(&lookups) {
+            for (s, span) in segments.iter().zip(&spans) {
                 match span {
                     Some((s0, s1)) if (*s0..=*s1).contains(&t) => {}
                     _ => continue,
                 }
-                let density = lookup.density(s.ray.at(t), &mut rng);
-                let optics = &self.optics[s.medium as usize];
-                let value = density / params.density_scale.max(f64::MIN_POSITIVE);
+                // Trilinear lookups, as the GPU's march reads the grid.
+                let value = sample_trilinear(self.scene.grid(s.medium), s.ray.at(t));
+                let density = value * self.scene.params(s.medium, s.placement).density_scale;
                 sigma += density;
-                source += density * value * DVec3::from(optics.emission);
+                source += density * value * DVec3::from(self.optics[s.medium as usize].emission);
             }
             if sigma <= 0.0 {
                 continue;
