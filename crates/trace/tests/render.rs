@@ -87,14 +87,8 @@ material = "white"
 kind = "diffuse"
 colour = [1, 1, 1]
 "#;
-    let image = furnace(scene, "spp = 4");
-    let (lo, hi) = range(&image);
     // Every shadow ray from a convex surface escapes: a leak (self-shadowing) darkens.
     assert_all_one(&furnace(scene, "spp = 4"));
-    assert!(
-        (1.0 - lo) < 1e-6 && (hi - 1.0) < 1e-6,
-        "pixels in [{lo}, {hi}], expected exactly 1"
-    );
     let grey = furnace(
         &scene.replace("[1, 1, 1]\n", "[0.5, 0.5, 0.5]\n"),
         "spp = 4",
