@@ -204,10 +204,13 @@ struct RenderParams {
     hierarchical: u32,
     row_offset: u32,
     row_count: u32,
-    medium: u32,
+    volume_mode: u32,
     medium_rows: array<vec4<f32>, 3>,
     medium_emission: array<f32, 3>,
     medium_step: f32,
+    medium_albedo: f32,
+    medium_g: f32,
+    pad: array<u32, 2>,
 }
 
 struct RenderItem {
@@ -255,6 +258,10 @@ const RENDER_VIEW_INSTANCE: u32 = 5u;
 const RENDER_VIEW_BOUNDARY: u32 = 6u;
 const RENDER_EFFECT_SHADING: u32 = 1u;
 const RENDER_EFFECT_SPECULAR: u32 = 2u;
+const RENDER_VOLUMES_NONE: u32 = 0u;
+const RENDER_VOLUMES_ABSORPTION: u32 = 1u;
+const RENDER_VOLUMES_SINGLE: u32 = 2u;
+const RENDER_VOLUMES_MULTIPLE: u32 = 3u;
 const RENDER_MATERIAL_DIFFUSE: u32 = 0u;
 const RENDER_MATERIAL_MIRROR: u32 = 1u;
 const RENDER_MATERIAL_DIELECTRIC: u32 = 2u;

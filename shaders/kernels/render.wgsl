@@ -2,16 +2,23 @@
 // views and surface light transport (crates/trace/src/render/{views,integrator}.rs),
 // compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each pixel runs its
 // samples; a sample is one loop whose every iteration traces one ray, the path's or a
-// shadow ray's, so the scene traversal is inlined once. Shading, specular and media code
-// is composed in only when the scene calls for it; of media, one placed medium rendered by
-// emission-absorption (twin of render::volumes::Media::emission_absorption).
+// shadow ray's, and then meets the media along it, so the scene traversal and the volume
+// walk are each inlined once. Shading, shadow rays, specular and media code is composed in
+// only when the scene calls for it. Of media, one placed medium: emission-absorption (twin
+// of render::volumes::Media::emission_absorption) or scattering (delta tracking to a real
+// collision, ratio tracking for shadow rays: twins of Media::collision and
+// Media::transmittance, through the same volume/estimate module as the transmittance
+// kernel).
 // #import trace_records
 // #import trace/scene
 // #import volume/rng
 // #import render/optics
-// #if media
+// #if absorption
 // #import volume/walk
 // #import volume/grid
+// #endif
+// #if scattering
+// #import volume/estimate
 // #endif
 
 @group(2) @binding(0) var<storage, read> rparams: RenderParams;
@@ -36,13 +43,20 @@ struct Sample {
     inside: f32,
     events: u32,
     travelled: f32,
-    // The diffuse point being lit, its lights' cursor and its environment direction.
+    // The point being lit (a diffuse surface's, or a collision in a medium: `scatter`,
+    // lit through the phase function around the travel direction `din`), its lights'
+    // cursor, its environment direction (when `use_env`), and whether the path goes on
+    // from it afterwards (multiple scattering: `resume`).
     p: vec3<f32>,
     n: vec3<f32>,
     facing: vec3<f32>,
     tint: vec3<f32>,
     env_dir: vec3<f32>,
     next_light: u32,
+    scatter: bool,
+    din: vec3<f32>,
+    use_env: bool,
+    resume: bool,
     // The shadow ray.
     so: vec3<f32>,
     sd: vec3<f32>,
@@ -130,10 +144,35 @@ fn view_step(s: ptr<function, Sample>, h: Hit) {
     (*s).radiance = c;
 }
 
-// #if shading
-// Starts the next shadow ray of the diffuse point (lights in order, then the environment),
-// or ends the sample when none is left.
-fn next_shadow(s: ptr<function, Sample>) {
+// #if lights
+// The lit point is done: a multiple-scattering path goes on from it in a direction drawn
+// from the phase function; any other sample ends.
+fn end_lighting(s: ptr<function, Sample>, rng: ptr<function, VolumeRng>) {
+    if !(*s).resume {
+        (*s).mode = MODE_DONE;
+        return;
+    }
+    let u = vec2<f32>(rng_next(rng), rng_next(rng));
+    (*s).d = sample_henyey_greenstein((*s).din, rparams.medium_g, u);
+    (*s).o = (*s).p;
+    (*s).events += 1u;
+    (*s).scatter = false;
+    (*s).resume = false;
+    (*s).mode = MODE_PATH;
+}
+
+// How the lit point answers light arriving from direction `w`: cos / pi on a diffuse
+// surface, the phase function in a medium.
+fn response(s: ptr<function, Sample>, w: vec3<f32>) -> f32 {
+    if (*s).scatter {
+        return henyey_greenstein(dot((*s).din, w), rparams.medium_g);
+    }
+    return dot((*s).facing, w) / RENDER_PI;
+}
+
+// Starts the next shadow ray of the lit point (lights in order, then the environment),
+// or ends the lighting when none is left.
+fn next_shadow(s: ptr<function, Sample>, rng: ptr<function, VolumeRng>) {
     loop {
         let k = (*s).next_light;
         (*s).next_light = k + 1u;
@@ -156,15 +195,16 @@ fn next_shadow(s: ptr<function, Sample>) {
                 w = -normalize(v3(item_a(item)));
                 power = v3(item_b(item));
             }
-            f = dot((*s).facing, w) / RENDER_PI;
-        } else if k > rparams.light_count || all(power == vec3<f32>(0.0)) {
-            (*s).mode = MODE_DONE;
+            f = response(s, w);
+        } else if k > rparams.light_count || !(*s).use_env || all(power == vec3<f32>(0.0)) {
+            end_lighting(s, rng);
             return;
         }
         if f <= 0.0 || all(power == vec3<f32>(0.0)) {
             continue;
         }
-        let o = spawn((*s).p, (*s).n, w);
+        // A point in a medium is on no surface.
+        let o = select(spawn((*s).p, (*s).n, w), (*s).p, (*s).scatter);
         var reach = dist;
         if dist < INF {
             reach = max(dist - length(o - (*s).p), 0.0);
@@ -182,7 +222,7 @@ fn next_shadow(s: ptr<function, Sample>) {
 }
 
 // One crossing of a shadow ray: light arrives, passes a see-through surface, or is blocked.
-fn shadow_step(s: ptr<function, Sample>, h: Hit) {
+fn shadow_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     var t = (*s).left;
     if h.found {
         t = h.t;
@@ -192,7 +232,7 @@ fn shadow_step(s: ptr<function, Sample>, h: Hit) {
     }
     if !h.found {
         (*s).radiance += (*s).contribution * (*s).weight;
-        next_shadow(s);
+        next_shadow(s, rng);
         return;
     }
     let m = instances[h.instance].material;
@@ -204,37 +244,58 @@ fn shadow_step(s: ptr<function, Sample>, h: Hit) {
         (*s).weight *= 1.0 - fresnel(abs(dot((*s).sd, h.normal)), eta);
         (*s).sinside = select(0.0, item_b(m).y, entering);
     } else if kind != RENDER_MATERIAL_TRANSPARENT {
-        next_shadow(s);
+        next_shadow(s, rng);
         return;
     }
     (*s).crossings += 1u;
     if (*s).weight == 0.0 || (*s).crossings >= MAX_SHADOW_CROSSINGS {
-        next_shadow(s);
+        next_shadow(s, rng);
         return;
     }
     (*s).so = spawn((*s).so + t * (*s).sd, h.normal, (*s).sd);
     (*s).left -= t;
     if (*s).left <= 0.0 {
         (*s).radiance += (*s).contribution * (*s).weight;
-        next_shadow(s);
+        next_shadow(s, rng);
     }
 }
 // #endif
 
-// #if media
-struct Emitted {
+// What the media do along one piece of a ray.
+struct MediumStep {
+    // Light they emit toward the piece's start and the fraction they let through.
     radiance: vec3<f32>,
     transmittance: f32,
+    // A real collision on a path (scattering media): where, and the grid value there.
+    collided: bool,
+    t: f32,
+    value: f32,
 }
 
+fn no_medium() -> MediumStep {
+    return MediumStep(vec3<f32>(0.0), 1.0, false, 0.0, 0.0);
+}
+
+// #if media
+// A world point (w = 1) or direction (w = 0) in the medium's translated index space.
+fn medium_space(p: vec3<f32>, w: f32) -> vec3<f32> {
+    let m = rparams.medium_rows;
+    return vec3<f32>(dot(m[0].xyz, p) + w * m[0].w, dot(m[1].xyz, p) + w * m[1].w, dot(m[2].xyz, p) + w * m[2].w);
+}
+
+fn medium_emission() -> vec3<f32> {
+    return vec3<f32>(rparams.medium_emission[0], rparams.medium_emission[1], rparams.medium_emission[2]);
+}
+// #endif
+
+// #if absorption
 // Emission-absorption of the medium over [0, t1] of the world ray o + t d: midpoint
 // compositing over the ray's part inside the range mips' box, in steps of
-// `medium_step` voxels.
-fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> Emitted {
-    var out = Emitted(vec3<f32>(0.0), 1.0);
-    let m = rparams.medium_rows;
-    let oi = vec3<f32>(dot(m[0].xyz, o) + m[0].w, dot(m[1].xyz, o) + m[1].w, dot(m[2].xyz, o) + m[2].w);
-    let di = vec3<f32>(dot(m[0].xyz, d), dot(m[1].xyz, d), dot(m[2].xyz, d));
+// `medium_step` voxels. Path and shadow pieces alike (`shadow` and `rng` unused).
+fn medium_along(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
+    var out = no_medium();
+    let oi = medium_space(o, 1.0);
+    let di = medium_space(d, 0.0);
     var w = walk_start(oi, di, 0.0, t1, true);
     let a = w.base;
     let b = walk_absolute(&w, w.t_end);
@@ -243,7 +304,7 @@ fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> Emitted {
     }
     let n = max(ceil((b - a) / (rparams.medium_step / length(di))), 1.0);
     let h = (b - a) / n;
-    let emission = vec3<f32>(rparams.medium_emission[0], rparams.medium_emission[1], rparams.medium_emission[2]);
+    let emission = medium_emission();
     for (var k = 0u; k < u32(n); k++) {
         let p = oi + (a + (f32(k) + 0.5) * h) * di;
         let cell = floor(p);
@@ -260,17 +321,70 @@ fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> Emitted {
 }
 // #endif
 
-// One surface of the path (twin of Renderer::radiance without media).
-fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
+// #if scattering
+// The scattering medium over [0, t1] of the world ray o + t d, under the local majorants
+// of the range mips: a path piece's first real collision by delta tracking on the path's
+// stream; a shadow piece's transmittance by ratio tracking on a stream of its own, keyed
+// by the next draw of the path's (as Media::transmittance keys it).
+fn medium_along(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
+    var stream = *rng;
+    var est = VOLUME_ESTIMATOR_DELTA;
+    if shadow {
+        stream = rng_new(rparams.seed, rng_u32(rng), 0u);
+        est = VOLUME_ESTIMATOR_RATIO;
+    }
+    let e = estimate_sample(medium_space(o, 1.0), medium_space(d, 0.0), 0.0, t1, est, false, &stream, false);
+    if !shadow {
+        *rng = stream;
+    }
+    return MediumStep(vec3<f32>(0.0), e.weight, e.collided, e.t, e.value);
+}
+
+// The path collided in the medium at `m.t`: the medium's emission (the collision
+// estimator of j / sigma = value * colour) and its light through the phase function;
+// single scattering ends there, multiple scattering goes on from it.
+fn scatter_step(s: ptr<function, Sample>, m: MediumStep, rng: ptr<function, VolumeRng>) {
+    if (*s).inside > 0.0 {
+        (*s).beta *= exp(-m.t / (*s).inside);
+    }
+    let d = (*s).d;
+    (*s).radiance += (*s).beta * m.value * medium_emission();
+    (*s).beta *= rparams.medium_albedo;
+    if all((*s).beta == vec3<f32>(0.0)) {
+        (*s).mode = MODE_DONE;
+        return;
+    }
+    let single = rparams.volume_mode == RENDER_VOLUMES_SINGLE;
+    if single {
+        let u = vec2<f32>(rng_next(rng), rng_next(rng));
+        (*s).env_dir = sample_henyey_greenstein(d, rparams.medium_g, u);
+    }
+    (*s).p = (*s).o + m.t * d;
+    (*s).scatter = true;
+    (*s).din = d;
+    (*s).use_env = single;
+    (*s).resume = !single;
+    (*s).tint = (*s).beta;
+    (*s).next_light = 0u;
+    next_shadow(s, rng);
+}
+// #endif
+
+// One piece of the path (twin of Renderer::radiance): the media along it (`m`), then its
+// surface.
+fn path_step(s: ptr<function, Sample>, h: Hit, m: MediumStep, rng: ptr<function, VolumeRng>) {
     var t_end = INF;
     if h.found {
         t_end = h.t;
     }
-    // #if media
-    let emitted = emission_absorption((*s).o, (*s).d, t_end);
-    (*s).radiance += (*s).beta * emitted.radiance;
-    (*s).beta *= emitted.transmittance;
+    // #if scattering
+    if m.collided {
+        scatter_step(s, m, rng);
+        return;
+    }
     // #endif
+    (*s).radiance += (*s).beta * m.radiance;
+    (*s).beta *= m.transmittance;
     if (*s).inside > 0.0 {
         (*s).beta *= exp(-t_end / (*s).inside);
     }
@@ -283,11 +397,11 @@ fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     let p = (*s).o + t_end * d;
     let n = h.normal;
     let facing = select(-n, n, dot(d, n) < 0.0);
-    let m = instances[h.instance].material;
-    let kind = items[m].kind;
+    let mat = instances[h.instance].material;
+    let kind = items[mat].kind;
     (*s).events += 1u;
     if kind == RENDER_MATERIAL_EMITTER {
-        (*s).radiance += (*s).beta * v3(item_a(m));
+        (*s).radiance += (*s).beta * v3(item_a(mat));
         (*s).mode = MODE_DONE;
         return;
     }
@@ -297,14 +411,14 @@ fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     }
     // #if specular
     if kind == RENDER_MATERIAL_MIRROR {
-        (*s).beta *= v3(item_a(m));
+        (*s).beta *= v3(item_a(mat));
         (*s).d = mirror(d, facing);
         (*s).o = spawn(p, n, (*s).d);
         return;
     }
     if kind == RENDER_MATERIAL_DIELECTRIC {
         let entering = dot(d, n) < 0.0;
-        let ior = item_b(m).x;
+        let ior = item_b(mat).x;
         let eta = select(1.0 / ior, ior, entering);
         let reflectance = fresnel(-dot(d, facing), eta);
         let r = refraction(d, facing, eta);
@@ -313,7 +427,7 @@ fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
             through = rng_next(rng) >= reflectance;
         }
         if through {
-            (*s).inside = select(0.0, item_b(m).y, entering);
+            (*s).inside = select(0.0, item_b(mat).y, entering);
             (*s).d = r.d;
         } else {
             (*s).d = mirror(d, facing);
@@ -324,7 +438,7 @@ fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     // #endif
     var colour = vec3<f32>(1.0);
     if kind == RENDER_MATERIAL_DIFFUSE || kind == RENDER_MATERIAL_MIRROR {
-        colour = v3(item_a(m));
+        colour = v3(item_a(mat));
     }
     // #if shading
     let u = vec2<f32>(rng_next(rng), rng_next(rng));
@@ -332,9 +446,12 @@ fn path_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) {
     (*s).p = p;
     (*s).n = n;
     (*s).facing = facing;
+    (*s).scatter = false;
+    (*s).use_env = true;
+    (*s).resume = false;
     (*s).tint = (*s).beta * colour;
     (*s).next_light = 0u;
-    next_shadow(s);
+    next_shadow(s, rng);
     return;
     // #endif
     (*s).radiance += (*s).beta * colour;
@@ -352,6 +469,9 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
     s.inside = 0.0;
     s.events = 0u;
     s.travelled = 0.0;
+    s.scatter = false;
+    s.use_env = false;
+    s.resume = false;
     let shaded = rparams.view == RENDER_VIEW_SHADED;
     loop {
         if s.mode == MODE_DONE || (shaded && s.mode == MODE_PATH && s.events > rparams.max_bounces) {
@@ -368,15 +488,29 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
         let h = trace_scene(ro, rd, tmax);
         if !shaded {
             view_step(&s, h);
-        } else if s.mode == MODE_PATH {
-            path_step(&s, h, rng);
+            continue;
+        }
+        let shadow = s.mode == MODE_SHADOW;
+        var m = no_medium();
+        // #if media
+        // The media along this piece, unless it is a shadow ray's ending at an opaque
+        // surface (the CPU draws nothing for those either).
+        let end = select(tmax, h.t, h.found);
+        var opaque = false;
+        if h.found {
+            let kind = items[instances[h.instance].material].kind;
+            opaque = kind != RENDER_MATERIAL_TRANSPARENT && kind != RENDER_MATERIAL_DIELECTRIC;
+        }
+        if !(shadow && (opaque || end <= 0.0)) {
+            m = medium_along(ro, rd, end, shadow, rng);
+        }
+        // #endif
+        if !shadow {
+            path_step(&s, h, m, rng);
         } else {
-            // #if media
-            // The media along this piece of the shadow ray (before shadow_step weighs it).
-            s.weight *= emission_absorption(s.so, s.sd, select(s.left, h.t, h.found)).transmittance;
-            // #endif
-            // #if shading
-            shadow_step(&s, h);
+            // #if lights
+            s.weight *= m.transmittance;
+            shadow_step(&s, h, rng);
             // #endif
         }
     }

@@ -25,9 +25,14 @@ fn rng_new(seed: u32, stream: u32, sample: u32) -> VolumeRng {
     return VolumeRng(vec3<u32>(seed, stream, sample), 0u);
 }
 
-// The next uniform in [0, 1), a multiple of 2^-24 (exact in f32).
-fn rng_next(r: ptr<function, VolumeRng>) -> f32 {
+// The next 32 random bits.
+fn rng_u32(r: ptr<function, VolumeRng>) -> u32 {
     let h = pcg4d(vec4<u32>((*r).key, (*r).counter));
     (*r).counter += 1u;
-    return f32(h.x >> 8u) * (1.0 / 16777216.0);
+    return h.x;
+}
+
+// The next uniform in [0, 1), a multiple of 2^-24 (exact in f32).
+fn rng_next(r: ptr<function, VolumeRng>) -> f32 {
+    return f32(rng_u32(r) >> 8u) * (1.0 / 16777216.0);
 }

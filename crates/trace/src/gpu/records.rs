@@ -242,9 +242,9 @@ record! {
         pub row_offset: u32,
         /// Rows in this batch.
         pub row_count: u32,
-        /// 1 when the render marches a medium (emission-absorption; the volume group is
-        /// bound), else 0.
-        pub medium: u32,
+        /// `RENDER_VOLUMES_*`: how the medium is rendered (the volume group is bound unless
+        /// none).
+        pub volume_mode: u32,
         /// World to the medium's index space (translated as the volume upload's): the rows
         /// of a 3x4 affine.
         pub medium_rows: [[f32; 4]; 3],
@@ -252,6 +252,12 @@ record! {
         pub medium_emission: [f32; 3],
         /// March step in voxels.
         pub medium_step: f32,
+        /// Scattering albedo of the medium.
+        pub medium_albedo: f32,
+        /// Henyey-Greenstein asymmetry of the medium.
+        pub medium_g: f32,
+        /// Padding.
+        pub pad: [u32; 2],
     }
 }
 
@@ -305,6 +311,14 @@ pub const RENDER_VIEW_BOUNDARY: u32 = 6;
 pub const RENDER_EFFECT_SHADING: u32 = 1;
 /// Mirrors and dielectrics.
 pub const RENDER_EFFECT_SPECULAR: u32 = 2;
+/// [`RenderParams::volume_mode`] values: no medium.
+pub const RENDER_VOLUMES_NONE: u32 = 0;
+/// Emission-absorption.
+pub const RENDER_VOLUMES_ABSORPTION: u32 = 1;
+/// Single scattering.
+pub const RENDER_VOLUMES_SINGLE: u32 = 2;
+/// Multiple scattering.
+pub const RENDER_VOLUMES_MULTIPLE: u32 = 3;
 /// [`RenderItem::kind`] of materials: diffuse.
 pub const RENDER_MATERIAL_DIFFUSE: u32 = 0;
 /// Mirror.
@@ -427,6 +441,10 @@ pub fn generate() -> String {
         ("RENDER_VIEW_BOUNDARY", RENDER_VIEW_BOUNDARY),
         ("RENDER_EFFECT_SHADING", RENDER_EFFECT_SHADING),
         ("RENDER_EFFECT_SPECULAR", RENDER_EFFECT_SPECULAR),
+        ("RENDER_VOLUMES_NONE", RENDER_VOLUMES_NONE),
+        ("RENDER_VOLUMES_ABSORPTION", RENDER_VOLUMES_ABSORPTION),
+        ("RENDER_VOLUMES_SINGLE", RENDER_VOLUMES_SINGLE),
+        ("RENDER_VOLUMES_MULTIPLE", RENDER_VOLUMES_MULTIPLE),
         ("RENDER_MATERIAL_DIFFUSE", RENDER_MATERIAL_DIFFUSE),
         ("RENDER_MATERIAL_MIRROR", RENDER_MATERIAL_MIRROR),
         ("RENDER_MATERIAL_DIELECTRIC", RENDER_MATERIAL_DIELECTRIC),

@@ -1,9 +1,9 @@
 //! The GPU renderer: the render kernel (`shaders/kernels/render.wgsl`) over the scene
 //! uploaded as the scan uploads it, composed with only the effects the render calls for.
 //! Its CPU twin is [`Renderer::render`]; `tests/gpu_render.rs` compares them pixel by
-//! pixel. Of media, the kernel marches one placed medium by emission-absorption; scattering
-//! media and several media are refused with [`GpuError::Unsupported`] (so `--backend auto`
-//! falls back to the CPU).
+//! pixel. Of media, the kernel renders one placed medium, by emission-absorption, single or
+//! multiple scattering; several media are refused with [`GpuError::Unsupported`] (so
+//! `--backend auto` falls back to the CPU).
 
 use std::time::Instant;
 
@@ -12,7 +12,8 @@ use super::records::{
     RenderInstance, RenderItem, RenderParams, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR,
     RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC,
     RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER, RENDER_MATERIAL_MIRROR,
-    RENDER_MATERIAL_TRANSPARENT, VOLUME_FILTER_TRILINEAR,
+    RENDER_MATERIAL_TRANSPARENT, RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE,
+    RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE, VOLUME_FILTER_TRILINEAR,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
@@ -20,6 +21,7 @@ use super::volume::VolumeUpload;
 use crate::render::camera::Projection;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
+use hytrace_volume::global_range;
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
@@ -35,7 +37,7 @@ pub struct GpuRenderer {
     pipeline: wgpu::ComputePipeline,
     render_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
-    /// The medium's group 0 (emission-absorption), with its translation of index space.
+    /// The medium's group 0, with its translation of index space.
     medium: Option<(wgpu::BindGroup, [f64; 3])>,
     hierarchical: bool,
     features: Vec<&'static str>,
@@ -89,37 +91,54 @@ fn material_item(m: &Material) -> RenderItem {
     }
 }
 
-/// Refuses what the kernel does not do yet: scattering media, or more than one placed
-/// medium.
+/// Refuses what the kernel does not do yet: more than one placed medium, and scattering
+/// media with negative values (which the CPU's trackers refuse).
 fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
-    match (renderer.effects.volumes, &renderer.media) {
-        (None | Some(VolumeMode::Off), _) => Ok(()),
-        (Some(VolumeMode::EmissionAbsorption), Some(m)) if m.scene.placements().count() == 1 => {
-            Ok(())
-        }
-        (Some(VolumeMode::EmissionAbsorption), _) => Err(GpuError::Unsupported(
-            "the GPU renderer marches one placed medium; this scene places several (render with --backend cpu)".into(),
-        )),
-        (Some(mode), _) => Err(GpuError::Unsupported(format!(
-            "the GPU renderer does not render media by {mode:?} yet, only emission-absorption (render with --backend cpu)"
-        ))),
+    let (Some(mode), Some(media)) = (renderer.effects.volumes, &renderer.media) else {
+        return Ok(());
+    };
+    let mut placed = media.scene.placements();
+    let Some(((_, medium), _)) = placed.next() else {
+        return Ok(());
+    };
+    if placed.next().is_some() {
+        return Err(GpuError::Unsupported(
+            "the GPU renderer renders one placed medium; this scene places several (render with --backend cpu)".into(),
+        ));
     }
+    let lowest = global_range(media.scene.grid(medium).ranges()).min;
+    if mode != VolumeMode::EmissionAbsorption && !(lowest >= 0.0) {
+        return Err(GpuError::Unsupported(format!(
+            "the medium's values go down to {lowest}; tracking a scattering medium needs densities >= 0"
+        )));
+    }
+    Ok(())
 }
 
 /// The effect features and `RENDER_EFFECT_*` bits of a render.
 fn effect_features(renderer: &Renderer) -> (Vec<&'static str>, u32) {
     let fx = renderer.effects;
     let (mut features, mut bits) = (Vec::new(), 0);
+    let scattering = matches!(
+        fx.volumes,
+        Some(VolumeMode::SingleScattering | VolumeMode::MultipleScattering)
+    );
     if fx.shading {
         features.push("shading");
         bits |= RENDER_EFFECT_SHADING;
+    }
+    if fx.shading || scattering {
+        // Shadow rays toward the lights.
+        features.push("lights");
     }
     if fx.specular {
         features.push("specular");
         bits |= RENDER_EFFECT_SPECULAR;
     }
-    if fx.volumes.is_some() {
-        features.push("media");
+    match fx.volumes {
+        None | Some(VolumeMode::Off) => {}
+        Some(VolumeMode::EmissionAbsorption) => features.extend(["media", "absorption"]),
+        Some(_) => features.extend(["media", "scattering"]),
     }
     (features, bits)
 }
@@ -206,15 +225,23 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> R
         hierarchical: hierarchical as u32,
         row_offset: 0,
         row_count: 0,
-        medium: 0,
+        volume_mode: RENDER_VOLUMES_NONE,
         medium_rows: [[0.0; 4]; 3],
         medium_emission: [0.0; 3],
         medium_step: s.step as f32,
+        medium_albedo: 0.0,
+        medium_g: 0.0,
+        pad: [0; 2],
     };
     let mut params = params;
     if let (Some(media), Some(shift)) = (&renderer.media, shift) {
         if let Some(((_, medium), to_index)) = media.scene.placements().next() {
-            params.medium = 1;
+            params.volume_mode = match renderer.effects.volumes {
+                Some(VolumeMode::EmissionAbsorption) => RENDER_VOLUMES_ABSORPTION,
+                Some(VolumeMode::SingleScattering) => RENDER_VOLUMES_SINGLE,
+                Some(VolumeMode::MultipleScattering) => RENDER_VOLUMES_MULTIPLE,
+                None | Some(VolumeMode::Off) => RENDER_VOLUMES_NONE,
+            };
             params.medium_rows = std::array::from_fn(|r| {
                 let row = to_index.rows[r];
                 [
@@ -224,7 +251,10 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> R
                     (row[3] - shift[r]) as f32,
                 ]
             });
-            params.medium_emission = media.optics[medium as usize].emission.map(|c| c as f32);
+            let optics = &media.optics[medium as usize];
+            params.medium_emission = optics.emission.map(|c| c as f32);
+            params.medium_albedo = optics.albedo as f32;
+            params.medium_g = optics.g as f32;
         }
     }
     RenderInputs {
@@ -250,21 +280,24 @@ impl GpuRenderer {
             "render",
             RENDER_BINDINGS + medium_bindings,
         )?;
-        // The one placed medium (check_supported): its grid and the estimator's parameters.
+        // The one placed medium (check_supported): its grid and the trackers' parameters.
         let medium = match &renderer.media {
             None => None,
             Some(media) => {
-                let ((_, m), _) = media
-                    .scene
-                    .placements()
-                    .next()
-                    .expect("check_supported admits one placed medium");
+                let ((_, m), _) = media.scene.placements().next().ok_or_else(|| {
+                    GpuError::Unsupported(
+                        "the scene has media but places none (render with --backend cpu)".into(),
+                    )
+                })?;
                 let grid = media.scene.grid(m);
                 let volume = VolumeUpload::new(ctx, grid)?;
+                // The CPU's: trilinear lookups; trackers under the finest local majorants
+                // (the march walks one global segment whatever `global` says).
                 let mut params = volume.base;
                 params.density_scale = media.scene.params(m, 0).density_scale as f32;
                 params.lookup_filter = VOLUME_FILTER_TRILINEAR;
-                params.global = 1;
+                params.global = 0;
+                params.finest = 0;
                 let mut buffers =
                     vec![ctx.input_buffer("medium params", bytemuck::bytes_of(&params))];
                 buffers.extend(volume.buffers.iter().cloned());

@@ -97,6 +97,13 @@ impl Renderer<'_> {
         for _ in 0..MAX_SHADOW_CROSSINGS {
             let hit = self.trace(o, dir, left);
             let t = hit.map_or(left, |h| h.t as f64);
+            // An opaque surface blocks the light: no media are drawn for this piece (the GPU
+            // draws none either, so both keep the same random streams).
+            let see_through =
+                |m: Material| matches!(m, Material::Transparent | Material::Dielectric { .. });
+            if hit.is_some_and(|h| !see_through(self.material(&h))) {
+                return Ok(0.0);
+            }
             weight *= media_t(o, t, rng)?;
             if let Some(length) = inside {
                 weight *= (-t / length).exp();
