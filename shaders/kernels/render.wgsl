@@ -291,8 +291,8 @@ fn medium_emission() -> vec3<f32> {
 // #if absorption
 // Emission-absorption of the medium over [0, t1] of the world ray o + t d: midpoint
 // compositing over the ray's part inside the range mips' box, in steps of
-// `medium_step` voxels. Path and shadow pieces alike (`shadow` and `rng` unused).
-fn medium_along(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
+// `medium_step` voxels. Path and shadow pieces alike.
+fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> MediumStep {
     var out = no_medium();
     let oi = medium_space(o, 1.0);
     let di = medium_space(d, 0.0);
@@ -326,7 +326,7 @@ fn medium_along(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<func
 // of the range mips: a path piece's first real collision by delta tracking on the path's
 // stream; a shadow piece's transmittance by ratio tracking on a stream of its own, keyed
 // by the next draw of the path's (as Media::transmittance keys it).
-fn medium_along(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
+fn medium_tracked(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
     var stream = *rng;
     var est = VOLUME_ESTIMATOR_DELTA;
     if shadow {
@@ -501,8 +501,16 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
             let kind = items[instances[h.instance].material].kind;
             opaque = kind != RENDER_MATERIAL_TRANSPARENT && kind != RENDER_MATERIAL_DIELECTRIC;
         }
-        if !(shadow && (opaque || end <= 0.0)) {
-            m = medium_along(ro, rd, end, shadow, rng);
+        let wanted = !(shadow && (opaque || end <= 0.0));
+        // #endif
+        // #if absorption
+        if wanted {
+            m = emission_absorption(ro, rd, end);
+        }
+        // #endif
+        // #if scattering
+        if wanted {
+            m = medium_tracked(ro, rd, end, shadow, rng);
         }
         // #endif
         if !shadow {

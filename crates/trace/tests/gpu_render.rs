@@ -176,11 +176,11 @@ fn the_kernel_holds_only_the_effects_the_scene_calls_for() {
             .expect("the render kernel validates");
     }
     let (features, source) = kernel("scenes/render/fog-emission.toml", View::Shaded).unwrap();
-    assert!(features.contains(&"absorption") && source.contains("fn walk_start"));
+    assert!(features.contains(&"absorption") && source.contains("fn emission_absorption"));
     assert!(!source.contains("fn estimate_sample") && !source.contains("fn scatter_step"));
     let (features, scattering) = kernel("scenes/render/fog-single.toml", View::Shaded).unwrap();
     assert!(features.contains(&"scattering") && features.contains(&"lights"));
-    assert!(!features.contains(&"absorption") && !scattering.contains("medium_step / length"));
+    assert!(!features.contains(&"absorption") && !scattering.contains("fn emission_absorption"));
     assert!(scattering.contains("fn estimate_sample") && scattering.contains("fn scatter_step"));
     assert!(!sources.iter().any(|s| s.contains("fn walk_start")));
     // The media's code validates too.

@@ -107,7 +107,7 @@ fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
         ));
     }
     let lowest = global_range(media.scene.grid(medium).ranges()).min;
-    if mode != VolumeMode::EmissionAbsorption && !(lowest >= 0.0) {
+    if mode != VolumeMode::EmissionAbsorption && (lowest.is_nan() || lowest < 0.0) {
         return Err(GpuError::Unsupported(format!(
             "the medium's values go down to {lowest}; tracking a scattering medium needs densities >= 0"
         )));
