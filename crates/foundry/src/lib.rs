@@ -10,6 +10,7 @@ pub mod error;
 pub mod g4solid;
 pub mod gdml;
 pub mod layout;
+mod merge;
 pub mod npy;
 pub mod optics;
 mod persist;
@@ -20,6 +21,7 @@ mod validate;
 pub mod wgsl;
 
 pub use error::{FoundryError, Result};
+pub use merge::Appended;
 pub use persist::{file_names, gpu_arrays, FORMAT_NAME, FORMAT_VERSION};
 pub use records::{
     pack_label, Affine64, Brick, Instance, Mother, Node, NodeParam64, Plane, Plane64, Prim, Solid,

@@ -434,7 +434,7 @@ pub fn aabb_to_f32_outward(b: &[f64; 6]) -> [f32; 6] {
     })
 }
 
-fn invert(t: &Transform64) -> Result<Transform64> {
+pub(crate) fn invert(t: &Transform64) -> Result<Transform64> {
     if !t.is_affine() {
         return Err(FoundryError::Build(format!(
             "transform is not a finite affine matrix: {:?}",
@@ -445,6 +445,6 @@ fn invert(t: &Transform64) -> Result<Transform64> {
         .ok_or_else(|| FoundryError::Build(format!("transform is singular: {:?}", t.rows)))
 }
 
-fn index_u32(n: usize, what: &str) -> Result<u32> {
+pub(crate) fn index_u32(n: usize, what: &str) -> Result<u32> {
     u32::try_from(n).map_err(|_| FoundryError::Build(format!("too many {what}: {n}")))
 }
