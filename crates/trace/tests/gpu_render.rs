@@ -126,9 +126,11 @@ fn gdml_boundary_view_sees_through_the_world_as_the_cpu_does() {
 #[test]
 fn shaded_surfaces_match_the_cpu_sample_for_sample() {
     // The default scene with its fog turned off: acrylic vessel, mirror ring, shadows.
+    // A scene file placing a GDML detector twice (its world transparent, a gold mirror).
     for (scene, spp) in [
         ("scenes/render/shading.toml", 2),
         ("scenes/render/glass.toml", 2),
+        ("scenes/render/gdml.toml", 1),
         ("default", 1),
     ] {
         let tweak = |s: &mut RenderSpec| {
