@@ -58,6 +58,21 @@ fn subtree_sizes(g: &Gdml) -> Vec<u64> {
     sizes
 }
 
+/// The solids of a hierarchical scene's worlds (the instances without a mother), each
+/// once; none for a flat scene. Renders leave them transparent so the detector shows.
+pub(crate) fn world_solids(f: &Foundry) -> Vec<String> {
+    let mut worlds: Vec<String> = Vec::new();
+    if f.inst_mother.iter().any(|m| m.index != UNSET) {
+        for (inst, m) in f.inst.iter().zip(&f.inst_mother) {
+            let solid = &f.solid_names[inst.solid as usize];
+            if m.index == UNSET && !worlds.contains(solid) {
+                worlds.push(solid.clone());
+            }
+        }
+    }
+    worlds
+}
+
 /// Reads a GDML file into a Foundry.
 pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
     let gdml = read_gdml(path, options)?;

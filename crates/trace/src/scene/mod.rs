@@ -10,7 +10,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context};
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_foundry::{Foundry, UNSET};
+use hytrace_foundry::Foundry;
 
 use crate::render::spec::RenderSpec;
 
@@ -69,15 +69,9 @@ pub fn load_render_scene(
         return load_toml_render_scene(p);
     }
     let f = load_scene(arg, options)?;
-    let mut spec = RenderSpec::default();
-    let hierarchical = f.inst_mother.iter().any(|m| m.index != UNSET);
-    if hierarchical {
-        for (i, m) in f.inst_mother.iter().enumerate() {
-            if m.index == UNSET {
-                let solid = f.inst[i].solid as usize;
-                spec.transparent_solids.push(f.solid_names[solid].clone());
-            }
-        }
-    }
+    let spec = RenderSpec {
+        transparent_solids: gdml_scene::world_solids(&f),
+        ..RenderSpec::default()
+    };
     Ok((f, spec))
 }

@@ -60,7 +60,7 @@ use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
 use hytrace_volume::{is_procedural, TexelFormat};
 use serde::Deserialize;
 
-use super::gdml_scene::gdml_to_foundry;
+use super::gdml_scene::{gdml_to_foundry, world_solids};
 use super::media::{add_medium_solid, MediumSpec};
 use super::mesh_scene::add_mesh_file_solid;
 use crate::render::camera::CameraSpec;
@@ -393,15 +393,7 @@ fn gdml_part(
         *old = renamed;
     }
     // As for a GDML scene on its own: the world (no mother) is transparent.
-    let mut transparent_solids = Vec::new();
-    if foundry.inst_mother.iter().any(|m| m.index != UNSET) {
-        for (inst, m) in foundry.inst.iter().zip(&foundry.inst_mother) {
-            let solid = &foundry.solid_names[inst.solid as usize];
-            if m.index == UNSET && !transparent_solids.contains(solid) {
-                transparent_solids.push(solid.clone());
-            }
-        }
-    }
+    let transparent_solids = world_solids(&foundry);
     Ok(GdmlPart {
         name: name.to_string(),
         foundry,
