@@ -210,7 +210,8 @@ struct RenderParams {
     medium_step: f32,
     medium_albedo: f32,
     medium_g: f32,
-    pad: array<u32, 2>,
+    sample: u32,
+    pad: u32,
 }
 
 struct RenderItem {

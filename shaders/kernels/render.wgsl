@@ -1,7 +1,7 @@
 // The render kernel (hytrace render --backend gpu): twin of the CPU renderer's geometry
 // views and surface light transport (crates/trace/src/render/{views,integrator}.rs),
-// compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each pixel runs its
-// samples; a sample is one loop whose every iteration traces one ray, the path's or a
+// compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each dispatch takes one
+// sample of every pixel of a batch; a sample is one loop whose every iteration traces one ray, the path's or a
 // shadow ray's, and then meets the media along it, so the scene traversal and the volume
 // walk are each inlined once. Shading, shadow rays, specular and media code is composed in
 // only when the scene calls for it. Of media, one placed medium: emission-absorption (twin
@@ -565,15 +565,21 @@ fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let i = k % rparams.width;
     let j = rparams.row_offset + k / rparams.width;
     let pixel = j * rparams.width + i;
-    var sum = vec3<f32>(0.0);
-    for (var s = 0u; s < rparams.spp; s += 1u) {
-        var rng = rng_new(rparams.seed, pixel, s);
-        var offset = vec2<f32>(0.5);
-        if rparams.spp != 1u {
-            offset.x = rng_next(&rng);
-            offset.y = rng_next(&rng);
-        }
-        sum += radiance_sample(camera_origin(i, j, offset), camera_direction(i, j, offset), &rng);
+    // One sample per dispatch (long paths stay within one invocation's budget): the
+    // image holds the running sum, in sample order, until the last sample divides it.
+    let s = rparams.sample;
+    var rng = rng_new(rparams.seed, pixel, s);
+    var offset = vec2<f32>(0.5);
+    if rparams.spp != 1u {
+        offset.x = rng_next(&rng);
+        offset.y = rng_next(&rng);
     }
-    image[k] = vec4<f32>(sum / f32(rparams.spp), 0.0);
+    var sum = radiance_sample(camera_origin(i, j, offset), camera_direction(i, j, offset), &rng);
+    if s > 0u {
+        sum = image[k].xyz + sum;
+    }
+    if s + 1u == rparams.spp {
+        sum /= f32(rparams.spp);
+    }
+    image[k] = vec4<f32>(sum, 0.0);
 }

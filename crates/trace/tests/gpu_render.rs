@@ -390,3 +390,20 @@ fn scattering_media_match_the_cpu_in_mean_and_variance() {
         );
     }
 }
+
+#[test]
+fn long_paths_over_many_samples_match_the_cpu() {
+    // Multiple scattering in a dense cloud (paths of tens of bounces) at 16 spp: every
+    // sample of every pixel, with the running sums, as on the CPU. (Lavapipe corrupted
+    // blocks of pixels when one invocation ran all of a pixel's samples.)
+    let tweak = |s: &mut RenderSpec| {
+        small(s, View::Shaded, 16);
+        s.settings.size = [24, 16];
+    };
+    let Some(images) = both("scenes/render/fog-multiple.toml", &[&tweak]) else {
+        return;
+    };
+    let (cpu, gpu, _) = &images[0];
+    let agree = compare("fog-multiple at 16 spp", cpu, gpu, 1e-4);
+    assert!(agree >= 0.99, "{:.3}% agree", 100.0 * agree);
+}

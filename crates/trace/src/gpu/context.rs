@@ -252,6 +252,41 @@ impl GpuContext {
         self.queue.submit([encoder.finish()]);
     }
 
+    /// Records and submits one compute pass that dispatches `pipeline` over `items`
+    /// invocations once per bind group of `varying` (set at index `varying.0` before each
+    /// dispatch; the dispatches run in order), with the `groups` shared by all, timed by
+    /// `timer` when given.
+    pub fn submit_sequence(
+        &self,
+        label: &str,
+        pipeline: &wgpu::ComputePipeline,
+        groups: &[(u32, &wgpu::BindGroup)],
+        varying: (u32, &[wgpu::BindGroup]),
+        items: u32,
+        timer: Option<&PassTimer>,
+    ) {
+        let (x, y) = dispatch_size(items, self.limits.max_compute_workgroups_per_dimension);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: timer.map(PassTimer::writes),
+            });
+            pass.set_pipeline(pipeline);
+            for (index, group) in groups {
+                pass.set_bind_group(*index, *group, &[]);
+            }
+            for group in varying.1 {
+                pass.set_bind_group(varying.0, group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+        }
+        if let Some(timer) = timer {
+            timer.resolve(&mut encoder);
+        }
+        self.queue.submit([encoder.finish()]);
+    }
+
     /// Copies `size` bytes of a storage buffer back to the CPU.
     pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {

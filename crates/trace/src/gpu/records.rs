@@ -256,8 +256,11 @@ record! {
         pub medium_albedo: f32,
         /// Henyey-Greenstein asymmetry of the medium.
         pub medium_g: f32,
+        /// The sample this dispatch takes (one dispatch per sample: the image holds the
+        /// running sum until the last divides it).
+        pub sample: u32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
     }
 }
 

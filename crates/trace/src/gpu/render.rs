@@ -231,7 +231,8 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> R
         medium_step: s.step as f32,
         medium_albedo: 0.0,
         medium_g: 0.0,
-        pad: [0; 2],
+        sample: 0,
+        pad: 0,
     };
     let mut params = params;
     if let (Some(media), Some(shift)) = (&renderer.media, shift) {
@@ -409,34 +410,46 @@ impl GpuRenderer {
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "render timestamps");
         let (out, _keep) = ctx.checked("render dispatch", || {
-            let params = RenderParams {
-                row_offset,
-                row_count,
-                ..inputs.params
-            };
-            let buffers = [
-                ctx.input_buffer("render params", &binding_bytes(&[params])),
+            let image = ctx.output_buffer("image", out_size);
+            let shared = [
                 ctx.input_buffer("render items", &binding_bytes(&inputs.items)),
                 ctx.input_buffer("render instances", &binding_bytes(&inputs.instances)),
-                ctx.output_buffer("image", out_size),
             ];
-            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("render"),
-                layout: &self.render_layout,
-                entries: &whole_buffer_entries(&buffers),
-            });
-            let mut groups = vec![(1, &self.scene_group), (2, &group)];
+            // One dispatch per sample, each with its parameters.
+            let samples: Vec<wgpu::BindGroup> = (0..inputs.params.spp)
+                .map(|sample| {
+                    let params = RenderParams {
+                        row_offset,
+                        row_count,
+                        sample,
+                        ..inputs.params
+                    };
+                    let buffers = [
+                        ctx.input_buffer("render params", &binding_bytes(&[params])),
+                        shared[0].clone(),
+                        shared[1].clone(),
+                        image.clone(),
+                    ];
+                    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("render"),
+                        layout: &self.render_layout,
+                        entries: &whole_buffer_entries(&buffers),
+                    })
+                })
+                .collect();
+            let mut groups = vec![(1, &self.scene_group)];
             if let Some((medium, _)) = &self.medium {
                 groups.push((0, medium));
             }
-            ctx.submit_pass(
+            ctx.submit_sequence(
                 "render",
-                &[&self.pipeline],
+                &self.pipeline,
                 &groups,
+                (2, &samples),
                 n as u32,
                 timer.as_ref(),
             );
-            (buffers[3].clone(), (buffers, group))
+            (image.clone(), (shared, samples))
         })?;
         let bytes = finish_batch(
             ctx,
