@@ -28,7 +28,8 @@ const KERNEL: &str = "kernels/render";
 const RENDER_BINDINGS: u32 = 4;
 /// Storage buffers of the medium group (group 0: `shaders/volume/bindings.wgsl`).
 const MEDIUM_BINDINGS: u32 = 5;
-/// Samples (pixels x spp) per dispatch: drivers may kill long dispatches.
+/// Samples (pixels x spp) per submission of one batch of rows (a dispatch per sample):
+/// drivers may kill long submissions.
 const SAMPLES_PER_BATCH: u64 = 1 << 20;
 
 /// A scene's render kernel on the GPU, compiled for one set of effects; it renders any
