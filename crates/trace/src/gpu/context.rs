@@ -230,32 +230,20 @@ impl GpuContext {
         items: u32,
         timer: Option<&PassTimer>,
     ) {
-        let (x, y) = dispatch_size(items, self.limits.max_compute_workgroups_per_dimension);
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: timer.map(PassTimer::writes),
-            });
+        self.submit_with(label, items, timer, |pass, (x, y)| {
             for (index, group) in groups {
                 pass.set_bind_group(*index, *group, &[]);
             }
-            // Dispatches in one pass run in order.
             for pipeline in pipelines {
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(x, y, 1);
             }
-        }
-        if let Some(timer) = timer {
-            timer.resolve(&mut encoder);
-        }
-        self.queue.submit([encoder.finish()]);
+        });
     }
 
     /// Records and submits one compute pass that dispatches `pipeline` over `items`
     /// invocations once per bind group of `varying` (set at index `varying.0` before each
-    /// dispatch; the dispatches run in order), with the `groups` shared by all, timed by
-    /// `timer` when given.
+    /// dispatch), with the `groups` shared by all, timed by `timer` when given.
     pub fn submit_sequence(
         &self,
         label: &str,
@@ -265,13 +253,7 @@ impl GpuContext {
         items: u32,
         timer: Option<&PassTimer>,
     ) {
-        let (x, y) = dispatch_size(items, self.limits.max_compute_workgroups_per_dimension);
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: timer.map(PassTimer::writes),
-            });
+        self.submit_with(label, items, timer, |pass, (x, y)| {
             pass.set_pipeline(pipeline);
             for (index, group) in groups {
                 pass.set_bind_group(*index, *group, &[]);
@@ -280,6 +262,26 @@ impl GpuContext {
                 pass.set_bind_group(varying.0, group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             }
+        });
+    }
+
+    /// One timed compute pass whose dispatches `record` writes (given the workgroup grid
+    /// for `items` invocations), submitted. Dispatches in one pass run in order.
+    fn submit_with(
+        &self,
+        label: &str,
+        items: u32,
+        timer: Option<&PassTimer>,
+        record: impl FnOnce(&mut wgpu::ComputePass<'_>, (u32, u32)),
+    ) {
+        let grid = dispatch_size(items, self.limits.max_compute_workgroups_per_dimension);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: timer.map(PassTimer::writes),
+            });
+            record(&mut pass, grid);
         }
         if let Some(timer) = timer {
             timer.resolve(&mut encoder);
