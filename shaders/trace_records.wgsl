@@ -171,6 +171,9 @@ struct VolumeParams {
     march_step: f32,
     ray_count: u32,
     ray_offset: u32,
+    indirection_base: u32,
+    atlas_base: u32,
+    pad: array<u32, 2>,
 }
 
 struct TransmittanceRecord {
@@ -205,13 +208,11 @@ struct RenderParams {
     row_offset: u32,
     row_count: u32,
     volume_mode: u32,
-    medium_rows: array<vec4<f32>, 3>,
-    medium_emission: array<f32, 3>,
+    media_count: u32,
     medium_step: f32,
-    medium_albedo: f32,
-    medium_g: f32,
     sample: u32,
-    pad: u32,
+    probe_trips: u32,
+    pad: array<u32, 3>,
 }
 
 struct RenderItem {
@@ -225,6 +226,16 @@ struct RenderInstance {
     material: u32,
     solid: u32,
     boundary: u32,
+    pad: u32,
+}
+
+struct RenderMedium {
+    rows: array<vec4<f32>, 3>,
+    emission: array<f32, 3>,
+    volume: u32,
+    albedo: f32,
+    g: f32,
+    seed: u32,
     pad: u32,
 }
 
@@ -260,6 +271,7 @@ const RENDER_VIEW_BOUNDARY: u32 = 6u;
 const RENDER_EFFECT_SHADING: u32 = 1u;
 const RENDER_EFFECT_SPECULAR: u32 = 2u;
 const RENDER_VOLUMES_NONE: u32 = 0u;
+const RENDER_MAX_MEDIA: u32 = 16u;
 const RENDER_VOLUMES_ABSORPTION: u32 = 1u;
 const RENDER_VOLUMES_SINGLE: u32 = 2u;
 const RENDER_VOLUMES_MULTIPLE: u32 = 3u;

@@ -4,8 +4,9 @@
 // sample of every pixel of a batch; a sample is one loop whose every iteration traces one ray, the path's or a
 // shadow ray's, and then meets the media along it, so the scene traversal and the volume
 // walk are each inlined once. Shading, shadow rays, specular and media code is composed in
-// only when the scene calls for it. Of media, one placed medium: emission-absorption (twin
-// of render::volumes::Media::emission_absorption) or scattering (delta tracking to a real
+// only when the scene calls for it. Media (up to RENDER_MAX_MEDIA placements, their grids
+// sharing the volume group's arrays): emission-absorption (twin of
+// render::volumes::Media::emission_absorption) or scattering (delta tracking to a real
 // collision, ratio tracking for shadow rays: twins of Media::collision and
 // Media::transmittance, through the same volume/estimate module as the transmittance
 // kernel).
@@ -13,6 +14,7 @@
 // #import trace/scene
 // #import volume/rng
 // #import render/optics
+// #import loop_budget
 // #if absorption
 // #import volume/walk
 // #import volume/grid
@@ -25,6 +27,7 @@
 @group(2) @binding(1) var<storage, read> items: array<RenderItem>;
 @group(2) @binding(2) var<storage, read> instances: array<RenderInstance>;
 @group(2) @binding(3) var<storage, read_write> image: array<vec4<f32>>;
+@group(2) @binding(4) var<storage, read> media: array<RenderMedium>;
 
 const MODE_PATH: u32 = 0u;
 const MODE_SHADOW: u32 = 1u;
@@ -44,7 +47,8 @@ struct Sample {
     events: u32,
     travelled: f32,
     // The point being lit (a diffuse surface's, or a collision in a medium: `scatter`,
-    // lit through the phase function around the travel direction `din`), its lights'
+    // lit through the phase function of asymmetry `g` around the travel direction `din`),
+    // its lights'
     // cursor, its environment direction (when `use_env`), and whether the path goes on
     // from it afterwards (multiple scattering: `resume`).
     p: vec3<f32>,
@@ -55,6 +59,7 @@ struct Sample {
     next_light: u32,
     scatter: bool,
     din: vec3<f32>,
+    g: f32,
     use_env: bool,
     resume: bool,
     // The shadow ray.
@@ -153,7 +158,7 @@ fn end_lighting(s: ptr<function, Sample>, rng: ptr<function, VolumeRng>) {
         return;
     }
     let u = vec2<f32>(rng_next(rng), rng_next(rng));
-    (*s).d = sample_henyey_greenstein((*s).din, rparams.medium_g, u);
+    (*s).d = sample_henyey_greenstein((*s).din, (*s).g, u);
     (*s).o = (*s).p;
     (*s).events += 1u;
     (*s).scatter = false;
@@ -165,7 +170,7 @@ fn end_lighting(s: ptr<function, Sample>, rng: ptr<function, VolumeRng>) {
 // surface, the phase function in a medium.
 fn response(s: ptr<function, Sample>, w: vec3<f32>) -> f32 {
     if (*s).scatter {
-        return henyey_greenstein(dot((*s).din, w), rparams.medium_g);
+        return henyey_greenstein(dot((*s).din, w), (*s).g);
     }
     return dot((*s).facing, w) / RENDER_PI;
 }
@@ -266,81 +271,137 @@ struct MediumStep {
     // Light they emit toward the piece's start and the fraction they let through.
     radiance: vec3<f32>,
     transmittance: f32,
-    // A real collision on a path (scattering media): where, and the grid value there.
+    // A real collision on a path (scattering media): where, the grid value there, and in
+    // which placed medium.
     collided: bool,
     t: f32,
     value: f32,
+    medium: u32,
 }
 
 fn no_medium() -> MediumStep {
-    return MediumStep(vec3<f32>(0.0), 1.0, false, 0.0, 0.0);
+    return MediumStep(vec3<f32>(0.0), 1.0, false, 0.0, 0.0, 0u);
 }
 
 // #if media
-// A world point (w = 1) or direction (w = 0) in the medium's translated index space.
-fn medium_space(p: vec3<f32>, w: f32) -> vec3<f32> {
-    let m = rparams.medium_rows;
+// A world point (w = 1) or direction (w = 0) in the index space of placed medium `k`
+// (translated as its grid's upload).
+fn medium_space(k: u32, p: vec3<f32>, w: f32) -> vec3<f32> {
+    let m = media[k].rows;
     return vec3<f32>(dot(m[0].xyz, p) + w * m[0].w, dot(m[1].xyz, p) + w * m[1].w, dot(m[2].xyz, p) + w * m[2].w);
 }
 
-fn medium_emission() -> vec3<f32> {
-    return vec3<f32>(rparams.medium_emission[0], rparams.medium_emission[1], rparams.medium_emission[2]);
+fn medium_emission(k: u32) -> vec3<f32> {
+    let e = media[k].emission;
+    return vec3<f32>(e[0], e[1], e[2]);
 }
 // #endif
 
 // #if absorption
-// Emission-absorption of the medium over [0, t1] of the world ray o + t d: midpoint
-// compositing over the ray's part inside the range mips' box, in steps of
-// `medium_step` voxels. Path and shadow pieces alike.
+// Emission-absorption of the media over [0, t1] of the world ray o + t d, path and shadow
+// pieces alike: midpoint compositing over the union of the ray's parts inside each
+// medium's range-mips box, in steps of `medium_step` voxels of the finest medium; at each
+// step the media covering it add their extinctions sigma and sources j, the step adds
+// T j / sigma (1 - exp(-sigma h)) and multiplies T by exp(-sigma h).
 fn emission_absorption(o: vec3<f32>, d: vec3<f32>, t1: f32) -> MediumStep {
     var out = no_medium();
-    let oi = medium_space(o, 1.0);
-    let di = medium_space(d, 0.0);
-    var w = walk_start(oi, di, 0.0, t1, true);
-    let a = w.base;
-    let b = walk_absolute(&w, w.t_end);
-    if !(a < b) {
+    // Per medium crossed: the ray in its index space and its span there.
+    var origin: array<vec3<f32>, RENDER_MAX_MEDIA>;
+    var dir: array<vec3<f32>, RENDER_MAX_MEDIA>;
+    var span_from: array<f32, RENDER_MAX_MEDIA>;
+    var span_to: array<f32, RENDER_MAX_MEDIA>;
+    var crossed: array<u32, RENDER_MAX_MEDIA>;
+    var count = 0u;
+    var a = INF;
+    var b = -INF;
+    var h = INF;
+    for (var k = 0u; k < rparams.media_count; k++) {
+        use_volume(media[k].volume);
+        let oi = medium_space(k, o, 1.0);
+        let di = medium_space(k, d, 0.0);
+        var w = walk_start(oi, di, 0.0, t1, true);
+        let s0 = w.base;
+        let s1 = walk_absolute(&w, w.t_end);
+        if s0 < s1 {
+            origin[count] = oi;
+            dir[count] = di;
+            span_from[count] = s0;
+            span_to[count] = s1;
+            crossed[count] = k;
+            count += 1u;
+            a = min(a, s0);
+            b = max(b, s1);
+            h = min(h, rparams.medium_step / length(di));
+        }
+    }
+    if count == 0u {
         return out;
     }
-    let n = max(ceil((b - a) / (rparams.medium_step / length(di))), 1.0);
-    let h = (b - a) / n;
-    let emission = medium_emission();
-    for (var k = 0u; k < u32(n); k++) {
-        let p = oi + (a + (f32(k) + 0.5) * h) * di;
-        let cell = floor(p);
-        let value = trilinear_sum(grid_fetch(vec3<i32>(cell), 8u), p - cell);
-        let density = value * vparams.density_scale;
-        if density <= 0.0 {
-            continue;
+    let n = max(ceil((b - a) / h), 1.0);
+    let step = (b - a) / n;
+    for (var i = 0u; i < u32(n); i++) {
+        let t = a + (f32(i) + 0.5) * step;
+        var sigma = 0.0;
+        var source = vec3<f32>(0.0);
+        for (var c = 0u; c < count; c++) {
+            if t >= span_from[c] && t <= span_to[c] {
+                let k = crossed[c];
+                use_volume(media[k].volume);
+                let p = origin[c] + t * dir[c];
+                let cell = floor(p);
+                let value = trilinear_sum(grid_fetch(vec3<i32>(cell), 8u), p - cell);
+                let density = value * vparams.density_scale;
+                sigma += density;
+                source += density * value * medium_emission(k);
+            }
         }
-        let step_t = exp(-density * h);
-        out.radiance += out.transmittance * value * emission * (1.0 - step_t);
-        out.transmittance *= step_t;
+        if sigma > 0.0 {
+            let step_t = exp(-sigma * step);
+            out.radiance += out.transmittance * source / sigma * (1.0 - step_t);
+            out.transmittance *= step_t;
+        }
     }
     return out;
 }
 // #endif
 
 // #if scattering
-// The scattering medium over [0, t1] of the world ray o + t d, under the local majorants
-// of the range mips: a path piece's first real collision by delta tracking on the path's
-// stream; a shadow piece's transmittance by ratio tracking on a stream of its own, keyed
-// by the next draw of the path's (as Media::transmittance keys it).
+// The scattering media over [0, t1] of the world ray o + t d, each under the local
+// majorants of its range mips, in placement order (twins of Media::collision and
+// Media::transmittance): a path piece's first real collision by delta tracking on the
+// path's stream (the earliest of the media's collisions); a shadow piece's transmittance
+// by ratio tracking, each medium on a stream of its own keyed by one draw of the path's.
 fn medium_tracked(o: vec3<f32>, d: vec3<f32>, t1: f32, shadow: bool, rng: ptr<function, VolumeRng>) -> MediumStep {
-    var stream = *rng;
+    var out = no_medium();
     var est = VOLUME_ESTIMATOR_DELTA;
+    var key = 0u;
     if shadow {
-        stream = rng_new(rparams.seed, rng_u32(rng), 0u);
         est = VOLUME_ESTIMATOR_RATIO;
+        key = rng_u32(rng);
     }
-    let e = estimate_sample(medium_space(o, 1.0), medium_space(d, 0.0), 0.0, t1, est, false, &stream, false);
-    if !shadow {
-        *rng = stream;
+    for (var k = 0u; k < rparams.media_count; k++) {
+        use_volume(media[k].volume);
+        var stream = *rng;
+        if shadow {
+            stream = rng_new(media[k].seed, key, 0u);
+        }
+        let e = estimate_sample(medium_space(k, o, 1.0), medium_space(k, d, 0.0), 0.0, t1, est, false, &stream, false);
+        if shadow {
+            out.transmittance *= e.weight;
+        } else {
+            *rng = stream;
+            if e.collided && (!out.collided || e.t < out.t) {
+                out.collided = true;
+                out.t = e.t;
+                out.value = e.value;
+                out.medium = k;
+            }
+        }
     }
-    return MediumStep(vec3<f32>(0.0), e.weight, e.collided, e.t, e.value);
+    return out;
 }
 
-// The path collided in the medium at `m.t`: the medium's emission (the collision
+// The path collided in medium `m.medium` at `m.t`: the medium's emission (the collision
 // estimator of j / sigma = value * colour) and its light through the phase function;
 // single scattering ends there, multiple scattering goes on from it.
 fn scatter_step(s: ptr<function, Sample>, m: MediumStep, rng: ptr<function, VolumeRng>) {
@@ -348,8 +409,9 @@ fn scatter_step(s: ptr<function, Sample>, m: MediumStep, rng: ptr<function, Volu
         (*s).beta *= exp(-m.t / (*s).inside);
     }
     let d = (*s).d;
-    (*s).radiance += (*s).beta * m.value * medium_emission();
-    (*s).beta *= rparams.medium_albedo;
+    let medium = media[m.medium];
+    (*s).radiance += (*s).beta * m.value * medium_emission(m.medium);
+    (*s).beta *= medium.albedo;
     if all((*s).beta == vec3<f32>(0.0)) {
         (*s).mode = MODE_DONE;
         return;
@@ -357,11 +419,12 @@ fn scatter_step(s: ptr<function, Sample>, m: MediumStep, rng: ptr<function, Volu
     let single = rparams.volume_mode == RENDER_VOLUMES_SINGLE;
     if single {
         let u = vec2<f32>(rng_next(rng), rng_next(rng));
-        (*s).env_dir = sample_henyey_greenstein(d, rparams.medium_g, u);
+        (*s).env_dir = sample_henyey_greenstein(d, medium.g, u);
     }
     (*s).p = (*s).o + m.t * d;
     (*s).scatter = true;
     (*s).din = d;
+    (*s).g = medium.g;
     (*s).use_env = single;
     (*s).resume = !single;
     (*s).tint = (*s).beta;
@@ -470,6 +533,7 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
     s.events = 0u;
     s.travelled = 0.0;
     s.scatter = false;
+    s.g = 0.0;
     s.use_env = false;
     s.resume = false;
     let shaded = rparams.view == RENDER_VIEW_SHADED;
@@ -575,11 +639,14 @@ fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         offset.y = rng_next(&rng);
     }
     var sum = radiance_sample(camera_origin(i, j, offset), camera_direction(i, j, offset), &rng);
+    // w: 1 once any sample of the pixel ran out of the driver's loop budget.
+    var cut = select(0.0, 1.0, loops_cut_short(rparams.probe_trips));
     if s > 0u {
         sum = image[k].xyz + sum;
+        cut = max(cut, image[k].w);
     }
     if s + 1u == rparams.spp {
         sum /= f32(rparams.spp);
     }
-    image[k] = vec4<f32>(sum, 0.0);
+    image[k] = vec4<f32>(sum, cut);
 }

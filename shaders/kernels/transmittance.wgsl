@@ -14,6 +14,7 @@
 @compute @workgroup_size(64)
 fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
     let i = gid.y * groups_.x * 64u + gid.x;
+    use_volume(0u);
     if i >= vparams.ray_count {
         return;
     }

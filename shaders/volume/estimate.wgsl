@@ -159,11 +159,10 @@ fn estimate_sample(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, est: u32, g
                     count = 8u;
                 } else {
                     // Per axis the upper neighbour when u < frac (three draws, x first).
-                    var up = vec3<f32>(0.0);
-                    for (var k = 0u; k < 3u; k++) {
-                        up[k] = select(0.0, 1.0, rng_next(rng) < p[k] - base[k]);
-                    }
-                    cell = vec3<i32>(base + up);
+                    let ux = rng_next(rng) < p.x - base.x;
+                    let uy = rng_next(rng) < p.y - base.y;
+                    let uz = rng_next(rng) < p.z - base.z;
+                    cell = vec3<i32>(base) + vec3<i32>(select(0, 1, ux), select(0, 1, uy), select(0, 1, uz));
                 }
             }
             let v = grid_fetch(cell, count);

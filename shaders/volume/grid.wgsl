@@ -53,20 +53,22 @@ fn half_to_f32(h: u32) -> f32 {
     return bitcast<f32>(sign | ((e + 112u) << 23u) | (m << 13u));
 }
 
-// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot`.
+// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot` of the grid (its
+// slots start at word `atlas_base`).
 fn atlas_texel(slot: u32, i: u32) -> f32 {
+    let w = vparams.atlas_base;
     switch vparams.format {
         case VOLUME_FORMAT_F32: {
-            return bitcast<f32>(atlas[slot * 512u + i]);
+            return bitcast<f32>(atlas[w + slot * 512u + i]);
         }
         case VOLUME_FORMAT_F16: {
-            return half_to_f32(atlas[slot * 256u + (i >> 1u)] >> (16u * (i & 1u)));
+            return half_to_f32(atlas[w + slot * 256u + (i >> 1u)] >> (16u * (i & 1u)));
         }
         case VOLUME_FORMAT_UNORM16: {
-            return f32((atlas[slot * 256u + (i >> 1u)] >> (16u * (i & 1u))) & 0xffffu);
+            return f32((atlas[w + slot * 256u + (i >> 1u)] >> (16u * (i & 1u))) & 0xffffu);
         }
         case VOLUME_FORMAT_UNORM8: {
-            return f32((atlas[slot * 128u + (i >> 2u)] >> (8u * (i & 3u))) & 0xffu);
+            return f32((atlas[w + slot * 128u + (i >> 2u)] >> (8u * (i & 3u))) & 0xffu);
         }
         default: {
             // BC4: per z slice four 4x4 blocks of two words, by block row then column.
@@ -74,7 +76,7 @@ fn atlas_texel(slot: u32, i: u32) -> f32 {
             let y = (i >> 3u) & 7u;
             let z = i >> 6u;
             let block = 4u * z + 2u * (y >> 2u) + (x >> 2u);
-            return bc4_texel(slot * 64u + 2u * block, 4u * (y & 3u) + (x & 3u));
+            return bc4_texel(w + slot * 64u + 2u * block, 4u * (y & 3u) + (x & 3u));
         }
     }
 }
@@ -88,7 +90,7 @@ fn grid_voxel(c: vec3<i32>) -> f32 {
     }
     let l = vec3<u32>(local);
     let d = vec3<u32>(dims);
-    let e = indirection[(l.z * d.y + l.y) * d.x + l.x];
+    let e = indirection[vparams.indirection_base + (l.z * d.y + l.y) * d.x + l.x];
     if e == VOLUME_NO_BRICK {
         return vparams.background;
     }
@@ -100,7 +102,8 @@ fn grid_voxel(c: vec3<i32>) -> f32 {
     return entry.offset + atlas_texel(entry.atlas_slot, b.x | (b.y << 3u) | (b.z << 6u)) * entry.scale;
 }
 
-// Voxels `cell + (c & 1, c >> 1 & 1, c >> 2)` for c < count (1 or 8): the one read place.
+// Voxels `cell + (c & 1, c >> 1 & 1, c >> 2)` for c < count (1 or 8): the one read place
+// (a loop, so grid_voxel is inlined once).
 fn grid_fetch(cell: vec3<i32>, count: u32) -> array<f32, 8> {
     var v: array<f32, 8>;
     for (var c = 0u; c < count; c++) {
@@ -109,20 +112,31 @@ fn grid_fetch(cell: vec3<i32>, count: u32) -> array<f32, 8> {
     return v;
 }
 
-// The trilinear lookup's blend (hytrace_volume::sample_trilinear): the sum over the corners
-// of the product of the per-axis weights, zero weights skipped.
-fn trilinear_sum(v: array<f32, 8>, f: vec3<f32>) -> f32 {
-    var sum = 0.0;
-    for (var c = 0u; c < 8u; c++) {
-        var w = 1.0;
-        for (var k = 0u; k < 3u; k++) {
-            w *= select(1.0 - f[k], f[k], ((c >> k) & 1u) == 1u);
-        }
-        if w != 0.0 {
-            sum += w * v[c];
-        }
+// `sum + w v` unless the weight `w` is zero.
+fn corner_add(sum: f32, w: f32, v: f32) -> f32 {
+    if w != 0.0 {
+        return sum + w * v;
     }
     return sum;
+}
+
+// The trilinear lookup's blend (hytrace_volume::sample_trilinear): the sum over the corners
+// (x the fastest) of the product of the per-axis weights (x, then y, then z), zero weights
+// skipped. Straight-line code: lavapipe (llvmpipe) gives all the loops of an invocation
+// 65535 iterations together (shaders/loop_budget.wgsl), so per-lookup arithmetic loops
+// none.
+fn trilinear_sum(v: array<f32, 8>, f: vec3<f32>) -> f32 {
+    let x = vec2<f32>(1.0 - f.x, f.x);
+    let y = vec2<f32>(1.0 - f.y, f.y);
+    let z = vec2<f32>(1.0 - f.z, f.z);
+    var sum = corner_add(0.0, x[0] * y[0] * z[0], v[0]);
+    sum = corner_add(sum, x[1] * y[0] * z[0], v[1]);
+    sum = corner_add(sum, x[0] * y[1] * z[0], v[2]);
+    sum = corner_add(sum, x[1] * y[1] * z[0], v[3]);
+    sum = corner_add(sum, x[0] * y[0] * z[1], v[4]);
+    sum = corner_add(sum, x[1] * y[0] * z[1], v[5]);
+    sum = corner_add(sum, x[0] * y[1] * z[1], v[6]);
+    return corner_add(sum, x[1] * y[1] * z[1], v[7]);
 }
 
 fn lerp1(a: f32, b: f32, w: f32) -> f32 {

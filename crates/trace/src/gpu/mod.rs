@@ -13,7 +13,7 @@ mod tracer;
 mod volume;
 
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
-pub use render::{compose_render_kernel, GpuRenderer};
+pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
 pub use timing::{add_gpu_stats, GpuTimes};
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};

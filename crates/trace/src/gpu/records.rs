@@ -174,6 +174,12 @@ record! {
         /// Index of the batch's first ray: ray `i` of the batch uses random stream
         /// `ray_offset + i`.
         pub ray_offset: u32,
+        /// The grid's first entry in the indirection array (shared by several grids).
+        pub indirection_base: u32,
+        /// The grid's first word in the atlas (shared by several grids).
+        pub atlas_base: u32,
+        /// Padding.
+        pub pad: [u32; 2],
     }
 }
 
@@ -242,23 +248,39 @@ record! {
         pub row_offset: u32,
         /// Rows in this batch.
         pub row_count: u32,
-        /// `RENDER_VOLUMES_*`: how the medium is rendered (the volume group is bound unless
+        /// `RENDER_VOLUMES_*`: how the media are rendered (the volume group is bound unless
         /// none).
         pub volume_mode: u32,
-        /// World to the medium's index space (translated as the volume upload's): the rows
-        /// of a 3x4 affine.
-        pub medium_rows: [[f32; 4]; 3],
-        /// Emission colour of the medium.
-        pub medium_emission: [f32; 3],
-        /// March step in voxels.
+        /// Number of placed media ([`RenderMedium`] entries).
+        pub media_count: u32,
+        /// Emission-absorption march step in voxels.
         pub medium_step: f32,
-        /// Scattering albedo of the medium.
-        pub medium_albedo: f32,
-        /// Henyey-Greenstein asymmetry of the medium.
-        pub medium_g: f32,
         /// The sample this dispatch takes (one dispatch per sample: the image holds the
         /// running sum until the last divides it).
         pub sample: u32,
+        /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
+        pub probe_trips: u32,
+        /// Padding.
+        pub pad: [u32; 3],
+    }
+}
+
+record! {
+    /// One placed medium of a GPU render.
+    pub struct RenderMedium {
+        /// World to the medium's index space (translated as its grid's upload): the rows of
+        /// a 3x4 affine.
+        pub rows: [[f32; 4]; 3],
+        /// Emission colour.
+        pub emission: [f32; 3],
+        /// Its grid's entry in the volume parameters.
+        pub volume: u32,
+        /// Scattering albedo.
+        pub albedo: f32,
+        /// Henyey-Greenstein asymmetry.
+        pub g: f32,
+        /// Seed of its shadow rays' ratio-tracking streams.
+        pub seed: u32,
         /// Padding.
         pub pad: u32,
     }
@@ -322,6 +344,8 @@ pub const RENDER_VOLUMES_ABSORPTION: u32 = 1;
 pub const RENDER_VOLUMES_SINGLE: u32 = 2;
 /// Multiple scattering.
 pub const RENDER_VOLUMES_MULTIPLE: u32 = 3;
+/// Most placed media a GPU render takes.
+pub const RENDER_MAX_MEDIA: u32 = 16;
 /// [`RenderItem::kind`] of materials: diffuse.
 pub const RENDER_MATERIAL_DIFFUSE: u32 = 0;
 /// Mirror.
@@ -384,6 +408,7 @@ fn trace_records() -> Vec<RecordEntry> {
         entry::<RenderParams>(),
         entry::<RenderItem>(),
         entry::<RenderInstance>(),
+        entry::<RenderMedium>(),
     ]
 }
 
@@ -408,6 +433,7 @@ pub fn generate() -> String {
     push_struct::<RenderParams>(&mut out);
     push_struct::<RenderItem>(&mut out);
     push_struct::<RenderInstance>(&mut out);
+    push_struct::<RenderMedium>(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
@@ -445,6 +471,7 @@ pub fn generate() -> String {
         ("RENDER_EFFECT_SHADING", RENDER_EFFECT_SHADING),
         ("RENDER_EFFECT_SPECULAR", RENDER_EFFECT_SPECULAR),
         ("RENDER_VOLUMES_NONE", RENDER_VOLUMES_NONE),
+        ("RENDER_MAX_MEDIA", RENDER_MAX_MEDIA),
         ("RENDER_VOLUMES_ABSORPTION", RENDER_VOLUMES_ABSORPTION),
         ("RENDER_VOLUMES_SINGLE", RENDER_VOLUMES_SINGLE),
         ("RENDER_VOLUMES_MULTIPLE", RENDER_VOLUMES_MULTIPLE),

@@ -1,19 +1,20 @@
 //! The GPU renderer: the render kernel (`shaders/kernels/render.wgsl`) over the scene
 //! uploaded as the scan uploads it, composed with only the effects the render calls for.
 //! Its CPU twin is [`Renderer::render`]; `tests/gpu_render.rs` compares them pixel by
-//! pixel. Of media, the kernel renders one placed medium, by emission-absorption, single or
-//! multiple scattering; several media are refused with [`GpuError::Unsupported`] (so
-//! `--backend auto` falls back to the CPU).
+//! pixel. Media (up to [`RENDER_MAX_MEDIA`] placements) are rendered by emission-absorption,
+//! single or multiple scattering, their grids in one set of shared arrays; more are refused
+//! with [`GpuError::Unsupported`] (so `--backend auto` falls back to the CPU).
 
 use std::time::Instant;
 
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{
-    RenderInstance, RenderItem, RenderParams, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR,
-    RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC,
-    RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER, RENDER_MATERIAL_MIRROR,
-    RENDER_MATERIAL_TRANSPARENT, RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE,
-    RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE, VOLUME_FILTER_TRILINEAR,
+    RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_EFFECT_SHADING,
+    RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT,
+    RENDER_MATERIAL_DIELECTRIC, RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER,
+    RENDER_MATERIAL_MIRROR, RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA,
+    RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE,
+    VOLUME_FILTER_TRILINEAR,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
@@ -21,16 +22,41 @@ use super::volume::VolumeUpload;
 use crate::render::camera::Projection;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
-use hytrace_volume::global_range;
+use hytrace_volume::{global_range, BrickedGrid};
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
-const RENDER_BINDINGS: u32 = 4;
+const RENDER_BINDINGS: u32 = 5;
 /// Storage buffers of the medium group (group 0: `shaders/volume/bindings.wgsl`).
 const MEDIUM_BINDINGS: u32 = 5;
 /// Samples (pixels x spp) per submission of one batch of rows (a dispatch per sample):
 /// drivers may kill long submissions.
 const SAMPLES_PER_BATCH: u64 = 1 << 20;
+
+/// A render on the GPU.
+#[derive(Debug)]
+pub struct GpuImage {
+    /// The image.
+    pub image: Image,
+    /// Where the time went.
+    pub times: GpuTimes,
+    /// Pixels (row-major indices) a sample of which ran out of the driver's loop budget
+    /// (`shaders/loop_budget.wgsl`: llvmpipe only): their values are wrong, to be
+    /// rendered again elsewhere.
+    pub cut_short: Vec<u32>,
+}
+
+impl GpuImage {
+    /// Renders the pixels cut short again with `renderer` (the CPU twin of the kernel:
+    /// the same samples of the same streams), so the image is right everywhere.
+    pub fn redo_cut_short(&mut self, renderer: &Renderer) -> anyhow::Result<()> {
+        let again = renderer.render_pixels(&self.cut_short)?;
+        for (&p, value) in self.cut_short.iter().zip(again) {
+            self.image.pixels[p as usize] = value;
+        }
+        Ok(())
+    }
+}
 
 /// A scene's render kernel on the GPU, compiled for one set of effects; it renders any
 /// view of the scene ([`GpuRenderer::render`]) with those effects.
@@ -38,8 +64,8 @@ pub struct GpuRenderer {
     pipeline: wgpu::ComputePipeline,
     render_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
-    /// The medium's group 0, with its translation of index space.
-    medium: Option<(wgpu::BindGroup, [f64; 3])>,
+    /// The media's group 0, with each grid's translation of index space.
+    medium: Option<(wgpu::BindGroup, Vec<[f64; 3]>)>,
     hierarchical: bool,
     features: Vec<&'static str>,
     /// The effect part of `features`, which every render must call for exactly.
@@ -52,6 +78,7 @@ struct RenderInputs {
     params: RenderParams,
     items: Vec<RenderItem>,
     instances: Vec<RenderInstance>,
+    media: Vec<RenderMedium>,
 }
 
 fn item(kind: u32, a: [f32; 4], b: [f32; 4]) -> RenderItem {
@@ -92,26 +119,28 @@ fn material_item(m: &Material) -> RenderItem {
     }
 }
 
-/// Refuses what the kernel does not do yet: more than one placed medium, and scattering
-/// media with negative values (which the CPU's trackers refuse).
+/// Refuses what the kernel does not do: more than [`RENDER_MAX_MEDIA`] placed media, and
+/// scattering media with negative values (which the CPU's trackers refuse).
 fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
     let (Some(mode), Some(media)) = (renderer.effects.volumes, &renderer.media) else {
         return Ok(());
     };
-    let mut placed = media.scene.placements();
-    let Some(((_, medium), _)) = placed.next() else {
-        return Ok(());
-    };
-    if placed.next().is_some() {
-        return Err(GpuError::Unsupported(
-            "the GPU renderer renders one placed medium; this scene places several (render with --backend cpu)".into(),
-        ));
-    }
-    let lowest = global_range(media.scene.grid(medium).ranges()).min;
-    if mode != VolumeMode::EmissionAbsorption && (lowest.is_nan() || lowest < 0.0) {
+    let placed = media.scene.placements().count();
+    if placed > RENDER_MAX_MEDIA as usize {
         return Err(GpuError::Unsupported(format!(
-            "the medium's values go down to {lowest}; tracking a scattering medium needs densities >= 0"
+            "the GPU renderer takes at most {RENDER_MAX_MEDIA} placed media; this scene places {placed} (render with --backend cpu)"
         )));
+    }
+    if mode == VolumeMode::EmissionAbsorption {
+        return Ok(());
+    }
+    for medium in 0..media.scene.medium_count() {
+        let lowest = global_range(media.scene.grid(medium as u32).ranges()).min;
+        if lowest.is_nan() || lowest < 0.0 {
+            return Err(GpuError::Unsupported(format!(
+                "medium {medium}'s values go down to {lowest}; tracking a scattering medium needs densities >= 0"
+            )));
+        }
     }
     Ok(())
 }
@@ -158,9 +187,9 @@ pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, 
     Ok((features, source))
 }
 
-/// The kernel's inputs for `renderer` (materials deduplicated, then the lights), with the
-/// medium's index space translated by `shift`.
-fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> RenderInputs {
+/// The kernel's inputs for `renderer` (materials deduplicated, then the lights, then the
+/// placed media), each medium's index space translated by its grid's `shifts` entry.
+fn inputs(renderer: &Renderer, hierarchical: bool, shifts: &[[f64; 3]]) -> RenderInputs {
     let mut items: Vec<RenderItem> = Vec::new();
     let mut instances = Vec::with_capacity(renderer.instance_material.len());
     for (i, m) in renderer.instance_material.iter().enumerate() {
@@ -227,42 +256,49 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shift: Option<[f64; 3]>) -> R
         row_offset: 0,
         row_count: 0,
         volume_mode: RENDER_VOLUMES_NONE,
-        medium_rows: [[0.0; 4]; 3],
-        medium_emission: [0.0; 3],
+        media_count: 0,
         medium_step: s.step as f32,
-        medium_albedo: 0.0,
-        medium_g: 0.0,
         sample: 0,
-        pad: 0,
+        probe_trips: 2,
+        pad: [0; 3],
     };
     let mut params = params;
-    if let (Some(media), Some(shift)) = (&renderer.media, shift) {
-        if let Some(((_, medium), to_index)) = media.scene.placements().next() {
-            params.volume_mode = match renderer.effects.volumes {
-                Some(VolumeMode::EmissionAbsorption) => RENDER_VOLUMES_ABSORPTION,
-                Some(VolumeMode::SingleScattering) => RENDER_VOLUMES_SINGLE,
-                Some(VolumeMode::MultipleScattering) => RENDER_VOLUMES_MULTIPLE,
-                None | Some(VolumeMode::Off) => RENDER_VOLUMES_NONE,
-            };
-            params.medium_rows = std::array::from_fn(|r| {
-                let row = to_index.rows[r];
-                [
-                    row[0] as f32,
-                    row[1] as f32,
-                    row[2] as f32,
-                    (row[3] - shift[r]) as f32,
-                ]
+    let mut media = Vec::new();
+    if let (Some(m), false) = (&renderer.media, shifts.is_empty()) {
+        params.volume_mode = match renderer.effects.volumes {
+            Some(VolumeMode::EmissionAbsorption) => RENDER_VOLUMES_ABSORPTION,
+            Some(VolumeMode::SingleScattering) => RENDER_VOLUMES_SINGLE,
+            Some(VolumeMode::MultipleScattering) => RENDER_VOLUMES_MULTIPLE,
+            None | Some(VolumeMode::Off) => RENDER_VOLUMES_NONE,
+        };
+        for (k, ((_, medium), to_index)) in m.scene.placements().enumerate() {
+            let shift = shifts[medium as usize];
+            let optics = &m.optics[medium as usize];
+            media.push(RenderMedium {
+                rows: std::array::from_fn(|r| {
+                    let row = to_index.rows[r];
+                    [
+                        row[0] as f32,
+                        row[1] as f32,
+                        row[2] as f32,
+                        (row[3] - shift[r]) as f32,
+                    ]
+                }),
+                emission: optics.emission.map(|c| c as f32),
+                volume: medium,
+                albedo: optics.albedo as f32,
+                g: optics.g as f32,
+                seed: m.scene.params(medium, k as u32).seed,
+                pad: 0,
             });
-            let optics = &media.optics[medium as usize];
-            params.medium_emission = optics.emission.map(|c| c as f32);
-            params.medium_albedo = optics.albedo as f32;
-            params.medium_g = optics.g as f32;
         }
+        params.media_count = media.len() as u32;
     }
     RenderInputs {
         params,
         items,
         instances,
+        media,
     }
 }
 
@@ -282,41 +318,46 @@ impl GpuRenderer {
             "render",
             RENDER_BINDINGS + medium_bindings,
         )?;
-        // The one placed medium (check_supported): its grid and the trackers' parameters.
+        // Every medium's grid in the shared arrays, with the trackers' parameters (the
+        // CPU's: trilinear lookups, the finest local majorants; the march walks one global
+        // segment whatever `global` says).
         let medium = match &renderer.media {
             None => None,
             Some(media) => {
-                let ((_, m), _) = media.scene.placements().next().ok_or_else(|| {
-                    GpuError::Unsupported(
-                        "the scene has media but places none (render with --backend cpu)".into(),
-                    )
-                })?;
-                let grid = media.scene.grid(m);
-                let volume = VolumeUpload::new(ctx, grid)?;
-                // The CPU's: trilinear lookups; trackers under the finest local majorants
-                // (the march walks one global segment whatever `global` says).
-                let mut params = volume.base;
-                params.density_scale = media.scene.params(m, 0).density_scale as f32;
-                params.lookup_filter = VOLUME_FILTER_TRILINEAR;
-                params.global = 0;
-                params.finest = 0;
-                let mut buffers =
-                    vec![ctx.input_buffer("medium params", bytemuck::bytes_of(&params))];
+                let grids: Vec<&BrickedGrid> = (0..media.scene.medium_count())
+                    .map(|m| media.scene.grid(m as u32))
+                    .collect();
+                let volume = VolumeUpload::new(ctx, &grids)?;
+                let params: Vec<VolumeParams> = volume
+                    .grids
+                    .iter()
+                    .enumerate()
+                    .map(|(m, g)| {
+                        let mut params = g.base;
+                        params.density_scale = media.scene.params(m as u32, 0).density_scale as f32;
+                        params.lookup_filter = VOLUME_FILTER_TRILINEAR;
+                        params.global = 0;
+                        params.finest = 0;
+                        params
+                    })
+                    .collect();
+                let mut buffers = vec![ctx.input_buffer("medium params", &binding_bytes(&params))];
                 buffers.extend(volume.buffers.iter().cloned());
-                Some((buffers, volume.shift))
+                let shifts: Vec<[f64; 3]> = volume.grids.iter().map(|g| g.shift).collect();
+                Some((buffers, shifts))
             }
         };
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
             let medium_layout = ctx.storage_layout("medium", MEDIUM_BINDINGS, &[]);
-            let medium_group = medium.as_ref().map(|(buffers, shift)| {
+            let medium_group = medium.as_ref().map(|(buffers, shifts)| {
                 let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("medium"),
                     layout: &medium_layout,
                     entries: &whole_buffer_entries(buffers),
                 });
-                (group, *shift)
+                (group, shifts.clone())
             });
             let group0 = medium_group.as_ref().map(|_| &medium_layout);
             let pipeline_layout =
@@ -357,7 +398,7 @@ impl GpuRenderer {
         ctx: &GpuContext,
         renderer: &Renderer,
         progress: &dyn Fn(u64),
-    ) -> Result<(Image, GpuTimes), GpuError> {
+    ) -> Result<GpuImage, GpuError> {
         // The scene is the caller's promise; the effects are checked.
         check_supported(renderer)?;
         let effects = effect_features(renderer).0;
@@ -373,29 +414,36 @@ impl GpuRenderer {
         let inputs = inputs(
             renderer,
             self.hierarchical,
-            self.medium.as_ref().map(|(_, shift)| *shift),
+            self.medium.as_ref().map_or(&[][..], |(_, shifts)| shifts),
         );
         let (width, height) = (inputs.params.width, inputs.params.height);
         let per_row = width as u64 * inputs.params.spp as u64;
         let limit_rows = (ctx.limits.max_storage_buffer_binding_size / (16 * width as u64)).max(1);
         let rows_per_batch = (SAMPLES_PER_BATCH / per_row).clamp(1, limit_rows) as u32;
         let mut pixels = Vec::with_capacity(width as usize * height as usize);
+        let mut cut_short = Vec::new();
         let mut times = GpuTimes::default();
         let mut row = 0;
         while row < height {
             let rows = rows_per_batch.min(height - row);
-            pixels.extend(self.render_rows(ctx, &inputs, row, rows, &mut times)?);
+            for texel in self.render_rows(ctx, &inputs, row, rows, &mut times)? {
+                if texel[3] != 0.0 {
+                    cut_short.push(pixels.len() as u32);
+                }
+                pixels.push([texel[0], texel[1], texel[2]]);
+            }
             row += rows;
             progress(row as u64);
         }
-        Ok((
-            Image {
+        Ok(GpuImage {
+            image: Image {
                 width,
                 height,
                 pixels,
             },
             times,
-        ))
+            cut_short,
+        })
     }
 
     fn render_rows(
@@ -405,7 +453,7 @@ impl GpuRenderer {
         row_offset: u32,
         row_count: u32,
         times: &mut GpuTimes,
-    ) -> Result<Vec<[f32; 3]>, GpuError> {
+    ) -> Result<Vec<[f32; 4]>, GpuError> {
         let n = (inputs.params.width * row_count) as usize;
         let out_size = (n * 16) as u64;
         let t0 = Instant::now();
@@ -415,6 +463,7 @@ impl GpuRenderer {
             let shared = [
                 ctx.input_buffer("render items", &binding_bytes(&inputs.items)),
                 ctx.input_buffer("render instances", &binding_bytes(&inputs.instances)),
+                ctx.input_buffer("render media", &binding_bytes(&inputs.media)),
             ];
             // One dispatch per sample, each with its parameters.
             let samples: Vec<wgpu::BindGroup> = (0..inputs.params.spp)
@@ -430,6 +479,7 @@ impl GpuRenderer {
                         shared[0].clone(),
                         shared[1].clone(),
                         image.clone(),
+                        shared[2].clone(),
                     ];
                     ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some("render"),
@@ -461,8 +511,7 @@ impl GpuRenderer {
             timer.as_ref(),
             times,
         )?;
-        let texels: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok(texels.iter().map(|t| [t[0], t[1], t[2]]).collect())
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 }
 

@@ -15,7 +15,7 @@ use std::time::Instant;
 use bytemuck::Zeroable;
 use hytrace_volume::{
     global_range, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray, TexelFormat,
-    TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, RANGE_LEVELS,
+    TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
 use super::compose::compose;
@@ -55,15 +55,26 @@ pub struct GpuVolume<'a> {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     upload: VolumeUpload,
+    /// The grid's parameters and translation.
+    grid_upload: UploadedGrid,
     upload_s: f64,
 }
 
-/// A bricked grid on the GPU: the arrays of `shaders/volume/bindings.wgsl` but the
-/// parameters, and the translation of its index space.
+/// Bricked grids on the GPU: the arrays of `shaders/volume/bindings.wgsl` but the
+/// parameters, every grid's concatenated (the renderer uploads all its media; the
+/// transmittance kernel one grid), and each grid's parameters and index-space translation.
 pub(super) struct VolumeUpload {
     /// Ranges, indirection, bricks, atlas (bindings 1 to 4).
     pub buffers: Vec<wgpu::Buffer>,
-    /// Everything of the parameters but the estimator's and the batch's.
+    /// Each grid's place in them, in the order given.
+    pub grids: Vec<UploadedGrid>,
+}
+
+/// One grid of a [`VolumeUpload`].
+#[derive(Clone, Copy)]
+pub(super) struct UploadedGrid {
+    /// Everything of the parameters but the estimator's and the batch's (with the grid's
+    /// first entries in the shared arrays).
     pub base: VolumeParams,
     /// The translation of index space (voxels, a multiple of [`TOP_SIDE`]): the kernels'
     /// index space is the grid's minus `shift`.
@@ -72,10 +83,19 @@ pub(super) struct VolumeUpload {
     pub centre: [f64; 3],
 }
 
-impl VolumeUpload {
-    /// Uploads `grid` and its range mips. Arrays beyond the device's binding limit are a
-    /// [`GpuError::SceneTooBig`].
-    pub fn new(ctx: &GpuContext, grid: &BrickedGrid) -> Result<VolumeUpload, GpuError> {
+/// The shared arrays being filled: ranges, indirection, brick table, atlas words.
+#[derive(Default)]
+struct VolumeArrays {
+    ranges: Vec<[f32; 2]>,
+    indirection: Vec<u32>,
+    bricks: Vec<u8>,
+    brick_count: u32,
+    atlas: Vec<u8>,
+}
+
+impl VolumeArrays {
+    /// Appends `grid`: its parameters with its first entries in the arrays.
+    fn push(&mut self, grid: &BrickedGrid) -> Result<UploadedGrid, GpuError> {
         let too_big = |why: String| Err(GpuError::SceneTooBig(why));
         let mips = grid.ranges();
         if mips.levels.len() != RANGE_LEVELS {
@@ -97,14 +117,17 @@ impl VolumeUpload {
             }
             Ok(out)
         };
+        let index = |n: usize, what: &str| {
+            u32::try_from(n).map_err(|_| GpuError::SceneTooBig(format!("more than 2^32 {what}")))
+        };
         let mut base = VolumeParams::zeroed();
-        let mut ranges: Vec<[f32; 2]> = Vec::new();
         for (l, level) in mips.levels.iter().enumerate() {
             let lo = shifted(level.lo, level.side)?;
             base.level_lo[l] = [lo[0], lo[1], lo[2], level.side as i32];
             let d = level.dims;
-            base.level_dims[l] = [d[0], d[1], d[2], ranges.len() as u32];
-            ranges.extend(level.ranges.iter().map(|r| [r.min, r.max]));
+            base.level_dims[l] = [d[0], d[1], d[2], index(self.ranges.len(), "ranges")?];
+            self.ranges
+                .extend(level.ranges.iter().map(|r| [r.min, r.max]));
         }
         let (brick_lo, brick_dims) = grid.indirection_box();
         base.brick_lo = shifted(brick_lo, BLOCK_SIDE as u32)?;
@@ -120,31 +143,54 @@ impl VolumeUpload {
         base.global_min = global.min;
         base.global_max = global.max;
         base.background = grid.background();
+        // Brick indices move past the bricks of the grids before; atlas words likewise.
+        base.indirection_base = index(self.indirection.len(), "indirection entries")?;
+        let first_brick = self.brick_count;
+        self.indirection.extend(grid.indirection().iter().map(|&e| {
+            if e == NO_BRICK {
+                e
+            } else {
+                e + first_brick
+            }
+        }));
+        let bricks: &[u8] = bytemuck::cast_slice(grid.bricks());
+        self.bricks.extend_from_slice(bricks);
+        self.brick_count = index(self.brick_count as usize + grid.bricks().len(), "bricks")?;
+        base.atlas_base = index(self.atlas.len() / 4, "atlas words")?;
+        self.atlas.extend_from_slice(grid.atlas());
+        self.atlas.resize(self.atlas.len().next_multiple_of(4), 0);
         let side = TOP_SIDE as f64;
-        let shift = shift_blocks.map(|b| b as f64 * side);
-        let centre = std::array::from_fn(|k| f64::from(top.dims[k]) * side * 0.5 - 0.5);
-        let arrays: [(&str, Vec<u8>); 4] = [
+        Ok(UploadedGrid {
+            base,
+            shift: shift_blocks.map(|b| b as f64 * side),
+            centre: std::array::from_fn(|k| f64::from(top.dims[k]) * side * 0.5 - 0.5),
+        })
+    }
+}
+
+impl VolumeUpload {
+    /// Uploads `grids` and their range mips into shared arrays. Arrays beyond the device's
+    /// binding limit are a [`GpuError::SceneTooBig`].
+    pub fn new(ctx: &GpuContext, grids: &[&BrickedGrid]) -> Result<VolumeUpload, GpuError> {
+        let mut arrays = VolumeArrays::default();
+        let grids = grids
+            .iter()
+            .map(|g| arrays.push(g))
+            .collect::<Result<Vec<_>, _>>()?;
+        let bytes: [(&str, Vec<u8>); 4] = [
             (
                 "volume ranges",
-                storage_bytes(bytemuck::cast_slice(&ranges)),
+                storage_bytes(bytemuck::cast_slice(&arrays.ranges)),
             ),
             (
                 "volume indirection",
-                storage_bytes(bytemuck::cast_slice(grid.indirection())),
+                storage_bytes(bytemuck::cast_slice(&arrays.indirection)),
             ),
-            (
-                "volume bricks",
-                storage_bytes(bytemuck::cast_slice(grid.bricks())),
-            ),
-            ("volume atlas", storage_bytes(grid.atlas())),
+            ("volume bricks", storage_bytes(&arrays.bricks)),
+            ("volume atlas", storage_bytes(&arrays.atlas)),
         ];
-        let buffers = ctx.storage_buffers(&arrays)?;
-        Ok(VolumeUpload {
-            buffers,
-            base,
-            shift,
-            centre,
-        })
+        let buffers = ctx.storage_buffers(&bytes)?;
+        Ok(VolumeUpload { buffers, grids })
     }
 }
 
@@ -159,7 +205,8 @@ impl<'a> GpuVolume<'a> {
                 "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
             )));
         }
-        let upload = VolumeUpload::new(ctx, grid)?;
+        let upload = VolumeUpload::new(ctx, &[grid])?;
+        let grid_upload = upload.grids[0];
         let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
@@ -183,6 +230,7 @@ impl<'a> GpuVolume<'a> {
             pipeline,
             layout,
             upload,
+            grid_upload,
             upload_s: t0.elapsed().as_secs_f64(),
         })
     }
@@ -196,14 +244,14 @@ impl<'a> GpuVolume<'a> {
     /// box when its origin is far; errors as [`IndexRay::from_world`].
     fn kernel_ray(&self, ray: &Ray) -> Result<RayRecord, VolumeError> {
         let r = IndexRay::from_world(ray, self.grid.map())?;
-        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.upload.shift[k]);
+        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.grid_upload.shift[k]);
         let near = origin.iter().all(|c| c.abs() <= NEAR) && r.tmin.abs() <= NEAR;
         let base = if near {
             0.0
         } else {
             // The point nearest the box's centre, within [tmin, tmax].
             let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            let to_centre = std::array::from_fn(|k| self.upload.centre[k] - origin[k]);
+            let to_centre = std::array::from_fn(|k| self.grid_upload.centre[k] - origin[k]);
             (dot(to_centre, r.dir) / dot(r.dir, r.dir))
                 .min(r.tmax)
                 .max(r.tmin)
@@ -245,7 +293,7 @@ impl<'a> GpuVolume<'a> {
                     .map_err(|e| VolumeError(format!("transmittance: ray {i}: {}", e.0)))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let mut p = self.upload.base;
+        let mut p = self.grid_upload.base;
         let (estimator, step) = match params.estimator {
             Estimator::Exact => (VOLUME_ESTIMATOR_EXACT, 0.0),
             Estimator::March { step } => (VOLUME_ESTIMATOR_MARCH, step as f32),

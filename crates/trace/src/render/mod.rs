@@ -19,7 +19,7 @@ mod volumes;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use anyhow::{ensure, Context};
+use anyhow::{bail, ensure, Context};
 use glam::DVec3;
 use hytrace_foundry::{Foundry, PrimKind, UNSET};
 use hytrace_volume::{Estimator, Rng, TransmittanceParams};
@@ -188,6 +188,14 @@ pub fn auto_camera(bounds: Option<[[f64; 3]; 2]>) -> CameraSpec {
     }
 }
 
+/// Which pixels a render computes.
+enum Pixels<'p> {
+    /// The whole image, by rows; the callback gets the rows finished so far.
+    All(&'p (dyn Fn(u64) + Sync)),
+    /// These, by row-major index.
+    Some(&'p [u32]),
+}
+
 impl<'a> Renderer<'a> {
     /// Prepares a render of `f` (traced through `scene`, prepared from it) under `spec`.
     pub fn new(scene: &'a CpuScene<f32>, f: &Foundry, spec: &RenderSpec) -> anyhow::Result<Self> {
@@ -304,6 +312,29 @@ impl<'a> Renderer<'a> {
     /// Renders the image on the CPU (rayon over rows); `progress` is called with the
     /// number of rows finished so far. Errors name the pixel that failed.
     pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> anyhow::Result<Image> {
+        let [width, height] = self.settings.size;
+        Ok(Image {
+            width,
+            height,
+            pixels: self.shade(Pixels::All(progress))?,
+        })
+    }
+
+    /// The values of some pixels of the image (row-major indices below width x height),
+    /// each as [`Renderer::render`] gives it: the same samples of the same streams.
+    pub fn render_pixels(&self, pixels: &[u32]) -> anyhow::Result<Vec<[f32; 3]>> {
+        let [width, height] = self.settings.size;
+        if let Some(p) = pixels
+            .iter()
+            .find(|&&p| p as u64 >= width as u64 * height as u64)
+        {
+            bail!("pixel {p} is outside the {width}x{height} image");
+        }
+        self.shade(Pixels::Some(pixels))
+    }
+
+    /// The values of `pixels` under this render's effects.
+    fn shade(&self, pixels: Pixels<'_>) -> anyhow::Result<Vec<[f32; 3]>> {
         let fx = self.effects;
         let vm = match fx.volumes {
             None | Some(VolumeMode::Off) => NO_VOLUMES,
@@ -312,18 +343,18 @@ impl<'a> Renderer<'a> {
             Some(VolumeMode::MultipleScattering) => MULTIPLE_SCATTERING,
         };
         if fx.view != View::Shaded {
-            return self.render_with(progress, |o, d, _| Ok(self.geometry_view(o, d)));
+            return self.render_with(pixels, |o, d, _| Ok(self.geometry_view(o, d)));
         }
         // One instantiation per effect set; those with media only in builds with the
         // `media` feature (on by default), so a build without it holds no media code.
         macro_rules! shaded {
             (always: $($s:literal, $p:literal, $v:ident);* ; media: $($ms:literal, $mp:literal, $mv:ident);* $(;)?) => {
                 match (fx.shading, fx.specular, vm) {
-                    $(($s, $p, $v) => self.render_with(progress, |o, d, rng| {
+                    $(($s, $p, $v) => self.render_with(pixels, |o, d, rng| {
                         self.radiance::<$s, $p, $v>(o, d, rng)
                     }),)*
                     $(#[cfg(feature = "media")]
-                    ($ms, $mp, $mv) => self.render_with(progress, |o, d, rng| {
+                    ($ms, $mp, $mv) => self.render_with(pixels, |o, d, rng| {
                         self.radiance::<$ms, $mp, $mv>(o, d, rng)
                     }),)*
                     _ => anyhow::bail!("{NO_MEDIA_BUILD}"),
@@ -344,43 +375,46 @@ impl<'a> Renderer<'a> {
         )
     }
 
-    /// The image whose pixel samples `sample` gives.
-    fn render_with<F>(&self, progress: &(dyn Fn(u64) + Sync), sample: F) -> anyhow::Result<Image>
+    /// The values of `pixels`, each the mean of its samples that `sample` gives.
+    fn render_with<F>(&self, pixels: Pixels<'_>, sample: F) -> anyhow::Result<Vec<[f32; 3]>>
     where
         F: Fn(DVec3, DVec3, &mut Rng) -> anyhow::Result<DVec3> + Sync,
     {
         let [width, height] = self.settings.size;
-        let spp = self.settings.spp;
         ensure!(
             (width as u64) * (height as u64) <= u32::MAX as u64,
             "{width}x{height} pixels: at most 2^32 - 1"
         );
-        let done = AtomicU64::new(0);
-        let rows: Vec<Vec<[f32; 3]>> = (0..height)
-            .into_par_iter()
-            .map(|j| {
-                let row = (0..width)
-                    .map(|i| {
-                        let pixel = j * width + i;
-                        let mut sum = DVec3::ZERO;
-                        for s in 0..spp {
-                            let mut rng = Rng::new(self.settings.seed, pixel, s);
-                            let (o, d) = self.camera_ray(i, j, &mut rng);
-                            sum += sample(o, d, &mut rng)
-                                .with_context(|| format!("pixel ({i}, {j}), sample {s}"))?;
-                        }
-                        Ok((sum / spp as f64).as_vec3().to_array())
+        let pixel = |i: u32, j: u32| -> anyhow::Result<[f32; 3]> {
+            let mut sum = DVec3::ZERO;
+            for s in 0..self.settings.spp {
+                let mut rng = Rng::new(self.settings.seed, j * width + i, s);
+                let (o, d) = self.camera_ray(i, j, &mut rng);
+                sum += sample(o, d, &mut rng)
+                    .with_context(|| format!("pixel ({i}, {j}), sample {s}"))?;
+            }
+            Ok((sum / self.settings.spp as f64).as_vec3().to_array())
+        };
+        match pixels {
+            Pixels::Some(list) => list
+                .par_iter()
+                .map(|&p| pixel(p % width, p / width))
+                .collect(),
+            Pixels::All(progress) => {
+                let done = AtomicU64::new(0);
+                let rows: Vec<Vec<[f32; 3]>> = (0..height)
+                    .into_par_iter()
+                    .map(|j| {
+                        let row = (0..width)
+                            .map(|i| pixel(i, j))
+                            .collect::<anyhow::Result<Vec<_>>>()?;
+                        progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                        Ok(row)
                     })
-                    .collect::<anyhow::Result<Vec<_>>>()?;
-                progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                Ok(row)
-            })
-            .collect::<anyhow::Result<_>>()?;
-        Ok(Image {
-            width,
-            height,
-            pixels: rows.into_iter().flatten().collect(),
-        })
+                    .collect::<anyhow::Result<_>>()?;
+                Ok(rows.into_iter().flatten().collect())
+            }
+        }
     }
 
     /// Solid, boundary (or `UNSET`) of an instance.

@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::spec::{View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{add_gpu_stats, gpu_or_cpu, GpuContext, GpuError, GpuRenderer, GpuTimes};
+use crate::gpu::{add_gpu_stats, gpu_or_cpu, GpuContext, GpuRenderer, GpuTimes};
 use crate::scene::load_render_scene;
 
 /// Where a render runs.
@@ -19,8 +19,8 @@ use crate::scene::load_render_scene;
 pub enum RenderBackend {
     /// Our CPU path (rayon over rows).
     Cpu,
-    /// Our WGSL render kernel through wgpu (f32; geometry views, surfaces and one medium
-    /// by emission-absorption: scattering media are not on the GPU yet).
+    /// Our WGSL render kernel through wgpu (f32): every effect, media of up to 16
+    /// placements.
     Gpu,
     /// The GPU when one opens and the render is one it does, else the CPU.
     Auto,
@@ -31,22 +31,38 @@ struct GpuRun {
     adapter: String,
     features: Vec<&'static str>,
     times: GpuTimes,
+    /// Pixels the CPU rendered again because the driver cut their loops short.
+    redone_on_cpu: usize,
 }
 
-/// Renders on the GPU of `ctx`.
+/// Renders on the GPU of `ctx`. Pixels whose samples ran out of the driver's loop budget
+/// (llvmpipe's: `shaders/loop_budget.wgsl`) are rendered again on the CPU, which draws
+/// the same random streams, so the image is the kernel's everywhere else and right
+/// everywhere.
 fn render_gpu(
     ctx: &GpuContext,
     renderer: &Renderer,
     progress: &dyn Fn(u64),
-) -> Result<(Image, GpuRun), GpuError> {
+) -> anyhow::Result<(Image, GpuRun)> {
     let gpu = GpuRenderer::new(ctx, renderer)?;
-    let (image, times) = gpu.render(ctx, renderer, progress)?;
+    let mut run = gpu.render(ctx, renderer, progress)?;
+    if !run.cut_short.is_empty() {
+        eprintln!(
+            "warning: on {}, {} of {} pixels ran out of the driver's loop budget (65535 \
+             loop iterations per 8 invocations); the CPU rendered them again",
+            ctx.describe(),
+            run.cut_short.len(),
+            run.image.pixels.len()
+        );
+        run.redo_cut_short(renderer)?;
+    }
     Ok((
-        image,
+        run.image,
         GpuRun {
             adapter: ctx.describe(),
             features: gpu.features().to_vec(),
-            times,
+            times: run.times,
+            redone_on_cpu: run.cut_short.len(),
         },
     ))
 }
@@ -142,8 +158,8 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         }
         println!(
             "backends: the CPU path is monomorphised over these effects; the GPU kernel \
-             composes only their WGSL (geometry views, surfaces, one medium by \
-             emission-absorption; scattering media on the CPU only)"
+             composes only their WGSL (geometry views, surfaces, specular, media of up to \
+             16 placements by emission-absorption, single or multiple scattering)"
         );
         return Ok(());
     }
@@ -163,9 +179,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let progress = |rows| bar.set_position(rows);
     let cpu = || renderer.render(&progress).map(|image| (image, None));
     let gpu = |ctx: GpuContext| {
-        render_gpu(&ctx, &renderer, &progress)
-            .map(|(image, run)| (image, Some(run)))
-            .map_err(anyhow::Error::from)
+        render_gpu(&ctx, &renderer, &progress).map(|(image, run)| (image, Some(run)))
     };
     let (image, gpu_run) = match args.backend {
         RenderBackend::Cpu => cpu()?,
@@ -195,6 +209,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         });
         if let Some(g) = &gpu_run {
             add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+            line["gpu_pixels_redone_on_cpu"] = g.redone_on_cpu.into();
         }
         println!("{line}");
     }
