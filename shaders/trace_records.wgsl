@@ -124,7 +124,8 @@ struct SurfacePrim {
 struct ScanParams {
     ray_count: u32,
     hierarchical: u32,
-    pad: array<u32, 2>,
+    probe_trips: u32,
+    pad: u32,
 }
 
 struct RayRecord {
@@ -173,7 +174,8 @@ struct VolumeParams {
     ray_offset: u32,
     indirection_base: u32,
     atlas_base: u32,
-    pad: array<u32, 2>,
+    probe_trips: u32,
+    pad: u32,
 }
 
 struct TransmittanceRecord {
@@ -240,6 +242,7 @@ struct RenderMedium {
 }
 
 const STATUS_DEPTH_LIMIT: u32 = 1u;
+const STATUS_LOOPS_CUT: u32 = 2u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
 const SURFACE_TOLERANCE: f32 = 2e-6;
 // Deepest box BVH the CPU accepts when it prepares a scene.
@@ -259,6 +262,7 @@ const VOLUME_FORMAT_F16: u32 = 3u;
 const VOLUME_FORMAT_F32: u32 = 4u;
 const VOLUME_STATUS_NEGATIVE: u32 = 1u;
 const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
+const VOLUME_STATUS_LOOPS_CUT: u32 = 4u;
 const VOLUME_NO_BRICK: u32 = 4294967295u;
 const VOLUME_NO_SLOT: u32 = 4294967295u;
 const RENDER_VIEW_SHADED: u32 = 0u;

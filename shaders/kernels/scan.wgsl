@@ -3,6 +3,7 @@
 // (the navigator's locate of every origin) and then `scan`; flat scenes `scan` alone.
 // #import trace_records
 // #import trace/scene
+// #import loop_budget
 
 @group(2) @binding(0) var<storage, read> params: ScanParams;
 @group(2) @binding(1) var<storage, read> rays: array<RayRecord>;
@@ -26,6 +27,9 @@ fn locate_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
     }
     var status = 0u;
     located[i] = locate_point(ray_origin(rays[i]), &status);
+    if loops_cut_short(params.probe_trips) {
+        status |= STATUS_LOOPS_CUT;
+    }
     hits[i].status = status;
 }
 
@@ -49,6 +53,9 @@ fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     out.t = h.t;
     out.instance = h.instance;
     out.prim = h.prim;
+    if loops_cut_short(params.probe_trips) {
+        status |= STATUS_LOOPS_CUT;
+    }
     out.status = status;
     out.pad = 0u;
     hits[i] = out;

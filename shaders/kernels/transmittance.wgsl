@@ -7,6 +7,7 @@
 // #import volume/bindings
 // #import volume/rng
 // #import volume/estimate
+// #import loop_budget
 
 @group(0) @binding(5) var<storage, read> rays: array<RayRecord>;
 @group(0) @binding(6) var<storage, read_write> results: array<TransmittanceRecord>;
@@ -53,6 +54,9 @@ fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     out.variance = select(0.0, m2 / f32(max(passes, 2u) - 1u), tracking && passes > 1u);
     out.lookups = lookups;
     out.null_collisions = nulls;
+    if loops_cut_short(vparams.probe_trips) {
+        status |= VOLUME_STATUS_LOOPS_CUT;
+    }
     out.status = status;
     results[i] = out;
 }

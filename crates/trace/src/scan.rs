@@ -24,8 +24,8 @@ use hytrace_volume::TransmittanceParams;
 
 use crate::cpu::media::{MediumSegment, SceneMedia};
 use crate::cpu::{CpuScene, Hit};
-use crate::gpu::records::RayRecord;
-use crate::gpu::{gpu_or_cpu, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
+use crate::gpu::records::{RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
+use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -165,8 +165,15 @@ fn trace_all<T: Real>(
     rays: &[RayRow],
     trace: impl Fn(&Ray<T>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
 ) -> anyhow::Result<ScanResult> {
-    let answers: Vec<([f64; 4], i32)> = rays
-        .par_iter()
+    Ok(result_from(f, &answers(rays, trace)?))
+}
+
+/// Every ray's answer from `trace` (a tracer's `trace`: ray, tmin, tmax).
+fn answers<T: Real>(
+    rays: &[RayRow],
+    trace: impl Fn(&Ray<T>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
+) -> anyhow::Result<Vec<Answer>> {
+    rays.par_iter()
         .map(|r| {
             let ray = Ray {
                 origin: V3::from_f64(r.origin),
@@ -185,8 +192,7 @@ fn trace_all<T: Real>(
                 None => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
             })
         })
-        .collect::<anyhow::Result<_>>()?;
-    Ok(result_from(f, &answers))
+        .collect()
 }
 
 /// A scan's result from `(nx ny nz t, instance)` per ray (instance -1 on a miss).
@@ -301,7 +307,7 @@ fn gpu_scan(
     let tracer = GpuTracer::new(&ctx, &cpu)?;
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let (answers, gpu_times) = gpu_trace(&ctx, &tracer, rays)?;
+    let (answers, gpu_times) = gpu_trace(&ctx, &tracer, &cpu, rays)?;
     let trace_s = t1.elapsed().as_secs_f64();
     let gpu = GpuScanInfo {
         adapter: ctx.describe(),
@@ -320,22 +326,31 @@ fn gpu_scan(
 type Answer = ([f64; 4], i32);
 
 /// Every ray through the GPU scan kernel: `(nx ny nz t, instance)` per ray (`t = inf`,
-/// instance -1 on a miss) and the kernel's times; a ray cut short is an error.
+/// instance -1 on a miss) and the kernel's times. A placement tree deeper than the
+/// kernel's bound is an error; rays whose loops the driver's budget cut short (llvmpipe)
+/// are traced again by the kernel's twin `cpu`.
 fn gpu_trace(
     ctx: &GpuContext,
     tracer: &GpuTracer,
+    cpu: &CpuScene<f32>,
     rays: &[RayRow],
 ) -> anyhow::Result<(Vec<Answer>, GpuTimes)> {
     let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
-    let (hits, times) = tracer.trace(ctx, &records)?;
-    if let Some(i) = hits.iter().position(|h| h.status != 0) {
+    let (hits, mut times) = tracer.trace(ctx, &records)?;
+    if let Some(i) = hits.iter().position(|h| h.status & STATUS_DEPTH_LIMIT != 0) {
         bail!(
-            "GPU scan: ray {i} was cut short (status {:#x}): the placement tree is deeper \
-             than the kernel's bound",
-            hits[i].status
+            "GPU scan: ray {i} was cut short: the placement tree is deeper than the kernel's \
+             bound"
         );
     }
-    let answers = hits
+    let cut: Vec<usize> = (0..hits.len())
+        .filter(|&i| hits[i].status & STATUS_LOOPS_CUT != 0)
+        .collect();
+    let cut_rows: Vec<RayRow> = cut.iter().map(|&i| rays[i]).collect();
+    let again = answers(&cut_rows, |ray, tmin, tmax| Ok(cpu.trace(ray, tmin, tmax)))?;
+    times.redone_on_cpu = cut.len() as u64;
+    warn_redone(&ctx.describe(), &times, rays.len(), "rays");
+    let mut answers: Vec<Answer> = hits
         .iter()
         .map(|h| match h.t < GPU_INF {
             true => {
@@ -345,6 +360,9 @@ fn gpu_trace(
             false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
         })
         .collect();
+    for (&i, answer) in cut.iter().zip(again) {
+        answers[i] = answer;
+    }
     Ok((answers, times))
 }
 
@@ -520,6 +538,7 @@ fn gpu_transmittance(
         .map(|s| (s.placement, s.medium))
         .collect();
     let mut values = vec![1.0; rays.len()];
+    let pieces = batches.len() * rays.len();
     for (placement, medium) in batches {
         let find = |ray: &[MediumSegment]| {
             ray.iter()
@@ -545,6 +564,7 @@ fn gpu_transmittance(
             }
         }
     }
+    warn_redone(&ctx.describe(), &times, pieces, "ray pieces");
     Ok(TransmittanceRun {
         values,
         open_s,
@@ -566,6 +586,7 @@ fn add_times(total: &mut GpuTimes, more: &GpuTimes) {
         .kernel_gpu_s
         .zip(more.kernel_gpu_s)
         .map(|(a, b)| a + b);
+    total.redone_on_cpu += more.redone_on_cpu;
 }
 
 /// The Embree backend's scan: build times include preparing the CPU scene it borrows.

@@ -15,7 +15,7 @@ use hytrace_volume::{
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::gpu::{gpu_or_cpu, GpuContext, GpuTimes, GpuVolume};
+use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume};
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
@@ -417,6 +417,7 @@ fn gpu_transmittances(
     let rays = world_rays(rays);
     let t1 = Instant::now();
     let (estimates, times) = volume.transmittance(&ctx, &rays, &args.params())?;
+    warn_redone(&ctx.describe(), &times, rays.len(), "rays");
     Ok(TransmittanceRun {
         estimates,
         mips_s: 0.0,

@@ -540,7 +540,7 @@ fn pixels_past_the_driver_loop_budget_are_rendered_again_on_the_cpu() {
     };
     let (gpu, stats, err) = render("gpu");
     let (cpu, _, _) = render("cpu");
-    let redone = stats["gpu_pixels_redone_on_cpu"].as_u64().unwrap();
+    let redone = stats["gpu_redone_on_cpu"].as_u64().unwrap();
     if llvmpipe {
         assert!(
             redone > 0 && redone < 16 * 12,

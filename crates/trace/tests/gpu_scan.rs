@@ -207,3 +207,87 @@ fn scan_cli_on_the_gpu() {
     assert_eq!(stats["backend"], "cpu");
     assert_eq!(read_values(Path::new(&p("auto.npy"))), want);
 }
+
+#[test]
+fn rays_past_the_driver_loop_budget_are_traced_again_on_the_cpu() {
+    // A stack of 40 000 overlapping triangles in the plane z = 0 and a wall beyond it.
+    // Rays in the plane meet every triangle's box and test every triangle (none is hit:
+    // the ray lies in its plane), past the 65535 loop iterations lavapipe gives 8
+    // invocations together; rays above the plane skip the stack. Both kinds hit the wall.
+    // On lavapipe the kernel's probe marks exactly the 8 rays in the plane, the CPU twin
+    // traces them again, and every answer equals the f32 CPU scan's; a GPU without such a
+    // budget redoes none.
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let llvmpipe = ctx.describe().contains("llvmpipe");
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).display().to_string();
+    let mut obj = String::new();
+    let n = 40_000;
+    for k in 0..n {
+        let s = k as f64 * 1e-3;
+        obj += &format!(
+            "v {} -100 0\nv {} -100 0\nv {s} 100 0\n",
+            s - 100.0,
+            s + 100.0
+        );
+    }
+    for k in 0..n {
+        obj += &format!("f {} {} {}\n", 3 * k + 1, 3 * k + 2, 3 * k + 3);
+    }
+    std::fs::write(p("stack.obj"), obj).unwrap();
+    let scene = "[meshes.stack]\nfile = \"stack.obj\"\n\n[solids.wall]\nshape = \"box(5, 200, 200)\"\n\n\
+                 [[place]]\nsolid = \"stack\"\n\n[[place]]\nsolid = \"wall\"\ntranslate = [300, 0, 0]\n";
+    std::fs::write(p("stack.toml"), scene).unwrap();
+    let rows: Vec<f64> = (0..16)
+        .flat_map(|k| {
+            let z = if k < 8 { 0.0 } else { 5.0 };
+            [-150.0, -40.25 + 0.5 * k as f64, z, 0.0, 1.0, 0.0, 0.0, 1e9]
+        })
+        .collect();
+    hytrace_foundry::npy::write_array(
+        Path::new(&p("rays.npy")),
+        hytrace_foundry::layout::Scalar::F64,
+        &[16, 8],
+        bytemuck::cast_slice(&rows),
+    )
+    .unwrap();
+    let scan = |backend: &str| {
+        let out = p(&format!("{backend}.npy"));
+        let args = [
+            "scan",
+            &p("stack.toml"),
+            "--rays",
+            &p("rays.npy"),
+            "--out",
+            &out,
+            "--backend",
+            backend,
+            "--stats",
+        ];
+        let r = hytrace(&args, &[]);
+        let err = String::from_utf8_lossy(&r.stderr).to_string();
+        assert!(r.status.success(), "{backend}: {err}");
+        let stats: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+        (read_values(Path::new(&out)), stats, err)
+    };
+    let (gpu, stats, err) = scan("gpu");
+    let (cpu, _, _) = scan("cpu");
+    let redone = stats["gpu_redone_on_cpu"].as_u64().unwrap();
+    if llvmpipe {
+        assert_eq!(redone, 8, "{stats}");
+        assert!(err.contains("loop budget"), "{err}");
+    } else {
+        assert_eq!(redone, 0, "{stats}");
+    }
+    // nx ny nz t per ray: every ray hits the wall's face at x = 297.5.
+    for k in 0..16 {
+        assert!(
+            (cpu[4 * k + 3] - 447.5).abs() < 1e-3,
+            "ray {k}: t {}",
+            cpu[4 * k + 3]
+        );
+    }
+    assert_eq!(gpu, cpu);
+}

@@ -239,8 +239,10 @@ fn compare(
 ) -> (Tally, f64, f64, f64) {
     let rays: Vec<Ray> = families.iter().flat_map(|f| f.rays.clone()).collect();
     let want = transmittance_batch(grid, grid.ranges(), &rays, params).unwrap();
-    let (got, _) = gpu.transmittance(ctx, &rays, params).unwrap();
+    let (got, times) = gpu.transmittance(ctx, &rays, params).unwrap();
     assert_eq!(want.len(), got.len());
+    // Every answer is the kernel's (none past the driver's loop budget, redone on the CPU).
+    assert_eq!(times.redone_on_cpu, 0, "{label}");
     let tol = match params.estimator {
         Estimator::Exact | Estimator::March { .. } => DETERMINISTIC_TOL,
         _ => SAME_TOL,
@@ -554,4 +556,51 @@ fn transmittance_cli_on_the_gpu() {
     assert!(String::from_utf8_lossy(&auto.stderr).contains("--backend auto traces on the CPU"));
     let stats: serde_json::Value = serde_json::from_slice(&auto.stdout).unwrap();
     assert_eq!(stats["backend"], "cpu");
+}
+
+#[test]
+fn rays_past_the_driver_loop_budget_are_computed_again_on_the_cpu() {
+    // A march of 1/10000 voxel: some 120 000 steps through a fog sphere, past the 65535
+    // loop iterations lavapipe gives 8 invocations together. The first 32 rays cross the
+    // sphere, the last 32 pass far from it: on lavapipe the kernel's probe marks exactly
+    // the first 32, which the CPU twin computes again, on their own streams; the answers
+    // equal the CPU's. A GPU without such a budget redoes none.
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let grid = BrickedGrid::convert(&fog_sphere(6.0, 2.0).unwrap(), TexelFormat::F32).unwrap();
+    let gpu = GpuVolume::new(&ctx, &grid).unwrap();
+    let rays: Vec<Ray> = (0..64)
+        .map(|k| {
+            let y = if k < 32 {
+                0.05 * k as f64
+            } else {
+                100.0 + k as f64
+            };
+            Ray::new([-20.0, y, 0.3], [1.0, 0.0, 0.0], 0.0, 40.0)
+        })
+        .collect();
+    let mut p = params(
+        Estimator::March { step: 1e-4 },
+        Filter::Trilinear,
+        Majorant::Global,
+        1.0,
+    );
+    p.spp = 1;
+    let want = transmittance_batch(&grid, grid.ranges(), &rays, &p).unwrap();
+    let (got, times) = gpu.transmittance(&ctx, &rays, &p).unwrap();
+    let llvmpipe = ctx.describe().contains("llvmpipe");
+    assert_eq!(times.redone_on_cpu, if llvmpipe { 32 } else { 0 });
+    for (k, (w, g)) in want.iter().zip(&got).enumerate() {
+        // Redone rays are the CPU's own answers; the others (1: no fog) equal too. A real
+        // GPU's f32 march of 120 000 steps rounds more.
+        let tol = if llvmpipe { 0.0 } else { 1e-3 };
+        assert!(
+            (w.transmittance - g.transmittance).abs() <= tol,
+            "ray {k}: cpu {} gpu {}",
+            w.transmittance,
+            g.transmittance
+        );
+        assert!(k >= 32 || w.transmittance < 0.99, "ray {k} misses the fog");
+    }
 }

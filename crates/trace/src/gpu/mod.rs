@@ -15,6 +15,6 @@ mod volume;
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
 pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
-pub use timing::{add_gpu_stats, GpuTimes};
+pub use timing::{add_gpu_stats, warn_redone, GpuTimes};
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};
 pub use volume::GpuVolume;

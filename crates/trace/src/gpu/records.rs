@@ -92,8 +92,10 @@ record! {
         pub ray_count: u32,
         /// 1 for a hierarchical scene (the navigator's answer), 0 for a flat one.
         pub hierarchical: u32,
+        /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
+        pub probe_trips: u32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
     }
 }
 
@@ -131,6 +133,9 @@ record! {
 
 /// [`HitRecord::status`] bit: the navigator's hierarchy was deeper than its loop bound.
 pub const STATUS_DEPTH_LIMIT: u32 = 1;
+/// [`HitRecord::status`] bit: the driver's loop budget cut the ray's loops short (llvmpipe:
+/// `shaders/loop_budget.wgsl`); its answer is wrong.
+pub const STATUS_LOOPS_CUT: u32 = 2;
 
 record! {
     /// What every ray of a GPU transmittance batch shares (`shaders/kernels/transmittance.wgsl`):
@@ -178,8 +183,10 @@ record! {
         pub indirection_base: u32,
         /// The grid's first word in the atlas (shared by several grids).
         pub atlas_base: u32,
+        /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
+        pub probe_trips: u32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
     }
 }
 
@@ -391,6 +398,9 @@ pub const VOLUME_FORMAT_F32: u32 = 4;
 pub const VOLUME_STATUS_NEGATIVE: u32 = 1;
 /// [`TransmittanceRecord::status`] bit: the march needs more than `u32::MAX` steps.
 pub const VOLUME_STATUS_MARCH_STEPS: u32 = 2;
+/// [`TransmittanceRecord::status`] bit: the driver's loop budget cut the ray's loops short
+/// (llvmpipe: `shaders/loop_budget.wgsl`); its answer is wrong.
+pub const VOLUME_STATUS_LOOPS_CUT: u32 = 4;
 
 /// The tracers' own records, in declaration order.
 fn trace_records() -> Vec<RecordEntry> {
@@ -436,6 +446,7 @@ pub fn generate() -> String {
     push_struct::<RenderMedium>(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
+         const STATUS_LOOPS_CUT: u32 = {STATUS_LOOPS_CUT}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
          const SURFACE_TOLERANCE: f32 = {:e};\n\
          // Deepest box BVH the CPU accepts when it prepares a scene.\n\
@@ -459,6 +470,7 @@ pub fn generate() -> String {
         ("VOLUME_FORMAT_F32", VOLUME_FORMAT_F32),
         ("VOLUME_STATUS_NEGATIVE", VOLUME_STATUS_NEGATIVE),
         ("VOLUME_STATUS_MARCH_STEPS", VOLUME_STATUS_MARCH_STEPS),
+        ("VOLUME_STATUS_LOOPS_CUT", VOLUME_STATUS_LOOPS_CUT),
         ("VOLUME_NO_BRICK", hytrace_volume::NO_BRICK),
         ("VOLUME_NO_SLOT", hytrace_volume::NO_SLOT),
         ("RENDER_VIEW_SHADED", RENDER_VIEW_SHADED),

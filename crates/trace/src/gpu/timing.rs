@@ -18,6 +18,9 @@ pub struct GpuTimes {
     pub readback_s: f64,
     /// The kernels' pass on the GPU, from timestamp queries (`None` without them).
     pub kernel_gpu_s: Option<f64>,
+    /// Items (rays, pixels) the CPU computed again because the driver's loop budget cut
+    /// their loops short (llvmpipe only: `shaders/loop_budget.wgsl`).
+    pub redone_on_cpu: u64,
 }
 
 /// Timestamp queries written at the beginning and end of one compute pass.
@@ -103,6 +106,18 @@ pub fn finish_batch(
 /// Adds what every GPU command's `--stats` line reports: the adapter, the kernel's
 /// composition features and the times (`gpu_upload_s`, `gpu_kernel_s`, `gpu_readback_s`,
 /// `gpu_kernel_timestamps_s`: null where the device has no timestamp queries).
+/// Warns on stderr when the CPU computed some of `total` `items` again
+/// ([`GpuTimes::redone_on_cpu`]): the adapter's loop budget was too small for them.
+pub fn warn_redone(adapter: &str, times: &GpuTimes, total: usize, items: &str) {
+    if times.redone_on_cpu > 0 {
+        eprintln!(
+            "warning: on {adapter}, {} of {total} {items} ran out of the driver's loop budget \
+             (65535 loop iterations per 8 invocations); the CPU computed them again",
+            times.redone_on_cpu
+        );
+    }
+}
+
 pub fn add_gpu_stats(
     line: &mut serde_json::Value,
     adapter: &str,
@@ -115,4 +130,5 @@ pub fn add_gpu_stats(
     line["gpu_kernel_s"] = times.kernel_s.into();
     line["gpu_readback_s"] = times.readback_s.into();
     line["gpu_kernel_timestamps_s"] = times.kernel_gpu_s.into();
+    line["gpu_redone_on_cpu"] = times.redone_on_cpu.into();
 }

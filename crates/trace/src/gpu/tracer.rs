@@ -234,7 +234,8 @@ impl GpuTracer {
             let params = ScanParams {
                 ray_count: n as u32,
                 hierarchical: self.hierarchical as u32,
-                pad: [0; 2],
+                probe_trips: 2,
+                pad: 0,
             };
             let located = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("located"),

@@ -14,8 +14,8 @@ use std::time::Instant;
 
 use bytemuck::Zeroable;
 use hytrace_volume::{
-    global_range, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray, TexelFormat,
-    TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
+    global_range, transmittance, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray,
+    TexelFormat, TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
 use super::compose::compose;
@@ -25,7 +25,7 @@ use super::records::{
     VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO, VOLUME_ESTIMATOR_RESIDUAL,
     VOLUME_FILTER_NEAREST, VOLUME_FILTER_STOCHASTIC, VOLUME_FILTER_TRILINEAR, VOLUME_FORMAT_BC4,
     VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_UNORM16, VOLUME_FORMAT_UNORM8,
-    VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
+    VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::GPU_INF;
@@ -121,6 +121,7 @@ impl VolumeArrays {
             u32::try_from(n).map_err(|_| GpuError::SceneTooBig(format!("more than 2^32 {what}")))
         };
         let mut base = VolumeParams::zeroed();
+        base.probe_trips = 2;
         for (l, level) in mips.levels.iter().enumerate() {
             let lo = shifted(level.lo, level.side)?;
             base.level_lo[l] = [lo[0], lo[1], lo[2], level.side as i32];
@@ -270,7 +271,8 @@ impl<'a> GpuVolume<'a> {
     /// with the upload, kernel and readback seconds of the batches. Errors as the CPU's
     /// [`hytrace_volume::transmittance_batch`] on bad parameters or rays (NaN, zero
     /// direction), a march of more than `u32::MAX` steps, or a tracker meeting a negative
-    /// density.
+    /// density. Rays whose loops the driver's loop budget cut short (llvmpipe) are
+    /// computed again by that CPU twin ([`GpuTimes::redone_on_cpu`]).
     pub fn transmittance(
         &self,
         ctx: &GpuContext,
@@ -337,6 +339,18 @@ impl<'a> GpuVolume<'a> {
                         "transmittance: ray {i}: a march step of {step} needs more than {} steps",
                         u32::MAX
                     );
+                }
+                if r.status & VOLUME_STATUS_LOOPS_CUT != 0 {
+                    // The CPU twin, on the ray's own streams.
+                    out.push(transmittance(
+                        self.grid,
+                        self.grid.ranges(),
+                        &rays[i],
+                        i as u32,
+                        params,
+                    )?);
+                    times.redone_on_cpu += 1;
+                    continue;
                 }
                 out.push(Estimate {
                     transmittance: f64::from(r.transmittance),

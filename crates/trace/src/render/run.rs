@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::spec::{View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{add_gpu_stats, gpu_or_cpu, GpuContext, GpuRenderer, GpuTimes};
+use crate::gpu::{add_gpu_stats, gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes};
 use crate::scene::load_render_scene;
 
 /// Where a render runs.
@@ -31,14 +31,12 @@ struct GpuRun {
     adapter: String,
     features: Vec<&'static str>,
     times: GpuTimes,
-    /// Pixels the CPU rendered again because the driver cut their loops short.
-    redone_on_cpu: usize,
 }
 
 /// Renders on the GPU of `ctx`. Pixels whose samples ran out of the driver's loop budget
 /// (llvmpipe's: `shaders/loop_budget.wgsl`) are rendered again on the CPU, which draws
 /// the same random streams, so the image is the kernel's everywhere else and right
-/// everywhere.
+/// everywhere; `gpu_redone_on_cpu` in the stats counts them.
 fn render_gpu(
     ctx: &GpuContext,
     renderer: &Renderer,
@@ -46,23 +44,19 @@ fn render_gpu(
 ) -> anyhow::Result<(Image, GpuRun)> {
     let gpu = GpuRenderer::new(ctx, renderer)?;
     let mut run = gpu.render(ctx, renderer, progress)?;
-    if !run.cut_short.is_empty() {
-        eprintln!(
-            "warning: on {}, {} of {} pixels ran out of the driver's loop budget (65535 \
-             loop iterations per 8 invocations); the CPU rendered them again",
-            ctx.describe(),
-            run.cut_short.len(),
-            run.image.pixels.len()
-        );
-        run.redo_cut_short(renderer)?;
-    }
+    run.redo_cut_short(renderer)?;
+    warn_redone(
+        &ctx.describe(),
+        &run.times,
+        run.image.pixels.len(),
+        "pixels",
+    );
     Ok((
         run.image,
         GpuRun {
             adapter: ctx.describe(),
             features: gpu.features().to_vec(),
             times: run.times,
-            redone_on_cpu: run.cut_short.len(),
         },
     ))
 }
@@ -209,7 +203,6 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         });
         if let Some(g) = &gpu_run {
             add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
-            line["gpu_pixels_redone_on_cpu"] = g.redone_on_cpu.into();
         }
         println!("{line}");
     }
