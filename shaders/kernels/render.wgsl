@@ -1,9 +1,9 @@
 // The render kernel (hytrace render --backend gpu): twin of the CPU renderer's geometry
 // views and surface light transport (crates/trace/src/render/{views,integrator}.rs),
 // compared pixel by pixel in crates/trace/tests/gpu_render.rs. Each dispatch takes one
-// sample of every pixel of a batch; a sample is one loop whose every iteration traces one ray, the path's or a
-// shadow ray's, and then meets the media along it, so the scene traversal and the volume
-// walk are each inlined once. Shading, shadow rays, specular and media code is composed in
+// sample of every pixel of a batch; a sample is one loop whose every iteration traces one
+// ray, the path's or a shadow ray's, and then meets the media along it, so the scene
+// traversal and the volume walk are each inlined once. Shading, shadow rays, specular and media code is composed in
 // only when the scene calls for it. Media (up to RENDER_MAX_MEDIA placements, their grids
 // sharing the volume group's arrays): emission-absorption (twin of
 // render::volumes::Media::emission_absorption) or scattering (delta tracking to a real

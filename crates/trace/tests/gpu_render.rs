@@ -517,29 +517,15 @@ fn pixels_past_the_driver_loop_budget_are_rendered_again_on_the_cpu() {
         ),
     )
     .unwrap();
-    let render = |backend: &str| {
-        let out = dir.path().join(format!("{backend}.npy"));
-        let args = [
-            "render",
-            scene.to_str().unwrap(),
-            "--backend",
-            backend,
-            "--size",
-            "16x12",
-            "--step",
-            "0.0005",
-            "-o",
-            out.to_str().unwrap(),
-            "--stats",
-        ];
-        let r = hytrace(&args, &[]);
-        let err = String::from_utf8_lossy(&r.stderr).to_string();
-        assert!(r.status.success(), "{backend}: {err}");
-        let stats: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
-        (common::read_values(&out), stats, err)
-    };
-    let (gpu, stats, err) = render("gpu");
-    let (cpu, _, _) = render("cpu");
+    let args = [
+        "render",
+        scene.to_str().unwrap(),
+        "--size",
+        "16x12",
+        "--step",
+        "0.0005",
+    ];
+    let (gpu, cpu, stats, err) = common::gpu_and_cpu_values(&args, dir.path());
     let redone = stats["gpu_redone_on_cpu"].as_u64().unwrap();
     if llvmpipe {
         assert!(

@@ -253,27 +253,8 @@ fn rays_past_the_driver_loop_budget_are_traced_again_on_the_cpu() {
         bytemuck::cast_slice(&rows),
     )
     .unwrap();
-    let scan = |backend: &str| {
-        let out = p(&format!("{backend}.npy"));
-        let args = [
-            "scan",
-            &p("stack.toml"),
-            "--rays",
-            &p("rays.npy"),
-            "--out",
-            &out,
-            "--backend",
-            backend,
-            "--stats",
-        ];
-        let r = hytrace(&args, &[]);
-        let err = String::from_utf8_lossy(&r.stderr).to_string();
-        assert!(r.status.success(), "{backend}: {err}");
-        let stats: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
-        (read_values(Path::new(&out)), stats, err)
-    };
-    let (gpu, stats, err) = scan("gpu");
-    let (cpu, _, _) = scan("cpu");
+    let args = ["scan", &p("stack.toml"), "--rays", &p("rays.npy")];
+    let (gpu, cpu, stats, err) = common::gpu_and_cpu_values(&args, dir.path());
     let redone = stats["gpu_redone_on_cpu"].as_u64().unwrap();
     if llvmpipe {
         assert_eq!(redone, 8, "{stats}");

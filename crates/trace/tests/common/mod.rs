@@ -74,6 +74,35 @@ pub fn gpu_stats(out: &Output) -> serde_json::Value {
     stats
 }
 
+/// Runs `hytrace ARGS --backend B --out DIR/B.npy --stats` on the GPU and then on the CPU:
+/// the values each wrote, the GPU run's stats ([`gpu_stats`]) and its stderr.
+pub fn gpu_and_cpu_values(
+    args: &[&str],
+    dir: &Path,
+) -> (Vec<f64>, Vec<f64>, serde_json::Value, String) {
+    let run = |backend: &str| {
+        let out = dir.join(format!("{backend}.npy"));
+        let mut all = args.to_vec();
+        let path = out.to_str().unwrap();
+        all.extend(["--backend", backend, "--out", path, "--stats"]);
+        (hytrace(&all, &[]), out)
+    };
+    let (gpu, gpu_out) = run("gpu");
+    let stats = gpu_stats(&gpu);
+    let (cpu, cpu_out) = run("cpu");
+    assert!(
+        cpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cpu.stderr)
+    );
+    (
+        read_values(&gpu_out),
+        read_values(&cpu_out),
+        stats,
+        String::from_utf8_lossy(&gpu.stderr).into_owned(),
+    )
+}
+
 /// The values of a float32, float64 or int32 `.npy` file, as f64.
 pub fn read_values(path: &Path) -> Vec<f64> {
     let a = read_array(path).unwrap();
