@@ -20,21 +20,16 @@
 //! 2.30-2.74 Mrays/s on coherent rays and from 0.47-0.49 to 1.00-1.04 on incoherent ones
 //! with 2 threads, about 2.2x (see BENCHMARKS.md).
 //!
-//! BVH2 or CWBVH: measured, BVH2 kept. obvhs 0.4's compressed 8-wide BVH
-//! (`build_cwbvh_from_tris`, `fast_build`, its SSE child test) traversed with this
-//! module's watertight triangle test, against this BVH2 on the same heightfield, f32,
-//! 200 704 rays per set, one thread, four runs on the shared VM: coherent
-//! 1.043 / 1.332 / 1.234 / 1.652 Mrays/s (BVH2) vs 1.098 / 1.375 / 1.391 / 1.746 (CWBVH),
-//! +3 to +13%; incoherent 0.440 / 0.588 / 0.545 / 0.701 vs 0.569 / 0.656 / 0.653 / 0.856,
-//! +12 to +29%; build 0.67-0.96 s vs 0.70-1.37 s. That is the CWBVH's best case: its
-//! node test clamps the entry to a fixed 1e-4 (our recentred rays need a signed start),
-//! its child boxes were not padded, and zero direction components and equal-distance ties
-//! were not handled. Its 8-bit child boxes are rounded outward (min floored, max ceiled,
-//! power-of-two scales) but not to the last bit: decoding all 743 600 child boxes of that
-//! tree found one smaller than its triangles by 3e-8, so adopting it means padding the
-//! boxes before quantization and a node test of our own, for f32 only. Not clearly
-//! faster, so not adopted (BENCHMARKS.md, "Triangle meshes", says what limits the ratio
-//! to Embree).
+//! The f32 kernel's nearest-crossing search on the CPU does not walk this binary tree: it
+//! walks its wide form (module `wide`: 8 children per node and 4 triangles per SIMD test),
+//! built from it and giving the same answers bit for bit. The binary tree stays what the
+//! GPU kernels, the f64 kernel and the parity count of [`MeshPrim::contains`] traverse.
+//!
+//! obvhs' own compressed 8-wide BVH (`build_cwbvh_from_tris`) was measured first and not
+//! adopted: with our triangle test it was only 3-13% (coherent) and 12-29% (incoherent)
+//! faster than the binary walk, its node test clamps the entry to a fixed 1e-4 where our
+//! recentred rays need a signed start, and its 8-bit child boxes, rounded outward but not
+//! to the last bit, left one of 743 600 decoded boxes 3e-8 smaller than its triangles.
 
 use std::ops::Range;
 use std::time::Duration;
@@ -49,6 +44,8 @@ use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
+
+mod wide;
 
 /// A triangle mesh ready for intersection in precision `T`, closed or open.
 ///
@@ -66,6 +63,8 @@ pub struct MeshPrim<T> {
     pub(crate) bounds: Bounds<T>,
     pub(crate) scale: T,
     pub(crate) nodes: Vec<MeshNode<T>>,
+    /// The 4-wide form of the BVH the f32 kernel traverses on the CPU (`None` in f64).
+    wide: Option<wide::WideBvh>,
 }
 
 /// A BVH node: padded bounds, then either children `first, first + 1` (`count == 0`) or
@@ -258,9 +257,15 @@ impl<T: Real> MeshPrim<T> {
                     .map(|&p| triangles[p as usize].map(V3::from_f64)),
             );
         }
+        let nodes = depth_first_layout(&nodes);
+        let wide = (T::NAME == "f32").then(|| {
+            let (nodes, triangles) = wide::to_f32(&nodes, &ordered);
+            wide::WideBvh::new(&nodes, &triangles)
+        });
         Ok(MeshPrim {
             triangles: ordered,
-            nodes: depth_first_layout(&nodes),
+            nodes,
+            wide,
             bounds: [
                 V3::from_f64(lo.map(|v| v - pad)),
                 V3::from_f64(hi.map(|v| v + pad)),
@@ -400,6 +405,26 @@ impl<T: Real> MeshPrim<T> {
     /// (triangles are numbered in the order a depth-first walk visiting second children
     /// first meets them, the order earlier versions searched them in).
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
+        let from_f32 = |v: V3<f32>| V3::new(T::from_f32(v.x), T::from_f32(v.y), T::from_f32(v.z));
+        match &self.wide {
+            Some(wide) => {
+                let ray = Ray {
+                    origin: wide::point_f32(ray.origin),
+                    direction: wide::point_f32(ray.direction),
+                };
+                wide.nearest(&ray, after.to_f64() as f32, f32::INFINITY)
+                    .map(|(t, _, normal)| (T::from_f32(t), from_f32(normal)))
+            }
+            None => self.nearest_binary(ray, after).map(|(t, i)| {
+                let [v0, v1, v2] = self.triangles[i];
+                (t, (v1 - v0).cross(v2 - v0))
+            }),
+        }
+    }
+
+    /// [`Self::nearest`] by the binary BVH, one box and one triangle at a time: the f64
+    /// kernel's search, and the f32 one's on the GPU. Returns the distance and triangle.
+    fn nearest_binary(&self, ray: &Ray<T>, after: T) -> Option<(T, usize)> {
         let shear = Shear::new(ray.direction);
         let mut best: Option<(T, usize)> = None;
         self.walk(ray, after, T::INFINITY, |leaf, limit| {
@@ -421,15 +446,13 @@ impl<T: Real> MeshPrim<T> {
             }
             best.map_or(limit, |(b, _)| b)
         });
-        best.map(|(t, i)| {
-            let [v0, v1, v2] = self.triangles[i];
-            (t, (v1 - v0).cross(v2 - v0))
-        })
+        best
     }
 
-    /// Bytes of the BVH nodes.
+    /// Bytes of the BVH nodes, in both forms (the f32 kernel's wide form adds its copy of
+    /// the triangles, in blocks).
     pub fn bvh_bytes(&self) -> usize {
-        std::mem::size_of_val(self.nodes.as_slice())
+        std::mem::size_of_val(self.nodes.as_slice()) + self.wide.as_ref().map_or(0, |w| w.bytes())
     }
 
     /// The ray parameter where `ray` meets triangle `tri` (either side), by the
