@@ -6,25 +6,9 @@
 use hytrace_csg::{MeshPrim, Ray, Real, V3};
 
 mod common;
-use common::Rng;
+use common::{grid, Rng};
 
 type Tri = [[f64; 3]; 3];
-
-/// An `n x n` grid of unit quads over `[0, n]^2` with heights `z(x, y)`, two triangles per
-/// quad, counter-clockwise seen from above. With integer vertex coordinates, the BVH node
-/// boxes have their faces in the planes `x = i` and `y = j`.
-fn grid(n: usize, z: impl Fn(f64, f64) -> f64) -> Vec<Tri> {
-    let p = |i: usize, j: usize| [i as f64, j as f64, z(i as f64, j as f64)];
-    let mut tris = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
-        }
-    }
-    tris
-}
 
 fn first_hit<T: Real>(mesh: &MeshPrim<T>, o: [f64; 3], d: [f64; 3]) -> f64 {
     let ray = Ray {

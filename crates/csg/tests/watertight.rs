@@ -5,7 +5,7 @@
 use hytrace_csg::{tessellate, MeshPrim, Ray, Real, V3};
 
 mod common;
-use common::Rng;
+use common::{grid, Rng};
 
 type Tri = [[f64; 3]; 3];
 
@@ -144,22 +144,11 @@ fn rays_at_shared_edges_and_vertices_hit_f64() {
     closed_cases::<f64>();
 }
 
-/// A heightfield: an open sheet z = f(x, y) over a grid, counter-clockwise from above.
-fn heightfield(n: usize) -> Vec<Tri> {
-    let z = |i: usize, j: usize| [i as f64, j as f64, ((i * 7 + j * 3) % 5) as f64 * 0.2];
-    let mut tris = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (z(i, j), z(i + 1, j), z(i + 1, j + 1), z(i, j + 1));
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
-        }
-    }
-    tris
-}
-
 fn open_case<T: Real>() {
-    let tris = heightfield(8);
+    // A heightfield: an open sheet over a grid, counter-clockwise from above.
+    let tris = grid(8, |x, y| {
+        ((x as usize * 7 + y as usize * 3) % 5) as f64 * 0.2
+    });
     let mesh = MeshPrim::<T>::new(&tris).unwrap();
     // Straight down and straight up at every grid vertex and edge midpoint: a hit at the
     // surface, the normal up (the triangles' geometric normal) either way, "inside" only

@@ -488,51 +488,22 @@ pub(crate) fn to_f32<T: Real>(
 }
 
 #[cfg(test)]
+#[path = "../../tests/common/mod.rs"]
+mod test_common;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A small xorshift generator: the tests need reproducible rays, nothing more.
-    struct Rng(u64);
+    use super::test_common::{grid, Rng};
 
-    impl Rng {
-        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            lo + (hi - lo) * (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        fn direction(&mut self) -> [f64; 3] {
-            loop {
-                let d = [0; 3].map(|_| self.uniform(-1.0, 1.0));
-                let l = d.iter().map(|c| c * c).sum::<f64>().sqrt();
-                if l > 0.1 && l < 1.0 {
-                    return d.map(|c| c / l);
-                }
-            }
-        }
-    }
-
-    /// An `n x n` grid of unit quads with integer heights, shifted by `offset`: every
-    /// vertex, edge and box face is exact in f32, so rays aimed at them meet edge functions
-    /// of exactly 0.
-    fn grid(n: usize, offset: f64) -> Vec<[[f64; 3]; 3]> {
-        let p = |i: usize, j: usize| {
-            [
-                i as f64 + offset,
-                j as f64 + offset,
-                ((i * j) % 3) as f64 + offset,
-            ]
-        };
-        let mut tris = Vec::new();
-        for i in 0..n {
-            for j in 0..n {
-                let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
-                tris.push([a, b, c]);
-                tris.push([a, c, d]);
-            }
-        }
-        tris
+    /// A grid with integer heights, shifted by `offset`: every vertex, edge and box face is
+    /// exact in f32, so rays aimed at them meet edge functions of exactly 0.
+    fn shifted_grid(n: usize, offset: f64) -> Vec<[[f64; 3]; 3]> {
+        let tris = grid(n, |x, y| ((x as usize * y as usize) % 3) as f64);
+        tris.iter()
+            .map(|t| t.map(|v| v.map(|c| c + offset)))
+            .collect()
     }
 
     /// Runs both searches on a ray and its recentred form; returns whether it hit.
@@ -566,18 +537,18 @@ mod tests {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
         let mut soup = Vec::new();
         for _ in 0..3000 {
-            let c = [0; 3].map(|_| rng.uniform(-10.0, 10.0));
-            let size = rng.uniform(0.01, 2.0);
+            let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
+            let size = rng.range(0.01, 2.0);
             soup.push([0; 3].map(|_| {
-                let e = rng.direction();
+                let e = rng.unit();
                 [0, 1, 2].map(|k| c[k] + size * e[k])
             }));
         }
         let mesh = MeshPrim::<f32>::new(&soup).unwrap();
         let mut hits = 0;
         for _ in 0..20_000 {
-            let o = [0; 3].map(|_| rng.uniform(-15.0, 15.0));
-            hits += both_agree(&mesh, o, rng.direction()) as usize;
+            let o = [0; 3].map(|_| rng.range(-15.0, 15.0));
+            hits += both_agree(&mesh, o, rng.unit()) as usize;
         }
         assert!(hits > 5_000, "only {hits} of 20000 rays hit the soup");
     }
@@ -585,7 +556,7 @@ mod tests {
     #[test]
     fn wide_search_equals_the_binary_one_on_edges_vertices_and_box_faces() {
         for offset in [0.0, 1.0e5] {
-            let mesh = MeshPrim::<f32>::new(&grid(24, offset)).unwrap();
+            let mesh = MeshPrim::<f32>::new(&shifted_grid(24, offset)).unwrap();
             let mut hits = 0;
             // Rays straight down (two zero components) and tilted in one axis plane (one
             // zero component) onto every vertex, edge midpoint and quad centre.
@@ -606,13 +577,13 @@ mod tests {
             let mut rng = Rng(7);
             for k in 0..2000 {
                 let o = [
-                    offset + rng.uniform(-2.0, 26.0),
+                    offset + rng.range(-2.0, 26.0),
                     offset + (k % 25) as f64,
-                    offset + rng.uniform(-1.0, 3.0),
+                    offset + rng.range(-1.0, 3.0),
                 ];
-                let d = [rng.uniform(-1.0, 1.0), 0.0, rng.uniform(-0.2, 0.2)];
+                let d = [rng.range(-1.0, 1.0), 0.0, rng.range(-0.2, 0.2)];
                 both_agree(&mesh, o, d);
-                both_agree(&mesh, o, rng.direction());
+                both_agree(&mesh, o, rng.unit());
             }
         }
     }
