@@ -127,6 +127,18 @@ fn main() {
                 "|  | agreement cpu vs Embree | {:.4}% | | | |",
                 100.0 * agree as f64 / rays.len() as f64
             );
+            let (secs, embree_occluded) = best(|| {
+                rays.par_iter()
+                    .filter(|r| embree.occluded(&ray32(r), 0.0, f32::INFINITY).unwrap())
+                    .count()
+            });
+            row(
+                "any hit",
+                "Embree 3 (hytrace backend)",
+                embree_build_s,
+                secs,
+                embree_occluded,
+            );
         }
         for (label, estimator) in [
             ("transmittance exact", Estimator::Exact),

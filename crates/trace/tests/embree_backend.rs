@@ -217,6 +217,73 @@ mod with_embree {
         }
     }
 
+    /// Any-hit queries: Embree's `rtcOccluded1` (triangles native, CSG through the occluded
+    /// callback, instances) against [`CpuScene::occluded`] on every ray, and on each ray that
+    /// hits again with its segment ending halfway to the CPU's hit (nothing is crossed
+    /// before it) and just past it (the hit is crossed): flat CSG, mixed, mesh-file and
+    /// hierarchical GDML scenes.
+    #[test]
+    fn occlusion_agrees_with_the_cpu() {
+        let mesh = obj_to_foundry(mesh_obj().as_bytes()).unwrap();
+        let mesh_rays = mesh_scene_rays(&mesh);
+        let mut scenes = vec![("mesh", mesh, mesh_rays)];
+        for (name, f) in [
+            ("default", default_scene().unwrap()),
+            (
+                "mixed",
+                load_scene(Some(&repo("scenes/mixed.toml")), &GdmlOptions::default()).unwrap(),
+            ),
+            (
+                "coverage.gdml",
+                load_scene(
+                    Some(&repo("tests/data/gdml/coverage.gdml")),
+                    &GdmlOptions::default(),
+                )
+                .unwrap(),
+            ),
+        ] {
+            let rays = rays_for(&f, 60, 10_000);
+            scenes.push((name, f, rays));
+        }
+        for (name, f, rays) in scenes {
+            let cpu = CpuScene::<f32>::new(&f).unwrap();
+            let embree = EmbreeScene::new(&f, &cpu).unwrap();
+            let (mut queries, mut blocked, mut differ) = (0usize, 0usize, Vec::new());
+            for (i, r) in rays.iter().enumerate() {
+                let (ray, tmin, tmax) = f32_ray(r);
+                let mut segments = vec![(tmin, tmax)];
+                if let Some(h) = cpu.trace(&ray, tmin, tmax) {
+                    let to_hit = h.t - tmin;
+                    segments.push((tmin, tmin + 0.5 * to_hit));
+                    segments.push((tmin, (h.t + 0.01 * to_hit).min(tmax)));
+                }
+                for (a, b) in segments {
+                    let want = cpu.occluded(&ray, a, b);
+                    let got = embree.occluded(&ray, a, b).unwrap();
+                    queries += 1;
+                    blocked += want as usize;
+                    if got != want {
+                        differ.push(format!("ray {i} over ({a}, {b}): cpu {want}, embree {got}"));
+                    }
+                }
+            }
+            eprintln!(
+                "{name}: {queries} any-hit queries, {blocked} occluded, {} differ",
+                differ.len()
+            );
+            assert!(
+                blocked > queries / 10 && blocked < queries * 9 / 10,
+                "{name}: {blocked} of {queries} occluded"
+            );
+            assert!(
+                differ.len() * 1000 <= queries,
+                "{name}: {} of {queries} differ: {:?}",
+                differ.len(),
+                &differ[..differ.len().min(10)]
+            );
+        }
+    }
+
     fn hytrace(args: &[&str]) -> Output {
         Command::new(env!("CARGO_BIN_EXE_hytrace"))
             .args(args)

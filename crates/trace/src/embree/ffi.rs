@@ -1,6 +1,6 @@
 //! Hand-written bindings to the part of Embree 3's C API (`embree3/rtcore.h`, 3.13) that
-//! the backend uses: devices, scenes, triangle, user and instance geometries, and
-//! `rtcIntersect1`.
+//! the backend uses: devices, scenes, triangle, user and instance geometries,
+//! `rtcIntersect1` and `rtcOccluded1`.
 //!
 //! Layouts and constants are copied from the 3.13.5 headers (configured with
 //! `RTC_MAX_INSTANCE_LEVEL_COUNT 1` and `RTC_MIN_WIDTH 0`, as Debian builds them);
@@ -215,6 +215,10 @@ pub struct RTCIntersectFunctionNArguments {
 pub type RTCBoundsFunction = unsafe extern "C" fn(args: *const RTCBoundsFunctionArguments);
 /// `RTCIntersectFunctionN`.
 pub type RTCIntersectFunctionN = unsafe extern "C" fn(args: *const RTCIntersectFunctionNArguments);
+/// `RTCOccludedFunctionN`. Its `struct RTCOccludedFunctionNArguments` has the fields of
+/// [`RTCIntersectFunctionNArguments`] in the same order, with rays only (an `RTCRayN`,
+/// [`RTCRay`]'s fields) where `rayhit` is; an occluded ray gets `tfar = -inf`.
+pub type RTCOccludedFunctionN = unsafe extern "C" fn(args: *const RTCIntersectFunctionNArguments);
 
 #[allow(non_snake_case)]
 extern "C" {
@@ -241,6 +245,8 @@ extern "C" {
         context: *mut RTCIntersectContext,
         rayhit: *mut RTCRayHit,
     );
+    /// Sets `ray.tfar` to -inf when some geometry crosses the ray in `[tnear, tfar]`.
+    pub fn rtcOccluded1(scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay);
 
     /// Creates a geometry of `enum RTCGeometryType`.
     pub fn rtcNewGeometry(device: RTCDevice, kind: u32) -> RTCGeometry;
@@ -271,6 +277,11 @@ extern "C" {
     pub fn rtcSetGeometryIntersectFunction(
         geometry: RTCGeometry,
         intersect: Option<RTCIntersectFunctionN>,
+    );
+    /// Occlusion callback of a user geometry.
+    pub fn rtcSetGeometryOccludedFunction(
+        geometry: RTCGeometry,
+        occluded: Option<RTCOccludedFunctionN>,
     );
     /// The scene an instance geometry places.
     pub fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);

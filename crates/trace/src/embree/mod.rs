@@ -15,6 +15,9 @@
 //! of the two wins (the exit on a tie, as on the CPU). Ties between instances at the same
 //! `t` may go to a different instance than on the CPU (which takes the lowest index).
 //!
+//! Any-hit queries ([`EmbreeScene::occluded`]) go through `rtcOccluded1`, which stops at the
+//! first crossing it finds.
+//!
 //! Every Embree object is released on drop. Requires the `embree` cargo feature and
 //! Embree 3 (Debian: `libembree-dev`).
 
@@ -140,6 +143,64 @@ impl<'a> EmbreeScene<'a> {
         }))
     }
 
+    /// Whether any surface crosses the ray with `tmin < t < tmax`, as
+    /// [`CpuScene::occluded`] answers it: Embree's any-hit query (`rtcOccluded1`, which
+    /// stops at the first crossing found) over the top-level instances, or, from inside an
+    /// instance of a hierarchy, whether [`Self::trace`] finds a crossing. Fails only if one
+    /// of our intersection callbacks panicked.
+    pub fn occluded(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> anyhow::Result<bool> {
+        if self.cpu.locate_origin(ray.origin).is_some() {
+            return Ok(self.trace(ray, tmin, tmax)?.is_some());
+        }
+        // From outside every root, a crossing of a daughter comes after one of its mother,
+        // so the top-level instances decide.
+        let Some(group) = self.top.as_ref() else {
+            return Ok(false);
+        };
+        let (o, d) = (ray.origin, ray.direction);
+        // Embree's triangles accept `tnear <= t <= tfar`: the neighbouring floats make the
+        // segment open, as the CPU's (an empty segment, `tnear > tfar`, meets nothing).
+        let mut embree_ray = ffi::RTCRay {
+            org_x: o.x,
+            org_y: o.y,
+            org_z: o.z,
+            tnear: tmin.next_up(),
+            dir_x: d.x,
+            dir_y: d.y,
+            dir_z: d.z,
+            time: 0.0,
+            tfar: tmax.next_down(),
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        };
+        let mut ctx = self.context(group, ray);
+        // SAFETY: the scene is committed and alive; `ctx` starts with the
+        // `RTCIntersectContext` (repr(C)) and outlives the call, as does `embree_ray`.
+        unsafe {
+            ffi::rtcOccluded1(
+                group.scene.raw(),
+                &mut ctx as *mut TraceContext as *mut ffi::RTCIntersectContext,
+                &mut embree_ray,
+            )
+        };
+        if ctx.panicked.get() {
+            bail!("Embree: an intersection callback panicked");
+        }
+        Ok(embree_ray.tfar == f32::NEG_INFINITY)
+    }
+
+    /// The context of one query on `group`'s scene.
+    fn context<'s>(&'s self, group: &'s GroupScene, ray: &Ray<f32>) -> TraceContext<'s> {
+        TraceContext {
+            base: ffi::RTCIntersectContext::default(),
+            ray: *ray,
+            members: &group.members,
+            cpu: self.cpu,
+            panicked: Cell::new(false),
+        }
+    }
+
     /// Embree's closest hit in `(tmin, tmax)` among a group's instances (normal in the
     /// instance's frame).
     fn enter(
@@ -171,13 +232,7 @@ impl<'a> EmbreeScene<'a> {
                 ..Default::default()
             },
         };
-        let mut ctx = TraceContext {
-            base: ffi::RTCIntersectContext::default(),
-            ray: *ray,
-            members: &group.members,
-            cpu: self.cpu,
-            panicked: Cell::new(false),
-        };
+        let mut ctx = self.context(group, ray);
         // SAFETY: the scene is committed and alive; `ctx` starts with the
         // `RTCIntersectContext` (repr(C)) and outlives the call, as does `rayhit`.
         unsafe {

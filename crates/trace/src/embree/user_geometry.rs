@@ -8,9 +8,10 @@
 //! precision far from the world origin. The world ray travels in [`TraceContext`], which
 //! starts with the `RTCIntersectContext` Embree passes back to callbacks.
 //!
-//! The backend only calls `rtcIntersect1`, so every callback sees `N == 1`: one ray in the
-//! structure-of-arrays `RTCRayHitN`, whose layout for `N == 1` is [`ffi::RTCRayHit`]'s
-//! fields in order (checked by the layout test). Callbacks never unwind into Embree: a
+//! The backend only calls `rtcIntersect1` and `rtcOccluded1`, so every callback sees
+//! `N == 1`: one ray in the structure-of-arrays `RTCRayHitN` (or `RTCRayN`), whose layout
+//! for `N == 1` is [`ffi::RTCRayHit`]'s (or [`ffi::RTCRay`]'s) fields in order (checked by
+//! the layout test). Callbacks never unwind into Embree: a
 //! panic is caught and flagged in the context, and the trace reports it as an error.
 
 use std::cell::Cell;
@@ -79,6 +80,7 @@ impl<'a> CsgPrims<'a> {
             ffi::rtcSetGeometryUserData(g.raw(), user);
             ffi::rtcSetGeometryBoundsFunction(g.raw(), Some(bounds), user);
             ffi::rtcSetGeometryIntersectFunction(g.raw(), Some(intersect));
+            ffi::rtcSetGeometryOccludedFunction(g.raw(), Some(occluded));
         }
         device.check(|| "setting up a CSG user geometry".into())?;
         Ok(g)
@@ -135,22 +137,28 @@ const PRIM_ID: usize = HIT + 5;
 const GEOM_ID: usize = HIT + 6;
 const INST_ID: usize = HIT + 7;
 
-/// `RTCIntersectFunctionN`: the first crossing of a CSG prim, accepted when it lies in the
-/// ray's open segment `(tnear, tfar)`. The hit's `primID` is the prim's Foundry index.
-unsafe extern "C" fn intersect(args: *const ffi::RTCIntersectFunctionNArguments) {
-    // SAFETY: Embree passes valid arguments; the user pointer is the `CsgPrims` set in
-    // `CsgPrims::geometry` and the context the `TraceContext` given to `rtcIntersect1`
-    // (the only entry point the backend uses), both alive during the call.
-    let args = unsafe { &*args };
+/// The first crossing of the callback's CSG prim in the ray's open segment `(tnear, tfar)`
+/// (read from the ray's words), with the prim's Foundry index and the instance; `None`
+/// also when the call is not one the backend makes. A panic is flagged in the context.
+///
+/// # Safety
+/// `args` must be the arguments Embree passes to an intersect or occluded callback of a
+/// geometry set up by [`CsgPrims::geometry`], during `rtcIntersect1` or `rtcOccluded1`
+/// with a [`TraceContext`].
+unsafe fn crossing(
+    args: &ffi::RTCIntersectFunctionNArguments,
+) -> Option<(u32, hytrace_csg::kernel::Step<f32>, u32)> {
+    // SAFETY: per the function's contract, the user pointer is the `CsgPrims` set in
+    // `CsgPrims::geometry` and the context a `TraceContext`, both alive during the call.
     let prims = unsafe { &*(args.geometry_user_ptr as *const CsgPrims) };
     let ctx = unsafe { &*(args.context as *const TraceContext) };
-    // SAFETY: `valid` has `N` entries; `rtcIntersect1` calls with `N == 1`.
+    // SAFETY: `valid` has `N` entries; the backend's calls have `N == 1`.
     if args.n != 1 || unsafe { *args.valid } == 0 {
-        return;
+        return None;
     }
-    let words = args.rayhit as *mut u32;
-    let floats = args.rayhit as *mut f32;
-    // SAFETY: with `N == 1` the structure of arrays has one word per field, 20 in all.
+    let floats = args.rayhit as *const f32;
+    // SAFETY: with `N == 1` the structure of arrays has one word per field, the ray's
+    // first (12 words, `tnear` and `tfar` among them).
     let (tnear, tfar) = unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) };
     let instance = ctx.base.inst_id[0];
     let found = catch_unwind(AssertUnwindSafe(|| {
@@ -158,22 +166,46 @@ unsafe extern "C" fn intersect(args: *const ffi::RTCIntersectFunctionNArguments)
         let index = *ctx.members.get(instance as usize)?;
         let local = ctx.cpu.instance_frame(index).ray_to_local(&ctx.ray);
         let step = prim.first_crossing(&local, tnear);
-        (step.t > tnear && step.t < tfar).then_some((*id, step))
+        (step.t > tnear && step.t < tfar).then_some((*id, step, instance))
     }));
-    let Ok(found) = found else {
+    found.unwrap_or_else(|_| {
         ctx.panicked.set(true);
+        None
+    })
+}
+
+/// `RTCIntersectFunctionN`: the first crossing of a CSG prim, accepted when it lies in the
+/// ray's open segment `(tnear, tfar)`. The hit's `primID` is the prim's Foundry index.
+unsafe extern "C" fn intersect(args: *const ffi::RTCIntersectFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments of a geometry set up by `CsgPrims::geometry`,
+    // during the backend's `rtcIntersect1` with a `TraceContext`.
+    let args = unsafe { &*args };
+    let Some((id, step, instance)) = (unsafe { crossing(args) }) else {
         return;
     };
-    if let Some((id, step)) = found {
-        // SAFETY: as above; the callback owns lane 0 of the hit for this call.
-        unsafe {
-            *floats.add(TFAR) = step.t;
-            *floats.add(NG_X) = step.normal.x;
-            *floats.add(NG_X + 1) = step.normal.y;
-            *floats.add(NG_X + 2) = step.normal.z;
-            *words.add(PRIM_ID) = id;
-            *words.add(GEOM_ID) = args.geom_id;
-            *words.add(INST_ID) = instance;
-        }
+    let words = args.rayhit as *mut u32;
+    let floats = args.rayhit as *mut f32;
+    // SAFETY: with `N == 1` the `RTCRayHitN` is 20 words; the callback owns lane 0 of the
+    // hit for this call.
+    unsafe {
+        *floats.add(TFAR) = step.t;
+        *floats.add(NG_X) = step.normal.x;
+        *floats.add(NG_X + 1) = step.normal.y;
+        *floats.add(NG_X + 2) = step.normal.z;
+        *words.add(PRIM_ID) = id;
+        *words.add(GEOM_ID) = args.geom_id;
+        *words.add(INST_ID) = instance;
+    }
+}
+
+/// `RTCOccludedFunctionN`: marks the ray occluded (`tfar = -inf`) when the CSG prim is
+/// crossed in its open segment `(tnear, tfar)`.
+unsafe extern "C" fn occluded(args: *const ffi::RTCIntersectFunctionNArguments) {
+    // SAFETY: as for `intersect`, during the backend's `rtcOccluded1`; the arguments have
+    // the intersect arguments' layout with an `RTCRayN` in place of the `RTCRayHitN`.
+    let args = unsafe { &*args };
+    if unsafe { crossing(args) }.is_some() {
+        // SAFETY: with `N == 1` the `RTCRayN` is 12 words; the callback owns lane 0.
+        unsafe { *(args.rayhit as *mut f32).add(TFAR) = f32::NEG_INFINITY };
     }
 }
