@@ -313,12 +313,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             transmittance,
             estimate,
         } => {
-            if transmittance.is_some() && backend == Backend::Embree {
-                anyhow::bail!(
-                    "--transmittance needs --backend cpu, gpu or auto: the embree backend \
-                     answers surfaces only"
-                );
-            }
             let t0 = std::time::Instant::now();
             let f = scene::load_scene(scene.as_deref(), &options)?;
             let ray_rows = match (sweep_kind, &rays) {

@@ -417,15 +417,12 @@ pub fn scan_transmittance_on(
     params: &TransmittanceParams,
     backend: Backend,
 ) -> anyhow::Result<TransmittanceRun> {
-    if backend == Backend::Embree {
-        bail!("the Embree backend answers surfaces only: transmittance needs cpu, gpu or auto");
-    }
     let (result, times) = scan_with(foundry, rays, precision, backend)?;
     let ends = ray_ends(&result, rays);
-    let ran_on = if times.gpu.is_some() {
-        Backend::Gpu
-    } else {
-        Backend::Cpu
+    let ran_on = match backend {
+        Backend::Embree => Backend::Embree,
+        _ if times.gpu.is_some() => Backend::Gpu,
+        _ => Backend::Cpu,
     };
     media_transmittance(foundry, rays, &ends, precision, params, ran_on)
 }
@@ -444,8 +441,9 @@ pub fn ray_ends(result: &ScanResult, rays: &[RayRow]) -> Vec<f64> {
 /// Transmittance of the scene's media along every ray over `[tmin, ends[i]]` (the ends a
 /// scan found, [`ray_ends`]), on `backend`. On the GPU (f32 only) the transmittance kernel
 /// estimates every medium on the very index-space segments and random streams the CPU
-/// would; `auto` falls back to the CPU with a line on stderr when the GPU fails. Embree
-/// answers surfaces only.
+/// would; `auto` falls back to the CPU with a line on stderr when the GPU fails. With
+/// Embree (f32 only) the brick clusters each ray meets are found by Embree, the estimates
+/// are the CPU's.
 pub fn media_transmittance(
     foundry: &Foundry,
     rays: &[RayRow],
@@ -475,9 +473,10 @@ pub fn media_transmittance(
     match (backend, precision) {
         (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, ends, params),
         (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, ends, params),
-        (Backend::Embree, _) => {
-            bail!("the Embree backend answers surfaces only: transmittance needs cpu, gpu or auto")
+        (Backend::Embree, Precision::F64) => {
+            bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
+        (Backend::Embree, Precision::F32) => embree_transmittance(foundry, rays, ends, params),
         (Backend::Gpu | Backend::Auto, Precision::F64) => {
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
@@ -609,10 +608,51 @@ fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, Scan
 
 #[cfg(not(feature = "embree"))]
 fn embree_scan(_: &Foundry, _: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
-    bail!(
-        "this hytrace was built without Embree; rebuild with \
-         `cargo build --release --features embree` (needs Debian's libembree-dev)"
-    )
+    bail!(NO_EMBREE)
+}
+
+/// Why a build without the `embree` feature refuses `--backend embree`.
+#[cfg(not(feature = "embree"))]
+const NO_EMBREE: &str = "this hytrace was built without Embree; rebuild with \
+     `cargo build --release --features embree` (needs Debian's libembree-dev)";
+
+/// The media's transmittance over each ray's `[tmin, end]` with Embree finding the brick
+/// clusters (see [`crate::embree::EmbreeScene::trace_transmittance`]).
+#[cfg(feature = "embree")]
+fn embree_transmittance(
+    f: &Foundry,
+    rays: &[RayRow],
+    ends: &[f64],
+    params: &TransmittanceParams,
+) -> anyhow::Result<TransmittanceRun> {
+    let t0 = Instant::now();
+    let cpu = CpuScene::<f32>::new(f)?;
+    let media = SceneMedia::new(&cpu, f, params)?;
+    let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
+    let t1 = Instant::now();
+    let values = media.transmittances_with(rays, ends, |r, end| {
+        let ray = Ray {
+            origin: V3::from_f64(r.origin),
+            direction: V3::from_f64(r.direction),
+        };
+        scene.cluster_visits(&ray, r.tmin, end)
+    })?;
+    Ok(TransmittanceRun {
+        values,
+        open_s: (t1 - t0).as_secs_f64(),
+        transmittance_s: t1.elapsed().as_secs_f64(),
+        gpu: None,
+    })
+}
+
+#[cfg(not(feature = "embree"))]
+fn embree_transmittance(
+    _: &Foundry,
+    _: &[RayRow],
+    _: &[f64],
+    _: &TransmittanceParams,
+) -> anyhow::Result<TransmittanceRun> {
+    bail!(NO_EMBREE)
 }
 
 /// Writes hits (and ids) atomically: float32 or float64 per the precision.

@@ -183,9 +183,40 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         end: f64,
         ray_index: u32,
     ) -> anyhow::Result<(f64, u64)> {
+        let spans = self.spans(&ray_in(origin, direction), tmin, end);
+        self.transmittance_over(origin, direction, spans, ray_index)
+    }
+
+    /// [`Self::transmittance_to`] with the brick clusters the ray meets found by another
+    /// backend (the Embree one): `visits` lists `(instance, medium, t0, t1)` for every
+    /// cluster of a placed medium whose box the ray crosses over `[t0, t1]` within
+    /// `[tmin, end]`, in any order, as [`CpuScene`]'s own search finds them.
+    pub fn transmittance_with(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        tmin: f64,
+        end: f64,
+        visits: impl IntoIterator<Item = (u32, u32, f64, f64)>,
+        ray_index: u32,
+    ) -> anyhow::Result<(f64, u64)> {
+        let ray: Ray<T> = ray_in(origin, direction);
+        let spans = merge_spans(&ray, tmin, end, visits);
+        self.transmittance_over(origin, direction, spans, ray_index)
+    }
+
+    /// The product of the media's transmittances over their spans on the ray, and the
+    /// lookups spent.
+    fn transmittance_over(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        spans: Vec<((u32, u32), (f64, f64))>,
+        ray_index: u32,
+    ) -> anyhow::Result<(f64, u64)> {
         let mut transmittance = 1.0;
         let mut lookups = 0;
-        for s in self.segments(origin, direction, tmin, end)? {
+        for s in self.segments_of(origin, direction, spans)? {
             let params = self.params(s.medium, s.placement);
             let grid = self.grid(s.medium);
             let e = IndexTransmittance::new(grid, grid.ranges(), &params)?
@@ -217,6 +248,33 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     /// The transmittance along every ray up to its end (`ends[i]`: its first surface
     /// crossing from a scan, or its `tmax`), ray `i` drawing the streams of index `i`.
     pub fn transmittances_to(&self, rays: &[RayRow], ends: &[f64]) -> anyhow::Result<Vec<f64>> {
+        self.each_ray(rays, ends, |r, end, i| {
+            self.transmittance_to(r.origin, r.direction, r.tmin, end, i)
+        })
+    }
+
+    /// [`Self::transmittances_to`] with the clusters each ray meets over `[tmin, end]` found
+    /// by another backend (see [`Self::transmittance_with`]).
+    pub fn transmittances_with(
+        &self,
+        rays: &[RayRow],
+        ends: &[f64],
+        visits: impl Fn(&RayRow, f64) -> anyhow::Result<Vec<(u32, u32, f64, f64)>> + Sync,
+    ) -> anyhow::Result<Vec<f64>> {
+        self.each_ray(rays, ends, |r, end, i| {
+            let found = visits(r, end)?;
+            self.transmittance_with(r.origin, r.direction, r.tmin, end, found, i)
+        })
+    }
+
+    /// `estimate(ray, end, ray index)` of every ray in parallel (the transmittances); an
+    /// error names the first ray that fails.
+    fn each_ray(
+        &self,
+        rays: &[RayRow],
+        ends: &[f64],
+        estimate: impl Fn(&RayRow, f64, u32) -> anyhow::Result<(f64, u64)> + Sync,
+    ) -> anyhow::Result<Vec<f64>> {
         anyhow::ensure!(
             rays.len() == ends.len() && u32::try_from(rays.len()).is_ok(),
             "{} rays and {} ends: need as many, at most {}",
@@ -228,7 +286,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .zip(ends)
             .enumerate()
             .map(|(i, (r, &end))| {
-                self.transmittance_to(r.origin, r.direction, r.tmin, end, i as u32)
+                estimate(r, end, i as u32)
                     .map(|(t, _)| t)
                     .with_context(|| format!("ray {i}"))
             })
@@ -270,8 +328,18 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmin: f64,
         end: f64,
     ) -> anyhow::Result<Vec<MediumSegment>> {
-        let ray = ray_in::<T>(origin, direction);
-        self.spans(&ray, tmin, end)
+        let spans = self.spans(&ray_in(origin, direction), tmin, end);
+        self.segments_of(origin, direction, spans)
+    }
+
+    /// The segments of the ray over the spans of [`Self::spans`] (or [`merge_spans`]).
+    fn segments_of(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        spans: Vec<((u32, u32), (f64, f64))>,
+    ) -> anyhow::Result<Vec<MediumSegment>> {
+        spans
             .into_iter()
             .enumerate()
             .map(|(k, ((instance, medium), (t0, t1)))| {
@@ -287,24 +355,16 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     }
 
     /// The part of `[tmin, end]` inside the brick clusters of each placed medium the ray
-    /// meets, widened for the rounding of the precision `T` tests and clamped to
-    /// `[tmin, end]`: `((instance, medium), (t0, t1))` in instance order.
+    /// meets (see [`merge_spans`]), the clusters found through the scene's BVHs.
     fn spans(&self, ray: &Ray<T>, tmin: f64, end: f64) -> Vec<((u32, u32), (f64, f64))> {
         let scene = self.scene;
-        let o = ray.origin.to_f64();
-        let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
-        // ((instance, medium), (t0, t1)): a ray meets few placed media, so a list it is.
-        let mut spans: Vec<((u32, u32), (f64, f64))> = Vec::new();
+        let mut visits = Vec::new();
         let (lo, hi) = (T::from_f64(tmin), T::from_f64(end));
         let mut visit_instance = |i: u32| {
             let p = &scene.placements[i as usize];
             let local = p.frame.ray_to_local(ray);
             scene.solids[p.solid].visit_clusters(&local, lo, hi, |c, t0, t1| {
-                let (t0, t1) = (t0.to_f64(), t1.to_f64());
-                match spans.iter_mut().find(|(key, _)| *key == (i, c.medium)) {
-                    Some((_, span)) => *span = (span.0.min(t0), span.1.max(t1)),
-                    None => spans.push(((i, c.medium), (t0, t1))),
-                }
+                visits.push((i, c.medium, t0.to_f64(), t1.to_f64()));
             });
         };
         let group = &scene.media;
@@ -315,17 +375,40 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                 hi
             }),
         }
-        // Instance order, whatever order the BVH visited them in: it picks the seeds.
-        spans.sort_unstable_by_key(|(key, _)| *key);
-        spans
-            .into_iter()
-            .map(|(key, (t0, t1))| {
-                // Precision-T slab tests are off by a few ulps of the larger of t and the
-                // coordinates; the density is zero just outside the clusters, so widening
-                // costs nothing but a few empty steps.
-                let slack = 64.0 * T::EPSILON.to_f64() * (t0.abs().max(t1.abs()) + reach);
-                (key, ((t0 - slack).max(tmin), (t1 + slack).min(end)))
-            })
-            .collect()
+        merge_spans(ray, tmin, end, visits)
     }
+}
+
+/// The part of `[tmin, end]` inside the brick clusters of each placed medium, from the
+/// clusters the ray meets (`(instance, medium, t0, t1)`, in any order), widened for the
+/// rounding of the precision `T` tests and clamped to `[tmin, end]`:
+/// `((instance, medium), (t0, t1))` in instance order.
+fn merge_spans<T: Real>(
+    ray: &Ray<T>,
+    tmin: f64,
+    end: f64,
+    visits: impl IntoIterator<Item = (u32, u32, f64, f64)>,
+) -> Vec<((u32, u32), (f64, f64))> {
+    let o = ray.origin.to_f64();
+    let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+    // ((instance, medium), (t0, t1)): a ray meets few placed media, so a list it is.
+    let mut spans: Vec<((u32, u32), (f64, f64))> = Vec::new();
+    for (i, medium, t0, t1) in visits {
+        match spans.iter_mut().find(|(key, _)| *key == (i, medium)) {
+            Some((_, span)) => *span = (span.0.min(t0), span.1.max(t1)),
+            None => spans.push(((i, medium), (t0, t1))),
+        }
+    }
+    // Instance order, whatever order the clusters were visited in: it picks the seeds.
+    spans.sort_unstable_by_key(|(key, _)| *key);
+    spans
+        .into_iter()
+        .map(|(key, (t0, t1))| {
+            // Precision-T slab tests are off by a few ulps of the larger of t and the
+            // coordinates; the density is zero just outside the clusters, so widening
+            // costs nothing but a few empty steps.
+            let slack = 64.0 * T::EPSILON.to_f64() * (t0.abs().max(t1.abs()) + reach);
+            (key, ((t0 - slack).max(tmin), (t1 + slack).min(end)))
+        })
+        .collect()
 }

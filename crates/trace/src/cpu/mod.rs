@@ -33,7 +33,7 @@ pub mod gpu_export;
 pub mod media;
 #[cfg(feature = "embree")]
 mod parts;
-mod solid;
+pub(crate) mod solid;
 #[cfg(test)]
 mod tests;
 

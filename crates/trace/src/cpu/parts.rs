@@ -1,16 +1,30 @@
 //! Read access to the pieces of a [`CpuScene`] that other tracers build on (the Embree
-//! backend): prims per solid, placements, the search groups, and the navigator's locate and
-//! exit steps. Each accessor only forwards to the scene's own fields and methods.
+//! backend): prims and brick clusters per solid, placements, the search groups, and the
+//! navigator's locate and exit steps. Each accessor only forwards to the scene's own fields and methods.
 
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{PreparedPrim, Ray, Real, V3};
 
+#[cfg(feature = "embree")]
+use super::solid::Cluster;
 use super::{CpuScene, Hit, Layout};
 
 impl<T: Real> CpuScene<T> {
     /// The surface prims (CSG trees and meshes) of solid `solid`, in the solid's frame.
     pub(crate) fn solid_prims(&self, solid: usize) -> &[PreparedPrim<T>] {
         &self.solids[solid].prims
+    }
+
+    /// The volume-brick clusters of solid `solid`, in the solid's frame.
+    #[cfg(feature = "embree")]
+    pub(crate) fn solid_clusters(&self, solid: usize) -> &[Cluster<T>] {
+        &self.solids[solid].clusters
+    }
+
+    /// The instances whose solids hold media.
+    #[cfg(feature = "embree")]
+    pub(crate) fn media_members(&self) -> &[u32] {
+        &self.media.members
     }
 
     /// The solid instance `instance` places.

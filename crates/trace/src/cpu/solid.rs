@@ -24,7 +24,7 @@ pub const CLUSTER_SIDE: i32 = 64;
 
 /// Bricks of one medium in one 64^3-voxel region.
 #[derive(Clone, Debug)]
-pub(super) struct Cluster<T> {
+pub(crate) struct Cluster<T> {
     /// Index of the medium (into the Foundry's `optics.media`).
     pub medium: u32,
     /// Box in the solid's frame.

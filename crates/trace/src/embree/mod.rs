@@ -25,16 +25,17 @@ pub mod ffi;
 mod handle;
 mod user_geometry;
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 
 use anyhow::{bail, Context};
 use hytrace_csg::{Ray, V3};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
+use crate::cpu::media::{SceneMedia, Transmitted};
 use crate::cpu::{CpuScene, Hit};
 use handle::{Device, Geometry, Scene};
-use user_geometry::{CsgPrims, TraceContext};
+use user_geometry::{ClusterBoxes, CsgPrims, MediaContext, TraceContext};
 
 /// A top-level scene over a group of instances, with the instance index of each of its
 /// geometry ids.
@@ -62,11 +63,17 @@ pub struct EmbreeScene<'a> {
     top: Option<GroupScene>,
     /// Per instance: the top-level scene of its daughters (hierarchies only).
     daughters: Vec<Option<GroupScene>>,
+    /// The instances holding media, each an Embree instance of its solid's clusters.
+    media: Option<GroupScene>,
     /// Per solid: its bottom-level scene, `None` for a solid without surfaces. Declared
     /// after the top-level scenes, which reference them, so they drop later.
     solids: Vec<Option<SolidScene>>,
+    /// Per solid: the scene of its brick clusters, `None` for a solid without media.
+    _cluster_scenes: Vec<Option<Scene>>,
     /// User data of the CSG user geometries (which point into it).
     _csg: Vec<CsgPrims<'a>>,
+    /// User data of the cluster user geometries (which point into it).
+    _clusters: Vec<ClusterBoxes<'a>>,
     _device: Device,
 }
 
@@ -103,7 +110,16 @@ impl<'a> EmbreeScene<'a> {
                     .with_context(|| format!("Embree: solid {s}"))
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
-        let group = |members: &[u32]| group_scene(&device, foundry, cpu, &solids, members);
+        let clusters: Vec<ClusterBoxes> = (0..foundry.solid.len())
+            .map(|s| ClusterBoxes::new(cpu.solid_clusters(s)))
+            .collect();
+        let cluster_scenes = clusters
+            .iter()
+            .map(|boxes| cluster_scene(&device, boxes))
+            .collect::<anyhow::Result<Vec<_>>>()
+            .context("Embree: brick clusters")?;
+        let surfaces = |s: usize| solids[s].as_ref().map(|solid| &solid.scene);
+        let group = |members: &[u32]| group_scene(&device, foundry, cpu, &surfaces, members);
         let top = group(cpu.top_members()).context("Embree: top-level scene")?;
         let daughters = (0..cpu.instances() as u32)
             .map(|i| {
@@ -111,12 +127,18 @@ impl<'a> EmbreeScene<'a> {
                     .with_context(|| format!("Embree: daughters of instance {i}"))
             })
             .collect::<anyhow::Result<_>>()?;
+        let media_of = |s: usize| cluster_scenes[s].as_ref();
+        let media = group_scene(&device, foundry, cpu, &media_of, cpu.media_members())
+            .context("Embree: media scene")?;
         Ok(EmbreeScene {
             cpu,
             top,
             daughters,
+            media,
             solids,
+            _cluster_scenes: cluster_scenes,
             _csg: csg,
+            _clusters: clusters,
             _device: device,
         })
     }
@@ -157,23 +179,9 @@ impl<'a> EmbreeScene<'a> {
         let Some(group) = self.top.as_ref() else {
             return Ok(false);
         };
-        let (o, d) = (ray.origin, ray.direction);
         // Embree's triangles accept `tnear <= t <= tfar`: the neighbouring floats make the
         // segment open, as the CPU's (an empty segment, `tnear > tfar`, meets nothing).
-        let mut embree_ray = ffi::RTCRay {
-            org_x: o.x,
-            org_y: o.y,
-            org_z: o.z,
-            tnear: tmin.next_up(),
-            dir_x: d.x,
-            dir_y: d.y,
-            dir_z: d.z,
-            time: 0.0,
-            tfar: tmax.next_down(),
-            mask: u32::MAX,
-            id: 0,
-            flags: 0,
-        };
+        let mut embree_ray = embree_ray(ray, tmin.next_up(), tmax.next_down());
         let mut ctx = self.context(group, ray);
         // SAFETY: the scene is committed and alive; `ctx` starts with the
         // `RTCIntersectContext` (repr(C)) and outlives the call, as does `embree_ray`.
@@ -188,6 +196,72 @@ impl<'a> EmbreeScene<'a> {
             bail!("Embree: an intersection callback panicked");
         }
         Ok(embree_ray.tfar == f32::NEG_INFINITY)
+    }
+
+    /// The first surface crossing with `tmin < t < tmax` of the ray `origin + t direction`
+    /// (unit direction, world space) and the transmittance of `media` before it, as
+    /// [`SceneMedia::trace_transmittance`] answers it, with Embree finding the surface
+    /// crossing and the brick clusters the ray meets (a user geometry of clusters); the
+    /// estimators and their random streams (`ray_index`) are the CPU's. `media` must have
+    /// been opened on this scene's [`CpuScene`].
+    pub fn trace_transmittance(
+        &self,
+        media: &SceneMedia<f32>,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        tmin: f64,
+        tmax: f64,
+        ray_index: u32,
+    ) -> anyhow::Result<Transmitted<f32>> {
+        let ray = Ray {
+            origin: V3::from_f64(origin),
+            direction: V3::from_f64(direction),
+        };
+        let hit = self.trace(&ray, tmin as f32, tmax as f32)?;
+        let end = hit.map_or(tmax, |h| f64::from(h.t));
+        let visits = self.cluster_visits(&ray, tmin, end)?;
+        let (transmittance, lookups) =
+            media.transmittance_with(origin, direction, tmin, end, visits, ray_index)?;
+        Ok(Transmitted {
+            hit,
+            transmittance,
+            lookups,
+        })
+    }
+
+    /// Every brick cluster of a placed medium whose box the ray crosses within
+    /// `[tmin, end]`: `(instance, medium, t0, t1)`, in Embree's order.
+    pub fn cluster_visits(
+        &self,
+        ray: &Ray<f32>,
+        tmin: f64,
+        end: f64,
+    ) -> anyhow::Result<Vec<(u32, u32, f64, f64)>> {
+        let Some(group) = self.media.as_ref() else {
+            return Ok(Vec::new());
+        };
+        let mut rayhit = ray_hit(ray, tmin as f32, end as f32);
+        let mut ctx = MediaContext {
+            base: ffi::RTCIntersectContext::default(),
+            ray: *ray,
+            members: &group.members,
+            cpu: self.cpu,
+            visits: RefCell::new(Vec::new()),
+            panicked: Cell::new(false),
+        };
+        // SAFETY: the scene is committed and alive; `ctx` starts with the
+        // `RTCIntersectContext` (repr(C)) and outlives the call, as does `rayhit`.
+        unsafe {
+            ffi::rtcIntersect1(
+                group.scene.raw(),
+                &mut ctx as *mut MediaContext as *mut ffi::RTCIntersectContext,
+                &mut rayhit,
+            )
+        };
+        if ctx.panicked.get() {
+            bail!("Embree: a brick-cluster callback panicked");
+        }
+        Ok(ctx.visits.into_inner())
     }
 
     /// The context of one query on `group`'s scene.
@@ -210,28 +284,7 @@ impl<'a> EmbreeScene<'a> {
         tmin: f32,
         tmax: f32,
     ) -> anyhow::Result<Option<Hit<f32>>> {
-        let (o, d) = (ray.origin, ray.direction);
-        let mut rayhit = ffi::RTCRayHit {
-            ray: ffi::RTCRay {
-                org_x: o.x,
-                org_y: o.y,
-                org_z: o.z,
-                tnear: tmin,
-                dir_x: d.x,
-                dir_y: d.y,
-                dir_z: d.z,
-                time: 0.0,
-                tfar: tmax,
-                mask: u32::MAX,
-                id: 0,
-                flags: 0,
-            },
-            hit: ffi::RTCHit {
-                geom_id: ffi::RTC_INVALID_GEOMETRY_ID,
-                inst_id: [ffi::RTC_INVALID_GEOMETRY_ID; ffi::RTC_MAX_INSTANCE_LEVEL_COUNT],
-                ..Default::default()
-            },
-        };
+        let mut rayhit = ray_hit(ray, tmin, tmax);
         let mut ctx = self.context(group, ray);
         // SAFETY: the scene is committed and alive; `ctx` starts with the
         // `RTCIntersectContext` (repr(C)) and outlives the call, as does `rayhit`.
@@ -268,6 +321,49 @@ impl<'a> EmbreeScene<'a> {
             prim,
         }))
     }
+}
+
+/// Embree's form of a ray over `[tnear, tfar]`.
+fn embree_ray(ray: &Ray<f32>, tnear: f32, tfar: f32) -> ffi::RTCRay {
+    let (o, d) = (ray.origin, ray.direction);
+    ffi::RTCRay {
+        org_x: o.x,
+        org_y: o.y,
+        org_z: o.z,
+        tnear,
+        dir_x: d.x,
+        dir_y: d.y,
+        dir_z: d.z,
+        time: 0.0,
+        tfar,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+/// A ray over `[tnear, tfar]` with no hit yet, for `rtcIntersect1`.
+fn ray_hit(ray: &Ray<f32>, tnear: f32, tfar: f32) -> ffi::RTCRayHit {
+    ffi::RTCRayHit {
+        ray: embree_ray(ray, tnear, tfar),
+        hit: ffi::RTCHit {
+            geom_id: ffi::RTC_INVALID_GEOMETRY_ID,
+            inst_id: [ffi::RTC_INVALID_GEOMETRY_ID; ffi::RTC_MAX_INSTANCE_LEVEL_COUNT],
+            ..Default::default()
+        },
+    }
+}
+
+/// The scene of a solid's brick clusters (one user geometry); `None` without clusters.
+fn cluster_scene(device: &Device, boxes: &ClusterBoxes) -> anyhow::Result<Option<Scene>> {
+    if boxes.is_empty() {
+        return Ok(None);
+    }
+    let mut scene = Scene::new(device)?;
+    scene.attach(boxes.geometry(device)?)?;
+    scene.commit();
+    device.check(|| "building a solid's cluster scene".into())?;
+    Ok(Some(scene))
 }
 
 /// The bottom-level scene of solid `solid`: one triangle geometry per mesh prim and one user
@@ -382,13 +478,14 @@ fn triangle_geometry(device: &Device, triangles: &[[[f32; 3]; 3]]) -> anyhow::Re
     Ok(g)
 }
 
-/// The top-level scene over `members` (each an Embree instance of its solid's scene);
-/// `None` if no member has surfaces.
-fn group_scene(
+/// The top-level scene over `members`, each an Embree instance of its solid's scene
+/// (`scene_of(solid)`: its surfaces, or its brick clusters); `None` if no member's solid
+/// has one.
+fn group_scene<'s>(
     device: &Device,
     foundry: &Foundry,
     cpu: &CpuScene<f32>,
-    solids: &[Option<SolidScene>],
+    scene_of: &dyn Fn(usize) -> Option<&'s Scene>,
     members: &[u32],
 ) -> anyhow::Result<Option<GroupScene>> {
     if members.is_empty() {
@@ -397,7 +494,7 @@ fn group_scene(
     let mut scene = Scene::new(device)?;
     let mut ids = Vec::with_capacity(members.len());
     for &i in members {
-        let Some(solid) = &solids[cpu.instance_solid(i)] else {
+        let Some(solid_scene) = scene_of(cpu.instance_solid(i)) else {
             continue;
         };
         let rows = foundry.inst_tran[i as usize].to_transform().rows;
@@ -406,7 +503,7 @@ fn group_scene(
         // SAFETY: both handles are alive (the instance takes a reference to the solid's
         // scene); `xfm` is twelve floats, three rows of four, read during the call.
         unsafe {
-            ffi::rtcSetGeometryInstancedScene(g.raw(), solid.scene.raw());
+            ffi::rtcSetGeometryInstancedScene(g.raw(), solid_scene.raw());
             ffi::rtcSetGeometryTransform(
                 g.raw(),
                 0,

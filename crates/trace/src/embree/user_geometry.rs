@@ -1,5 +1,8 @@
-//! CSG prims as Embree user geometry: one user geometry per solid, one user primitive per
-//! CSG prim, intersected by [`PreparedPrim::first_crossing`] as the CPU tracer does.
+//! CSG prims and volume-brick clusters as Embree user geometry: per solid, one user
+//! geometry with a user primitive per CSG prim, intersected by
+//! [`PreparedPrim::first_crossing`] as the CPU tracer does, and one with a user primitive
+//! per brick cluster, whose callback lists the clusters a ray crosses (the media's part of
+//! a transmittance query).
 //!
 //! Embree hands the intersect callback the ray already moved into the instance's frame in
 //! f32 by its own inverse. The callback instead re-derives the local ray from the world ray
@@ -14,16 +17,17 @@
 //! the layout test). Callbacks never unwind into Embree: a
 //! panic is caught and flagged in the context, and the trace reports it as an error.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use anyhow::bail;
-use hytrace_csg::{PreparedPrim, Ray, V3};
+use hytrace_csg::{ray_bounds_span, PreparedPrim, Ray, V3};
 use hytrace_foundry::{Foundry, PrimKind};
 
 use super::ffi;
 use super::handle::{Device, Geometry};
+use crate::cpu::solid::Cluster;
 use crate::cpu::CpuScene;
 
 /// The CSG prims of one solid, with their Foundry indices: the user data of its user
@@ -110,10 +114,21 @@ unsafe extern "C" fn bounds(args: *const ffi::RTCBoundsFunctionArguments) {
     let args = unsafe { &*args };
     let prims = unsafe { &*(args.geometry_user_ptr as *const CsgPrims) };
     // Indexing with `get` and plain arithmetic: nothing here can panic.
-    let [lo, hi] = prims
+    let b = prims
         .prims
         .get(args.prim_id as usize)
-        .map_or([V3::new(0.0, 0.0, 0.0); 2], |(_, p)| *p.bounds());
+        .map(|(_, p)| *p.bounds());
+    // SAFETY: `args` are a bounds callback's arguments.
+    unsafe { write_bounds(args, b) };
+}
+
+/// Writes a bounds callback's answer (an empty point box for a primitive that is not
+/// there).
+///
+/// # Safety
+/// `args` must be the arguments Embree passes to a bounds callback.
+unsafe fn write_bounds(args: &ffi::RTCBoundsFunctionArguments, b: Option<[V3<f32>; 2]>) {
+    let [lo, hi] = b.unwrap_or([V3::new(0.0, 0.0, 0.0); 2]);
     let out = ffi::RTCBounds {
         lower_x: lo.x,
         lower_y: lo.y,
@@ -207,5 +222,104 @@ unsafe extern "C" fn occluded(args: *const ffi::RTCIntersectFunctionNArguments) 
     if unsafe { crossing(args) }.is_some() {
         // SAFETY: with `N == 1` the `RTCRayN` is 12 words; the callback owns lane 0.
         unsafe { *(args.rayhit as *mut f32).add(TFAR) = f32::NEG_INFINITY };
+    }
+}
+
+/// The volume-brick clusters of one solid: the user data of its cluster user geometry, one
+/// user primitive per cluster.
+pub(crate) struct ClusterBoxes<'a> {
+    clusters: &'a [Cluster<f32>],
+}
+
+impl<'a> ClusterBoxes<'a> {
+    /// The clusters of a solid, as [`CpuScene`] holds them.
+    pub(crate) fn new(clusters: &'a [Cluster<f32>]) -> Self {
+        ClusterBoxes { clusters }
+    }
+
+    /// Whether the solid has no cluster.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.clusters.is_empty()
+    }
+
+    /// A user geometry over these clusters; `self` must outlive it and stay at its address
+    /// (as for [`CsgPrims::geometry`]). Its intersect callback records every cluster the
+    /// ray crosses in the [`MediaContext`] and accepts no hit, so one `rtcIntersect1`
+    /// visits them all.
+    pub(crate) fn geometry(&self, device: &Device) -> anyhow::Result<Geometry> {
+        let g = Geometry::new(device, ffi::RTC_GEOMETRY_TYPE_USER)?;
+        let user = self as *const ClusterBoxes as *mut c_void;
+        // SAFETY: as in `CsgPrims::geometry`, for `ClusterBoxes`.
+        unsafe {
+            ffi::rtcSetGeometryUserPrimitiveCount(g.raw(), self.clusters.len() as u32);
+            ffi::rtcSetGeometryUserData(g.raw(), user);
+            ffi::rtcSetGeometryBoundsFunction(g.raw(), Some(cluster_bounds), user);
+            ffi::rtcSetGeometryIntersectFunction(g.raw(), Some(cluster_visit));
+        }
+        device.check(|| "setting up a brick-cluster user geometry".into())?;
+        Ok(g)
+    }
+}
+
+/// What `rtcIntersect1` is given as its context when it looks for brick clusters: Embree's
+/// context first, then the world ray and where the visits go.
+#[repr(C)]
+pub(crate) struct MediaContext<'s> {
+    /// Embree's part; must stay the first field.
+    pub(crate) base: ffi::RTCIntersectContext,
+    /// The ray in world coordinates.
+    pub(crate) ray: Ray<f32>,
+    /// Instance index of each geometry id of the media's top-level scene.
+    pub(crate) members: &'s [u32],
+    /// Frames of the instances.
+    pub(crate) cpu: &'s CpuScene<f32>,
+    /// The clusters crossed: `(instance, medium, t0, t1)`.
+    pub(crate) visits: RefCell<Vec<(u32, u32, f64, f64)>>,
+    /// Set when a callback panicked.
+    pub(crate) panicked: Cell<bool>,
+}
+
+/// `RTCBoundsFunction`: a cluster's box in the solid's frame.
+unsafe extern "C" fn cluster_bounds(args: *const ffi::RTCBoundsFunctionArguments) {
+    // SAFETY: Embree passes valid arguments whose user pointer is the `ClusterBoxes` set in
+    // `ClusterBoxes::geometry`, alive while the geometry is.
+    let args = unsafe { &*args };
+    let boxes = unsafe { &*(args.geometry_user_ptr as *const ClusterBoxes) };
+    let b = boxes.clusters.get(args.prim_id as usize).map(|c| c.bounds);
+    // SAFETY: `args` are a bounds callback's arguments.
+    unsafe { write_bounds(args, b) };
+}
+
+/// `RTCIntersectFunctionN`: records the part `[t0, t1]` of `[tnear, tfar]` inside a
+/// cluster's box, the box tested in the instance's frame as [`CpuScene`] tests it (ray
+/// re-derived from the world ray with the instance's frame, exact slab test); accepts no
+/// hit.
+unsafe extern "C" fn cluster_visit(args: *const ffi::RTCIntersectFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments; the user pointer is the `ClusterBoxes` set in
+    // `ClusterBoxes::geometry` and the context the `MediaContext` the backend gives
+    // `rtcIntersect1` for the media's scene, both alive during the call.
+    let args = unsafe { &*args };
+    let boxes = unsafe { &*(args.geometry_user_ptr as *const ClusterBoxes) };
+    let ctx = unsafe { &*(args.context as *const MediaContext) };
+    // SAFETY: `valid` has `N` entries; the backend calls with `N == 1`.
+    if args.n != 1 || unsafe { *args.valid } == 0 {
+        return;
+    }
+    let floats = args.rayhit as *const f32;
+    // SAFETY: with `N == 1` the ray's fields are one word each.
+    let (tnear, tfar) = unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) };
+    let instance = ctx.base.inst_id[0];
+    let visited = catch_unwind(AssertUnwindSafe(|| {
+        let cluster = boxes.clusters.get(args.prim_id as usize)?;
+        let index = *ctx.members.get(instance as usize)?;
+        let local = ctx.cpu.instance_frame(index).ray_to_local(&ctx.ray);
+        let (t0, t1) = ray_bounds_span(&local, &cluster.bounds, tnear, tfar)?;
+        ctx.visits
+            .borrow_mut()
+            .push((index, cluster.medium, f64::from(t0), f64::from(t1)));
+        Some(())
+    }));
+    if visited.is_err() {
+        ctx.panicked.set(true);
     }
 }
