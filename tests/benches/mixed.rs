@@ -2,7 +2,8 @@
 //! traced by hytrace's CPU backend and by its Embree backend on the same rays.
 //!
 //! `cargo bench -p hytrace-tests --bench mixed --features embree` (without the feature the
-//! Embree rows are left out). `HYTRACE_BENCH_RAYS=N` sets the rays per set (default 10^6).
+//! Embree rows are left out: closest hit, any hit, and transmittance with Embree finding
+//! the surfaces and brick clusters). `HYTRACE_BENCH_RAYS=N` sets the rays per set (default 10^6).
 //!
 //! The scene: the open tank, rock mesh (1280 triangles) and fog box of
 //! `scenes/mixed.toml`, with a 20 x 20 grid of PMT-like sensors above the tank (400 CSG
@@ -160,6 +161,43 @@ fn main() {
                 out.iter().map(|r| r.transmittance).sum::<f64>() / out.len() as f64,
                 lookups as f64 / out.len() as f64
             );
+            // Embree finding the surfaces and the brick clusters, the same estimators.
+            #[cfg(feature = "embree")]
+            {
+                let (secs, through_embree) = best(|| {
+                    rays.par_iter()
+                        .enumerate()
+                        .map(|(i, r)| {
+                            embree
+                                .trace_transmittance(
+                                    &media,
+                                    r.origin,
+                                    r.direction,
+                                    r.tmin,
+                                    r.tmax,
+                                    i as u32,
+                                )
+                                .unwrap()
+                        })
+                        .collect::<Vec<_>>()
+                });
+                row(
+                    label,
+                    "Embree 3 (hytrace backend)",
+                    embree_build_s,
+                    secs,
+                    through_embree.iter().filter(|r| r.hit.is_some()).count(),
+                );
+                let same = out
+                    .iter()
+                    .zip(&through_embree)
+                    .filter(|(a, b)| a.transmittance == b.transmittance)
+                    .count();
+                println!(
+                    "|  | {label}: equal transmittance cpu vs Embree | {:.4}% | | | |",
+                    100.0 * same as f64 / out.len() as f64
+                );
+            }
         }
     }
 }
