@@ -458,16 +458,11 @@ pub fn media_transmittance(
         ends: &[f64],
         params: &TransmittanceParams,
     ) -> anyhow::Result<TransmittanceRun> {
-        let t0 = Instant::now();
-        let scene = CpuScene::<T>::new(f)?;
-        let media = SceneMedia::new(&scene, f, params)?;
-        let t1 = Instant::now();
-        let values = media.transmittances_to(rays, ends)?;
-        Ok(TransmittanceRun {
-            values,
-            open_s: (t1 - t0).as_secs_f64(),
-            transmittance_s: t1.elapsed().as_secs_f64(),
-            gpu: None,
+        timed_transmittance(|opened| {
+            let scene = CpuScene::<T>::new(f)?;
+            let media = SceneMedia::new(&scene, f, params)?;
+            *opened = Instant::now();
+            media.transmittances_to(rays, ends)
         })
     }
     match (backend, precision) {
@@ -625,22 +620,33 @@ fn embree_transmittance(
     ends: &[f64],
     params: &TransmittanceParams,
 ) -> anyhow::Result<TransmittanceRun> {
+    timed_transmittance(|opened| {
+        let cpu = CpuScene::<f32>::new(f)?;
+        let media = SceneMedia::new(&cpu, f, params)?;
+        let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
+        *opened = Instant::now();
+        media.transmittances_with(rays, ends, |r, end| {
+            let ray = Ray {
+                origin: V3::from_f64(r.origin),
+                direction: V3::from_f64(r.direction),
+            };
+            scene.cluster_visits(&ray, r.tmin, end)
+        })
+    })
+}
+
+/// A transmittance run on the CPU side: `run` opens the scene and its media, sets
+/// `opened` to when it is done, and estimates; the two parts are timed apart.
+fn timed_transmittance(
+    run: impl FnOnce(&mut Instant) -> anyhow::Result<Vec<f64>>,
+) -> anyhow::Result<TransmittanceRun> {
     let t0 = Instant::now();
-    let cpu = CpuScene::<f32>::new(f)?;
-    let media = SceneMedia::new(&cpu, f, params)?;
-    let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
-    let t1 = Instant::now();
-    let values = media.transmittances_with(rays, ends, |r, end| {
-        let ray = Ray {
-            origin: V3::from_f64(r.origin),
-            direction: V3::from_f64(r.direction),
-        };
-        scene.cluster_visits(&ray, r.tmin, end)
-    })?;
+    let mut opened = t0;
+    let values = run(&mut opened)?;
     Ok(TransmittanceRun {
         values,
-        open_s: (t1 - t0).as_secs_f64(),
-        transmittance_s: t1.elapsed().as_secs_f64(),
+        open_s: (opened - t0).as_secs_f64(),
+        transmittance_s: opened.elapsed().as_secs_f64(),
         gpu: None,
     })
 }

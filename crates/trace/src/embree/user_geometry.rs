@@ -152,6 +152,22 @@ const PRIM_ID: usize = HIT + 5;
 const GEOM_ID: usize = HIT + 6;
 const INST_ID: usize = HIT + 7;
 
+/// The ray's segment `(tnear, tfar)` in a callback call with one ray (`N == 1`, the only
+/// calls the backend makes) whose lane is valid; `None` for any other call.
+///
+/// # Safety
+/// `args` must be the arguments Embree passes to an intersect or occluded callback.
+unsafe fn segment(args: &ffi::RTCIntersectFunctionNArguments) -> Option<(f32, f32)> {
+    // SAFETY: `valid` has `N` entries.
+    if args.n != 1 || unsafe { *args.valid } == 0 {
+        return None;
+    }
+    let floats = args.rayhit as *const f32;
+    // SAFETY: with `N == 1` the structure of arrays has one word per field, the ray's
+    // first (12 words, `tnear` and `tfar` among them).
+    Some(unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) })
+}
+
 /// The first crossing of the callback's CSG prim in the ray's open segment `(tnear, tfar)`
 /// (read from the ray's words), with the prim's Foundry index and the instance; `None`
 /// also when the call is not one the backend makes. A panic is flagged in the context.
@@ -167,14 +183,8 @@ unsafe fn crossing(
     // `CsgPrims::geometry` and the context a `TraceContext`, both alive during the call.
     let prims = unsafe { &*(args.geometry_user_ptr as *const CsgPrims) };
     let ctx = unsafe { &*(args.context as *const TraceContext) };
-    // SAFETY: `valid` has `N` entries; the backend's calls have `N == 1`.
-    if args.n != 1 || unsafe { *args.valid } == 0 {
-        return None;
-    }
-    let floats = args.rayhit as *const f32;
-    // SAFETY: with `N == 1` the structure of arrays has one word per field, the ray's
-    // first (12 words, `tnear` and `tfar` among them).
-    let (tnear, tfar) = unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) };
+    // SAFETY: per the function's contract.
+    let (tnear, tfar) = unsafe { segment(args) }?;
     let instance = ctx.base.inst_id[0];
     let found = catch_unwind(AssertUnwindSafe(|| {
         let (id, prim) = prims.prims.get(args.prim_id as usize)?;
@@ -301,13 +311,10 @@ unsafe extern "C" fn cluster_visit(args: *const ffi::RTCIntersectFunctionNArgume
     let args = unsafe { &*args };
     let boxes = unsafe { &*(args.geometry_user_ptr as *const ClusterBoxes) };
     let ctx = unsafe { &*(args.context as *const MediaContext) };
-    // SAFETY: `valid` has `N` entries; the backend calls with `N == 1`.
-    if args.n != 1 || unsafe { *args.valid } == 0 {
+    // SAFETY: as above.
+    let Some((tnear, tfar)) = (unsafe { segment(args) }) else {
         return;
-    }
-    let floats = args.rayhit as *const f32;
-    // SAFETY: with `N == 1` the ray's fields are one word each.
-    let (tnear, tfar) = unsafe { (*floats.add(TNEAR), *floats.add(TFAR)) };
+    };
     let instance = ctx.base.inst_id[0];
     let visited = catch_unwind(AssertUnwindSafe(|| {
         let cluster = boxes.clusters.get(args.prim_id as usize)?;
