@@ -188,13 +188,18 @@ fn main() {
                     secs,
                     through_embree.iter().filter(|r| r.hit.is_some()).count(),
                 );
-                let same = out
-                    .iter()
-                    .zip(&through_embree)
+                // Embree's own triangle test puts the rock's hits a few ulps off ours, so
+                // the media end there a few ulps apart too.
+                let pairs = out.iter().zip(&through_embree);
+                let same = pairs
+                    .clone()
                     .filter(|(a, b)| a.transmittance == b.transmittance)
                     .count();
+                let largest = pairs.fold(0.0f64, |m, (a, b)| {
+                    m.max((a.transmittance - b.transmittance).abs())
+                });
                 println!(
-                    "|  | {label}: equal transmittance cpu vs Embree | {:.4}% | | | |",
+                    "|  | {label}: cpu vs Embree: {:.4}% identical, largest difference {largest:.1e} | | | | |",
                     100.0 * same as f64 / out.len() as f64
                 );
             }
