@@ -201,7 +201,11 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         ray_index: u32,
     ) -> anyhow::Result<(f64, u64)> {
         let ray: Ray<T> = ray_in(origin, direction);
-        let spans = merge_spans(&ray, tmin, end, visits);
+        let mut spans = ClusterSpans::default();
+        for (instance, medium, t0, t1) in visits {
+            spans.add(instance, medium, t0, t1);
+        }
+        let spans = spans.finish(&ray, tmin, end);
         self.transmittance_over(origin, direction, spans, ray_index)
     }
 
@@ -332,7 +336,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         self.segments_of(origin, direction, spans)
     }
 
-    /// The segments of the ray over the spans of [`Self::spans`] (or [`merge_spans`]).
+    /// The segments of the ray over the spans of [`Self::spans`] (or [`ClusterSpans`]).
     fn segments_of(
         &self,
         origin: [f64; 3],
@@ -355,16 +359,16 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     }
 
     /// The part of `[tmin, end]` inside the brick clusters of each placed medium the ray
-    /// meets (see [`merge_spans`]), the clusters found through the scene's BVHs.
+    /// meets (see [`ClusterSpans`]), the clusters found through the scene's BVHs.
     fn spans(&self, ray: &Ray<T>, tmin: f64, end: f64) -> Vec<((u32, u32), (f64, f64))> {
         let scene = self.scene;
-        let mut visits = Vec::new();
+        let mut spans = ClusterSpans::default();
         let (lo, hi) = (T::from_f64(tmin), T::from_f64(end));
         let mut visit_instance = |i: u32| {
             let p = &scene.placements[i as usize];
             let local = p.frame.ray_to_local(ray);
             scene.solids[p.solid].visit_clusters(&local, lo, hi, |c, t0, t1| {
-                visits.push((i, c.medium, t0.to_f64(), t1.to_f64()));
+                spans.add(i, c.medium, t0.to_f64(), t1.to_f64());
             });
         };
         let group = &scene.media;
@@ -375,40 +379,47 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                 hi
             }),
         }
-        merge_spans(ray, tmin, end, visits)
+        spans.finish(ray, tmin, end)
     }
 }
 
-/// The part of `[tmin, end]` inside the brick clusters of each placed medium, from the
-/// clusters the ray meets (`(instance, medium, t0, t1)`, in any order), widened for the
-/// rounding of the precision `T` tests and clamped to `[tmin, end]`:
-/// `((instance, medium), (t0, t1))` in instance order.
-fn merge_spans<T: Real>(
-    ray: &Ray<T>,
-    tmin: f64,
-    end: f64,
-    visits: impl IntoIterator<Item = (u32, u32, f64, f64)>,
-) -> Vec<((u32, u32), (f64, f64))> {
-    let o = ray.origin.to_f64();
-    let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
-    // ((instance, medium), (t0, t1)): a ray meets few placed media, so a list it is.
-    let mut spans: Vec<((u32, u32), (f64, f64))> = Vec::new();
-    for (i, medium, t0, t1) in visits {
-        match spans.iter_mut().find(|(key, _)| *key == (i, medium)) {
+/// The brick clusters one ray meets, merged per placed medium as they are found (by
+/// [`CpuScene`]'s BVHs or by another backend, in any order): `((instance, medium),
+/// (t0, t1))`, the union of the placement's cluster spans. A ray meets few placed media,
+/// so a list it is.
+#[derive(Default)]
+struct ClusterSpans(Vec<((u32, u32), (f64, f64))>);
+
+impl ClusterSpans {
+    /// Adds the part `[t0, t1]` of the ray inside one cluster of `medium` in `instance`.
+    fn add(&mut self, instance: u32, medium: u32, t0: f64, t1: f64) {
+        match self
+            .0
+            .iter_mut()
+            .find(|(key, _)| *key == (instance, medium))
+        {
             Some((_, span)) => *span = (span.0.min(t0), span.1.max(t1)),
-            None => spans.push(((i, medium), (t0, t1))),
+            None => self.0.push(((instance, medium), (t0, t1))),
         }
     }
-    // Instance order, whatever order the clusters were visited in: it picks the seeds.
-    spans.sort_unstable_by_key(|(key, _)| *key);
-    spans
-        .into_iter()
-        .map(|(key, (t0, t1))| {
-            // Precision-T slab tests are off by a few ulps of the larger of t and the
-            // coordinates; the density is zero just outside the clusters, so widening
-            // costs nothing but a few empty steps.
-            let slack = 64.0 * T::EPSILON.to_f64() * (t0.abs().max(t1.abs()) + reach);
-            (key, ((t0 - slack).max(tmin), (t1 + slack).min(end)))
-        })
-        .collect()
+
+    /// The spans in instance order, widened for the rounding of the precision `T` tests
+    /// and clamped to `[tmin, end]`.
+    fn finish<T: Real>(self, ray: &Ray<T>, tmin: f64, end: f64) -> Vec<((u32, u32), (f64, f64))> {
+        let o = ray.origin.to_f64();
+        let reach = 1.0 + o.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+        let mut spans = self.0;
+        // Instance order, whatever order the clusters were found in: it picks the seeds.
+        spans.sort_unstable_by_key(|(key, _)| *key);
+        spans
+            .into_iter()
+            .map(|(key, (t0, t1))| {
+                // Precision-T slab tests are off by a few ulps of the larger of t and the
+                // coordinates; the density is zero just outside the clusters, so widening
+                // costs nothing but a few empty steps.
+                let slack = 64.0 * T::EPSILON.to_f64() * (t0.abs().max(t1.abs()) + reach);
+                (key, ((t0 - slack).max(tmin), (t1 + slack).min(end)))
+            })
+            .collect()
+    }
 }
