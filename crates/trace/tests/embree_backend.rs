@@ -329,6 +329,15 @@ mod with_embree {
                 differ.len()
             );
             assert!(attenuated > rays.len() / 10, "{attenuated} attenuated");
+            // Visits naming a placement the scene lacks are an error, not a panic.
+            let r = &rays[0];
+            let err = media
+                .transmittance_with(r.origin, r.direction, r.tmin, 1.0, [(0, 7, 0.0, 1.0)], 0)
+                .unwrap_err();
+            assert!(
+                format!("{err:#}").contains("does not hold medium 7"),
+                "{err:#}"
+            );
             assert!(
                 differ.is_empty(),
                 "{estimator:?}: {:?}",

@@ -347,7 +347,10 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .into_iter()
             .enumerate()
             .map(|(k, ((instance, medium), (t0, t1)))| {
-                let w = &self.to_index[&(instance, medium)];
+                // A visit from another backend may name a placement this scene lacks.
+                let w = self.to_index.get(&(instance, medium)).with_context(|| {
+                    format!("instance {instance} does not hold medium {medium}")
+                })?;
                 let ray = IndexRay::new(w.apply_point(origin), w.apply_vector(direction), t0, t1)?;
                 Ok(MediumSegment {
                     medium,
