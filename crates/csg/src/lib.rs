@@ -21,6 +21,12 @@ mod shape;
 mod solid_store;
 pub mod tessellate;
 mod tree;
+pub mod wide_tree;
+
+/// Random numbers and meshes shared by the unit tests and the integration tests.
+#[cfg(test)]
+#[path = "../tests/common/mod.rs"]
+mod test_common;
 
 pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
 pub use expr::{parse_shape, ExprError};

@@ -44,6 +44,7 @@ use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
+use crate::wide_tree::ray_f32;
 
 mod wide;
 
@@ -80,7 +81,7 @@ pub(crate) struct MeshNode<T> {
 
 /// Deepest mesh BVH the traversal's fixed stack accepts (PLOC trees over a million
 /// triangles stay far below it).
-pub(crate) const MAX_BVH_DEPTH: usize = 64;
+pub(crate) const MAX_BVH_DEPTH: usize = crate::wide_tree::MAX_DEPTH;
 
 /// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
 /// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
@@ -258,10 +259,16 @@ impl<T: Real> MeshPrim<T> {
             );
         }
         let nodes = depth_first_layout(&nodes);
-        let wide = (T::NAME == "f32").then(|| {
-            let (nodes, triangles) = wide::to_f32(&nodes, &ordered);
-            wide::WideBvh::new(&nodes, &triangles)
-        });
+        let wide = (T::NAME == "f32")
+            .then(|| {
+                let (nodes, triangles) = wide::to_f32(&nodes, &ordered);
+                wide::WideBvh::new(&nodes, &triangles)
+            })
+            .transpose()
+            .map_err(|problem| CsgError {
+                primitive: "mesh",
+                problem,
+            })?;
         Ok(MeshPrim {
             triangles: ordered,
             nodes,
@@ -407,14 +414,9 @@ impl<T: Real> MeshPrim<T> {
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
         let from_f32 = |v: V3<f32>| V3::new(T::from_f32(v.x), T::from_f32(v.y), T::from_f32(v.z));
         match &self.wide {
-            Some(wide) => {
-                let ray = Ray {
-                    origin: wide::point_f32(ray.origin),
-                    direction: wide::point_f32(ray.direction),
-                };
-                wide.nearest(&ray, after.to_f64() as f32, f32::INFINITY)
-                    .map(|(t, _, normal)| (T::from_f32(t), from_f32(normal)))
-            }
+            Some(wide) => wide
+                .nearest(&ray_f32(ray), after.to_f64() as f32, f32::INFINITY)
+                .map(|(t, _, normal)| (T::from_f32(t), from_f32(normal))),
             None => self.nearest_binary(ray, after).map(|(t, i)| {
                 let [v0, v1, v2] = self.triangles[i];
                 (t, (v1 - v0).cross(v2 - v0))

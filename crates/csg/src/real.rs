@@ -64,6 +64,8 @@ pub trait Real:
     fn sin(self) -> Self;
     /// Whether the value is neither infinite nor NaN.
     fn is_finite(self) -> bool;
+    /// The least value greater than `self` (`t < x.next_up()` is `t <= x`).
+    fn next_up(self) -> Self;
 
     /// Conversion from f32 (exact).
     fn from_f32(v: f32) -> Self {
@@ -107,6 +109,9 @@ macro_rules! impl_real {
             }
             fn copysign(self, sign: Self) -> Self {
                 $t::copysign(self, sign)
+            }
+            fn next_up(self) -> Self {
+                $t::next_up(self)
             }
             fn atan2(self, x: Self) -> Self {
                 $t::atan2(self, x)

@@ -44,6 +44,14 @@ impl<T: Real> Frame<T> {
         })
     }
 
+    /// Whether the frame's axes are the parent's up to order, sign and scale (each row of
+    /// the inverse has one non-zero entry): boxes stay boxes of the same extent.
+    pub fn is_axis_aligned(&self) -> bool {
+        self.inverse
+            .iter()
+            .all(|r| [r.x, r.y, r.z].iter().filter(|c| **c != T::ZERO).count() == 1)
+    }
+
     fn linear(&self, v: V3<T>) -> V3<T> {
         V3::new(
             self.inverse[0].dot(v),

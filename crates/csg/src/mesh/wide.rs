@@ -1,58 +1,24 @@
-//! The f32 CPU kernel's form of a mesh BVH: nodes of 8 children and triangles in blocks of
-//! 4, each tested all at once with SIMD (`wide`'s `f32x8` and `f32x4`: SSE on x86-64, NEON
-//! on AArch64, plain arrays elsewhere).
-//!
-//! It is built from the mesh's binary BVH (the one the GPU traverses) by collapsing: each
-//! wide node takes a binary node's two children and keeps opening its largest inner child
-//! (by surface area) until it has 8 or only leaves are left. Leaves keep their triangles,
-//! in blocks of 4 stored lane by lane; a leaf's last block repeats its first triangle in
-//! the unused lanes, a duplicate that can never win (same distance, same number).
+//! The f32 CPU kernel's form of a mesh BVH: the mesh's binary BVH (the one the GPU
+//! traverses) collapsed into eight-wide nodes ([`crate::wide_tree`]), with leaves holding
+//! triangles in blocks of 4 stored lane by lane, tested all at once with `wide`'s `f32x4`.
+//! A leaf's last block repeats its first triangle in the unused lanes, a duplicate that can
+//! never win (same distance, same number).
 //!
 //! The answers are bit for bit those of the binary walk (`MeshPrim::nearest_binary`): the
-//! box tests are conservative the same way (same padded boxes, reciprocal slabs, the
-//! dividing test when a direction component is zero), each lane of the triangle test
+//! node test accepts every box the binary walk's does, each lane of the triangle test
 //! performs the scalar watertight test's operations in the same order (no fused
 //! multiply-add), lanes with an edge function of exactly 0 are redone by the scalar test
 //! (its f64 fallback), and ties between equal distances go to the lowest triangle number,
 //! so the order leaves are visited in does not matter.
-//!
-//! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
-//! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
-//! reached 2.2-2.7 (coherent) and 0.9-1.1 (incoherent) Mrays/s; 4-wide nodes with these
-//! blocks 4.4-5.7 and 2.0-2.3; 8-wide nodes 5.3-7.4 and 2.2-2.9. Incoherent rays wait on
-//! memory: a profile puts half of the kernel's time on the first load of a node and of a
-//! block, so fewer levels (wider nodes) is what pays. The tree's quality matters less:
-//! obvhs' medium and slow presets were within the VM's noise of the fast one.
 
-use std::mem::MaybeUninit;
+use wide::f32x4;
 
-use wide::{f32x4, f32x8};
-
-use super::{MeshNode, MeshPrim, Shear, MAX_BVH_DEPTH};
+use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
-
-/// Children per node.
-const WIDTH: usize = 8;
+use crate::wide_tree::{point_f32, BinaryNode, WideSlabs, WideTree};
 
 /// Triangles per block.
 const LANES: usize = 4;
-
-/// Entries the traversal stack may need: a node visit pushes at most `WIDTH - 1` siblings,
-/// and the wide tree is no deeper than the binary one.
-const STACK: usize = (WIDTH - 1) * MAX_BVH_DEPTH + 1;
-
-/// Eight child boxes and what they hold, lane by lane (256 bytes, four cache lines).
-#[derive(Clone, Debug, PartialEq)]
-#[repr(C, align(64))]
-struct WideNode {
-    /// Padded child boxes: min x, min y, min z, max x, max y, max z, one lane per child.
-    /// Unused lanes hold empty boxes (min +inf, max -inf), which no ray enters.
-    planes: [[f32; WIDTH]; 6],
-    /// An inner child's node index (`count == 0`), or a leaf's first triangle block.
-    child: [u32; WIDTH],
-    /// A leaf's number of triangle blocks; 0 for an inner child.
-    count: [u32; WIDTH],
-}
 
 /// Four triangles, lane by lane.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,95 +33,34 @@ struct TriangleBlock {
 /// A mesh BVH in the f32 CPU kernel's wide form.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct WideBvh {
-    /// Node 0 is the root.
-    nodes: Vec<WideNode>,
+    /// Leaves: `(first block, block count)`.
+    tree: WideTree,
     blocks: Vec<TriangleBlock>,
-}
-
-/// Surface area of a box (the collapse opens the largest inner child first).
-fn area(b: &[V3<f32>; 2]) -> f32 {
-    let e = b[1] - b[0];
-    e.x * e.y + e.y * e.z + e.z * e.x
 }
 
 impl WideBvh {
     /// The wide form of a mesh's binary BVH (`nodes`, root first, children of an inner node
-    /// at `first, first + 1`) over its reordered triangles.
-    pub(crate) fn new(nodes: &[MeshNode<f32>], triangles: &[[V3<f32>; 3]]) -> Self {
-        let mut wide = WideBvh {
-            nodes: Vec::with_capacity(nodes.len() / 2 + 1),
-            blocks: Vec::with_capacity(triangles.len() / 2 + 1),
-        };
-        if !nodes.is_empty() {
-            wide.collapse(nodes, triangles, 0);
-        }
-        wide
-    }
-
-    /// Adds the wide node that stands for binary node `index` and, below it, its subtree;
-    /// returns its index.
-    fn collapse(
-        &mut self,
-        nodes: &[MeshNode<f32>],
-        triangles: &[[V3<f32>; 3]],
-        index: usize,
-    ) -> u32 {
-        let n = &nodes[index];
-        let mut children = if n.count == 0 {
-            vec![n.first as usize, n.first as usize + 1]
-        } else {
-            vec![index]
-        };
-        while children.len() < WIDTH {
-            let largest_inner = (0..children.len())
-                .filter(|&i| nodes[children[i]].count == 0)
-                .max_by(|&a, &b| {
-                    area(&nodes[children[a]].bounds).total_cmp(&area(&nodes[children[b]].bounds))
-                });
-            let Some(i) = largest_inner else { break };
-            let first = nodes[children[i]].first as usize;
-            children[i] = first;
-            children.push(first + 1);
-        }
-        let slot = self.nodes.len();
-        self.nodes.push(WideNode {
-            planes: [
-                [f32::INFINITY; WIDTH],
-                [f32::INFINITY; WIDTH],
-                [f32::INFINITY; WIDTH],
-                [f32::NEG_INFINITY; WIDTH],
-                [f32::NEG_INFINITY; WIDTH],
-                [f32::NEG_INFINITY; WIDTH],
-            ],
-            child: [0; WIDTH],
-            count: [0; WIDTH],
-        });
-        for (lane, &c) in children.iter().enumerate() {
-            let node = &nodes[c];
-            let (child, count) = if node.count == 0 {
-                (self.collapse(nodes, triangles, c), 0)
-            } else {
-                let range = node.first as usize..(node.first + node.count) as usize;
-                self.push_leaf(triangles, range)
-            };
-            let w = &mut self.nodes[slot];
-            for k in 0..3 {
-                w.planes[k][lane] = node.bounds[0].get(k);
-                w.planes[k + 3][lane] = node.bounds[1].get(k);
-            }
-            w.child[lane] = child;
-            w.count[lane] = count;
-        }
-        slot as u32
+    /// at `first, first + 1`) over its reordered triangles; an error when the binary tree
+    /// is deeper than [`crate::wide_tree::MAX_DEPTH`].
+    pub(crate) fn new(nodes: &[BinaryNode], triangles: &[[V3<f32>; 3]]) -> Result<Self, String> {
+        let mut blocks = Vec::with_capacity(triangles.len() / 2 + 1);
+        let tree = WideTree::new(nodes, |first, count| {
+            Self::push_leaf(
+                &mut blocks,
+                triangles,
+                first as usize..(first + count) as usize,
+            )
+        })?;
+        Ok(WideBvh { tree, blocks })
     }
 
     /// Adds the triangle blocks of one leaf; returns its first block and block count.
     fn push_leaf(
-        &mut self,
+        blocks: &mut Vec<TriangleBlock>,
         triangles: &[[V3<f32>; 3]],
         range: std::ops::Range<usize>,
     ) -> (u32, u32) {
-        let first = self.blocks.len() as u32;
+        let first = blocks.len() as u32;
         let start = range.start;
         for chunk in range.clone().step_by(LANES) {
             let mut block = TriangleBlock {
@@ -176,14 +81,14 @@ impl WideBvh {
                 }
                 block.number[lane] = i as u32;
             }
-            self.blocks.push(block);
+            blocks.push(block);
         }
-        (first, self.blocks.len() as u32 - first)
+        (first, blocks.len() as u32 - first)
     }
 
     /// Bytes of the nodes and triangle blocks.
     pub(crate) fn bytes(&self) -> usize {
-        std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.blocks.as_slice())
+        self.tree.bytes() + std::mem::size_of_val(self.blocks.as_slice())
     }
 
     /// The nearest crossing after `after` and strictly before `limit` of a (recentred) ray:
@@ -195,10 +100,6 @@ impl WideBvh {
         after: f32,
         limit: f32,
     ) -> Option<(f32, usize, V3<f32>)> {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let slabs = WideSlabs::new(ray);
         let triangles = WideRay::new(ray);
         let mut best = Best {
             t: limit,
@@ -207,88 +108,20 @@ impl WideBvh {
             lane: 0,
             found: false,
         };
-        // Postponed children, the nearest on top; only `stack[..top]` is ever read.
-        let mut stack = [MaybeUninit::<Postponed>::uninit(); STACK];
-        let mut top = 0;
-        let (mut child, mut count) = (0u32, 0u32);
-        loop {
-            if count == 0 {
-                let node = &self.nodes[child as usize];
-                let (hit, entries) = slabs.entries(node, after, best.t);
-                match hit.count_ones() {
-                    0 => {}
-                    1 => {
-                        let lane = hit.trailing_zeros() as usize;
-                        (child, count) = (node.child[lane], node.count[lane]);
-                        continue;
-                    }
-                    _ => {
-                        // Sort the entered children farthest first, push all but the
-                        // nearest, and go on with it.
-                        let mut entered = [Postponed::default(); WIDTH];
-                        let mut n = 0;
-                        let mut bits = hit;
-                        while bits != 0 {
-                            let lane = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            let e = Postponed {
-                                child: node.child[lane],
-                                count: node.count[lane],
-                                entry: entries[lane],
-                            };
-                            let mut at = n;
-                            while at > 0 && entered[at - 1].entry < e.entry {
-                                entered[at] = entered[at - 1];
-                                at -= 1;
-                            }
-                            entered[at] = e;
-                            n += 1;
-                        }
-                        for e in &entered[..n - 1] {
-                            stack[top].write(*e);
-                            top += 1;
-                        }
-                        (child, count) = (entered[n - 1].child, entered[n - 1].count);
-                        continue;
-                    }
-                }
-            } else {
-                for b in child..child + count {
+        self.tree
+            .walk(&WideSlabs::new(ray), after, limit, |first, count| {
+                for b in first..first + count {
                     triangles.test(&self.blocks[b as usize], b, ray, after, &mut best);
                 }
-            }
-            // The nearest postponed child still entered within the best distance (boxes
-            // entered exactly there may hold a tied crossing).
-            loop {
-                if top == 0 {
-                    return best.found.then(|| {
-                        let v = &self.blocks[best.block as usize].vertex;
-                        let [v0, v1, v2] = [0, 1, 2].map(|j| {
-                            V3::new(v[j][0][best.lane], v[j][1][best.lane], v[j][2][best.lane])
-                        });
-                        (best.t, best.number as usize, (v1 - v0).cross(v2 - v0))
-                    });
-                }
-                top -= 1;
-                // SAFETY: entries below `top` were written by the pushes above (each
-                // push writes `stack[top]` before raising `top`), and `top` never exceeds
-                // `STACK` (see its doc).
-                let e = unsafe { stack[top].assume_init() };
-                if e.entry <= best.t {
-                    (child, count) = (e.child, e.count);
-                    break;
-                }
-            }
-        }
+                best.t
+            });
+        best.found.then(|| {
+            let v = &self.blocks[best.block as usize].vertex;
+            let [v0, v1, v2] = [0, 1, 2]
+                .map(|j| V3::new(v[j][0][best.lane], v[j][1][best.lane], v[j][2][best.lane]));
+            (best.t, best.number as usize, (v1 - v0).cross(v2 - v0))
+        })
     }
-}
-
-/// A child postponed by the traversal, with its box entry.
-#[derive(Clone, Copy, Default)]
-struct Postponed {
-    child: u32,
-    count: u32,
-    entry: f32,
 }
 
 /// The best crossing so far: its distance (the search limit until one is found) and
@@ -322,65 +155,6 @@ impl Best {
                 found: true,
             };
         }
-    }
-}
-
-/// The per-ray part of the node-wide slab test.
-struct WideSlabs {
-    origin: [f32x8; 3],
-    /// Reciprocal direction, or, when a component is zero (or its reciprocal overflows),
-    /// the direction itself for the dividing test.
-    scale: [f32x8; 3],
-    /// Which of `planes` is each axis' entry plane (min for a positive component).
-    near: [usize; 3],
-    /// Whether the dividing test runs (some reciprocal is not finite).
-    exact: bool,
-    /// Per axis in the dividing test: whether the direction component is zero.
-    zero: [bool; 3],
-}
-
-impl WideSlabs {
-    fn new(ray: &Ray<f32>) -> Self {
-        let d = [ray.direction.x, ray.direction.y, ray.direction.z];
-        let inv = d.map(|c| 1.0 / c);
-        let exact = !inv.iter().all(|c| c.is_finite());
-        WideSlabs {
-            origin: [ray.origin.x, ray.origin.y, ray.origin.z].map(f32x8::splat),
-            scale: if exact { d } else { inv }.map(f32x8::splat),
-            near: [0, 1, 2].map(|k| if d[k] >= 0.0 { k } else { k + 3 }),
-            exact,
-            zero: d.map(|c| c == 0.0),
-        }
-    }
-
-    /// Which children's boxes the ray enters within `[after, limit]` (bit per lane) and
-    /// where (the padding of the boxes exceeds the reciprocal's error, as for the binary
-    /// walk's [`crate::SlabRay::entry`]).
-    #[inline(always)]
-    fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
-        let mut entry = f32x8::splat(after);
-        let mut exit = f32x8::splat(limit);
-        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
-        for k in 0..3 {
-            let near = f32x8::from(node.planes[self.near[k]]);
-            let far = f32x8::from(node.planes[(self.near[k] + 3) % 6]);
-            let o = self.origin[k];
-            let (t0, t1) = if !self.exact {
-                ((near - o) * self.scale[k], (far - o) * self.scale[k])
-            } else if self.zero[k] {
-                // Parallel to the slab: inside it or not, at every distance.
-                let lo = f32x8::from(node.planes[k]);
-                let hi = f32x8::from(node.planes[k + 3]);
-                inside = inside & lo.simd_le(o) & o.simd_le(hi);
-                continue;
-            } else {
-                ((near - o) / self.scale[k], (far - o) / self.scale[k])
-            };
-            entry = entry.fast_max(t0);
-            exit = exit.fast_min(t1);
-        }
-        let hit = (entry.simd_le(exit) & inside).to_bitmask();
-        (hit, entry.to_array())
     }
 }
 
@@ -459,25 +233,15 @@ impl WideRay {
     }
 }
 
-/// A point or direction in f32 (exact when `T` is f32, the only precision that builds a
-/// wide BVH).
-pub(crate) fn point_f32<T: Real>(p: V3<T>) -> V3<f32> {
-    V3::new(
-        p.x.to_f64() as f32,
-        p.y.to_f64() as f32,
-        p.z.to_f64() as f32,
-    )
-}
-
 /// A mesh's binary BVH and triangles in f32 (exact when `T` is f32).
 pub(crate) fn to_f32<T: Real>(
     nodes: &[MeshNode<T>],
     triangles: &[[V3<T>; 3]],
-) -> (Vec<MeshNode<f32>>, Vec<[V3<f32>; 3]>) {
+) -> (Vec<BinaryNode>, Vec<[V3<f32>; 3]>) {
     (
         nodes
             .iter()
-            .map(|n| MeshNode {
+            .map(|n| BinaryNode {
                 bounds: n.bounds.map(point_f32),
                 first: n.first,
                 count: n.count,
@@ -488,14 +252,10 @@ pub(crate) fn to_f32<T: Real>(
 }
 
 #[cfg(test)]
-#[path = "../../tests/common/mod.rs"]
-mod test_common;
-
-#[cfg(test)]
 mod tests {
     use super::*;
 
-    use super::test_common::{grid, Rng};
+    use crate::test_common::{grid, Rng};
 
     /// A grid with integer heights, shifted by `offset`: every vertex, edge and box face is
     /// exact in f32, so rays aimed at them meet edge functions of exactly 0.

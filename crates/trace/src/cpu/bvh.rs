@@ -13,6 +13,7 @@
 use std::time::Duration;
 
 use glam::Vec3A;
+use hytrace_csg::wide_tree::{ray_f32, WideSlabs, WideTree};
 use hytrace_csg::{bvh2_depth, Bounds, Ray, Real, SlabRay, V3};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
@@ -37,6 +38,29 @@ pub(super) struct BoxBvh<T> {
     items: Vec<u32>,
     /// Items whose bounds are not finite: not in the tree, visited by every query.
     unbounded: Vec<u32>,
+    /// The tree with eight-wide nodes (leaves: ranges of `items`) the f32 ray walk takes;
+    /// `None` in f64.
+    wide: Option<WideTree>,
+}
+
+/// A ray's slab-test form for [`BoxBvh::visit_ray`], made once per ray: eight boxes at a
+/// time in f32 (the wide tree's walk), one at a time in f64 (the binary tree's).
+// A value on the stack for one ray's walk, never stored: boxing the wide form would cost
+// an allocation per ray.
+#[allow(clippy::large_enum_variant)]
+pub(crate) enum RaySlabs<T> {
+    Binary(SlabRay<T>),
+    Wide(WideSlabs),
+}
+
+impl<T: Real> RaySlabs<T> {
+    pub(crate) fn new(ray: &Ray<T>) -> Self {
+        if T::NAME == "f32" {
+            RaySlabs::Wide(WideSlabs::new(&ray_f32(ray)))
+        } else {
+            RaySlabs::Binary(SlabRay::new(ray))
+        }
+    }
 }
 
 /// Deepest BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
@@ -118,11 +142,15 @@ impl<T: Real> BoxBvh<T> {
                 nodes: Vec::new(),
                 items: Vec::new(),
                 unbounded,
+                wide: None,
             });
         }
         let bvh = build_bvh2(
             &boxes,
-            BvhBuildParams::medium_build(),
+            BvhBuildParams {
+                max_prims_per_leaf: 1,
+                ..BvhBuildParams::medium_build()
+            },
             &mut Duration::default(),
         );
         let depth = bvh2_depth(&bvh.nodes);
@@ -133,6 +161,9 @@ impl<T: Real> BoxBvh<T> {
             ));
         }
         let corner = |v: Vec3A| V3::from_f64([v.x, v.y, v.z].map(f64::from));
+        let wide = (T::NAME == "f32")
+            .then(|| WideTree::from_bvh2(&bvh))
+            .transpose()?;
         Ok(BoxBvh {
             nodes: bvh
                 .nodes
@@ -149,16 +180,21 @@ impl<T: Real> BoxBvh<T> {
                 .map(|&i| bounded[i as usize].0)
                 .collect(),
             unbounded,
+            wide,
         })
     }
 
-    /// Calls `visit` on every item whose node boxes the ray meets within `[tmin, limit]`,
-    /// nearer nodes first; `visit` tests the item and returns the limit from then on (the
-    /// nearest crossing found so far; below `tmin` to stop). Boxes met exactly at the limit
-    /// are still visited, so crossings tied with the best one are seen.
+    /// Calls `visit` on every item whose box the ray (`slabs`: its slab-test form) meets
+    /// within `[tmin, limit]` by a test accepting every box the exact one does (leaves hold
+    /// one item, so the leaf's box is the item's, rounded outward to f32), and on the
+    /// unbounded items; nearer boxes first. `visit` tests the item and returns the limit
+    /// from then on (the nearest crossing found so far; below `tmin` to stop). Boxes met
+    /// exactly at the limit are still visited, so crossings tied with the best one are
+    /// seen.
     pub(super) fn visit_ray(
         &self,
         ray: &Ray<T>,
+        slabs: &RaySlabs<T>,
         tmin: T,
         mut limit: T,
         mut visit: impl FnMut(u32) -> T,
@@ -172,9 +208,41 @@ impl<T: Real> BoxBvh<T> {
         if self.nodes.is_empty() {
             return;
         }
+        let (wide, wide_slabs) = match (&self.wide, slabs) {
+            (Some(wide), RaySlabs::Wide(wide_slabs)) => (wide, wide_slabs),
+            (_, RaySlabs::Binary(slabs)) => {
+                return self.visit_binary(ray, slabs, tmin, limit, visit)
+            }
+            // f32 trees always have a wide form; a binary walk would answer the same.
+            (None, RaySlabs::Wide(_)) => {
+                return self.visit_binary(ray, &SlabRay::new(ray), tmin, limit, visit)
+            }
+        };
+        // `T` is f32: the conversions are exact.
+        let f32_of = |t: T| t.to_f64() as f32;
+        let (tmin, mut limit) = (f32_of(tmin), f32_of(limit));
+        wide.walk(wide_slabs, tmin, limit, |first, count| {
+            for &i in &self.items[first as usize..(first + count) as usize] {
+                limit = f32_of(visit(i));
+                if limit < tmin {
+                    break;
+                }
+            }
+            limit
+        });
+    }
+
+    /// [`Self::visit_ray`]'s walk of the binary tree, one box at a time.
+    fn visit_binary(
+        &self,
+        ray: &Ray<T>,
+        slabs: &SlabRay<T>,
+        tmin: T,
+        mut limit: T,
+        mut visit: impl FnMut(u32) -> T,
+    ) {
         // (node, entry parameter); children are pushed farther first. Node tests are
         // conservative (a superset of the exact slab test), so monotonicity holds.
-        let slabs = SlabRay::new(ray);
         let entry = |b: &Bounds<T>, limit: T| slabs.entry_conservative(ray, b, tmin, limit);
         let mut stack = Stack::new((0u32, T::ZERO));
         if let Some(t) = entry(&self.nodes[0].bounds, limit) {

@@ -27,6 +27,7 @@ use hytrace_volume::{
 
 use rayon::prelude::*;
 
+use super::bvh::RaySlabs;
 use super::{CpuScene, Hit};
 use crate::scan::RayRow;
 use crate::scene::{open_medium, MediumSpec};
@@ -377,7 +378,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         let group = &scene.media;
         match &group.bvh {
             None => group.members.iter().for_each(|&i| visit_instance(i)),
-            Some(bvh) => bvh.visit_ray(ray, lo, hi, |i| {
+            Some(bvh) => bvh.visit_ray(ray, &RaySlabs::new(ray), lo, hi, |i| {
                 visit_instance(i);
                 hi
             }),

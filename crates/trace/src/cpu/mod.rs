@@ -25,7 +25,7 @@
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
-use hytrace_csg::{ray_meets_bounds, transform_bounds, Bounds, Ray, Real, V3};
+use hytrace_csg::{transform_bounds, Bounds, Ray, Real, SlabRay, V3};
 use hytrace_foundry::{Foundry, UNSET};
 
 mod bvh;
@@ -37,7 +37,7 @@ pub(crate) mod solid;
 #[cfg(test)]
 mod tests;
 
-use bvh::{holds, BoxBvh};
+use bvh::{holds, BoxBvh, RaySlabs};
 
 /// Deepest box BVH (instances, a solid's leaves) a scene may have: the traversal stacks'
 /// size, on the CPU and in the GPU kernels.
@@ -51,6 +51,9 @@ pub const BVH_MIN_MEMBERS: usize = 8;
 #[derive(Clone, Debug)]
 struct Placement<T> {
     frame: Frame<T>,
+    /// Whether `frame` is axis-aligned ([`Frame::is_axis_aligned`]): `bounds` are then as
+    /// tight as the solid's own box.
+    aligned: bool,
     solid: usize,
     bounds: Bounds<T>,
 }
@@ -149,6 +152,7 @@ impl<T: Real> CpuScene<T> {
                 .with_context(|| format!("instance {i}: singular transform"))?;
             let aabb = &f.solid[inst.solid as usize].aabb;
             placements.push(Placement {
+                aligned: frame.is_axis_aligned(),
                 frame,
                 solid: inst.solid as usize,
                 bounds: world_bounds(aabb, tran),
@@ -171,10 +175,11 @@ impl<T: Real> CpuScene<T> {
                     .collect::<anyhow::Result<_>>()?,
             })
         } else {
-            Layout::Flat(Group::new(
-                (0..placements.len() as u32).collect(),
-                &placements,
-            )?)
+            // Instances of solids without surface prims (media only) have nothing to cross.
+            let surfaced = (0..placements.len() as u32)
+                .filter(|&i| !solids[placements[i as usize].solid].prims.is_empty())
+                .collect();
+            Layout::Flat(Group::new(surfaced, &placements)?)
         };
         let holding_media = (0..placements.len() as u32)
             .filter(|&i| !solids[placements[i as usize].solid].clusters.is_empty())
@@ -188,30 +193,32 @@ impl<T: Real> CpuScene<T> {
         })
     }
 
-    /// The nearer of `best` and the first crossing of instance `index`'s surface.
+    /// The first crossing of instance `index`'s surface in `(tmin, limit)`. `cull`: the
+    /// ray's slab-test form, to skip the instance when the ray misses its box; `None` when
+    /// the caller's BVH walk found the ray meeting that box.
+    #[inline]
     fn cross_instance(
         &self,
         index: usize,
         ray: &Ray<T>,
+        cull: Option<&SlabRay<T>>,
         tmin: T,
-        tmax: T,
-        best: Option<Hit<T>>,
+        limit: T,
     ) -> Option<Hit<T>> {
         let p = &self.placements[index];
-        if !ray_meets_bounds(ray, &p.bounds, tmin, best.map_or(tmax, |b| b.t)) {
-            return best;
+        if let Some(slabs) = cull {
+            // A superset of the exact test's boxes: culling only, the solid decides.
+            slabs.entry_conservative(ray, &p.bounds, tmin, limit)?;
         }
         let local = p.frame.ray_to_local(ray);
-        let limit = best.map_or(tmax, |b| b.t);
-        match self.solids[p.solid].cross(&local, tmin, limit) {
-            Some(c) => Some(Hit {
+        self.solids[p.solid]
+            .cross(&local, tmin, limit, p.aligned)
+            .map(|c| Hit {
                 t: c.t,
                 normal: c.normal,
                 instance: index as u32,
                 prim: c.prim,
-            }),
-            None => best,
-        }
+            })
     }
 
     /// The nearer of `seed` and the first crossing of a member of `group`: what folding
@@ -226,30 +233,26 @@ impl<T: Real> CpuScene<T> {
         seed: Option<Hit<T>>,
     ) -> Option<Hit<T>> {
         let Some(bvh) = &group.bvh else {
+            let slabs = SlabRay::new(ray);
             return group.members.iter().fold(seed, |best, &i| {
-                self.cross_instance(i as usize, ray, tmin, tmax, best)
+                let limit = best.map_or(tmax, |b| b.t);
+                self.cross_instance(i as usize, ray, Some(&slabs), tmin, limit)
+                    .or(best)
             });
         };
+        let slabs = RaySlabs::new(ray);
         let mut best = seed;
         let mut seeded = seed.is_some();
-        bvh.visit_ray(ray, tmin, best.map_or(tmax, |b| b.t), |i| {
-            match best {
+        bvh.visit_ray(ray, &slabs, tmin, best.map_or(tmax, |b| b.t), |i| {
+            let limit = match best {
+                None => tmax,
                 // Visited out of order: an earlier member wins a tie with a later one.
-                Some(b) if !seeded && i < b.instance => {
-                    let bounds = &self.placements[i as usize].bounds;
-                    if ray_meets_bounds(ray, bounds, tmin, b.t) {
-                        let own = self.cross_instance(i as usize, ray, tmin, tmax, None);
-                        if let Some(h) = own.filter(|h| h.t <= b.t) {
-                            best = Some(h);
-                        }
-                    }
-                }
-                _ => {
-                    best = self.cross_instance(i as usize, ray, tmin, tmax, best);
-                    if best.is_some_and(|h| h.instance == i) {
-                        seeded = false;
-                    }
-                }
+                Some(b) if !seeded && i < b.instance => b.t.next_up(),
+                Some(b) => b.t,
+            };
+            if let Some(h) = self.cross_instance(i as usize, ray, None, tmin, limit) {
+                best = Some(h);
+                seeded = false;
             }
             best.map_or(tmax, |b| b.t)
         });
@@ -300,14 +303,15 @@ impl<T: Real> CpuScene<T> {
     /// the surface it starts on; the navigator's answer is then that surface, found again
     /// with the start moved back by the tolerance band.
     fn exit(&self, index: usize, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-        self.cross_instance(index, ray, tmin, tmax, None)
+        let slabs = SlabRay::new(ray);
+        self.cross_instance(index, ray, Some(&slabs), tmin, tmax)
             .or_else(|| {
                 let [lo, hi] = &self.placements[index].bounds;
                 let size = (hi.x - lo.x).max(hi.y - lo.y).max(hi.z - lo.z);
                 let o = ray.origin;
                 let scale = size + o.x.abs().max(o.y.abs()).max(o.z.abs());
                 let band = T::from_f64(4.0) * T::SURFACE_TOLERANCE * scale;
-                self.cross_instance(index, ray, tmin - band, tmax, None)
+                self.cross_instance(index, ray, Some(&slabs), tmin - band, tmax)
                     .map(|h| Hit {
                         t: h.t.max(tmin),
                         ..h
@@ -339,15 +343,17 @@ impl<T: Real> CpuScene<T> {
             Layout::Flat(all) => all,
         };
         let Some(bvh) = &all.bvh else {
+            let slabs = SlabRay::new(ray);
             return all.members.iter().any(|&i| {
-                self.cross_instance(i as usize, ray, tmin, tmax, None)
+                self.cross_instance(i as usize, ray, Some(&slabs), tmin, tmax)
                     .is_some()
             });
         };
+        let slabs = RaySlabs::new(ray);
         let mut found = false;
-        bvh.visit_ray(ray, tmin, tmax, |i| {
+        bvh.visit_ray(ray, &slabs, tmin, tmax, |i| {
             found = self
-                .cross_instance(i as usize, ray, tmin, tmax, None)
+                .cross_instance(i as usize, ray, None, tmin, tmax)
                 .is_some();
             if found {
                 -T::INFINITY

@@ -11,12 +11,11 @@ use std::collections::BTreeMap;
 
 use anyhow::Context;
 use hytrace_csg::{
-    ray_bounds_entry, ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real,
-    EMPTY_AABB, V3,
+    ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, EMPTY_AABB, V3,
 };
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
-use super::bvh::BoxBvh;
+use super::bvh::{BoxBvh, RaySlabs};
 use super::{widened_bounds, BVH_MIN_MEMBERS};
 
 /// Side, in voxels, of the regions whose bricks form one cluster.
@@ -126,27 +125,50 @@ impl<T: Real> SolidAccel<T> {
     }
 
     /// The first surface crossing in `(tmin, limit)` of a ray in the solid's frame; of
-    /// crossings at the same `t`, the lowest prim's.
-    pub fn cross(&self, ray: &Ray<T>, tmin: T, limit: T) -> Option<PrimCrossing<T>> {
+    /// crossings at the same `t`, the lowest prim's. `boxed`: the caller found the ray
+    /// meeting a box as tight as the solid's (an axis-aligned placement's world box), so a
+    /// lone prim's own box test would cull nothing more.
+    pub fn cross(&self, ray: &Ray<T>, tmin: T, limit: T, boxed: bool) -> Option<PrimCrossing<T>> {
+        if boxed && self.prims.len() == 1 {
+            let step = self.prims[0].first_crossing(ray, tmin);
+            return (step.t > tmin && step.t < limit).then(|| PrimCrossing {
+                t: step.t,
+                normal: step.normal,
+                prim: self.prim_ids[0],
+            });
+        }
         // (local prim index, t, normal)
         let mut best: Option<(usize, T, V3<T>)> = None;
-        let try_prim = |i: usize, best: &mut Option<(usize, T, V3<T>)>| {
-            let within = best.map_or(limit, |b| b.1);
-            let prim = &self.prims[i];
-            if ray_bounds_entry(ray, prim.bounds(), tmin, within).is_none() {
-                return;
-            }
-            let step = prim.first_crossing(ray, tmin);
-            let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
-            if step.t > tmin && (step.t < within || tie_won) {
-                *best = Some((i, step.t, step.normal));
-            }
-        };
+        if self.prims.is_empty() {
+            return None;
+        }
+        // `cull`: the ray's slab form to skip a prim whose box it misses; `None` when a BVH
+        // walk found it meeting the box.
+        let try_prim =
+            |i: usize, cull: Option<&SlabRay<T>>, best: &mut Option<(usize, T, V3<T>)>| {
+                let within = best.map_or(limit, |b| b.1);
+                let prim = &self.prims[i];
+                // A superset of the exact test's boxes: culling only, the prim decides.
+                if cull.is_some_and(|s| {
+                    s.entry_conservative(ray, prim.bounds(), tmin, within)
+                        .is_none()
+                }) {
+                    return;
+                }
+                let step = prim.first_crossing(ray, tmin);
+                let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
+                if step.t > tmin && (step.t < within || tie_won) {
+                    *best = Some((i, step.t, step.normal));
+                }
+            };
         match &self.bvh {
-            None => (0..self.prims.len()).for_each(|i| try_prim(i, &mut best)),
-            Some(bvh) => bvh.visit_ray(ray, tmin, limit, |id| {
+            None => {
+                let slabs = SlabRay::new(ray);
+                (0..self.prims.len()).for_each(|i| try_prim(i, Some(&slabs), &mut best));
+            }
+            Some(bvh) => bvh.visit_ray(ray, &RaySlabs::new(ray), tmin, limit, |id| {
                 if (id as usize) < self.prims.len() {
-                    try_prim(id as usize, &mut best);
+                    try_prim(id as usize, None, &mut best);
                 }
                 best.map_or(limit, |b| b.1)
             }),
@@ -179,7 +201,7 @@ impl<T: Real> SolidAccel<T> {
         };
         match &self.bvh {
             None => self.clusters.iter().for_each(&mut one),
-            Some(bvh) => bvh.visit_ray(ray, tmin, tmax, |id| {
+            Some(bvh) => bvh.visit_ray(ray, &RaySlabs::new(ray), tmin, tmax, |id| {
                 if let Some(c) = (id as usize)
                     .checked_sub(self.prims.len())
                     .and_then(|k| self.clusters.get(k))

@@ -106,7 +106,11 @@ fn random_rays<T: Real>(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<T>
 
 /// The flat scene's answer by the linear loop over all instances.
 fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-    (0..s.placements.len()).fold(None, |best, i| s.cross_instance(i, ray, tmin, tmax, best))
+    let slabs = SlabRay::new(ray);
+    (0..s.placements.len()).fold(None, |best, i| {
+        let limit = best.map_or(tmax, |b| b.t);
+        s.cross_instance(i, ray, Some(&slabs), tmin, limit).or(best)
+    })
 }
 
 /// The navigator's answer by linear loops over roots and daughters.
@@ -127,8 +131,11 @@ fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> 
         break;
     }
     let exit = current.and_then(|c| s.exit(c as usize, ray, tmin, tmax));
+    let slabs = SlabRay::new(ray);
     members.iter().fold(exit, |best, &d| {
-        s.cross_instance(d as usize, ray, tmin, tmax, best)
+        let limit = best.map_or(tmax, |b| b.t);
+        s.cross_instance(d as usize, ray, Some(&slabs), tmin, limit)
+            .or(best)
     })
 }
 

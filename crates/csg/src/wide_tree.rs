@@ -1,0 +1,556 @@
+//! Eight-wide BVH nodes for the f32 CPU traversals: a binary BVH collapsed so that each node
+//! holds up to 8 child boxes, tested against a ray all at once with SIMD (`wide`'s `f32x8`:
+//! SSE on x86-64, NEON on AArch64, plain arrays elsewhere). The triangle meshes' kernel
+//! (`mesh::wide`, leaves of triangle blocks) and the tracer's box BVHs over instances and a
+//! solid's prims (leaves of item ranges) share it.
+//!
+//! Collapsing: each wide node takes a binary node's two children and keeps opening its
+//! largest inner child (by surface area) until it has 8 or only leaves are left. A wide
+//! tree is no deeper than the binary one.
+//!
+//! The box test accepts every box the exact dividing slab test
+//! ([`crate::ray_bounds_entry`]) accepts: it multiplies by the reciprocal direction and
+//! widens the slab bounds by four machine epsilons of their size, as
+//! [`crate::SlabRay::entry_conservative`] does; per axis, it divides where a non-zero
+//! direction component has no finite reciprocal, and tests the origin against the slab
+//! where the component is zero. The walk is a culling: callers whose answers do not depend on the
+//! order leaves are visited in (nearest wins, ties by a fixed numbering) get the answers an
+//! exhaustive search gives.
+//!
+//! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
+//! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
+//! reached 2.2-2.7 (coherent) and 0.9-1.1 (incoherent) Mrays/s; 4-wide nodes 4.4-5.7 and
+//! 2.0-2.3; 8-wide nodes 5.3-7.4 and 2.2-2.9. Incoherent rays wait on memory: a profile puts
+//! half of the mesh kernel's time on the first load of a node and of a triangle block, so
+//! fewer levels (wider nodes) is what pays.
+
+use std::mem::MaybeUninit;
+
+use obvhs::bvh2::Bvh2;
+use wide::f32x8;
+
+use crate::real::{Ray, Real, V3};
+
+/// Children per node.
+pub const WIDTH: usize = 8;
+
+/// Deepest binary tree a wide tree is collapsed from (the traversal stack's size follows).
+pub const MAX_DEPTH: usize = 64;
+
+/// Entries the traversal stack may need: a node visit pushes at most `WIDTH - 1` siblings,
+/// and the wide tree is at most [`MAX_DEPTH`] levels deep.
+const STACK: usize = (WIDTH - 1) * MAX_DEPTH + 1;
+
+/// A node of the binary BVH a wide tree is collapsed from: its box, then either children
+/// `first, first + 1` (`count == 0`) or a leaf's `count` items from `first`.
+#[derive(Clone, Copy, Debug)]
+pub struct BinaryNode {
+    /// Box (min, max) in f32, containing everything below.
+    pub bounds: [V3<f32>; 2],
+    /// First child, or a leaf's first item.
+    pub first: u32,
+    /// A leaf's item count; 0 for an inner node.
+    pub count: u32,
+}
+
+/// Eight child boxes and what they hold, lane by lane (256 bytes, four cache lines).
+#[derive(Clone, Debug, PartialEq)]
+#[repr(C, align(64))]
+struct WideNode {
+    /// Child boxes: min x, min y, min z, max x, max y, max z, one lane per child. Unused
+    /// lanes hold empty boxes (min +inf, max -inf), which no ray enters.
+    planes: [[f32; WIDTH]; 6],
+    /// An inner child's node index (`count == 0`), or what the leaf callback made of a
+    /// leaf's first item.
+    child: [u32; WIDTH],
+    /// What the leaf callback made of a leaf's item count (never 0); 0 for an inner child.
+    count: [u32; WIDTH],
+}
+
+/// A BVH of eight-wide nodes; node 0 is the root.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WideTree {
+    nodes: Vec<WideNode>,
+}
+
+/// Surface area of a box (the collapse opens the largest inner child first).
+fn area(b: &[V3<f32>; 2]) -> f32 {
+    let e = b[1] - b[0];
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
+/// A child postponed by the walk, with its box entry.
+#[derive(Clone, Copy, Default)]
+struct Postponed {
+    child: u32,
+    count: u32,
+    entry: f32,
+}
+
+impl WideTree {
+    /// The wide form of a binary BVH (`nodes`, root first; empty for an empty tree).
+    /// `leaf(first, count)` turns each binary leaf's item range into what the wide node
+    /// stores for it, `(child, count)` with `count > 0`, for instance after copying the
+    /// items into blocks of its own. An error when the binary tree is deeper than
+    /// [`MAX_DEPTH`].
+    pub fn new(
+        nodes: &[BinaryNode],
+        mut leaf: impl FnMut(u32, u32) -> (u32, u32),
+    ) -> Result<Self, String> {
+        let mut tree = WideTree {
+            nodes: Vec::with_capacity(nodes.len() / 4 + 1),
+        };
+        if !nodes.is_empty() {
+            tree.collapse(nodes, 0, 1, &mut leaf)?;
+        }
+        Ok(tree)
+    }
+
+    /// The wide form of an obvhs binary BVH whose leaves keep their ranges of the BVH's
+    /// `primitive_indices`; an error when it is deeper than [`MAX_DEPTH`].
+    pub fn from_bvh2(bvh: &Bvh2) -> Result<Self, String> {
+        let binary: Vec<BinaryNode> = bvh
+            .nodes
+            .iter()
+            .map(|n| BinaryNode {
+                bounds: [n.aabb.min, n.aabb.max].map(|v| V3::new(v.x, v.y, v.z)),
+                first: n.first_index,
+                count: n.prim_count,
+            })
+            .collect();
+        Self::new(&binary, |first, count| (first, count))
+    }
+
+    /// Adds the wide node that stands for binary node `index` (at wide depth `depth`) and,
+    /// below it, its subtree; returns its index.
+    fn collapse(
+        &mut self,
+        nodes: &[BinaryNode],
+        index: usize,
+        depth: usize,
+        leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
+    ) -> Result<u32, String> {
+        if depth > MAX_DEPTH {
+            return Err(format!(
+                "a BVH over {} nodes is deeper than {MAX_DEPTH} levels",
+                nodes.len()
+            ));
+        }
+        let n = &nodes[index];
+        let mut children = if n.count == 0 {
+            vec![n.first as usize, n.first as usize + 1]
+        } else {
+            vec![index]
+        };
+        while children.len() < WIDTH {
+            let largest_inner = (0..children.len())
+                .filter(|&i| nodes[children[i]].count == 0)
+                .max_by(|&a, &b| {
+                    area(&nodes[children[a]].bounds).total_cmp(&area(&nodes[children[b]].bounds))
+                });
+            let Some(i) = largest_inner else { break };
+            let first = nodes[children[i]].first as usize;
+            children[i] = first;
+            children.push(first + 1);
+        }
+        let slot = self.nodes.len();
+        self.nodes.push(WideNode {
+            planes: [
+                [f32::INFINITY; WIDTH],
+                [f32::INFINITY; WIDTH],
+                [f32::INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+            ],
+            child: [0; WIDTH],
+            count: [0; WIDTH],
+        });
+        for (lane, &c) in children.iter().enumerate() {
+            let node = &nodes[c];
+            let (child, count) = if node.count == 0 {
+                (self.collapse(nodes, c, depth + 1, leaf)?, 0)
+            } else {
+                leaf(node.first, node.count)
+            };
+            let w = &mut self.nodes[slot];
+            for k in 0..3 {
+                w.planes[k][lane] = node.bounds[0].get(k);
+                w.planes[k + 3][lane] = node.bounds[1].get(k);
+            }
+            w.child[lane] = child;
+            w.count[lane] = count;
+        }
+        Ok(slot as u32)
+    }
+
+    /// Bytes of the nodes.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+    }
+
+    /// Calls `leaf(child, count)` for every leaf whose boxes the ray (`slabs`) meets within
+    /// `[after, limit]`, nearer boxes first; `leaf` tests what it holds and returns the limit
+    /// from then on (the nearest crossing so far; below `after` to stop). Boxes met exactly
+    /// at the limit are still visited, so crossings tied with the best one are seen.
+    #[inline(always)]
+    pub fn walk(
+        &self,
+        slabs: &WideSlabs,
+        after: f32,
+        mut limit: f32,
+        mut leaf: impl FnMut(u32, u32) -> f32,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        // Postponed children, the nearest on top; only `stack[..top]` is ever read.
+        let mut stack = [MaybeUninit::<Postponed>::uninit(); STACK];
+        let mut top = 0;
+        let (mut child, mut count) = (0u32, 0u32);
+        loop {
+            if count == 0 {
+                let node = &self.nodes[child as usize];
+                let (hit, entries) = slabs.entries(node, after, limit);
+                // (`count_ones` would be a bit-trick sequence without POPCNT, which the
+                // baseline x86-64 target lacks.)
+                match hit {
+                    0 => {}
+                    _ if hit & (hit - 1) == 0 => {
+                        let lane = hit.trailing_zeros() as usize;
+                        (child, count) = (node.child[lane], node.count[lane]);
+                        continue;
+                    }
+                    _ => {
+                        // Sort the entered children farthest first, push all but the
+                        // nearest, and go on with it.
+                        let mut entered = [Postponed::default(); WIDTH];
+                        let mut n = 0;
+                        let mut bits = hit;
+                        while bits != 0 {
+                            let lane = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let e = Postponed {
+                                child: node.child[lane],
+                                count: node.count[lane],
+                                entry: entries[lane],
+                            };
+                            let mut at = n;
+                            while at > 0 && entered[at - 1].entry < e.entry {
+                                entered[at] = entered[at - 1];
+                                at -= 1;
+                            }
+                            entered[at] = e;
+                            n += 1;
+                        }
+                        for e in &entered[..n - 1] {
+                            stack[top].write(*e);
+                            top += 1;
+                        }
+                        (child, count) = (entered[n - 1].child, entered[n - 1].count);
+                        continue;
+                    }
+                }
+            } else {
+                limit = leaf(child, count);
+                if limit < after {
+                    return;
+                }
+            }
+            // The nearest postponed child still entered within the limit (boxes entered
+            // exactly there may hold a tied crossing).
+            loop {
+                if top == 0 {
+                    return;
+                }
+                top -= 1;
+                // SAFETY: entries below `top` were written by the pushes above (each
+                // push writes `stack[top]` before raising `top`), and `top` never exceeds
+                // `STACK`: each level of the at most `MAX_DEPTH` deep tree pushes at most
+                // `WIDTH - 1` siblings.
+                let e = unsafe { stack[top].assume_init() };
+                if e.entry <= limit {
+                    (child, count) = (e.child, e.count);
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// How one axis of the slab test is computed for a ray.
+#[derive(Clone, Copy, PartialEq)]
+enum Axis {
+    /// By the reciprocal direction component.
+    Multiply,
+    /// By dividing, for a non-zero component without a finite reciprocal (subnormal).
+    Divide,
+    /// The component is zero: the ray is inside the slab at every distance or never.
+    Parallel,
+}
+
+/// The per-ray part of the node-wide slab test.
+pub struct WideSlabs {
+    origin: [f32x8; 3],
+    /// Per axis: the reciprocal direction component, or (`Axis::Divide`) the component.
+    scale: [f32x8; 3],
+    /// Which of `planes` is each axis' entry plane (min for a positive component).
+    near: [usize; 3],
+    axis: [Axis; 3],
+}
+
+impl WideSlabs {
+    /// The slab-test form of `ray`.
+    #[inline]
+    pub fn new(ray: &Ray<f32>) -> Self {
+        let d = [ray.direction.x, ray.direction.y, ray.direction.z];
+        let inv = d.map(|c| 1.0 / c);
+        let axis = [0, 1, 2].map(|k| {
+            if d[k] == 0.0 {
+                Axis::Parallel
+            } else if inv[k].is_finite() {
+                Axis::Multiply
+            } else {
+                Axis::Divide
+            }
+        });
+        WideSlabs {
+            origin: [ray.origin.x, ray.origin.y, ray.origin.z].map(f32x8::splat),
+            scale: [0, 1, 2].map(|k| {
+                f32x8::splat(if axis[k] == Axis::Divide {
+                    d[k]
+                } else {
+                    inv[k]
+                })
+            }),
+            near: [0, 1, 2].map(|k| if d[k] >= 0.0 { k } else { k + 3 }),
+            axis,
+        }
+    }
+
+    /// Which children's boxes the ray enters within `[after, limit]` (bit per lane) and
+    /// where (see the module doc for why no box the exact test accepts is missed).
+    #[inline(always)]
+    fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
+        let mut entry = f32x8::splat(f32::NEG_INFINITY);
+        let mut exit = f32x8::splat(f32::INFINITY);
+        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        for k in 0..3 {
+            let near = f32x8::from(node.planes[self.near[k]]);
+            let far = f32x8::from(node.planes[(self.near[k] + 3) % 6]);
+            let o = self.origin[k];
+            let (t0, t1) = match self.axis[k] {
+                Axis::Multiply => ((near - o) * self.scale[k], (far - o) * self.scale[k]),
+                Axis::Divide => ((near - o) / self.scale[k], (far - o) / self.scale[k]),
+                Axis::Parallel => {
+                    // Inside the slab or not, at every distance.
+                    inside = inside & near.simd_le(o) & o.simd_le(far);
+                    continue;
+                }
+            };
+            entry = entry.fast_max(t0);
+            exit = exit.fast_min(t1);
+        }
+        // Widened by four machine epsilons of their size, more than the reciprocal's error;
+        // by multiplying, which keeps the empty lanes' infinities (no inf - inf).
+        let (less, more) = (
+            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
+            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
+        );
+        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
+        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(f32x8::splat(after));
+        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(f32x8::splat(limit));
+        let hit = (entry.simd_le(exit) & inside).to_bitmask();
+        (hit, entry.to_array())
+    }
+}
+
+/// A point or direction in f32 (exact when `T` is f32, the precision wide trees serve).
+pub fn point_f32<T: Real>(p: V3<T>) -> V3<f32> {
+    V3::new(
+        p.x.to_f64() as f32,
+        p.y.to_f64() as f32,
+        p.z.to_f64() as f32,
+    )
+}
+
+/// A ray in f32 (exact when `T` is f32).
+pub fn ray_f32<T: Real>(ray: &Ray<T>) -> Ray<f32> {
+    Ray {
+        origin: point_f32(ray.origin),
+        direction: point_f32(ray.direction),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use glam::Vec3A;
+    use obvhs::aabb::Aabb;
+    use obvhs::bvh2::builder::build_bvh2;
+    use obvhs::BvhBuildParams;
+
+    use super::*;
+    use crate::prim_tree::ray_bounds_entry;
+    use crate::test_common::Rng;
+
+    /// Random boxes around `centre` (f32 corners), a wide tree over them (leaves of up to 4
+    /// boxes) and the box numbers in leaf order.
+    fn forest(
+        rng: &mut Rng,
+        n: usize,
+        centre: f64,
+        size: f64,
+    ) -> (Vec<[V3<f32>; 2]>, WideTree, Vec<u32>) {
+        let boxes: Vec<[V3<f32>; 2]> = (0..n)
+            .map(|_| {
+                let c = [0; 3].map(|_| centre + rng.range(-size, size));
+                // Some boxes flat in one axis (a face's box), most not.
+                let e = [0; 3].map(|_| {
+                    if rng.range(0.0, 1.0) < 0.1 {
+                        0.0
+                    } else {
+                        rng.range(0.0, 0.1 * size)
+                    }
+                });
+                [
+                    V3::from_f64([0, 1, 2].map(|k| c[k] - e[k])),
+                    V3::from_f64([0, 1, 2].map(|k| c[k] + e[k])),
+                ]
+            })
+            .collect();
+        let aabbs: Vec<Aabb> = boxes
+            .iter()
+            .map(|b| {
+                Aabb::new(
+                    Vec3A::new(b[0].x, b[0].y, b[0].z),
+                    Vec3A::new(b[1].x, b[1].y, b[1].z),
+                )
+            })
+            .collect();
+        let params = BvhBuildParams {
+            max_prims_per_leaf: 4,
+            ..BvhBuildParams::fast_build()
+        };
+        let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+        let tree = WideTree::from_bvh2(&bvh).unwrap();
+        (boxes, tree, bvh.primitive_indices)
+    }
+
+    /// Checks that walking the whole tree (the limit never lowered) reaches every box the
+    /// exact dividing test finds the ray meeting within `[after, limit]`; returns how many.
+    fn reaches_all_met(
+        boxes: &[[V3<f32>; 2]],
+        tree: &WideTree,
+        order: &[u32],
+        ray: &Ray<f32>,
+        after: f32,
+        limit: f32,
+    ) -> usize {
+        let mut reached = vec![false; boxes.len()];
+        tree.walk(&WideSlabs::new(ray), after, limit, |first, count| {
+            for &i in &order[first as usize..(first + count) as usize] {
+                reached[i as usize] = true;
+            }
+            limit
+        });
+        let mut met = 0;
+        for (i, b) in boxes.iter().enumerate() {
+            if ray_bounds_entry(ray, b, after, limit).is_some() {
+                met += 1;
+                assert!(
+                    reached[i],
+                    "box {i} {b:?} met by {ray:?} in [{after}, {limit}] not reached"
+                );
+            }
+        }
+        met
+    }
+
+    fn ray(origin: [f64; 3], direction: [f64; 3]) -> Ray<f32> {
+        Ray {
+            origin: V3::from_f64(origin),
+            direction: V3::from_f64(direction),
+        }
+    }
+
+    #[test]
+    fn wide_walk_reaches_every_box_the_exact_test_meets_near_and_far_from_the_origin() {
+        let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+        for centre in [0.0, 1.0e6, -3.0e7] {
+            let (boxes, tree, order) = forest(&mut rng, 3000, centre, 100.0);
+            let mut met = 0;
+            for _ in 0..3000 {
+                let o = [0; 3].map(|_| centre + rng.range(-150.0, 150.0));
+                met += reaches_all_met(
+                    &boxes,
+                    &tree,
+                    &order,
+                    &ray(o, rng.unit()),
+                    0.0,
+                    f32::INFINITY,
+                );
+                // A window of the ray, as a closest-hit search's shrinking limit makes.
+                let (a, b) = (rng.range(-50.0, 100.0) as f32, rng.range(0.0, 300.0) as f32);
+                met += reaches_all_met(&boxes, &tree, &order, &ray(o, rng.unit()), a, a + b);
+            }
+            assert!(met > 10_000, "only {met} boxes met around {centre}");
+        }
+    }
+
+    #[test]
+    fn wide_walk_reaches_boxes_for_zero_and_subnormal_direction_components() {
+        let mut rng = Rng(99);
+        let (boxes, tree, order) = forest(&mut rng, 2000, 0.0, 50.0);
+        let mut met = 0;
+        for _ in 0..2000 {
+            let o = [0; 3].map(|_| rng.range(-60.0, 60.0));
+            let u = rng.unit();
+            for zeroed in [
+                [true, false, false],
+                [false, true, true],
+                [true, true, false],
+            ] {
+                let d = [0, 1, 2].map(|k| if zeroed[k] { 0.0 } else { u[k] });
+                if d.iter().all(|c| *c == 0.0) {
+                    continue;
+                }
+                met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            }
+            // A subnormal component: its reciprocal overflows, that axis divides.
+            let d = [u[0], 1.0e-40, u[2]];
+            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+        }
+        assert!(met > 5_000, "only {met} boxes met");
+    }
+
+    #[test]
+    fn wide_walk_reaches_boxes_grazed_along_faces_and_touched_at_corners() {
+        let mut rng = Rng(5);
+        let (boxes, tree, order) = forest(&mut rng, 1000, 10.0, 20.0);
+        let mut met = 0;
+        for (i, b) in boxes.iter().enumerate() {
+            // Along a face plane of box `i` (origin on the plane, direction in it), and
+            // touching its edge.
+            let k = i % 3;
+            let mut o = [0, 1, 2].map(|j| f64::from(b[0].get(j)) - 5.0);
+            o[k] = f64::from(b[1].get(k));
+            let mut d = [1.0, 1.0, 1.0];
+            d[k] = 0.0;
+            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            let mut d = rng.unit();
+            d[k] = 0.0;
+            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            // Aimed from afar at a corner, where the slabs' entry and exit meet: rounding
+            // decides whether the ray touches the box, and the walk must not disagree.
+            for corner in 0..8 {
+                let c = [0, 1, 2].map(|j| f64::from(b[(corner >> j) & 1].get(j)));
+                let d = rng.unit();
+                let o = [0, 1, 2].map(|j| c[j] - 1.0e3 * d[j]);
+                met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            }
+        }
+        assert!(met > 1_000, "only {met} boxes met");
+    }
+}
