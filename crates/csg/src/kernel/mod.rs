@@ -44,12 +44,19 @@ impl<T: Real> Frame<T> {
         })
     }
 
-    /// Whether the frame's axes are the parent's up to order, sign and scale (each row of
-    /// the inverse has one non-zero entry): boxes stay boxes of the same extent.
+    /// Whether the frame's axes are the parent's up to order, sign and scale, within 1e-6
+    /// (each row of the inverse has one entry above 1e-6 of its largest: rotations by right
+    /// angles built from sines and cosines leave entries of about 1e-16): a box placed by
+    /// it has a parent-frame box as tight as itself.
     pub fn is_axis_aligned(&self) -> bool {
-        self.inverse
-            .iter()
-            .all(|r| [r.x, r.y, r.z].iter().filter(|c| **c != T::ZERO).count() == 1)
+        self.inverse.iter().all(|r| {
+            let c = [r.x, r.y, r.z].map(|c| c.abs());
+            let largest = c[0].max(c[1]).max(c[2]);
+            c.iter()
+                .filter(|&&c| c > T::from_f64(1e-6) * largest)
+                .count()
+                == 1
+        })
     }
 
     fn linear(&self, v: V3<T>) -> V3<T> {
@@ -262,6 +269,31 @@ impl<T: Real> Leaf<T> {
             -s
         } else {
             s
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn right_angle_placements_are_axis_aligned_and_others_are_not() {
+        let frame = |t: &Transform64| Frame::<f32>::from_transform(t).unwrap();
+        let aligned = [
+            Transform64::IDENTITY,
+            Transform64::translation([3.0, -1e6, 2.0]),
+            Transform64::rotation([1.0, 0.0, 0.0], std::f64::consts::PI),
+            Transform64::rotation([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_2),
+        ];
+        for t in &aligned {
+            assert!(frame(t).is_axis_aligned(), "{t:?}");
+        }
+        for angle in [0.5f64, 1.0, 3.0] {
+            let t = Transform64::rotation([0.0, 1.0, 0.0], angle);
+            assert!(!frame(&t).is_axis_aligned(), "{t:?}");
+            let t = Transform64::rotation([1.0, 1.0, 1.0], angle);
+            assert!(!frame(&t).is_axis_aligned(), "{t:?}");
         }
     }
 }
