@@ -4,11 +4,20 @@
 //!
 //! obvhs builds the tree from f32 copies of the boxes, each rounded outward, so every node
 //! box (a union of such boxes, exact in f32) contains the exact box of every item below
-//! it. The traversal runs in the kernel's precision over those boxes with a reciprocal slab
-//! test widened to accept every box the exact test ([`hytrace_csg::ray_meets_bounds`])
-//! accepts ([`SlabRay::entry_conservative`]); the exact test is monotone in the box, so
-//! whenever an item's own exact bounds test passes, so does every node above it, and no item
-//! the ray meets is culled. Items with non-finite bounds stay out of the tree and are visited every time.
+//! it. Leaves hold one item each, so a leaf's box is its item's and callers need no box
+//! test of their own. The traversal runs over those boxes with a reciprocal slab test
+//! widened to accept every box the exact test ([`hytrace_csg::ray_meets_bounds`]) accepts:
+//! in f32 eight boxes at a time over the tree collapsed into eight-wide nodes
+//! ([`hytrace_csg::wide_tree`], the mesh kernel's node form), in f64 one at a time over the
+//! binary tree ([`SlabRay::entry_conservative`]); the GPU walks the binary tree. The exact
+//! test is monotone in the box, so whenever an item's own exact bounds test passes, so does
+//! every node above it, and no item the ray meets is culled. Items with non-finite bounds
+//! stay out of the tree and are visited every time.
+//!
+//! Measured on the mixed scene of `cargo bench -p hytrace-tests --bench mixed` (406
+//! instances; BENCHMARKS.md), the wide walk with one-item leaves and no repeated box tests
+//! took the closest-hit query from 0.80x (coherent) and 0.94x (incoherent) of Embree's
+//! speed to 1.01x and 1.06-1.18x.
 
 use std::time::Duration;
 
