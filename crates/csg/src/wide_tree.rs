@@ -13,9 +13,9 @@
 //! widens the slab bounds by four machine epsilons of their size, as
 //! [`crate::SlabRay::entry_conservative`] does; per axis, it divides where a non-zero
 //! direction component has no finite reciprocal, and tests the origin against the slab
-//! where the component is zero. The walk is a culling: callers whose answers do not depend on the
-//! order leaves are visited in (nearest wins, ties by a fixed numbering) get the answers an
-//! exhaustive search gives.
+//! where the component is zero. The walk is a culling: callers whose answers do not depend
+//! on the order leaves are visited in (nearest wins, ties by a fixed numbering) get the
+//! answers an exhaustive search gives.
 //!
 //! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
 //! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
