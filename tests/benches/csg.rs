@@ -7,7 +7,7 @@
 
 use std::time::Instant;
 
-use hytrace_csg::{box3, sphere, PrimTree, Ray, Real, Shape, V3};
+use hytrace_csg::{box3, sphere, PrimTree, Ray, Real, Shape};
 use hytrace_foundry::TypeCode;
 use hytrace_tests::geant4::{prepare, run_oracle, OracleData};
 use hytrace_tests::oracle_python;
@@ -20,15 +20,7 @@ fn rate<T: Real, P: Sync + Fn(usize, &Ray<T>) -> bool>(
 ) -> f64 {
     let prepared: Vec<(usize, Ray<T>)> = rays
         .iter()
-        .map(|(i, r)| {
-            (
-                *i,
-                Ray {
-                    origin: V3::from_f64([r[0], r[1], r[2]]),
-                    direction: V3::from_f64([r[4], r[5], r[6]]),
-                },
-            )
-        })
+        .map(|(i, r)| (*i, Ray::from_f64([r[0], r[1], r[2]], [r[4], r[5], r[6]])))
         .collect();
     let mut done = 0usize;
     let start = Instant::now();

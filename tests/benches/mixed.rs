@@ -16,7 +16,7 @@ mod mixed_scene;
 
 use std::time::Instant;
 
-use hytrace_csg::{Ray, V3};
+use hytrace_csg::Ray;
 use hytrace_trace::cpu::media::SceneMedia;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::scan::RayRow;
@@ -26,10 +26,7 @@ use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
 use rayon::prelude::*;
 
 fn ray32(r: &RayRow) -> Ray<f32> {
-    Ray {
-        origin: V3::from_f64(r.origin),
-        direction: V3::from_f64(r.direction),
-    }
+    Ray::from_f64(r.origin, r.direction)
 }
 
 /// Seconds of the best of three runs of `f`, and its last result.

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use hytrace_csg::geant4::{G4Mapping, G4Solid};
-use hytrace_csg::{add_geometry, to_tree, PreparedPrim, Ray, Real, V3};
+use hytrace_csg::{add_geometry, to_tree, PreparedPrim, Ray, Real};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_foundry::{Foundry, UNSET};
@@ -142,10 +142,7 @@ pub fn prepare<T: Real>(solids: &[G4Solid]) -> Vec<PreparedPrim<T>> {
 /// cosine between the ray and the surface normal there, and whether the ray starts inside
 /// by the prim's inside test.
 pub fn answer<T: Real>(prim: &PreparedPrim<T>, r: &[f64; 8]) -> (f64, f64, bool) {
-    let ray = Ray {
-        origin: V3::from_f64([r[0], r[1], r[2]]),
-        direction: V3::from_f64([r[4], r[5], r[6]]),
-    };
+    let ray = Ray::from_f64([r[0], r[1], r[2]], [r[4], r[5], r[6]]);
     let step = prim.first_crossing(&ray, T::from_f64(r[3]));
     let cos = step
         .normal

@@ -257,3 +257,13 @@ pub struct Ray<T> {
     /// Direction.
     pub direction: V3<T>,
 }
+
+impl<T: Real> Ray<T> {
+    /// A ray from f64 coordinates, each rounded to `T`.
+    pub fn from_f64(origin: [f64; 3], direction: [f64; 3]) -> Self {
+        Ray {
+            origin: V3::from_f64(origin),
+            direction: V3::from_f64(direction),
+        }
+    }
+}

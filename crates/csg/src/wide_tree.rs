@@ -92,11 +92,23 @@ impl WideTree {
     /// `leaf(first, count)` turns each binary leaf's item range into what the wide node
     /// stores for it, `(child, count)` with `count > 0`, for instance after copying the
     /// items into blocks of its own. An error when the binary tree is deeper than
-    /// [`MAX_DEPTH`].
+    /// [`MAX_DEPTH`] (a cycle included), names a child it lacks, or a leaf is stored with no
+    /// items.
     pub fn new(
         nodes: &[BinaryNode],
         mut leaf: impl FnMut(u32, u32) -> (u32, u32),
     ) -> Result<Self, String> {
+        if let Some(i) = nodes
+            .iter()
+            .position(|n| n.count == 0 && n.first as usize + 1 >= nodes.len())
+        {
+            return Err(format!(
+                "BVH node {i} names children {} and {} of {} nodes",
+                nodes[i].first,
+                nodes[i].first as u64 + 1,
+                nodes.len()
+            ));
+        }
         let mut tree = WideTree {
             nodes: Vec::with_capacity(nodes.len() / 4 + 1),
         };
@@ -171,7 +183,10 @@ impl WideTree {
             let (child, count) = if node.count == 0 {
                 (self.collapse(nodes, c, depth + 1, leaf)?, 0)
             } else {
-                leaf(node.first, node.count)
+                match leaf(node.first, node.count) {
+                    (_, 0) => return Err(format!("leaf node {c} was stored with no items")),
+                    stored => stored,
+                }
             };
             let w = &mut self.nodes[slot];
             for k in 0..3 {
@@ -468,13 +483,6 @@ mod tests {
         met
     }
 
-    fn ray(origin: [f64; 3], direction: [f64; 3]) -> Ray<f32> {
-        Ray {
-            origin: V3::from_f64(origin),
-            direction: V3::from_f64(direction),
-        }
-    }
-
     #[test]
     fn wide_walk_reaches_every_box_the_exact_test_meets_near_and_far_from_the_origin() {
         let mut rng = Rng(0x2545_f491_4f6c_dd1d);
@@ -487,13 +495,20 @@ mod tests {
                     &boxes,
                     &tree,
                     &order,
-                    &ray(o, rng.unit()),
+                    &Ray::from_f64(o, rng.unit()),
                     0.0,
                     f32::INFINITY,
                 );
                 // A window of the ray, as a closest-hit search's shrinking limit makes.
                 let (a, b) = (rng.range(-50.0, 100.0) as f32, rng.range(0.0, 300.0) as f32);
-                met += reaches_all_met(&boxes, &tree, &order, &ray(o, rng.unit()), a, a + b);
+                met += reaches_all_met(
+                    &boxes,
+                    &tree,
+                    &order,
+                    &Ray::from_f64(o, rng.unit()),
+                    a,
+                    a + b,
+                );
             }
             assert!(met > 10_000, "only {met} boxes met around {centre}");
         }
@@ -516,11 +531,25 @@ mod tests {
                 if d.iter().all(|c| *c == 0.0) {
                     continue;
                 }
-                met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+                met += reaches_all_met(
+                    &boxes,
+                    &tree,
+                    &order,
+                    &Ray::from_f64(o, d),
+                    0.0,
+                    f32::INFINITY,
+                );
             }
             // A subnormal component: its reciprocal overflows, that axis divides.
             let d = [u[0], 1.0e-40, u[2]];
-            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            met += reaches_all_met(
+                &boxes,
+                &tree,
+                &order,
+                &Ray::from_f64(o, d),
+                0.0,
+                f32::INFINITY,
+            );
         }
         assert!(met > 5_000, "only {met} boxes met");
     }
@@ -538,19 +567,62 @@ mod tests {
             o[k] = f64::from(b[1].get(k));
             let mut d = [1.0, 1.0, 1.0];
             d[k] = 0.0;
-            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            met += reaches_all_met(
+                &boxes,
+                &tree,
+                &order,
+                &Ray::from_f64(o, d),
+                0.0,
+                f32::INFINITY,
+            );
             let mut d = rng.unit();
             d[k] = 0.0;
-            met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+            met += reaches_all_met(
+                &boxes,
+                &tree,
+                &order,
+                &Ray::from_f64(o, d),
+                0.0,
+                f32::INFINITY,
+            );
             // Aimed from afar at a corner, where the slabs' entry and exit meet: rounding
             // decides whether the ray touches the box, and the walk must not disagree.
             for corner in 0..8 {
                 let c = [0, 1, 2].map(|j| f64::from(b[(corner >> j) & 1].get(j)));
                 let d = rng.unit();
                 let o = [0, 1, 2].map(|j| c[j] - 1.0e3 * d[j]);
-                met += reaches_all_met(&boxes, &tree, &order, &ray(o, d), 0.0, f32::INFINITY);
+                met += reaches_all_met(
+                    &boxes,
+                    &tree,
+                    &order,
+                    &Ray::from_f64(o, d),
+                    0.0,
+                    f32::INFINITY,
+                );
             }
         }
         assert!(met > 1_000, "only {met} boxes met");
+    }
+
+    #[test]
+    fn malformed_trees_are_errors_not_panics() {
+        let unit = [V3::new(0.0, 0.0, 0.0), V3::new(1.0, 1.0, 1.0)];
+        let node = |first, count| BinaryNode {
+            bounds: unit,
+            first,
+            count,
+        };
+        let keep = |first, count| (first, count);
+        // A child index past the end.
+        let err = WideTree::new(&[node(1, 0), node(0, 1)], keep).unwrap_err();
+        assert!(err.contains("names children 1 and 2 of 2 nodes"), "{err}");
+        // A cycle: node 1's children are the root and node 1 again.
+        let err = WideTree::new(&[node(1, 0), node(0, 0), node(0, 1)], keep).unwrap_err();
+        assert!(err.contains("deeper than"), "{err}");
+        // A leaf stored with no items.
+        let err = WideTree::new(&[node(1, 0), node(0, 1), node(1, 1)], |first, _| (first, 0))
+            .unwrap_err();
+        assert!(err.contains("no items"), "{err}");
+        assert!(WideTree::new(&[node(1, 0), node(0, 1), node(1, 1)], keep).is_ok());
     }
 }

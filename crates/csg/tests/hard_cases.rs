@@ -31,10 +31,7 @@ fn cross<T: Real>(
     d: [f64; 3],
     tmin: f64,
 ) -> (f64, [f64; 3], bool) {
-    let ray = Ray {
-        origin: V3::from_f64(o),
-        direction: V3::from_f64(d),
-    };
+    let ray = Ray::from_f64(o, d);
     let s = tree.first_crossing(&ray, T::from_f64(tmin));
     (
         s.t.to_f64(),

@@ -2,7 +2,7 @@
 //! touching or disjoint spheres and intersections of many spheres, walked crossing by
 //! crossing from outside and from inside.
 
-use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Shape, TreeOptions, V3};
+use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Shape, TreeOptions};
 use hytrace_foundry::TypeCode;
 
 mod common;
@@ -82,10 +82,7 @@ fn check_with(centres: &[[f64; 3]], radii: &[f64], union: bool, seed: u64, optio
                 .filter(|&t| t > 1e-9)
                 .collect()
         };
-        let ray = Ray {
-            origin: V3::from_f64(o),
-            direction: V3::from_f64(d),
-        };
+        let ray = Ray::from_f64(o, d);
         let mut tmin = 0.0;
         for (k, want) in reference.iter().enumerate() {
             let s = prim.first_crossing(&ray, tmin);

@@ -11,10 +11,7 @@ use common::{grid, Rng};
 type Tri = [[f64; 3]; 3];
 
 fn first_hit<T: Real>(mesh: &MeshPrim<T>, o: [f64; 3], d: [f64; 3]) -> f64 {
-    let ray = Ray {
-        origin: V3::from_f64(o),
-        direction: V3::from_f64(d),
-    };
+    let ray = Ray::from_f64(o, d);
     mesh.first_crossing(&ray, T::ZERO).t.to_f64()
 }
 

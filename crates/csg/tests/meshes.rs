@@ -19,10 +19,7 @@ fn mesh_of(solid: &G4Solid, tol: f64) -> Vec<[[f64; 3]; 3]> {
 }
 
 fn ray<T: Real>(o: [f64; 3], d: [f64; 3]) -> Ray<T> {
-    Ray {
-        origin: V3::from_f64(o),
-        direction: V3::from_f64(d),
-    }
+    Ray::from_f64(o, d)
 }
 
 fn l_shape_case<T: Real>() {

@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use hytrace_csg::{Ray, Real, V3};
+use hytrace_csg::{Ray, Real};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
 use hytrace_foundry::Foundry;
@@ -175,10 +175,7 @@ fn answers<T: Real>(
 ) -> anyhow::Result<Vec<Answer>> {
     rays.par_iter()
         .map(|r| {
-            let ray = Ray {
-                origin: V3::from_f64(r.origin),
-                direction: V3::from_f64(r.direction),
-            };
+            let ray = Ray::from_f64(r.origin, r.direction);
             let tmax = if r.tmax.is_finite() {
                 T::from_f64(r.tmax)
             } else {
@@ -626,10 +623,7 @@ fn embree_transmittance(
         let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
         *opened = Instant::now();
         media.transmittances_with(rays, ends, |r, end| {
-            let ray = Ray {
-                origin: V3::from_f64(r.origin),
-                direction: V3::from_f64(r.direction),
-            };
+            let ray = Ray::from_f64(r.origin, r.direction);
             scene.cluster_visits(&ray, r.tmin, end)
         })
     })

@@ -35,7 +35,7 @@ mod with_embree {
     use std::path::{Path, PathBuf};
     use std::process::{Command, Output};
 
-    use hytrace_csg::{Ray, V3};
+    use hytrace_csg::Ray;
     use hytrace_foundry::gdml::GdmlOptions;
     use hytrace_foundry::npy::read_array;
     use hytrace_foundry::Foundry;
@@ -496,10 +496,7 @@ mod with_embree {
         let embree = EmbreeScene::new(&f, &cpu).unwrap();
         let (mut same, mut total) = (0, 0);
         for r in rays_for(&f, 40, 2000) {
-            let ray = Ray {
-                origin: V3::from_f64(r.origin),
-                direction: V3::from_f64(r.direction),
-            };
+            let ray = Ray::from_f64(r.origin, r.direction);
             let want: Option<Hit<f32>> = cpu.trace(&ray, 0.0, f32::INFINITY);
             let got = embree.trace(&ray, 0.0, f32::INFINITY).unwrap();
             if let (Some(w), Some(g)) = (want, got) {

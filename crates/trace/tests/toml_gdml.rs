@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 
 use common::{repo, unit, Rng};
-use hytrace_csg::{Ray, V3};
+use hytrace_csg::Ray;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
 use hytrace_trace::cpu::{CpuScene, Hit};
@@ -39,10 +39,7 @@ fn boundary_names(f: &Foundry, i: u32) -> Option<[Option<String>; 4]> {
 }
 
 fn trace(scene: &CpuScene<f64>, origin: [f64; 3], direction: [f64; 3]) -> Option<Hit<f64>> {
-    let ray = Ray {
-        origin: V3::from_f64(origin),
-        direction: V3::from_f64(direction),
-    };
+    let ray = Ray::from_f64(origin, direction);
     scene.trace(&ray, 0.0, f64::INFINITY)
 }
 

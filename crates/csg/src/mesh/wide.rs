@@ -269,10 +269,7 @@ mod tests {
     /// Runs both searches on a ray and its recentred form; returns whether it hit.
     fn both_agree(mesh: &MeshPrim<f32>, origin: [f64; 3], direction: [f64; 3]) -> bool {
         let wide = mesh.wide.as_ref().expect("f32 meshes have a wide BVH");
-        let ray = Ray {
-            origin: V3::from_f64(origin),
-            direction: V3::from_f64(direction),
-        };
+        let ray = Ray::from_f64(origin, direction);
         let (moved, shift) = mesh.recentred(&ray);
         let mut hit = false;
         for (r, after) in [(ray, 0.0f32), (moved, -shift)] {

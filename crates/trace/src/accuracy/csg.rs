@@ -11,7 +11,7 @@
 //! only shows that the leaf's shift costs nothing there.
 
 use hytrace_csg::kernel::{first_crossing, primitive_spans, Frame, Leaf};
-use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Real, Shape, TreeOptions, V3};
+use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Real, Shape, TreeOptions};
 use hytrace_foundry::{Node, Transform64, TypeCode};
 use hytrace_volume::Rng;
 
@@ -38,10 +38,7 @@ struct Case {
 
 impl Case {
     fn ray<T: Real>(&self) -> Ray<T> {
-        Ray {
-            origin: V3::from_f64(self.origin),
-            direction: V3::from_f64(self.dir),
-        }
+        Ray::from_f64(self.origin, self.dir)
     }
 }
 

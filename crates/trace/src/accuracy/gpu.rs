@@ -4,7 +4,7 @@
 //! rows' fog, judged against their quadrature reference. On a CPU adapter (lavapipe) the
 //! GPU's time means nothing for real GPUs: those rows are functional there, and say so.
 
-use hytrace_csg::{Ray, V3};
+use hytrace_csg::Ray;
 
 use hytrace_volume::{BrickedGrid, Estimator, Majorant, TexelFormat};
 
@@ -39,10 +39,7 @@ fn max_error(got: &[Answer], want: &[Answer]) -> f64 {
 fn cpu_answers<T: hytrace_csg::Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
     rays.iter()
         .map(|r| {
-            let ray = Ray {
-                origin: V3::from_f64(r.origin),
-                direction: V3::from_f64(r.direction),
-            };
+            let ray = Ray::from_f64(r.origin, r.direction);
             scene
                 .trace(&ray, T::from_f64(r.tmin), T::INFINITY)
                 .map(|h| (h.t.to_f64(), h.instance))

@@ -82,10 +82,7 @@ fn edge_rays(tris: &[[[f64; 3]; 3]], centre: [f64; 3], count: usize) -> Vec<Ray<
                 target[c] + out[c] + 40.0 * wobble[c]
             }));
             let d: [f64; 3] = std::array::from_fn(|c| target[c] - from[c]);
-            Ray {
-                origin: V3::from_f64(from),
-                direction: V3::from_f64(d),
-            }
+            Ray::from_f64(from, d)
         })
         .collect()
 }
@@ -166,10 +163,7 @@ fn bvh_rows(settings: Settings) -> Result<Vec<Row>, String> {
             let to: [f64; 3] = std::array::from_fn(|_| 120.0 * (rng.next_f64() - 0.5));
             let d: [f64; 3] = std::array::from_fn(|k| to[k] - from[k]);
             let n = d.iter().map(|c| c * c).sum::<f64>().sqrt();
-            Ray {
-                origin: V3::from_f64(from),
-                direction: V3::from_f64(d.map(|c| c / n)),
-            }
+            Ray::from_f64(from, d.map(|c| c / n))
         })
         .collect();
     // The reference: every triangle tested, in f64, no BVH.

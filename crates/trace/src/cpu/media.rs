@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::str::FromStr;
 
 use anyhow::Context;
-use hytrace_csg::{Ray, Real, V3};
+use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
     BrickedGrid, GridMap, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams,
@@ -78,14 +78,6 @@ pub struct SceneMedia<'a, T> {
 /// streams of different placements apart).
 fn placement_seed(seed: u32, k: u32) -> u32 {
     seed.wrapping_add(k.wrapping_mul(0x9E37_79B9))
-}
-
-/// The world ray `origin + t direction` in precision `T`, as the surfaces are traced.
-fn ray_in<T: Real>(origin: [f64; 3], direction: [f64; 3]) -> Ray<T> {
-    Ray {
-        origin: V3::from_f64(origin),
-        direction: V3::from_f64(direction),
-    }
 }
 
 impl<'a, T: Real> SceneMedia<'a, T> {
@@ -161,7 +153,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmax: f64,
         ray_index: u32,
     ) -> anyhow::Result<Transmitted<T>> {
-        let ray = ray_in::<T>(origin, direction);
+        let ray = Ray::<T>::from_f64(origin, direction);
         let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
         let (transmittance, lookups) =
@@ -184,7 +176,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         end: f64,
         ray_index: u32,
     ) -> anyhow::Result<(f64, u64)> {
-        let spans = self.spans(&ray_in(origin, direction), tmin, end);
+        let spans = self.spans(&Ray::from_f64(origin, direction), tmin, end);
         self.transmittance_over(origin, direction, spans, ray_index)
     }
 
@@ -201,7 +193,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         visits: impl IntoIterator<Item = (u32, u32, f64, f64)>,
         ray_index: u32,
     ) -> anyhow::Result<(f64, u64)> {
-        let ray: Ray<T> = ray_in(origin, direction);
+        let ray: Ray<T> = Ray::from_f64(origin, direction);
         let mut spans = ClusterSpans::default();
         for (instance, medium, t0, t1) in visits {
             spans.add(instance, medium, t0, t1);
@@ -333,7 +325,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmin: f64,
         end: f64,
     ) -> anyhow::Result<Vec<MediumSegment>> {
-        let spans = self.spans(&ray_in(origin, direction), tmin, end);
+        let spans = self.spans(&Ray::from_f64(origin, direction), tmin, end);
         self.segments_of(origin, direction, spans)
     }
 

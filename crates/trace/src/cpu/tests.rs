@@ -96,10 +96,7 @@ fn random_rays<T: Real>(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<T>
                 d = axis;
             }
             let l = d.iter().map(|c| c * c).sum::<f64>().sqrt();
-            Ray {
-                origin: V3::from_f64([0, 1, 2].map(|k| centre[k] + o[k])),
-                direction: V3::from_f64(d.map(|c| c / l)),
-            }
+            Ray::from_f64([0, 1, 2].map(|k| centre[k] + o[k]), d.map(|c| c / l))
         })
         .collect()
 }

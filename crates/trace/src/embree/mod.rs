@@ -213,10 +213,7 @@ impl<'a> EmbreeScene<'a> {
         tmax: f64,
         ray_index: u32,
     ) -> anyhow::Result<Transmitted<f32>> {
-        let ray = Ray {
-            origin: V3::from_f64(origin),
-            direction: V3::from_f64(direction),
-        };
+        let ray = Ray::from_f64(origin, direction);
         let hit = self.trace(&ray, tmin as f32, tmax as f32)?;
         let end = hit.map_or(tmax, |h| f64::from(h.t));
         let visits = self.cluster_visits(&ray, tmin, end)?;

@@ -16,7 +16,7 @@
 //! elsewhere, so no light is counted twice.
 
 use glam::DVec3;
-use hytrace_csg::{Ray, V3};
+use hytrace_csg::Ray;
 use hytrace_volume::Rng;
 
 use super::optics::{
@@ -57,10 +57,7 @@ fn uniforms2(rng: &mut Rng) -> [f64; 2] {
 impl Renderer<'_> {
     /// The first surface crossing along the ray (f32, as the GPU traces).
     pub(super) fn trace(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit<f32>> {
-        let ray = Ray {
-            origin: V3::from_f64(origin.into()),
-            direction: V3::from_f64(dir.into()),
-        };
+        let ray = Ray::from_f64(origin.into(), dir.into());
         self.scene.trace(&ray, 0.0, tmax as f32)
     }
 
@@ -83,10 +80,7 @@ impl Renderer<'_> {
             }
         };
         if !self.see_through {
-            let ray = Ray {
-                origin: V3::from_f64(origin.into()),
-                direction: V3::from_f64(dir.into()),
-            };
+            let ray = Ray::from_f64(origin.into(), dir.into());
             if self.scene.occluded(&ray, 0.0, dist as f32) {
                 return Ok(0.0);
             }

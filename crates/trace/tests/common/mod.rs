@@ -304,10 +304,7 @@ pub fn compare(name: &str, f: &Foundry, rays: &[RayRow], got: &[Option<Hit<f32>>
 
 /// A ray as the f32 tracers take it: rounded, infinite `tmax` kept infinite.
 pub fn f32_ray(r: &RayRow) -> (Ray<f32>, f32, f32) {
-    let ray = Ray {
-        origin: V3::from_f64(r.origin),
-        direction: V3::from_f64(r.direction),
-    };
+    let ray = Ray::from_f64(r.origin, r.direction);
     let tmax = if r.tmax.is_finite() {
         r.tmax as f32
     } else {
