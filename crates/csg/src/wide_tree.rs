@@ -410,105 +410,99 @@ mod tests {
     use crate::prim_tree::ray_bounds_entry;
     use crate::test_common::Rng;
 
-    /// Random boxes around `centre` (f32 corners), a wide tree over them (leaves of up to 4
-    /// boxes) and the box numbers in leaf order.
-    fn forest(
-        rng: &mut Rng,
-        n: usize,
-        centre: f64,
-        size: f64,
-    ) -> (Vec<[V3<f32>; 2]>, WideTree, Vec<u32>) {
-        let boxes: Vec<[V3<f32>; 2]> = (0..n)
-            .map(|_| {
-                let c = [0; 3].map(|_| centre + rng.range(-size, size));
-                // Some boxes flat in one axis (a face's box), most not.
-                let e = [0; 3].map(|_| {
-                    if rng.range(0.0, 1.0) < 0.1 {
-                        0.0
-                    } else {
-                        rng.range(0.0, 0.1 * size)
-                    }
-                });
-                [
-                    V3::from_f64([0, 1, 2].map(|k| c[k] - e[k])),
-                    V3::from_f64([0, 1, 2].map(|k| c[k] + e[k])),
-                ]
-            })
-            .collect();
-        let aabbs: Vec<Aabb> = boxes
-            .iter()
-            .map(|b| {
-                Aabb::new(
-                    Vec3A::new(b[0].x, b[0].y, b[0].z),
-                    Vec3A::new(b[1].x, b[1].y, b[1].z),
-                )
-            })
-            .collect();
-        let params = BvhBuildParams {
-            max_prims_per_leaf: 4,
-            ..BvhBuildParams::fast_build()
-        };
-        let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
-        let tree = WideTree::from_bvh2(&bvh).unwrap();
-        (boxes, tree, bvh.primitive_indices)
+    /// Random boxes, a wide tree over them (leaves of up to 4 boxes) and the box numbers in
+    /// leaf order.
+    struct Forest {
+        boxes: Vec<[V3<f32>; 2]>,
+        tree: WideTree,
+        order: Vec<u32>,
     }
 
-    /// Checks that walking the whole tree (the limit never lowered) reaches every box the
-    /// exact dividing test finds the ray meeting within `[after, limit]`; returns how many.
-    fn reaches_all_met(
-        boxes: &[[V3<f32>; 2]],
-        tree: &WideTree,
-        order: &[u32],
-        ray: &Ray<f32>,
-        after: f32,
-        limit: f32,
-    ) -> usize {
-        let mut reached = vec![false; boxes.len()];
-        tree.walk(&WideSlabs::new(ray), after, limit, |first, count| {
-            for &i in &order[first as usize..(first + count) as usize] {
-                reached[i as usize] = true;
-            }
-            limit
-        });
-        let mut met = 0;
-        for (i, b) in boxes.iter().enumerate() {
-            if ray_bounds_entry(ray, b, after, limit).is_some() {
-                met += 1;
-                assert!(
-                    reached[i],
-                    "box {i} {b:?} met by {ray:?} in [{after}, {limit}] not reached"
-                );
+    impl Forest {
+        /// Boxes around `centre` (f32 corners), some flat in one axis.
+        fn new(rng: &mut Rng, n: usize, centre: f64, size: f64) -> Self {
+            let boxes: Vec<[V3<f32>; 2]> = (0..n)
+                .map(|_| {
+                    let c = [0; 3].map(|_| centre + rng.range(-size, size));
+                    // Some boxes flat in one axis (a face's box), most not.
+                    let e = [0; 3].map(|_| {
+                        if rng.range(0.0, 1.0) < 0.1 {
+                            0.0
+                        } else {
+                            rng.range(0.0, 0.1 * size)
+                        }
+                    });
+                    [
+                        V3::from_f64([0, 1, 2].map(|k| c[k] - e[k])),
+                        V3::from_f64([0, 1, 2].map(|k| c[k] + e[k])),
+                    ]
+                })
+                .collect();
+            let aabbs: Vec<Aabb> = boxes
+                .iter()
+                .map(|b| {
+                    Aabb::new(
+                        Vec3A::new(b[0].x, b[0].y, b[0].z),
+                        Vec3A::new(b[1].x, b[1].y, b[1].z),
+                    )
+                })
+                .collect();
+            let params = BvhBuildParams {
+                max_prims_per_leaf: 4,
+                ..BvhBuildParams::fast_build()
+            };
+            let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+            let tree = WideTree::from_bvh2(&bvh).unwrap();
+            Forest {
+                boxes,
+                tree,
+                order: bvh.primitive_indices,
             }
         }
-        met
+
+        /// Checks that walking the tree (the limit never lowered) reaches every box the
+        /// exact dividing test finds the ray meeting within `[after, limit]`; returns how many.
+        fn window(&self, origin: [f64; 3], direction: [f64; 3], after: f32, limit: f32) -> usize {
+            let (boxes, tree, order) = (&self.boxes, &self.tree, &self.order);
+            let ray = &Ray::<f32>::from_f64(origin, direction);
+            let mut reached = vec![false; boxes.len()];
+            tree.walk(&WideSlabs::new(ray), after, limit, |first, count| {
+                for &i in &order[first as usize..(first + count) as usize] {
+                    reached[i as usize] = true;
+                }
+                limit
+            });
+            let mut met = 0;
+            for (i, b) in boxes.iter().enumerate() {
+                if ray_bounds_entry(ray, b, after, limit).is_some() {
+                    met += 1;
+                    assert!(
+                        reached[i],
+                        "box {i} {b:?} met by {ray:?} in [{after}, {limit}] not reached"
+                    );
+                }
+            }
+            met
+        }
+
+        /// [`Self::window`] over the whole ray.
+        fn whole(&self, origin: [f64; 3], direction: [f64; 3]) -> usize {
+            self.window(origin, direction, 0.0, f32::INFINITY)
+        }
     }
 
     #[test]
     fn wide_walk_reaches_every_box_the_exact_test_meets_near_and_far_from_the_origin() {
         let mut rng = Rng(0x2545_f491_4f6c_dd1d);
         for centre in [0.0, 1.0e6, -3.0e7] {
-            let (boxes, tree, order) = forest(&mut rng, 3000, centre, 100.0);
+            let forest = Forest::new(&mut rng, 3000, centre, 100.0);
             let mut met = 0;
             for _ in 0..3000 {
                 let o = [0; 3].map(|_| centre + rng.range(-150.0, 150.0));
-                met += reaches_all_met(
-                    &boxes,
-                    &tree,
-                    &order,
-                    &Ray::from_f64(o, rng.unit()),
-                    0.0,
-                    f32::INFINITY,
-                );
+                met += forest.whole(o, rng.unit());
                 // A window of the ray, as a closest-hit search's shrinking limit makes.
                 let (a, b) = (rng.range(-50.0, 100.0) as f32, rng.range(0.0, 300.0) as f32);
-                met += reaches_all_met(
-                    &boxes,
-                    &tree,
-                    &order,
-                    &Ray::from_f64(o, rng.unit()),
-                    a,
-                    a + b,
-                );
+                met += forest.window(o, rng.unit(), a, a + b);
             }
             assert!(met > 10_000, "only {met} boxes met around {centre}");
         }
@@ -517,7 +511,7 @@ mod tests {
     #[test]
     fn wide_walk_reaches_boxes_for_zero_and_subnormal_direction_components() {
         let mut rng = Rng(99);
-        let (boxes, tree, order) = forest(&mut rng, 2000, 0.0, 50.0);
+        let forest = Forest::new(&mut rng, 2000, 0.0, 50.0);
         let mut met = 0;
         for _ in 0..2000 {
             let o = [0; 3].map(|_| rng.range(-60.0, 60.0));
@@ -531,25 +525,11 @@ mod tests {
                 if d.iter().all(|c| *c == 0.0) {
                     continue;
                 }
-                met += reaches_all_met(
-                    &boxes,
-                    &tree,
-                    &order,
-                    &Ray::from_f64(o, d),
-                    0.0,
-                    f32::INFINITY,
-                );
+                met += forest.whole(o, d);
             }
             // A subnormal component: its reciprocal overflows, that axis divides.
             let d = [u[0], 1.0e-40, u[2]];
-            met += reaches_all_met(
-                &boxes,
-                &tree,
-                &order,
-                &Ray::from_f64(o, d),
-                0.0,
-                f32::INFINITY,
-            );
+            met += forest.whole(o, d);
         }
         assert!(met > 5_000, "only {met} boxes met");
     }
@@ -557,9 +537,9 @@ mod tests {
     #[test]
     fn wide_walk_reaches_boxes_grazed_along_faces_and_touched_at_corners() {
         let mut rng = Rng(5);
-        let (boxes, tree, order) = forest(&mut rng, 1000, 10.0, 20.0);
+        let forest = Forest::new(&mut rng, 1000, 10.0, 20.0);
         let mut met = 0;
-        for (i, b) in boxes.iter().enumerate() {
+        for (i, b) in forest.boxes.iter().enumerate() {
             // Along a face plane of box `i` (origin on the plane, direction in it), and
             // touching its edge.
             let k = i % 3;
@@ -567,38 +547,17 @@ mod tests {
             o[k] = f64::from(b[1].get(k));
             let mut d = [1.0, 1.0, 1.0];
             d[k] = 0.0;
-            met += reaches_all_met(
-                &boxes,
-                &tree,
-                &order,
-                &Ray::from_f64(o, d),
-                0.0,
-                f32::INFINITY,
-            );
+            met += forest.whole(o, d);
             let mut d = rng.unit();
             d[k] = 0.0;
-            met += reaches_all_met(
-                &boxes,
-                &tree,
-                &order,
-                &Ray::from_f64(o, d),
-                0.0,
-                f32::INFINITY,
-            );
+            met += forest.whole(o, d);
             // Aimed from afar at a corner, where the slabs' entry and exit meet: rounding
             // decides whether the ray touches the box, and the walk must not disagree.
             for corner in 0..8 {
                 let c = [0, 1, 2].map(|j| f64::from(b[(corner >> j) & 1].get(j)));
                 let d = rng.unit();
                 let o = [0, 1, 2].map(|j| c[j] - 1.0e3 * d[j]);
-                met += reaches_all_met(
-                    &boxes,
-                    &tree,
-                    &order,
-                    &Ray::from_f64(o, d),
-                    0.0,
-                    f32::INFINITY,
-                );
+                met += forest.whole(o, d);
             }
         }
         assert!(met > 1_000, "only {met} boxes met");
