@@ -175,7 +175,8 @@ struct VolumeParams {
     indirection_base: u32,
     atlas_base: u32,
     probe_trips: u32,
-    pad: u32,
+    index_shift: array<i32, 3>,
+    pad: array<u32, 2>,
 }
 
 struct TransmittanceRecord {
@@ -260,6 +261,7 @@ const VOLUME_FORMAT_UNORM8: u32 = 1u;
 const VOLUME_FORMAT_UNORM16: u32 = 2u;
 const VOLUME_FORMAT_F16: u32 = 3u;
 const VOLUME_FORMAT_F32: u32 = 4u;
+const VOLUME_FORMAT_NANOVDB: u32 = 5u;
 const VOLUME_STATUS_NEGATIVE: u32 = 1u;
 const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
 const VOLUME_STATUS_LOOPS_CUT: u32 = 4u;

@@ -1,8 +1,12 @@
 // Voxel reads of the bricked grid (twin of hytrace_volume::BrickedGrid::voxel): indirection,
 // brick table, atlas texel, decode `offset + t * scale`; and the two trilinear blends of the
 // CPU (the lookup's weighted sum and the exact estimator's nested lerps), in its order of
-// operations. No hardware filtering.
+// operations. No hardware filtering. Kernels composed with `nanovdb` also read grids stored
+// as raw NanoVDB buffers (volume/nanovdb).
 // #import volume/bindings
+// #if nanovdb
+// #import volume/nanovdb
+// #endif
 
 // Code-unit value of texel `j` (4 * row + column) of a BC4 block at atlas word `w`
 // (hytrace_volume bc4.rs: endpoints in bytes 0 and 1, 3-bit indices from bit 16).
@@ -81,8 +85,16 @@ fn atlas_texel(slot: u32, i: u32) -> f32 {
     }
 }
 
-// Voxel `c`: the background outside the stored bricks, `offset` for a constant brick.
+// Voxel `c`: the background outside the stored bricks, `offset` for a constant brick; for
+// a raw NanoVDB grid (only in kernels composed with `nanovdb`), its voxel `c` moved back by
+// the host's translation.
 fn grid_voxel(c: vec3<i32>) -> f32 {
+    // #if nanovdb
+    if vparams.format == VOLUME_FORMAT_NANOVDB {
+        let shift = vparams.index_shift;
+        return nanovdb_voxel(c + vec3<i32>(shift[0], shift[1], shift[2]));
+    }
+    // #endif
     let local = (c >> vec3<u32>(3u)) - vec3<i32>(vparams.brick_lo[0], vparams.brick_lo[1], vparams.brick_lo[2]);
     let dims = vec3<i32>(vec3<u32>(vparams.brick_dims[0], vparams.brick_dims[1], vparams.brick_dims[2]));
     if any(local < vec3<i32>(0)) || any(local >= dims) {

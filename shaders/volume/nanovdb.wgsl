@@ -1,14 +1,14 @@
 // Voxel reads straight from a raw NanoVDB grid buffer: the twin of hytrace_volume's
 // `NanoGrid::voxel` for Float, Fp4, Fp8, Fp16 and FpN grids (root tiles, upper and lower
 // internal nodes, leaves, tile values and the background, as the CPU reader walks them).
-// The grid's bytes are one storage buffer of little-endian words at group 1, binding 0;
-// every offset below is a byte offset of NanoVDB's layout (crates/volume/src/nanovdb/
-// layout.rs). The host (crates/trace/src/gpu/nanovdb.rs) uploads only grids the CPU reader
-// validated (every node inside the buffer, no repeated root keys) of at most 2^32 bytes, so
-// the low word of each 64-bit offset is the offset modulo 2^32 and `node + low word` is the
+// The grid's bytes sit in the volume atlas (volume/bindings) as little-endian words from
+// word `vparams.atlas_base` (format VOLUME_FORMAT_NANOVDB); every offset below is a byte
+// offset of NanoVDB's layout from the grid's start (crates/volume/src/nanovdb/layout.rs).
+// The host (crates/trace/src/gpu/nanovdb.rs) uploads only grids the CPU reader validated
+// (every node inside the buffer, no repeated root keys) of at most 2^32 bytes, so the low
+// word of each 64-bit offset is the offset modulo 2^32 and `node + low word` is the
 // child's byte position.
-
-@group(1) @binding(0) var<storage, read> nanovdb: array<u32>;
+// #import volume/bindings
 
 // Grid header: its size (the tree header follows) and the value type's offset.
 const NANOVDB_TREE: u32 = 672u;
@@ -51,7 +51,7 @@ struct NanoStep {
 
 // The word holding byte `at` (4-aligned).
 fn nanovdb_word(at: u32) -> u32 {
-    return nanovdb[at >> 2u];
+    return atlas[vparams.atlas_base + (at >> 2u)];
 }
 
 // Bit `n` of the bit mask starting at byte `mask` (64-bit little-endian words read as
@@ -67,7 +67,8 @@ fn nanovdb_root(root: u32, ijk: vec3<i32>) -> NanoStep {
     let key_lo = p.z | (p.y << 21u);
     let key_hi = (p.y >> 11u) | (p.x << 10u);
     // Never more tiles than the buffer holds, whatever the count says.
-    let tiles = min(nanovdb_word(root + NANOVDB_ROOT_TABLE_SIZE), arrayLength(&nanovdb) / 8u);
+    let words = arrayLength(&atlas) - vparams.atlas_base;
+    let tiles = min(nanovdb_word(root + NANOVDB_ROOT_TABLE_SIZE), words / 8u);
     for (var t = 0u; t < tiles; t += 1u) {
         let tile = root + NANOVDB_ROOT_TILES + NANOVDB_TILE_SIZE * t;
         if nanovdb_word(tile) == key_lo && nanovdb_word(tile + 4u) == key_hi {

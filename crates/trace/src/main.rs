@@ -169,8 +169,9 @@ enum VolumeCommand {
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
-        /// Where to trace: the CPU (f64), the GPU (f32, bricked grids; `--repr nanovdb` is
-        /// converted to f32 bricks) or the GPU when one opens, else the CPU.
+        /// Where to trace: the CPU (f64), the GPU (f32: bricked grids, or with `--repr
+        /// nanovdb` a NanoVDB file's raw buffer; other grids are converted to f32 bricks) or
+        /// the GPU when one opens, else the CPU.
         #[arg(long, value_enum, default_value_t = volume::VolumeBackend::Cpu)]
         backend: volume::VolumeBackend,
         /// Print one JSON line of counts and timings.

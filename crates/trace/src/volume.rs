@@ -15,6 +15,7 @@ use hytrace_volume::{
 use rayon::prelude::*;
 use serde_json::json;
 
+use crate::gpu::nanovdb::nanovdb_gpu_bytes;
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume};
 use crate::scan::{read_float_rows, RayRow};
 
@@ -334,7 +335,9 @@ pub enum VolumeBackend {
     /// The CPU estimators in f64, on any representation.
     #[default]
     Cpu,
-    /// The GPU kernel in f32 on a bricked grid (`--repr nanovdb` is converted to f32 bricks).
+    /// The GPU kernel in f32: on the bricked grid, or with `--repr nanovdb` on the raw
+    /// NanoVDB buffer (other grids as read, and NanoVDB types the GPU does not read, are
+    /// converted to f32 bricks).
     Gpu,
     /// The GPU when an adapter opens, else the CPU (with a note on stderr).
     Auto,
@@ -345,10 +348,11 @@ pub enum VolumeBackend {
 pub struct GpuVolumeInfo {
     /// The adapter (name, type, backend, driver).
     pub adapter: String,
-    /// The representation traced: the bricked format, and whether it was converted from
-    /// the grid as read (`--repr nanovdb`).
+    /// The representation traced: the bricked format, the raw NanoVDB buffer, or f32 bricks
+    /// converted from the grid as read (`--repr nanovdb`).
     pub repr: String,
-    /// Seconds converting (for `--repr nanovdb`), uploading the grid and building the kernel.
+    /// Seconds converting (a grid as read that is not a NanoVDB buffer the GPU reads),
+    /// uploading the grid and building the kernel.
     pub setup_s: f64,
     /// Upload, kernel and readback seconds of the rays' batches (host wall clock).
     pub times: GpuTimes,
@@ -367,8 +371,9 @@ pub struct TransmittanceRun {
     pub gpu: Option<GpuVolumeInfo>,
 }
 
-/// [`transmittances`] on `backend`: the GPU traces the bricked grid (a grid as read is
-/// converted to f32 bricks, exact for float grids), in f32. `gpu` without an adapter is an
+/// [`transmittances`] on `backend`: the GPU traces, in f32, the bricked grid or the raw
+/// NanoVDB buffer of a grid as read (other grids as read are converted to f32 bricks, exact
+/// for float grids). `gpu` without an adapter is an
 /// error; `auto` falls back to the CPU with a line on stderr when the GPU fails.
 pub fn transmittances_on(
     grid: &Represented,
@@ -405,14 +410,20 @@ fn gpu_transmittances(
 ) -> anyhow::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let converted;
-    let (bricked, repr) = match grid {
-        Represented::Bricked(b) => (b.as_ref(), b.format().name().to_string()),
+    let (volume, repr) = match grid {
+        Represented::Bricked(b) => (GpuVolume::new(&ctx, b)?, b.format().name().to_string()),
+        Represented::Source(Volume::Nano(g)) if nanovdb_gpu_bytes(g, u64::MAX).is_ok() => (
+            GpuVolume::nanovdb(&ctx, g)?,
+            "nanovdb (the raw grid buffer)".to_string(),
+        ),
         Represented::Source(v) => {
             converted = BrickedGrid::convert(v, TexelFormat::F32)?;
-            (&converted, "f32 (converted from nanovdb)".to_string())
+            (
+                GpuVolume::new(&ctx, &converted)?,
+                format!("f32 (converted from {})", v.kind()),
+            )
         }
     };
-    let volume = GpuVolume::new(&ctx, bricked)?;
     let setup_s = t0.elapsed().as_secs_f64();
     let rays = world_rays(rays);
     let t1 = Instant::now();

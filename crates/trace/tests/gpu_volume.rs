@@ -25,10 +25,11 @@ use std::path::Path;
 use common::{gpu_stats, hytrace, read_f64, unit, Rng};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
-use hytrace_trace::gpu::{GpuContext, GpuVolume};
+use hytrace_trace::gpu::{transmittance_source, GpuContext, GpuVolume};
 use hytrace_volume::{
-    fog_sphere, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator, Filter, GridMap,
-    Majorant, Ray, TexelFormat, TransmittanceParams, VoxelGrid,
+    fog_sphere, parse_nanovdb, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator,
+    Filter, GridMap, Majorant, NanoFile, NanoGrid, NanoGridType, RangeMips, Ray, TexelFormat,
+    TransmittanceParams, VoxelGrid,
 };
 
 /// Largest |GPU - CPU| of a deterministic estimate.
@@ -233,12 +234,12 @@ fn compare(
     label: &str,
     gpu: &GpuVolume,
     ctx: &GpuContext,
-    grid: &BrickedGrid,
+    twin: &Twin,
     families: &[Family],
     params: &TransmittanceParams,
 ) -> (Tally, f64, f64, f64) {
     let rays: Vec<Ray> = families.iter().flat_map(|f| f.rays.clone()).collect();
-    let want = transmittance_batch(grid, grid.ranges(), &rays, params).unwrap();
+    let want = transmittance_batch(twin.grid, twin.mips, &rays, params).unwrap();
     let (got, times) = gpu.transmittance(ctx, &rays, params).unwrap();
     assert_eq!(want.len(), got.len());
     // Every answer is the kernel's (none past the driver's loop budget, redone on the CPU).
@@ -305,17 +306,42 @@ const MAJORANTS: [Majorant; 3] = [
     Majorant::Global,
 ];
 
-/// Every estimator x filter x majorant on `grid` over `families`, asserted as the module
-/// documentation says.
+/// The CPU twin of a [`GpuVolume`]: the grid as the CPU reads it and the range mips its
+/// walks use.
+struct Twin<'a> {
+    grid: &'a dyn VoxelGrid,
+    mips: &'a RangeMips,
+}
+
+/// Every estimator x filter x majorant on bricked `grid` over `families`, asserted as the
+/// module documentation says.
 fn check_grid(name: &str, ctx: &GpuContext, grid: &BrickedGrid, families: &[Family], scale: f64) {
     let gpu = GpuVolume::new(ctx, grid).unwrap();
-    for estimator in ESTIMATORS {
+    let twin = Twin {
+        grid,
+        mips: grid.ranges(),
+    };
+    check_volume(name, ctx, &gpu, &twin, families, scale, &ESTIMATORS);
+}
+
+/// Every estimator of `estimators` x filter x majorant of `gpu` against its CPU `twin` over
+/// `families`.
+fn check_volume(
+    name: &str,
+    ctx: &GpuContext,
+    gpu: &GpuVolume,
+    twin: &Twin,
+    families: &[Family],
+    scale: f64,
+    estimators: &[Estimator],
+) {
+    for &estimator in estimators {
         let (mut max_diff, mut least, mut disagreements) = (0.0f64, 1.0f64, 0);
         for filter in FILTERS {
             for majorant in MAJORANTS {
                 let p = params(estimator, filter, majorant, scale);
                 let label = format!("{name} {estimator:?} {filter:?} {majorant:?}");
-                let (t, mean_w, mean_g, se) = compare(&label, &gpu, ctx, grid, families, &p);
+                let (t, mean_w, mean_g, se) = compare(&label, gpu, ctx, twin, families, &p);
                 let fraction = t.same as f64 / t.rays as f64;
                 println!(
                     "{label}: {} rays, same {:.4}, max |diff| of those {:.3e}, means cpu {mean_w:.6} gpu {mean_g:.6}",
@@ -388,6 +414,95 @@ fn far_placements_match_the_cpu() {
     check_grid("noisy at 2^20", &ctx, &grid, &fams, 0.02);
 }
 
+fn nanovdb_fixture(name: &str) -> NanoFile {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/nanovdb")
+        .join(name);
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    parse_nanovdb(&bytes, name).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Raw NanoVDB grids traced by the kernel (no conversion: it walks the grid's own buffer)
+/// against the CPU estimators on the same grid and range mips: float, the quantized types
+/// (Fp4, Fp8, Fp16, FpN) on a rotated anisotropic map, and grids of tiles. On the exact
+/// estimator the kernel also gives, bit for bit, what it gives on the grid converted to f32
+/// bricks (the same voxel values and mips, read another way).
+#[test]
+fn raw_nanovdb_grids_match_the_cpu() {
+    // Only kernels for NanoVDB grids carry the NanoVDB lookup.
+    assert!(transmittance_source(true)
+        .unwrap()
+        .contains("fn nanovdb_voxel("));
+    assert!(!transmittance_source(false).unwrap().contains("nanovdb_"));
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let files = [
+        "density_zip.nvdb",
+        "density_fp4.nvdb",
+        "density_fp8.nvdb",
+        "density_fp16.nvdb",
+        "density_fpn.nvdb",
+        "tiles_zip.nvdb",
+        "tiles_fp8.nvdb",
+    ];
+    for file in files {
+        for grid in &nanovdb_fixture(file).grids {
+            let name = format!("{file}:{} ({})", grid.name(), grid.grid_type());
+            let gpu = GpuVolume::nanovdb(&ctx, grid).unwrap();
+            let mips = RangeMips::build(grid).unwrap();
+            let twin = Twin { grid, mips: &mips };
+            let [lo, hi] = grid.index_bbox().unwrap().map(|c| c.map(f64::from));
+            let fams = families(grid.map(), lo, hi, 120);
+            // Optical depths up to about 30 across the box (the fixtures are sparse).
+            let range = hytrace_volume::global_range(&mips);
+            let diagonal = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+            let scale = 30.0 / (f64::from(range.max.abs().max(1e-3)) * diagonal);
+            let rays: Vec<Ray> = fams.iter().flat_map(|f| f.rays.clone()).collect();
+            if range.min >= 0.0 {
+                check_volume(&name, &ctx, &gpu, &twin, &fams, scale, &ESTIMATORS);
+            } else {
+                // Negative tiles: the trackers are refused on the GPU as on the CPU.
+                check_volume(&name, &ctx, &gpu, &twin, &fams, scale, &ESTIMATORS[..2]);
+                let p = params(Estimator::Delta, Filter::Trilinear, MAJORANTS[0], scale);
+                let err = gpu.transmittance(&ctx, &rays, &p).unwrap_err().to_string();
+                assert!(err.contains("need a density >= 0"), "{name}: {err}");
+            }
+
+            let bricks = BrickedGrid::convert(grid, TexelFormat::F32).unwrap();
+            assert_eq!(bricks.ranges(), &mips, "{name}: the same range mips");
+            let converted = GpuVolume::new(&ctx, &bricks).unwrap();
+            let p = params(Estimator::Exact, Filter::Trilinear, MAJORANTS[0], scale);
+            let raw = gpu.transmittance(&ctx, &rays, &p).unwrap().0;
+            let via_bricks = converted.transmittance(&ctx, &rays, &p).unwrap().0;
+            let differ = raw
+                .iter()
+                .zip(&via_bricks)
+                .filter(|(a, b)| a.transmittance.to_bits() != b.transmittance.to_bits())
+                .count();
+            assert_eq!(differ, 0, "{name}: raw and bricked differ on {differ} rays");
+        }
+    }
+    // Refused before anything is uploaded, naming the grid: a vector grid, and a grid
+    // with more 8^3 blocks of data than range mips may list.
+    let refusal = |grid: &NanoGrid| match GpuVolume::nanovdb(&ctx, grid) {
+        Ok(_) => panic!("grid '{}' was accepted", grid.name()),
+        Err(e) => e.to_string(),
+    };
+    let multi = nanovdb_fixture("multi_zip.nvdb");
+    let vector = multi
+        .grids
+        .iter()
+        .find(|g| g.grid_type() == NanoGridType::Vec3f);
+    let err = refusal(vector.unwrap());
+    assert!(err.contains("values of type Vec3f"), "{err}");
+    let err = refusal(&nanovdb_fixture("roottile_zip.nvdb").grids[0]);
+    assert!(
+        err.contains("'roottile' cannot be read on the GPU") && err.contains("blocks"),
+        "{err}"
+    );
+}
+
 /// Drivers inline every call: the kernel's costly functions each have one call site.
 #[test]
 fn costly_functions_are_called_once() {
@@ -403,6 +518,10 @@ fn costly_functions_are_called_once() {
         "bc4_texel",
         "trilinear_lerp",
         "trilinear_sum",
+        "nanovdb_voxel",
+        "nanovdb_root",
+        "nanovdb_internal",
+        "nanovdb_leaf",
     ] {
         let calls = source.matches(&format!("{f}(")).count();
         let definitions = source.matches(&format!("fn {f}(")).count();
@@ -461,8 +580,9 @@ fn bad_input_is_refused_clearly() {
 }
 
 /// `volume transmittance --backend gpu` writes what the CPU writes (within f32), on a
-/// bricked representation and on `--repr nanovdb` (converted to f32 bricks, as `--stats`
-/// says); without an adapter `gpu` fails and writes nothing, `auto` falls back to the CPU.
+/// bricked representation, on `--repr nanovdb` of a NanoVDB file (its raw buffer traced, as
+/// `--stats` says) and of a procedural grid (converted to f32 bricks); without an adapter
+/// `gpu` fails and writes nothing, `auto` falls back to the CPU.
 #[test]
 fn transmittance_cli_on_the_gpu() {
     if GpuContext::for_tests().is_none() {
@@ -470,46 +590,73 @@ fn transmittance_cli_on_the_gpu() {
     }
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n).display().to_string();
-    let mut rows: Vec<f64> = Vec::new();
-    for i in 0..40 {
-        let a = f64::from(i) * 0.157;
-        rows.extend([-30.0, a.sin() * 5.0, a.cos() * 3.0, 0.0, 1.0, 0.0, 0.0]);
-        rows.push(if i % 2 == 0 { f64::INFINITY } else { 35.0 });
+    // Rays along x through the sphere's centre region, and through the NanoVDB fixture's
+    // world box (x -12.6..0.4, y -22.1..-9.1, z -6.5..3).
+    for (file, centre) in [
+        ("rays.npy", [0.0, 0.0]),
+        ("fixture_rays.npy", [-15.5, -1.75]),
+    ] {
+        let mut rows: Vec<f64> = Vec::new();
+        for i in 0..40 {
+            let a = f64::from(i) * 0.157;
+            let (y, z) = (centre[0] + a.sin() * 5.0, centre[1] + a.cos() * 3.0);
+            rows.extend([-30.0, y, z, 0.0, 1.0, 0.0, 0.0]);
+            rows.push(if i % 2 == 0 { f64::INFINITY } else { 35.0 });
+        }
+        write_array(
+            Path::new(&p(file)),
+            Scalar::F64,
+            &[40, 8],
+            bytemuck::cast_slice(&rows),
+        )
+        .unwrap();
     }
-    write_array(
-        Path::new(&p("rays.npy")),
-        Scalar::F64,
-        &[40, 8],
-        bytemuck::cast_slice(&rows),
-    )
-    .unwrap();
-    let run = |backend: &str, repr: &str, out: &str, env: &[(&str, &str)]| {
-        let args = [
-            "volume",
-            "transmittance",
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/nanovdb/density_fp8.nvdb")
+        .display()
+        .to_string();
+    let run =
+        |spec: &str, rays: &str, backend: &str, repr: &str, out: &str, env: &[(&str, &str)]| {
+            let args = [
+                "volume",
+                "transmittance",
+                spec,
+                "--rays",
+                &p(rays),
+                "--out",
+                out,
+                "--repr",
+                repr,
+                "--density-scale",
+                "0.05",
+                "--stats",
+                "--backend",
+                backend,
+            ];
+            hytrace(&args, env)
+        };
+    for (spec, rays, repr, want_repr) in [
+        ("sphere:12,0.5", "rays.npy", "unorm8", "unorm8"),
+        (
             "sphere:12,0.5",
-            "--rays",
-            &p("rays.npy"),
-            "--out",
-            out,
-            "--repr",
-            repr,
-            "--density-scale",
-            "0.05",
-            "--stats",
-            "--backend",
-            backend,
-        ];
-        hytrace(&args, env)
-    };
-    for repr in ["unorm8", "nanovdb"] {
-        let cpu = run("cpu", repr, &p("cpu.npy"), &[]);
+            "rays.npy",
+            "nanovdb",
+            "f32 (converted from procedural)",
+        ),
+        (
+            fixture.as_str(),
+            "fixture_rays.npy",
+            "nanovdb",
+            "nanovdb (the raw grid buffer)",
+        ),
+    ] {
+        let cpu = run(spec, rays, "cpu", repr, &p("cpu.npy"), &[]);
         assert!(
             cpu.status.success(),
             "{}",
             String::from_utf8_lossy(&cpu.stderr)
         );
-        let gpu = run("gpu", repr, &p("gpu.npy"), &[]);
+        let gpu = run(spec, rays, "gpu", repr, &p("gpu.npy"), &[]);
         let stats = gpu_stats(&gpu);
         // The kernel's own time from timestamp queries, which lavapipe has.
         let stamps = &stats["gpu_kernel_timestamps_s"];
@@ -519,35 +666,44 @@ fn transmittance_cli_on_the_gpu() {
         {
             assert!(stamps.as_f64().is_some_and(|s| s >= 0.0), "{stamps}");
         }
-        let want_repr = if repr == "nanovdb" {
-            "f32 (converted from nanovdb)"
-        } else {
-            repr
-        };
         assert_eq!(stats["gpu_repr"], want_repr);
         let (want, got) = (
             read_f64(Path::new(&p("cpu.npy"))),
             read_f64(Path::new(&p("gpu.npy"))),
         );
         assert_eq!(want.len(), 40);
-        assert!(want.iter().any(|t| *t < 0.9), "{want:?}");
+        assert!(want.iter().any(|t| *t < 0.9), "{spec}: {want:?}");
         for (i, (w, g)) in want.iter().zip(&got).enumerate() {
             assert!(
                 (w - g).abs() <= DETERMINISTIC_TOL,
-                "ray {i}: cpu {w} gpu {g}"
+                "{spec} ray {i}: cpu {w} gpu {g}"
             );
         }
     }
     // No adapter: WGPU_BACKEND names one this build does not have.
     let none = [("WGPU_BACKEND", "metal")];
-    let no_gpu = run("gpu", "f32", &p("none.npy"), &none);
+    let no_gpu = run(
+        "sphere:12,0.5",
+        "rays.npy",
+        "gpu",
+        "f32",
+        &p("none.npy"),
+        &none,
+    );
     let err = String::from_utf8_lossy(&no_gpu.stderr);
     assert!(
         !no_gpu.status.success() && err.contains("no GPU adapter found"),
         "{err}"
     );
     assert!(!Path::new(&p("none.npy")).exists());
-    let auto = run("auto", "f32", &p("auto.npy"), &none);
+    let auto = run(
+        "sphere:12,0.5",
+        "rays.npy",
+        "auto",
+        "f32",
+        &p("auto.npy"),
+        &none,
+    );
     assert!(
         auto.status.success(),
         "{}",

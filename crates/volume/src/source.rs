@@ -20,6 +20,15 @@ pub enum Volume {
 }
 
 impl Volume {
+    /// Where the grid came from: `procedural`, `openvdb` or `nanovdb`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Volume::Dense(_) => "procedural",
+            Volume::Vdb(_) => "openvdb",
+            Volume::Nano(_) => "nanovdb",
+        }
+    }
+
     fn inner(&self) -> &dyn VoxelGrid {
         match self {
             Volume::Dense(g) => g.as_ref(),

@@ -17,4 +17,4 @@ pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
 pub use timing::{add_gpu_stats, warn_redone, GpuTimes};
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};
-pub use volume::GpuVolume;
+pub use volume::{transmittance_source, GpuVolume};

@@ -1,11 +1,14 @@
 //! Raw NanoVDB grids on the GPU: the checks a grid passes before its buffer is uploaded, as
-//! it is, for `shaders/volume/nanovdb.wgsl` (one storage buffer of words, byte offsets of
-//! NanoVDB's layout read as u32), and a probe that reads voxels through that lookup.
+//! it is, for `shaders/volume/nanovdb.wgsl` (words of the volume atlas, byte offsets of
+//! NanoVDB's layout read as u32), and a probe that reads voxels through that lookup. The
+//! transmittance kernel reads the same buffers ([`super::GpuVolume::nanovdb`]).
 
+use bytemuck::Zeroable;
 use hytrace_volume::{NanoGrid, NanoGridType};
 
 use super::context::{GpuContext, GpuError};
 use super::oneshot::{run, Buffer};
+use super::records::{VolumeParams, VOLUME_FORMAT_NANOVDB};
 
 /// Grid types the WGSL lookup decodes (f32 values, and codes quantized per leaf).
 pub const GPU_NANOVDB_TYPES: [NanoGridType; 5] = [
@@ -85,6 +88,9 @@ pub fn probe_nanovdb(
     let count = u32::try_from(points.len())
         .map_err(|_| GpuError::SceneTooBig(format!("{} probe points", points.len())))?;
     let items: Vec<i32> = points.iter().flat_map(|p| [p[0], p[1], p[2], 0]).collect();
+    // The grid alone in the atlas, untranslated.
+    let mut params = VolumeParams::zeroed();
+    params.format = VOLUME_FORMAT_NANOVDB;
     let out = run(
         ctx,
         "kernels/nanovdb_probe",
@@ -92,10 +98,16 @@ pub fn probe_nanovdb(
         count,
         &[
             vec![
+                Buffer::Input(bytemuck::bytes_of(&params)),
+                Buffer::Input(&[]),
+                Buffer::Input(&[]),
+                Buffer::Input(&[]),
+                Buffer::Input(bytes),
+            ],
+            vec![
                 Buffer::Input(bytemuck::cast_slice(&items)),
                 Buffer::Output(4 * u64::from(count)),
             ],
-            vec![Buffer::Input(bytes)],
         ],
     )?;
     Ok(bytemuck::cast_slice::<u8, u32>(&out[0])

@@ -185,8 +185,11 @@ record! {
         pub atlas_base: u32,
         /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
         pub probe_trips: u32,
+        /// What the kernels' index space is translated by: a voxel `c` there is voxel
+        /// `c + index_shift` of the grid (read by the raw NanoVDB lookup).
+        pub index_shift: [i32; 3],
         /// Padding.
-        pub pad: u32,
+        pub pad: [u32; 2],
     }
 }
 
@@ -394,6 +397,8 @@ pub const VOLUME_FORMAT_UNORM16: u32 = 2;
 pub const VOLUME_FORMAT_F16: u32 = 3;
 /// Single-precision texels.
 pub const VOLUME_FORMAT_F32: u32 = 4;
+/// No bricks: a raw NanoVDB grid buffer in the atlas, read by `shaders/volume/nanovdb.wgsl`.
+pub const VOLUME_FORMAT_NANOVDB: u32 = 5;
 /// [`TransmittanceRecord::status`] bit: a tracker met a negative density (the CPU errors).
 pub const VOLUME_STATUS_NEGATIVE: u32 = 1;
 /// [`TransmittanceRecord::status`] bit: the march needs more than `u32::MAX` steps.
@@ -468,6 +473,7 @@ pub fn generate() -> String {
         ("VOLUME_FORMAT_UNORM16", VOLUME_FORMAT_UNORM16),
         ("VOLUME_FORMAT_F16", VOLUME_FORMAT_F16),
         ("VOLUME_FORMAT_F32", VOLUME_FORMAT_F32),
+        ("VOLUME_FORMAT_NANOVDB", VOLUME_FORMAT_NANOVDB),
         ("VOLUME_STATUS_NEGATIVE", VOLUME_STATUS_NEGATIVE),
         ("VOLUME_STATUS_MARCH_STEPS", VOLUME_STATUS_MARCH_STEPS),
         ("VOLUME_STATUS_LOOPS_CUT", VOLUME_STATUS_LOOPS_CUT),

@@ -18,11 +18,11 @@ use super::records::{
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use super::volume::VolumeUpload;
+use super::volume::{KernelGrid, VolumeUpload};
 use crate::render::camera::Projection;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
-use hytrace_volume::{global_range, BrickedGrid};
+use hytrace_volume::global_range;
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
@@ -326,8 +326,8 @@ impl GpuRenderer {
         let medium = match &renderer.media {
             None => None,
             Some(media) => {
-                let grids: Vec<&BrickedGrid> = (0..media.scene.medium_count())
-                    .map(|m| media.scene.grid(m as u32))
+                let grids: Vec<KernelGrid> = (0..media.scene.medium_count())
+                    .map(|m| KernelGrid::Bricked(media.scene.grid(m as u32)))
                     .collect();
                 let volume = VolumeUpload::new(ctx, &grids)?;
                 let params: Vec<VolumeParams> = volume

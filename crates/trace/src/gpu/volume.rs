@@ -1,8 +1,8 @@
-//! GPU transmittance through a bricked grid: the grid, its range mips and the estimator's
-//! parameters uploaded once, rays dispatched in batches under the device's binding limit
-//! (`shaders/kernels/transmittance.wgsl`). The CPU twin is
-//! [`hytrace_volume::transmittance_batch`] on the same [`BrickedGrid`]; `tests/gpu_volume.rs`
-//! compares them ray by ray.
+//! GPU transmittance through a bricked grid or a raw NanoVDB grid buffer: the grid, its
+//! range mips and the estimator's parameters uploaded once, rays dispatched in batches under
+//! the device's binding limit (`shaders/kernels/transmittance.wgsl`). The CPU twin is
+//! [`hytrace_volume::transmittance_batch`] on the same grid and range mips;
+//! `tests/gpu_volume.rs` compares them ray by ray.
 //!
 //! The kernel computes in f32, so the host hands it numbers of the grid's size: the index
 //! space is translated by a multiple of 64 voxels (the coarsest blocks stay aligned) to put
@@ -10,22 +10,26 @@
 //! (in f64) to its point nearest the box, its `t` counted from there. Transmittance depends
 //! only on lengths of `t`, which this keeps.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use bytemuck::Zeroable;
 use hytrace_volume::{
-    global_range, transmittance, BrickedGrid, Estimate, Estimator, Filter, IndexRay, Majorant, Ray,
-    TexelFormat, TransmittanceParams, VolumeError, VoxelGrid, BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
+    global_range, transmittance, BrickEntry, BrickedGrid, Estimate, Estimator, Filter, IndexRay,
+    Majorant, NanoGrid, RangeMips, Ray, TexelFormat, TransmittanceParams, VolumeError, VoxelGrid,
+    BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
-use super::compose::compose;
+use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
+use super::nanovdb::{nanovdb_gpu_bytes, NanoGpuError};
 use super::records::{
     RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA, VOLUME_ESTIMATOR_EXACT,
     VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO, VOLUME_ESTIMATOR_RESIDUAL,
     VOLUME_FILTER_NEAREST, VOLUME_FILTER_STOCHASTIC, VOLUME_FILTER_TRILINEAR, VOLUME_FORMAT_BC4,
-    VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_UNORM16, VOLUME_FORMAT_UNORM8,
-    VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
+    VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_NANOVDB, VOLUME_FORMAT_UNORM16,
+    VOLUME_FORMAT_UNORM8, VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS,
+    VOLUME_STATUS_NEGATIVE,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::GPU_INF;
@@ -42,16 +46,27 @@ const TOP_SIDE: i64 = 64;
 /// they are; farther ones are moved to their point nearest the box.
 const NEAR: f64 = 65_536.0;
 
-/// A storage binding's bytes: at least 16 (bindings cannot be empty).
+/// The transmittance kernel's source: with the raw NanoVDB lookup (`nanovdb`) or without
+/// it, for bricked grids.
+pub fn transmittance_source(nanovdb: bool) -> Result<String, String> {
+    compose_with(KERNEL, &|feature| nanovdb && feature == "nanovdb")
+}
+
+/// A storage binding's bytes: at least one element of its largest type, a 32-byte brick
+/// entry (bindings cannot be empty, and an array's binding holds one element or more; a
+/// NanoVDB grid leaves the brick table empty).
 fn storage_bytes(bytes: &[u8]) -> Vec<u8> {
     let mut out = bytes.to_vec();
-    out.resize(out.len().max(16), 0);
+    out.resize(out.len().max(size_of::<BrickEntry>()), 0);
     out
 }
 
-/// A bricked grid on the GPU with its transmittance pipeline.
+/// A grid on the GPU (bricked, or a raw NanoVDB buffer) with its transmittance pipeline.
 pub struct GpuVolume<'a> {
-    grid: &'a BrickedGrid,
+    /// The grid as the CPU twin reads it.
+    grid: &'a dyn VoxelGrid,
+    /// The range mips the kernel walks (the CPU twin's too).
+    mips: Cow<'a, RangeMips>,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     upload: VolumeUpload,
@@ -83,6 +98,37 @@ pub(super) struct UploadedGrid {
     pub centre: [f64; 3],
 }
 
+/// `n` as a u32 index into the shared arrays, or a [`GpuError::SceneTooBig`] naming `what`.
+fn count_u32(n: usize, what: &str) -> Result<u32, GpuError> {
+    u32::try_from(n).map_err(|_| GpuError::SceneTooBig(format!("more than 2^32 {what}")))
+}
+
+/// A grid as the volume kernels read it, with the range mips its walks use.
+#[derive(Clone, Copy)]
+pub(super) enum KernelGrid<'a> {
+    /// A bricked grid (its own range mips).
+    Bricked(&'a BrickedGrid),
+    /// A raw NanoVDB grid buffer (checked by [`nanovdb_gpu_bytes`]) and the range mips
+    /// built from the grid.
+    Nanovdb {
+        /// The grid's buffer.
+        bytes: &'a [u8],
+        /// Its background.
+        background: f32,
+        /// Range mips of its values.
+        mips: &'a RangeMips,
+    },
+}
+
+impl KernelGrid<'_> {
+    fn mips(&self) -> &RangeMips {
+        match self {
+            KernelGrid::Bricked(grid) => grid.ranges(),
+            KernelGrid::Nanovdb { mips, .. } => mips,
+        }
+    }
+}
+
 /// The shared arrays being filled: ranges, indirection, brick table, atlas words.
 #[derive(Default)]
 struct VolumeArrays {
@@ -95,9 +141,9 @@ struct VolumeArrays {
 
 impl VolumeArrays {
     /// Appends `grid`: its parameters with its first entries in the arrays.
-    fn push(&mut self, grid: &BrickedGrid) -> Result<UploadedGrid, GpuError> {
+    fn push(&mut self, grid: KernelGrid) -> Result<UploadedGrid, GpuError> {
         let too_big = |why: String| Err(GpuError::SceneTooBig(why));
-        let mips = grid.ranges();
+        let mips = grid.mips();
         if mips.levels.len() != RANGE_LEVELS {
             return too_big(format!(
                 "the kernel walks {RANGE_LEVELS} range levels, the grid has {}",
@@ -117,19 +163,52 @@ impl VolumeArrays {
             }
             Ok(out)
         };
-        let index = |n: usize, what: &str| {
-            u32::try_from(n).map_err(|_| GpuError::SceneTooBig(format!("more than 2^32 {what}")))
-        };
         let mut base = VolumeParams::zeroed();
         base.probe_trips = 2;
         for (l, level) in mips.levels.iter().enumerate() {
             let lo = shifted(level.lo, level.side)?;
             base.level_lo[l] = [lo[0], lo[1], lo[2], level.side as i32];
             let d = level.dims;
-            base.level_dims[l] = [d[0], d[1], d[2], index(self.ranges.len(), "ranges")?];
+            base.level_dims[l] = [d[0], d[1], d[2], count_u32(self.ranges.len(), "ranges")?];
             self.ranges
                 .extend(level.ranges.iter().map(|r| [r.min, r.max]));
         }
+        let global = global_range(mips);
+        base.global_min = global.min;
+        base.global_max = global.max;
+        // Voxel coordinates are i32: so is the corner of the coarsest blocks holding them.
+        for (s, b) in base.index_shift.iter_mut().zip(&shift_blocks) {
+            *s = i32::try_from(b * TOP_SIDE)
+                .map_err(|_| GpuError::SceneTooBig("index space beyond i32".to_string()))?;
+        }
+        base.atlas_base = count_u32(self.atlas.len() / 4, "atlas words")?;
+        match grid {
+            KernelGrid::Bricked(grid) => self.push_bricks(grid, &mut base, shifted)?,
+            KernelGrid::Nanovdb {
+                bytes, background, ..
+            } => {
+                base.format = VOLUME_FORMAT_NANOVDB;
+                base.background = background;
+                self.atlas.extend_from_slice(bytes);
+            }
+        }
+        self.atlas.resize(self.atlas.len().next_multiple_of(4), 0);
+        let side = TOP_SIDE as f64;
+        Ok(UploadedGrid {
+            base,
+            shift: shift_blocks.map(|b| b as f64 * side),
+            centre: std::array::from_fn(|k| f64::from(top.dims[k]) * side * 0.5 - 0.5),
+        })
+    }
+
+    /// Appends the bricks of `grid` (indirection, brick table, atlas) and sets their part of
+    /// its parameters `base`; `shifted` translates brick coordinates.
+    fn push_bricks(
+        &mut self,
+        grid: &BrickedGrid,
+        base: &mut VolumeParams,
+        shifted: impl Fn([i32; 3], u32) -> Result<[i32; 3], GpuError>,
+    ) -> Result<(), GpuError> {
         let (brick_lo, brick_dims) = grid.indirection_box();
         base.brick_lo = shifted(brick_lo, BLOCK_SIDE as u32)?;
         base.brick_dims = brick_dims;
@@ -140,12 +219,9 @@ impl VolumeArrays {
             TexelFormat::F16 => VOLUME_FORMAT_F16,
             TexelFormat::F32 => VOLUME_FORMAT_F32,
         };
-        let global = global_range(mips);
-        base.global_min = global.min;
-        base.global_max = global.max;
         base.background = grid.background();
-        // Brick indices move past the bricks of the grids before; atlas words likewise.
-        base.indirection_base = index(self.indirection.len(), "indirection entries")?;
+        // Brick indices move past the bricks of the grids before.
+        base.indirection_base = count_u32(self.indirection.len(), "indirection entries")?;
         let first_brick = self.brick_count;
         self.indirection.extend(grid.indirection().iter().map(|&e| {
             if e == NO_BRICK {
@@ -156,27 +232,20 @@ impl VolumeArrays {
         }));
         let bricks: &[u8] = bytemuck::cast_slice(grid.bricks());
         self.bricks.extend_from_slice(bricks);
-        self.brick_count = index(self.brick_count as usize + grid.bricks().len(), "bricks")?;
-        base.atlas_base = index(self.atlas.len() / 4, "atlas words")?;
+        self.brick_count = count_u32(self.brick_count as usize + grid.bricks().len(), "bricks")?;
         self.atlas.extend_from_slice(grid.atlas());
-        self.atlas.resize(self.atlas.len().next_multiple_of(4), 0);
-        let side = TOP_SIDE as f64;
-        Ok(UploadedGrid {
-            base,
-            shift: shift_blocks.map(|b| b as f64 * side),
-            centre: std::array::from_fn(|k| f64::from(top.dims[k]) * side * 0.5 - 0.5),
-        })
+        Ok(())
     }
 }
 
 impl VolumeUpload {
     /// Uploads `grids` and their range mips into shared arrays. Arrays beyond the device's
     /// binding limit are a [`GpuError::SceneTooBig`].
-    pub fn new(ctx: &GpuContext, grids: &[&BrickedGrid]) -> Result<VolumeUpload, GpuError> {
+    pub fn new(ctx: &GpuContext, grids: &[KernelGrid]) -> Result<VolumeUpload, GpuError> {
         let mut arrays = VolumeArrays::default();
         let grids = grids
             .iter()
-            .map(|g| arrays.push(g))
+            .map(|g| arrays.push(*g))
             .collect::<Result<Vec<_>, _>>()?;
         let bytes: [(&str, Vec<u8>); 4] = [
             (
@@ -200,15 +269,60 @@ impl<'a> GpuVolume<'a> {
     /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
     pub fn new(ctx: &GpuContext, grid: &'a BrickedGrid) -> Result<GpuVolume<'a>, GpuError> {
         let t0 = Instant::now();
+        Self::upload(
+            ctx,
+            grid,
+            Cow::Borrowed(grid.ranges()),
+            KernelGrid::Bricked(grid),
+            t0,
+        )
+    }
+
+    /// Uploads the raw buffer of NanoVDB `grid` (no conversion: the kernel walks its tree)
+    /// with range mips built from it, and compiles the kernel with the NanoVDB lookup.
+    /// Grids the lookup cannot read, or above the device's binding limit, are refused
+    /// before anything is uploaded ([`nanovdb_gpu_bytes`]).
+    pub fn nanovdb(ctx: &GpuContext, grid: &'a NanoGrid) -> Result<GpuVolume<'a>, NanoGpuError> {
+        let t0 = Instant::now();
+        let bytes = nanovdb_gpu_bytes(grid, ctx.limits.max_storage_buffer_binding_size)?;
+        let mips = RangeMips::build(grid).map_err(|e| NanoGpuError::Refused {
+            number: grid.number(),
+            name: grid.name().to_string(),
+            reason: e.0,
+        })?;
+        let kernel_grid = KernelGrid::Nanovdb {
+            bytes,
+            background: grid.background(),
+            mips: &mips,
+        };
+        Ok(Self::upload(
+            ctx,
+            grid,
+            Cow::Owned(mips.clone()),
+            kernel_grid,
+            t0,
+        )?)
+    }
+
+    /// Uploads `kernel_grid` (the kernel's form of `grid`, whose walks use `mips`) and
+    /// compiles the kernel with what it needs; `t0` is when the setup began.
+    fn upload(
+        ctx: &GpuContext,
+        grid: &'a dyn VoxelGrid,
+        mips: Cow<'a, RangeMips>,
+        kernel_grid: KernelGrid,
+        t0: Instant,
+    ) -> Result<GpuVolume<'a>, GpuError> {
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
         if per_stage < BINDINGS {
             return Err(GpuError::SceneTooBig(format!(
                 "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
             )));
         }
-        let upload = VolumeUpload::new(ctx, &[grid])?;
+        let upload = VolumeUpload::new(ctx, &[kernel_grid])?;
         let grid_upload = upload.grids[0];
-        let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
+        let nanovdb = matches!(kernel_grid, KernelGrid::Nanovdb { .. });
+        let source = transmittance_source(nanovdb).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
         })?;
@@ -228,6 +342,7 @@ impl<'a> GpuVolume<'a> {
         })?;
         Ok(GpuVolume {
             grid,
+            mips,
             pipeline,
             layout,
             upload,
@@ -279,7 +394,7 @@ impl<'a> GpuVolume<'a> {
         rays: &[Ray],
         params: &TransmittanceParams,
     ) -> anyhow::Result<(Vec<Estimate>, GpuTimes)> {
-        params.validate(self.grid, self.grid.ranges())?;
+        params.validate(self.grid, &self.mips)?;
         if u32::try_from(rays.len()).is_err() {
             anyhow::bail!(
                 "transmittance: {} rays in one batch, at most {}",
@@ -343,11 +458,7 @@ impl<'a> GpuVolume<'a> {
                 if r.status & VOLUME_STATUS_LOOPS_CUT != 0 {
                     // The CPU twin, on the ray's own streams.
                     out.push(transmittance(
-                        self.grid,
-                        self.grid.ranges(),
-                        &rays[i],
-                        i as u32,
-                        params,
+                        self.grid, &self.mips, &rays[i], i as u32, params,
                     )?);
                     times.redone_on_cpu += 1;
                     continue;
