@@ -176,7 +176,8 @@ struct VolumeParams {
     atlas_base: u32,
     probe_trips: u32,
     index_shift: array<i32, 3>,
-    pad: array<u32, 2>,
+    atlas_chunk_log2: u32,
+    nanovdb_words: u32,
 }
 
 struct TransmittanceRecord {

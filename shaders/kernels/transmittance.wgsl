@@ -9,8 +9,8 @@
 // #import volume/estimate
 // #import loop_budget
 
-@group(0) @binding(5) var<storage, read> rays: array<RayRecord>;
-@group(0) @binding(6) var<storage, read_write> results: array<TransmittanceRecord>;
+@group(1) @binding(0) var<storage, read> rays: array<RayRecord>;
+@group(1) @binding(1) var<storage, read_write> results: array<TransmittanceRecord>;
 
 @compute @workgroup_size(64)
 fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {

@@ -10,8 +10,16 @@
 // VOLUME_NO_BRICK.
 @group(0) @binding(2) var<storage, read> indirection: array<u32>;
 @group(0) @binding(3) var<storage, read> bricks: array<BrickEntry>;
-// The atlas bytes as little-endian words.
+// The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids); above the
+// device's binding limit, split into chunks of 2^atlas_chunk_log2 words, the first here and
+// the others at bindings 5 to 7 (kernels composed with `atlas_chunks`). Read through
+// `atlas_word`.
 @group(0) @binding(4) var<storage, read> atlas: array<u32>;
+// #if atlas_chunks
+@group(0) @binding(5) var<storage, read> atlas_1: array<u32>;
+@group(0) @binding(6) var<storage, read> atlas_2: array<u32>;
+@group(0) @binding(7) var<storage, read> atlas_3: array<u32>;
+// #endif
 // The parameters of the grid the walks and lookups read (`use_volume`), and their entry.
 var<private> vparams: VolumeParams;
 var<private> vparams_entry: u32 = 0xffffffffu;
@@ -24,4 +32,26 @@ fn use_volume(i: u32) {
         vparams = volume_params[i];
         vparams_entry = i;
     }
+}
+
+// Word `i` of the atlas, whichever chunk holds it.
+fn atlas_word(i: u32) -> u32 {
+    var j = i;
+    // #if atlas_chunks
+    let log2 = vparams.atlas_chunk_log2;
+    j = i & ((1u << log2) - 1u);
+    switch i >> log2 {
+        case 1u: {
+            return atlas_1[j];
+        }
+        case 2u: {
+            return atlas_2[j];
+        }
+        case 3u: {
+            return atlas_3[j];
+        }
+        default: {}
+    }
+    // #endif
+    return atlas[j];
 }

@@ -11,8 +11,8 @@
 // Code-unit value of texel `j` (4 * row + column) of a BC4 block at atlas word `w`
 // (hytrace_volume bc4.rs: endpoints in bytes 0 and 1, 3-bit indices from bit 16).
 fn bc4_texel(w: u32, j: u32) -> f32 {
-    let lo = atlas[w];
-    let hi = atlas[w + 1u];
+    let lo = atlas_word(w);
+    let hi = atlas_word(w + 1u);
     let b = 16u + 3u * j;
     var index: u32;
     if b + 3u <= 32u {
@@ -63,16 +63,16 @@ fn atlas_texel(slot: u32, i: u32) -> f32 {
     let w = vparams.atlas_base;
     switch vparams.format {
         case VOLUME_FORMAT_F32: {
-            return bitcast<f32>(atlas[w + slot * 512u + i]);
+            return bitcast<f32>(atlas_word(w + slot * 512u + i));
         }
         case VOLUME_FORMAT_F16: {
-            return half_to_f32(atlas[w + slot * 256u + (i >> 1u)] >> (16u * (i & 1u)));
+            return half_to_f32(atlas_word(w + slot * 256u + (i >> 1u)) >> (16u * (i & 1u)));
         }
         case VOLUME_FORMAT_UNORM16: {
-            return f32((atlas[w + slot * 256u + (i >> 1u)] >> (16u * (i & 1u))) & 0xffffu);
+            return f32((atlas_word(w + slot * 256u + (i >> 1u)) >> (16u * (i & 1u))) & 0xffffu);
         }
         case VOLUME_FORMAT_UNORM8: {
-            return f32((atlas[w + slot * 128u + (i >> 2u)] >> (8u * (i & 3u))) & 0xffu);
+            return f32((atlas_word(w + slot * 128u + (i >> 2u)) >> (8u * (i & 3u))) & 0xffu);
         }
         default: {
             // BC4: per z slice four 4x4 blocks of two words, by block row then column.

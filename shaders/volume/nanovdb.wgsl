@@ -51,7 +51,7 @@ struct NanoStep {
 
 // The word holding byte `at` (4-aligned).
 fn nanovdb_word(at: u32) -> u32 {
-    return atlas[vparams.atlas_base + (at >> 2u)];
+    return atlas_word(vparams.atlas_base + (at >> 2u));
 }
 
 // Bit `n` of the bit mask starting at byte `mask` (64-bit little-endian words read as
@@ -67,8 +67,7 @@ fn nanovdb_root(root: u32, ijk: vec3<i32>) -> NanoStep {
     let key_lo = p.z | (p.y << 21u);
     let key_hi = (p.y >> 11u) | (p.x << 10u);
     // Never more tiles than the buffer holds, whatever the count says.
-    let words = arrayLength(&atlas) - vparams.atlas_base;
-    let tiles = min(nanovdb_word(root + NANOVDB_ROOT_TABLE_SIZE), words / 8u);
+    let tiles = min(nanovdb_word(root + NANOVDB_ROOT_TABLE_SIZE), vparams.nanovdb_words / 8u);
     for (var t = 0u; t < tiles; t += 1u) {
         let tile = root + NANOVDB_ROOT_TILES + NANOVDB_TILE_SIZE * t;
         if nanovdb_word(tile) == key_lo && nanovdb_word(tile + 4u) == key_hi {

@@ -541,3 +541,46 @@ fn pixels_past_the_driver_loop_budget_are_rendered_again_on_the_cpu() {
         assert!((g - c).abs() <= 1e-4, "value {k}: GPU {g}, CPU {c}");
     }
 }
+
+/// A media atlas above the device's binding limit is split over several buffers: the
+/// several-media scene rendered with the limit lowered so that its atlas takes three
+/// buffers is, pixel for pixel and bit for bit, what the one-buffer kernel renders.
+#[test]
+fn media_atlases_above_the_binding_limit_are_split() {
+    let Some(mut ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (f, mut spec) = load(&media_scene(dir.path(), "0.0", "[0.8, 0.5, 0.3]"));
+    small(&mut spec, View::Shaded, 1);
+    spec.settings.step = 0.5;
+    let cpu_scene = CpuScene::<f32>::new(&f).unwrap();
+    let renderer = Renderer::new(&cpu_scene, &f, &spec).unwrap();
+    let render = |ctx: &GpuContext| {
+        let gpu = GpuRenderer::new(ctx, &renderer).unwrap();
+        let run = gpu.render(ctx, &renderer, &|_| {}).unwrap();
+        let bits: Vec<[u32; 3]> = run
+            .image
+            .pixels
+            .iter()
+            .map(|p| p.map(f32::to_bits))
+            .collect();
+        (
+            gpu.features().contains(&"atlas_chunks"),
+            bits,
+            run.cut_short,
+        )
+    };
+    let whole = render(&ctx);
+    // Its atlas holds 96 KiB: three chunks of 32 KiB.
+    ctx.limits.max_storage_buffer_binding_size = 32 << 10;
+    let split = render(&ctx);
+    assert!(!whole.0 && split.0, "split only under the lowered limit");
+    assert_eq!(whole.2, split.2, "the same pixels past the loop budget");
+    let differ = whole.1.iter().zip(&split.1).filter(|(a, b)| a != b).count();
+    assert_eq!(differ, 0, "{differ} pixels differ");
+    // Four chunks of 16 KiB do not hold it.
+    ctx.limits.max_storage_buffer_binding_size = 16 << 10;
+    let err = GpuRenderer::new(&ctx, &renderer).err().unwrap().to_string();
+    assert!(err.contains("the volume atlas has"), "{err}");
+}

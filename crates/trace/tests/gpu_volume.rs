@@ -429,11 +429,16 @@ fn nanovdb_fixture(name: &str) -> NanoFile {
 /// bricks (the same voxel values and mips, read another way).
 #[test]
 fn raw_nanovdb_grids_match_the_cpu() {
-    // Only kernels for NanoVDB grids carry the NanoVDB lookup.
-    assert!(transmittance_source(true)
+    // Only kernels for NanoVDB grids carry the NanoVDB lookup, only split atlases more
+    // than one atlas binding.
+    let split = "var<storage, read> atlas_1";
+    let nanovdb = transmittance_source(&["nanovdb"]).unwrap();
+    assert!(nanovdb.contains("fn nanovdb_voxel(") && !nanovdb.contains(split));
+    let bricked = transmittance_source(&[]).unwrap();
+    assert!(!bricked.contains("fn nanovdb_") && !bricked.contains(split));
+    assert!(transmittance_source(&["atlas_chunks"])
         .unwrap()
-        .contains("fn nanovdb_voxel("));
-    assert!(!transmittance_source(false).unwrap().contains("nanovdb_"));
+        .contains("var<storage, read> atlas_3"));
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
@@ -501,6 +506,87 @@ fn raw_nanovdb_grids_match_the_cpu() {
         err.contains("'roottile' cannot be read on the GPU") && err.contains("blocks"),
         "{err}"
     );
+}
+
+/// An atlas above the device's binding limit is split over up to four buffers: with the
+/// limit lowered, bricks (756 KB of f32 texels) and a raw NanoVDB grid (614 KB) are read
+/// from three chunks of 256 KiB and every estimate is bit for bit the one-buffer kernel's;
+/// an atlas beyond four chunks is refused, naming it.
+#[test]
+fn atlases_above_the_binding_limit_are_split() {
+    let Some(mut ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let bricks =
+        BrickedGrid::convert(&noisy_grid(GridMap::IDENTITY, 0.0), TexelFormat::F32).unwrap();
+    let tiles = nanovdb_fixture("tiles_zip.nvdb");
+    let (lo, hi) = bounds(&bricks);
+    let brick_rays: Vec<Ray> = families(bricks.map(), lo, hi, 200)
+        .into_iter()
+        .flat_map(|f| f.rays)
+        .collect();
+    let [lo, hi] = tiles.grids[0]
+        .index_bbox()
+        .unwrap()
+        .map(|c| c.map(f64::from));
+    let tile_rays: Vec<Ray> = families(tiles.grids[0].map(), lo, hi, 200)
+        .into_iter()
+        .flat_map(|f| f.rays)
+        .collect();
+    let estimators = [
+        params(Estimator::Exact, Filter::Trilinear, MAJORANTS[0], 0.02),
+        params(
+            Estimator::March { step: 0.7 },
+            Filter::Nearest,
+            MAJORANTS[1],
+            0.02,
+        ),
+    ];
+    let trackers = [
+        params(Estimator::Ratio, Filter::Trilinear, MAJORANTS[0], 0.02),
+        params(Estimator::Delta, Filter::Stochastic, MAJORANTS[2], 0.02),
+    ];
+    let run = |ctx: &GpuContext, nanovdb: bool| {
+        let volume = if nanovdb {
+            GpuVolume::nanovdb(ctx, &tiles.grids[0]).unwrap()
+        } else {
+            GpuVolume::new(ctx, &bricks).unwrap()
+        };
+        let (rays, sets) = if nanovdb {
+            // Negative tiles: the deterministic estimators only.
+            (&tile_rays, &estimators[..])
+        } else {
+            (&brick_rays, &[estimators, trackers].concat()[..])
+        };
+        let values: Vec<u64> = sets
+            .iter()
+            .flat_map(|p| volume.transmittance(ctx, rays, p).unwrap().0)
+            .map(|e| e.transmittance.to_bits())
+            .collect();
+        (volume.features().contains(&"atlas_chunks"), values)
+    };
+    let whole = [run(&ctx, false), run(&ctx, true)];
+    ctx.limits.max_storage_buffer_binding_size = 256 << 10;
+    let split = [run(&ctx, false), run(&ctx, true)];
+    for (what, (w, s)) in ["bricks", "nanovdb"].iter().zip(whole.iter().zip(&split)) {
+        assert!(!w.0 && s.0, "{what}: split only under the lowered limit");
+        assert_eq!(w.1.len(), s.1.len());
+        let differ = w.1.iter().zip(&s.1).filter(|(a, b)| a != b).count();
+        println!("{what}: {} estimates, {differ} differ", w.1.len());
+        assert_eq!(differ, 0, "{what}: split and whole atlases differ");
+    }
+    // Four chunks of 64 KiB hold neither.
+    ctx.limits.max_storage_buffer_binding_size = 64 << 10;
+    let err = GpuVolume::new(&ctx, &bricks).err().unwrap().to_string();
+    assert!(
+        err.contains("the volume atlas has") && err.contains("4 storage buffers"),
+        "{err}"
+    );
+    let err = GpuVolume::nanovdb(&ctx, &tiles.grids[0])
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("the device can bind"), "{err}");
 }
 
 /// Drivers inline every call: the kernel's costly functions each have one call site.

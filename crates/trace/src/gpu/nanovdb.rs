@@ -42,9 +42,9 @@ pub enum NanoGpuError {
 
 /// The bytes of `grid` to upload for the lookup, after checking that it can read them: a
 /// validated grid of a type in [`GPU_NANOVDB_TYPES`], a whole number of words, at most
-/// [`MAX_GPU_NANOVDB_BYTES`] and at most `max_binding` bytes (the device's storage-buffer
-/// binding limit).
-pub fn nanovdb_gpu_bytes(grid: &NanoGrid, max_binding: u64) -> Result<&[u8], NanoGpuError> {
+/// [`MAX_GPU_NANOVDB_BYTES`] and at most `max_bytes` (what the device can bind for it: its
+/// storage-buffer binding limit, or the capacity of the split volume atlas).
+pub fn nanovdb_gpu_bytes(grid: &NanoGrid, max_bytes: u64) -> Result<&[u8], NanoGpuError> {
     let refuse = |reason: String| NanoGpuError::Refused {
         number: grid.number(),
         name: grid.name().to_string(),
@@ -68,9 +68,9 @@ pub fn nanovdb_gpu_bytes(grid: &NanoGrid, max_binding: u64) -> Result<&[u8], Nan
             "its buffer of {len} bytes has offsets beyond 2^32 bytes, which the GPU lookup cannot address"
         )));
     }
-    if len > max_binding {
+    if len > max_bytes {
         return Err(refuse(format!(
-            "its buffer of {len} bytes exceeds the device's storage-buffer binding limit of {max_binding} bytes"
+            "its buffer of {len} bytes exceeds the {max_bytes} bytes the device can bind for it"
         )));
     }
     Ok(bytes)
@@ -88,9 +88,12 @@ pub fn probe_nanovdb(
     let count = u32::try_from(points.len())
         .map_err(|_| GpuError::SceneTooBig(format!("{} probe points", points.len())))?;
     let items: Vec<i32> = points.iter().flat_map(|p| [p[0], p[1], p[2], 0]).collect();
-    // The grid alone in the atlas, untranslated.
+    // The grid alone in the atlas, untranslated, all in the first of its chunks (the
+    // probe is composed with every feature, `atlas_chunks` included).
     let mut params = VolumeParams::zeroed();
     params.format = VOLUME_FORMAT_NANOVDB;
+    params.nanovdb_words = (bytes.len() / 4) as u32;
+    params.atlas_chunk_log2 = 30;
     let out = run(
         ctx,
         "kernels/nanovdb_probe",
@@ -103,6 +106,9 @@ pub fn probe_nanovdb(
                 Buffer::Input(&[]),
                 Buffer::Input(&[]),
                 Buffer::Input(bytes),
+                Buffer::Input(&[]),
+                Buffer::Input(&[]),
+                Buffer::Input(&[]),
             ],
             vec![
                 Buffer::Input(bytemuck::cast_slice(&items)),

@@ -27,8 +27,6 @@ use hytrace_volume::global_range;
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
 const RENDER_BINDINGS: u32 = 5;
-/// Storage buffers of the medium group (group 0: `shaders/volume/bindings.wgsl`).
-const MEDIUM_BINDINGS: u32 = 5;
 /// Samples (pixels x spp) per submission of one batch of rows (a dispatch per sample):
 /// drivers may kill long submissions.
 const SAMPLES_PER_BATCH: u64 = 1 << 20;
@@ -308,18 +306,7 @@ impl GpuRenderer {
     /// Uploads the scene of `renderer` and compiles its render kernel with the effects it
     /// calls for.
     pub fn new(ctx: &GpuContext, renderer: &Renderer) -> Result<GpuRenderer, GpuError> {
-        let (features, source) = compose_render_kernel(renderer)?;
-        let medium_bindings = if renderer.media.is_some() {
-            MEDIUM_BINDINGS
-        } else {
-            0
-        };
-        let upload = SceneUpload::new(
-            ctx,
-            renderer.scene,
-            "render",
-            RENDER_BINDINGS + medium_bindings,
-        )?;
+        let (mut features, mut source) = compose_render_kernel(renderer)?;
         // Every medium's grid in the shared arrays, with the trackers' parameters (the
         // CPU's: trilinear lookups, the finest local majorants; the march walks one global
         // segment whatever `global` says).
@@ -330,6 +317,10 @@ impl GpuRenderer {
                     .map(|m| KernelGrid::Bricked(media.scene.grid(m as u32)))
                     .collect();
                 let volume = VolumeUpload::new(ctx, &grids)?;
+                if volume.split() {
+                    features.push("atlas_chunks");
+                    source = kernel_source(KERNEL, &features)?;
+                }
                 let params: Vec<VolumeParams> = volume
                     .grids
                     .iter()
@@ -349,10 +340,17 @@ impl GpuRenderer {
                 Some((buffers, shifts))
             }
         };
+        let medium_bindings = medium.as_ref().map_or(0, |(b, _)| b.len() as u32);
+        let upload = SceneUpload::new(
+            ctx,
+            renderer.scene,
+            "render",
+            RENDER_BINDINGS + medium_bindings,
+        )?;
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
-            let medium_layout = ctx.storage_layout("medium", MEDIUM_BINDINGS, &[]);
+            let medium_layout = ctx.storage_layout("medium", medium_bindings, &[]);
             let medium_group = medium.as_ref().map(|(buffers, shifts)| {
                 let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("medium"),

@@ -36,9 +36,6 @@ use super::tracer::GPU_INF;
 
 const KERNEL: &str = "kernels/transmittance";
 
-/// Storage buffers of the kernel: params, ranges, indirection, bricks, atlas, rays, results.
-const BINDINGS: u32 = 7;
-
 /// Side in voxels of the coarsest range blocks: the index space moves by multiples of it.
 const TOP_SIDE: i64 = 64;
 
@@ -46,10 +43,11 @@ const TOP_SIDE: i64 = 64;
 /// they are; farther ones are moved to their point nearest the box.
 const NEAR: f64 = 65_536.0;
 
-/// The transmittance kernel's source: with the raw NanoVDB lookup (`nanovdb`) or without
-/// it, for bricked grids.
-pub fn transmittance_source(nanovdb: bool) -> Result<String, String> {
-    compose_with(KERNEL, &|feature| nanovdb && feature == "nanovdb")
+/// The transmittance kernel's source with composition `features`: `nanovdb` (the raw
+/// NanoVDB lookup, for such grids) and `atlas_chunks` (an atlas split over several
+/// buffers); without them it reads bricks from one buffer.
+pub fn transmittance_source(features: &[&str]) -> Result<String, String> {
+    compose_with(KERNEL, &|feature| features.contains(&feature))
 }
 
 /// A storage binding's bytes: at least one element of its largest type, a 32-byte brick
@@ -68,8 +66,12 @@ pub struct GpuVolume<'a> {
     /// The range mips the kernel walks (the CPU twin's too).
     mips: Cow<'a, RangeMips>,
     pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    /// Group 0: the parameters, then the grid's arrays.
+    volume_layout: wgpu::BindGroupLayout,
+    /// Group 1: rays, results.
+    ray_layout: wgpu::BindGroupLayout,
     upload: VolumeUpload,
+    features: Vec<&'static str>,
     /// The grid's parameters and translation.
     grid_upload: UploadedGrid,
     upload_s: f64,
@@ -79,7 +81,8 @@ pub struct GpuVolume<'a> {
 /// parameters, every grid's concatenated (the renderer uploads all its media; the
 /// transmittance kernel one grid), and each grid's parameters and index-space translation.
 pub(super) struct VolumeUpload {
-    /// Ranges, indirection, bricks, atlas (bindings 1 to 4).
+    /// Ranges, indirection, bricks and the atlas' chunks (bindings 1 to 4, and 5 to 7 for
+    /// an atlas split in chunks).
     pub buffers: Vec<wgpu::Buffer>,
     /// Each grid's place in them, in the order given.
     pub grids: Vec<UploadedGrid>,
@@ -189,6 +192,7 @@ impl VolumeArrays {
             } => {
                 base.format = VOLUME_FORMAT_NANOVDB;
                 base.background = background;
+                base.nanovdb_words = count_u32(bytes.len() / 4, "NanoVDB words")?;
                 self.atlas.extend_from_slice(bytes);
             }
         }
@@ -239,15 +243,29 @@ impl VolumeArrays {
 }
 
 impl VolumeUpload {
-    /// Uploads `grids` and their range mips into shared arrays. Arrays beyond the device's
-    /// binding limit are a [`GpuError::SceneTooBig`].
+    /// Uploads `grids` and their range mips into shared arrays. The atlas is split into up
+    /// to [`ATLAS_CHUNKS`] buffers when it exceeds the device's binding limit; it, or any
+    /// other array, still too big is a [`GpuError::SceneTooBig`].
     pub fn new(ctx: &GpuContext, grids: &[KernelGrid]) -> Result<VolumeUpload, GpuError> {
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        let chunk_log2 = atlas_chunk_log2(limit);
         let mut arrays = VolumeArrays::default();
-        let grids = grids
+        let mut grids = grids
             .iter()
             .map(|g| arrays.push(*g))
             .collect::<Result<Vec<_>, _>>()?;
-        let bytes: [(&str, Vec<u8>); 4] = [
+        for g in &mut grids {
+            g.base.atlas_chunk_log2 = chunk_log2;
+        }
+        let capacity = atlas_capacity(limit);
+        if arrays.atlas.len() as u64 > capacity {
+            return Err(GpuError::SceneTooBig(format!(
+                "the volume atlas has {} bytes, more than the {capacity} bytes of the \
+                 {ATLAS_CHUNKS} storage buffers the device can bind for it",
+                arrays.atlas.len()
+            )));
+        }
+        let mut bytes: Vec<(&str, Vec<u8>)> = vec![
             (
                 "volume ranges",
                 storage_bytes(bytemuck::cast_slice(&arrays.ranges)),
@@ -257,11 +275,42 @@ impl VolumeUpload {
                 storage_bytes(bytemuck::cast_slice(&arrays.indirection)),
             ),
             ("volume bricks", storage_bytes(&arrays.bricks)),
-            ("volume atlas", storage_bytes(&arrays.atlas)),
         ];
+        let chunk_bytes = 4usize << chunk_log2;
+        bytes.extend(
+            arrays
+                .atlas
+                .chunks(chunk_bytes)
+                .map(|chunk| ("volume atlas", storage_bytes(chunk))),
+        );
+        // One atlas binding, or all of a split atlas' (the unused ones small).
+        let chunks = bytes.len() - 3;
+        let bindings = if chunks > 1 { ATLAS_CHUNKS as usize } else { 1 };
+        for _ in chunks..bindings {
+            bytes.push(("volume atlas", storage_bytes(&[])));
+        }
         let buffers = ctx.storage_buffers(&bytes)?;
         Ok(VolumeUpload { buffers, grids })
     }
+
+    /// Whether the atlas is split in chunks (kernels need the `atlas_chunks` feature).
+    pub fn split(&self) -> bool {
+        self.buffers.len() > 4
+    }
+}
+
+/// Most storage buffers the volume atlas is split into.
+pub const ATLAS_CHUNKS: u64 = 4;
+
+/// Words per atlas chunk, as a power of two: the largest within the binding limit `limit`,
+/// and at most 2^30 (the chunks' words then have u32 indices).
+fn atlas_chunk_log2(limit: u64) -> u32 {
+    (limit / 4).clamp(1, 1 << 30).ilog2()
+}
+
+/// Bytes the volume atlas may hold on a device with binding limit `limit`: its chunks.
+pub fn atlas_capacity(limit: u64) -> u64 {
+    ATLAS_CHUNKS * (4 << atlas_chunk_log2(limit))
 }
 
 impl<'a> GpuVolume<'a> {
@@ -280,11 +329,12 @@ impl<'a> GpuVolume<'a> {
 
     /// Uploads the raw buffer of NanoVDB `grid` (no conversion: the kernel walks its tree)
     /// with range mips built from it, and compiles the kernel with the NanoVDB lookup.
-    /// Grids the lookup cannot read, or above the device's binding limit, are refused
-    /// before anything is uploaded ([`nanovdb_gpu_bytes`]).
+    /// Grids the lookup cannot read, or above what the device can bind for the atlas, are
+    /// refused before anything is uploaded ([`nanovdb_gpu_bytes`]).
     pub fn nanovdb(ctx: &GpuContext, grid: &'a NanoGrid) -> Result<GpuVolume<'a>, NanoGpuError> {
         let t0 = Instant::now();
-        let bytes = nanovdb_gpu_bytes(grid, ctx.limits.max_storage_buffer_binding_size)?;
+        let capacity = atlas_capacity(ctx.limits.max_storage_buffer_binding_size);
+        let bytes = nanovdb_gpu_bytes(grid, capacity)?;
         let mips = RangeMips::build(grid).map_err(|e| NanoGpuError::Refused {
             number: grid.number(),
             name: grid.name().to_string(),
@@ -313,42 +363,62 @@ impl<'a> GpuVolume<'a> {
         kernel_grid: KernelGrid,
         t0: Instant,
     ) -> Result<GpuVolume<'a>, GpuError> {
+        let upload = VolumeUpload::new(ctx, &[kernel_grid])?;
+        // Group 0: the parameters and the grid's arrays; group 1: rays and results.
+        let volume_bindings = 1 + upload.buffers.len() as u32;
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < BINDINGS {
+        if per_stage < volume_bindings + 2 {
             return Err(GpuError::SceneTooBig(format!(
-                "the transmittance kernel binds {BINDINGS} storage buffers, the device allows {per_stage}"
+                "the transmittance kernel binds {} storage buffers, the device allows {per_stage}",
+                volume_bindings + 2
             )));
         }
-        let upload = VolumeUpload::new(ctx, &[kernel_grid])?;
         let grid_upload = upload.grids[0];
-        let nanovdb = matches!(kernel_grid, KernelGrid::Nanovdb { .. });
-        let source = transmittance_source(nanovdb).map_err(|problem| GpuError::Shader {
+        let mut features = Vec::new();
+        if matches!(kernel_grid, KernelGrid::Nanovdb { .. }) {
+            features.push("nanovdb");
+        }
+        if upload.split() {
+            features.push("atlas_chunks");
+        }
+        let source = transmittance_source(&features).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
         })?;
-        let (pipeline, layout) = ctx.checked("building the transmittance kernel", || {
-            let module = ctx.wgsl_module(KERNEL, &source);
-            // Every binding is read-only but the results, the last.
-            let layout = ctx.storage_layout("transmittance", BINDINGS, &[BINDINGS - 1]);
-            let pipeline_layout =
-                ctx.device
-                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some("transmittance"),
-                        bind_group_layouts: &[Some(&layout)],
-                        immediate_size: 0,
-                    });
-            let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
-            (pipeline, layout)
-        })?;
+        let (pipeline, volume_layout, ray_layout) =
+            ctx.checked("building the transmittance kernel", || {
+                let module = ctx.wgsl_module(KERNEL, &source);
+                let volume_layout =
+                    ctx.storage_layout("transmittance volume", volume_bindings, &[]);
+                // The results are written.
+                let ray_layout = ctx.storage_layout("transmittance rays", 2, &[1]);
+                let pipeline_layout =
+                    ctx.device
+                        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                            label: Some("transmittance"),
+                            bind_group_layouts: &[Some(&volume_layout), Some(&ray_layout)],
+                            immediate_size: 0,
+                        });
+                let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
+                (pipeline, volume_layout, ray_layout)
+            })?;
         Ok(GpuVolume {
             grid,
             mips,
             pipeline,
-            layout,
+            volume_layout,
+            ray_layout,
             upload,
             grid_upload,
+            features,
             upload_s: t0.elapsed().as_secs_f64(),
         })
+    }
+
+    /// The composition features of the kernel: `nanovdb` for a raw NanoVDB grid,
+    /// `atlas_chunks` for an atlas split over several buffers.
+    pub fn features(&self) -> &[&'static str] {
+        &self.features
     }
 
     /// Seconds spent uploading the grid and building the kernel (host wall clock).
@@ -489,19 +559,25 @@ impl<'a> GpuVolume<'a> {
         let results = ctx.checked("transmittance dispatch", || {
             let input = |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes));
             let results = ctx.output_buffer("transmittances", out_size);
-            let mut buffers = vec![input("volume params", bytemuck::bytes_of(params))];
-            buffers.extend(self.upload.buffers.iter().cloned());
-            buffers.push(input("volume rays", bytemuck::cast_slice(rays)));
-            buffers.push(results.clone());
-            let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("transmittance"),
-                layout: &self.layout,
-                entries: &whole_buffer_entries(&buffers),
-            });
+            let mut volume = vec![input("volume params", bytemuck::bytes_of(params))];
+            volume.extend(self.upload.buffers.iter().cloned());
+            let ray_buffers = [
+                input("volume rays", bytemuck::cast_slice(rays)),
+                results.clone(),
+            ];
+            let group = |label, layout, buffers: &[wgpu::Buffer]| {
+                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(label),
+                    layout,
+                    entries: &whole_buffer_entries(buffers),
+                })
+            };
+            let volume_group = group("transmittance volume", &self.volume_layout, &volume);
+            let ray_group = group("transmittance rays", &self.ray_layout, &ray_buffers);
             ctx.submit_pass(
                 "transmittance",
                 &[&self.pipeline],
-                &[(0, &group)],
+                &[(0, &volume_group), (1, &ray_group)],
                 n as u32,
                 timer.as_ref(),
             );
