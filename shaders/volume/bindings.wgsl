@@ -20,6 +20,12 @@
 @group(0) @binding(6) var<storage, read> atlas_2: array<u32>;
 @group(0) @binding(7) var<storage, read> atlas_3: array<u32>;
 // #endif
+// #if atlas_texture
+// A bricked grid's texels as a 3D texture instead (crates/trace/src/gpu/texels.rs): the 8^3
+// texels of atlas slot s at brick (s % bx, s / bx % by, s / (bx by)) of its bx x by x bz
+// bricks, in the format's own texture format.
+@group(0) @binding(8) var atlas_texture: texture_3d<f32>;
+// #endif
 // The parameters of the grid the walks and lookups read (`use_volume`), and their entry.
 var<private> vparams: VolumeParams;
 var<private> vparams_entry: u32 = 0xffffffffu;

@@ -57,9 +57,38 @@ fn half_to_f32(h: u32) -> f32 {
     return bitcast<f32>(sign | ((e + 112u) << 23u) | (m << 13u));
 }
 
+// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot` of the grid, from the
+// 3D texture: unorm codes read back exactly, BC4 as the device decodes it.
+// #if atlas_texture
+fn texture_texel(slot: u32, i: u32) -> f32 {
+    let bricks = textureDimensions(atlas_texture) >> vec3<u32>(3u);
+    let brick = vec3<u32>(slot % bricks.x, (slot / bricks.x) % bricks.y, slot / (bricks.x * bricks.y));
+    let texel = (brick << vec3<u32>(3u)) | vec3<u32>(i & 7u, (i >> 3u) & 7u, i >> 6u);
+    let v = textureLoad(atlas_texture, texel, 0).r;
+    switch vparams.format {
+        case VOLUME_FORMAT_UNORM8: {
+            return round(v * 255.0);
+        }
+        case VOLUME_FORMAT_UNORM16: {
+            return round(v * 65535.0);
+        }
+        case VOLUME_FORMAT_BC4: {
+            return v * 255.0;
+        }
+        default: {
+            return v;
+        }
+    }
+}
+// #endif
+
 // Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot` of the grid (its
-// slots start at word `atlas_base`).
+// slots start at word `atlas_base`), decoded from the atlas' words or, in kernels composed
+// with `atlas_texture`, read from the 3D texture.
 fn atlas_texel(slot: u32, i: u32) -> f32 {
+    // #if atlas_texture
+    return texture_texel(slot, i);
+    // #endif
     let w = vparams.atlas_base;
     switch vparams.format {
         case VOLUME_FORMAT_F32: {

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_trace::gpu::GpuContext;
+use hytrace_trace::gpu::{GpuContext, TexelStore};
 use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::volume::{self, FilterArg, Repr, Space};
@@ -174,6 +174,10 @@ enum VolumeCommand {
         /// the GPU when one opens, else the CPU.
         #[arg(long, value_enum, default_value_t = volume::VolumeBackend::Cpu)]
         backend: volume::VolumeBackend,
+        /// Where the GPU reads a bricked grid's texels from: a storage buffer, decoded as on
+        /// the CPU, or a 3D texture (BC4 then decoded by the device).
+        #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
+        gpu_texels: TexelStore,
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
@@ -233,6 +237,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             estimate,
             grid,
             backend,
+            gpu_texels,
             stats,
         } => {
             let t0 = std::time::Instant::now();
@@ -240,7 +245,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             let rays = scan::read_rays(&rays)?;
             let g = volume::represent(g, repr)?;
             let load_s = t0.elapsed().as_secs_f64();
-            let run = volume::transmittances_on(&g, &rays, &estimate.args(), backend)?;
+            let run = volume::transmittances_on(&g, &rays, &estimate.args(), backend, gpu_texels)?;
             let values: Vec<f64> = run.estimates.iter().map(|e| e.transmittance).collect();
             volume::write_f64(&out, &values)?;
             if stats {

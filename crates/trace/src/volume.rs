@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use crate::gpu::nanovdb::nanovdb_gpu_bytes;
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume};
+use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume, TexelStore};
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
@@ -380,6 +380,7 @@ pub fn transmittances_on(
     rays: &[RayRow],
     args: &TransmittanceArgs,
     backend: VolumeBackend,
+    texels: TexelStore,
 ) -> anyhow::Result<TransmittanceRun> {
     let cpu = || {
         let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
@@ -392,35 +393,51 @@ pub fn transmittances_on(
     };
     match backend {
         VolumeBackend::Cpu => cpu(),
-        VolumeBackend::Gpu => gpu_transmittances(GpuContext::new()?, grid, rays, args),
+        VolumeBackend::Gpu => gpu_transmittances(GpuContext::new()?, grid, rays, args, texels),
         VolumeBackend::Auto => gpu_or_cpu(
             "traces",
-            |ctx| gpu_transmittances(ctx, grid, rays, args),
+            |ctx| gpu_transmittances(ctx, grid, rays, args, texels),
             cpu,
         ),
     }
 }
 
-/// The GPU side of [`transmittances_on`].
+/// The GPU side of [`transmittances_on`], reading bricked grids' texels from `texels`.
 fn gpu_transmittances(
     ctx: GpuContext,
     grid: &Represented,
     rays: &[RayRow],
     args: &TransmittanceArgs,
+    texels: TexelStore,
 ) -> anyhow::Result<TransmittanceRun> {
     let t0 = Instant::now();
+    let in_texture = |repr: String| match texels {
+        TexelStore::Storage => repr,
+        TexelStore::Texture => format!("{repr}, texels in a 3D texture"),
+    };
     let converted;
     let (volume, repr) = match grid {
-        Represented::Bricked(b) => (GpuVolume::new(&ctx, b)?, b.format().name().to_string()),
-        Represented::Source(Volume::Nano(g)) if nanovdb_gpu_bytes(g, u64::MAX).is_ok() => (
-            GpuVolume::nanovdb(&ctx, g)?,
-            "nanovdb (the raw grid buffer)".to_string(),
+        Represented::Bricked(b) => (
+            GpuVolume::with_texels(&ctx, b, texels)?,
+            in_texture(b.format().name().to_string()),
         ),
+        Represented::Source(Volume::Nano(g)) if nanovdb_gpu_bytes(g, u64::MAX).is_ok() => {
+            if texels == TexelStore::Texture {
+                bail!(
+                    "--gpu-texels texture reads bricked grids; --repr nanovdb traces this \
+                     NanoVDB grid's own buffer (choose a bricked --repr for a texture)"
+                );
+            }
+            (
+                GpuVolume::nanovdb(&ctx, g)?,
+                "nanovdb (the raw grid buffer)".to_string(),
+            )
+        }
         Represented::Source(v) => {
             converted = BrickedGrid::convert(v, TexelFormat::F32)?;
             (
-                GpuVolume::new(&ctx, &converted)?,
-                format!("f32 (converted from {})", v.kind()),
+                GpuVolume::with_texels(&ctx, &converted, texels)?,
+                in_texture(format!("f32 (converted from {})", v.kind())),
             )
         }
     };

@@ -25,7 +25,7 @@ use std::path::Path;
 use common::{gpu_stats, hytrace, read_f64, unit, Rng};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
-use hytrace_trace::gpu::{transmittance_source, GpuContext, GpuVolume};
+use hytrace_trace::gpu::{transmittance_source, GpuContext, GpuVolume, TexelStore};
 use hytrace_volume::{
     fog_sphere, parse_nanovdb, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator,
     Filter, GridMap, Majorant, NanoFile, NanoGrid, NanoGridType, RangeMips, Ray, TexelFormat,
@@ -391,6 +391,63 @@ fn every_format_filter_estimator_and_majorant_matches_the_cpu() {
     }
 }
 
+/// Texels read from a 3D texture of each format's texture format (R8Unorm, R16Unorm,
+/// R16Float, R32Float, BC4 sliced 3D) instead of the atlas buffer. The unorm and float
+/// formats give the same voxel values, so every estimator x filter x majorant matches the
+/// CPU as above, and `exact` is bit for bit the storage kernel's. BC4 is decoded by the
+/// device, whose palette may round differently (lavapipe: to whole code units): `exact`
+/// stays within the bound that one code unit per voxel allows,
+/// `density_scale * largest brick scale * longest chord`.
+#[test]
+fn texels_from_3d_textures_match_the_cpu() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let source = noisy_grid(GridMap::IDENTITY, 0.0);
+    let scale = 0.02;
+    for format in TexelFormat::ALL {
+        let grid = BrickedGrid::convert(&source, format).unwrap();
+        let (lo, hi) = bounds(&grid);
+        let fams = families(grid.map(), lo, hi, 120);
+        let textured = GpuVolume::with_texels(&ctx, &grid, TexelStore::Texture).unwrap();
+        assert!(textured.features().contains(&"atlas_texture"), "{format}");
+        let twin = Twin {
+            grid: &grid,
+            mips: grid.ranges(),
+        };
+        let name = format!("noisy {format} in a 3D texture");
+        let rays: Vec<Ray> = fams.iter().flat_map(|f| f.rays.clone()).collect();
+        let exact = params(Estimator::Exact, Filter::Trilinear, MAJORANTS[0], scale);
+        let from_texture = textured.transmittance(&ctx, &rays, &exact).unwrap().0;
+        if format != TexelFormat::Bc4 {
+            check_volume(&name, &ctx, &textured, &twin, &fams, scale, &ESTIMATORS);
+            let storage = GpuVolume::new(&ctx, &grid).unwrap();
+            let from_storage = storage.transmittance(&ctx, &rays, &exact).unwrap().0;
+            let differ = from_texture
+                .iter()
+                .zip(&from_storage)
+                .filter(|(a, b)| a.transmittance.to_bits() != b.transmittance.to_bits())
+                .count();
+            assert_eq!(
+                differ, 0,
+                "{name}: texture and storage differ on {differ} rays"
+            );
+            continue;
+        }
+        let cpu = transmittance_batch(&grid, grid.ranges(), &rays, &exact).unwrap();
+        let largest_scale = grid.bricks().iter().map(|b| b.scale).fold(0.0f32, f32::max);
+        let chord = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+        let bound = scale * f64::from(largest_scale) * chord + DETERMINISTIC_TOL;
+        let worst = cpu
+            .iter()
+            .zip(&from_texture)
+            .map(|(c, g)| (c.transmittance - g.transmittance).abs())
+            .fold(0.0, f64::max);
+        println!("{name}: exact, largest |GPU - CPU| {worst:.3e} (bound {bound:.3e})");
+        assert!(worst <= bound, "{name}: {worst} above {bound}");
+    }
+}
+
 /// A fog sphere with half-voxel world units placed 1e5 world units out, and the noisy grid
 /// with a background of 0.01 moved 2^20 voxels out in index space: the host's translations
 /// keep the kernel's f32 numbers grid-sized.
@@ -666,9 +723,10 @@ fn bad_input_is_refused_clearly() {
 }
 
 /// `volume transmittance --backend gpu` writes what the CPU writes (within f32), on a
-/// bricked representation, on `--repr nanovdb` of a NanoVDB file (its raw buffer traced, as
-/// `--stats` says) and of a procedural grid (converted to f32 bricks); without an adapter
-/// `gpu` fails and writes nothing, `auto` falls back to the CPU.
+/// bricked representation (texels in a buffer or in a 3D texture), on `--repr nanovdb` of
+/// a NanoVDB file (its raw buffer traced, as `--stats` says) and of a procedural grid
+/// (converted to f32 bricks); a raw buffer asked for in a texture is refused; without an
+/// adapter `gpu` fails and writes nothing, `auto` falls back to the CPU.
 #[test]
 fn transmittance_cli_on_the_gpu() {
     if GpuContext::for_tests().is_none() {
@@ -701,48 +759,61 @@ fn transmittance_cli_on_the_gpu() {
         .join("../../tests/data/nanovdb/density_fp8.nvdb")
         .display()
         .to_string();
-    let run =
-        |spec: &str, rays: &str, backend: &str, repr: &str, out: &str, env: &[(&str, &str)]| {
-            let args = [
-                "volume",
-                "transmittance",
-                spec,
-                "--rays",
-                &p(rays),
-                "--out",
-                out,
-                "--repr",
-                repr,
-                "--density-scale",
-                "0.05",
-                "--stats",
-                "--backend",
-                backend,
-            ];
-            hytrace(&args, env)
-        };
-    for (spec, rays, repr, want_repr) in [
-        ("sphere:12,0.5", "rays.npy", "unorm8", "unorm8"),
+    // `texels`: where the GPU reads a bricked grid's texels from.
+    let run = |spec: &str,
+               rays: &str,
+               backend: &str,
+               (repr, texels): (&str, &str),
+               out: &str,
+               env: &[(&str, &str)]| {
+        let args = [
+            "volume",
+            "transmittance",
+            spec,
+            "--rays",
+            &p(rays),
+            "--out",
+            out,
+            "--repr",
+            repr,
+            "--density-scale",
+            "0.05",
+            "--stats",
+            "--backend",
+            backend,
+            "--gpu-texels",
+            texels,
+        ];
+        hytrace(&args, env)
+    };
+    for (spec, rays, (repr, texels), want_repr) in [
+        ("sphere:12,0.5", "rays.npy", ("unorm8", "storage"), "unorm8"),
         (
             "sphere:12,0.5",
             "rays.npy",
-            "nanovdb",
+            ("unorm8", "texture"),
+            "unorm8, texels in a 3D texture",
+        ),
+        (
+            "sphere:12,0.5",
+            "rays.npy",
+            ("nanovdb", "storage"),
             "f32 (converted from procedural)",
         ),
         (
             fixture.as_str(),
             "fixture_rays.npy",
-            "nanovdb",
+            ("nanovdb", "storage"),
             "nanovdb (the raw grid buffer)",
         ),
     ] {
-        let cpu = run(spec, rays, "cpu", repr, &p("cpu.npy"), &[]);
+        let cpu = run(spec, rays, "cpu", (repr, texels), &p("cpu.npy"), &[]);
         assert!(
             cpu.status.success(),
             "{}",
             String::from_utf8_lossy(&cpu.stderr)
         );
-        let gpu = run(spec, rays, "gpu", repr, &p("gpu.npy"), &[]);
+        let gpu = run(spec, rays, "gpu", (repr, texels), &p("gpu.npy"), &[]);
         let stats = gpu_stats(&gpu);
         // The kernel's own time from timestamp queries, which lavapipe has.
         let stamps = &stats["gpu_kernel_timestamps_s"];
@@ -766,13 +837,28 @@ fn transmittance_cli_on_the_gpu() {
             );
         }
     }
+    // A raw NanoVDB buffer has no texels to put in a texture: refused, nothing written.
+    let both = run(
+        &fixture,
+        "fixture_rays.npy",
+        "gpu",
+        ("nanovdb", "texture"),
+        &p("both.npy"),
+        &[],
+    );
+    let err = String::from_utf8_lossy(&both.stderr);
+    assert!(
+        !both.status.success() && err.contains("--gpu-texels texture reads bricked grids"),
+        "{err}"
+    );
+    assert!(!Path::new(&p("both.npy")).exists());
     // No adapter: WGPU_BACKEND names one this build does not have.
     let none = [("WGPU_BACKEND", "metal")];
     let no_gpu = run(
         "sphere:12,0.5",
         "rays.npy",
         "gpu",
-        "f32",
+        ("f32", "storage"),
         &p("none.npy"),
         &none,
     );
@@ -786,7 +872,7 @@ fn transmittance_cli_on_the_gpu() {
         "sphere:12,0.5",
         "rays.npy",
         "auto",
-        "f32",
+        ("f32", "storage"),
         &p("auto.npy"),
         &none,
     );

@@ -77,8 +77,13 @@ impl GpuContext {
                 .request_device(&wgpu::DeviceDescriptor {
                     label: Some("hytrace"),
                     required_limits: limits.clone(),
-                    // GPU-side timings of kernels where the adapter has them.
-                    required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
+                    // Where the adapter has them: GPU-side timings of kernels, and the
+                    // texture formats of the volume atlas' 3D textures (`super::texels`).
+                    required_features: adapter.features()
+                        & (wgpu::Features::TIMESTAMP_QUERY
+                            | wgpu::Features::TEXTURE_COMPRESSION_BC
+                            | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D
+                            | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM),
                     ..Default::default()
                 })
                 .await
@@ -168,14 +173,22 @@ impl GpuContext {
         count: u32,
         writable: &[u32],
     ) -> wgpu::BindGroupLayout {
-        let entries: Vec<_> = (0..count)
-            .map(|b| storage_layout_entry(b, !writable.contains(&b)))
-            .collect();
         self.device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
-                entries: &entries,
+                entries: &self.storage_layout_entries(count, writable),
             })
+    }
+
+    /// The entries of [`GpuContext::storage_layout`], for a layout with more bindings.
+    pub fn storage_layout_entries(
+        &self,
+        count: u32,
+        writable: &[u32],
+    ) -> Vec<wgpu::BindGroupLayoutEntry> {
+        (0..count)
+            .map(|b| storage_layout_entry(b, !writable.contains(&b)))
+            .collect()
     }
 
     /// Named arrays uploaded as read-only storage buffers, in order;

@@ -31,6 +31,7 @@ use super::records::{
     VOLUME_FORMAT_UNORM8, VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS,
     VOLUME_STATUS_NEGATIVE,
 };
+use super::texels::{atlas_texture, TexelStore};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::GPU_INF;
 
@@ -71,6 +72,8 @@ pub struct GpuVolume<'a> {
     /// Group 1: rays, results.
     ray_layout: wgpu::BindGroupLayout,
     upload: VolumeUpload,
+    /// The texels' 3D texture (`atlas_texture` kernels).
+    texture: Option<wgpu::TextureView>,
     features: Vec<&'static str>,
     /// The grid's parameters and translation.
     grid_upload: UploadedGrid,
@@ -109,8 +112,11 @@ fn count_u32(n: usize, what: &str) -> Result<u32, GpuError> {
 /// A grid as the volume kernels read it, with the range mips its walks use.
 #[derive(Clone, Copy)]
 pub(super) enum KernelGrid<'a> {
-    /// A bricked grid (its own range mips).
+    /// A bricked grid (its own range mips), texels in the atlas.
     Bricked(&'a BrickedGrid),
+    /// A bricked grid whose texels the kernel reads from a 3D texture (`super::texels`):
+    /// its brick table only.
+    TexturedBricks(&'a BrickedGrid),
     /// A raw NanoVDB grid buffer (checked by [`nanovdb_gpu_bytes`]) and the range mips
     /// built from the grid.
     Nanovdb {
@@ -126,7 +132,7 @@ pub(super) enum KernelGrid<'a> {
 impl KernelGrid<'_> {
     fn mips(&self) -> &RangeMips {
         match self {
-            KernelGrid::Bricked(grid) => grid.ranges(),
+            KernelGrid::Bricked(grid) | KernelGrid::TexturedBricks(grid) => grid.ranges(),
             KernelGrid::Nanovdb { mips, .. } => mips,
         }
     }
@@ -186,7 +192,10 @@ impl VolumeArrays {
         }
         base.atlas_base = count_u32(self.atlas.len() / 4, "atlas words")?;
         match grid {
-            KernelGrid::Bricked(grid) => self.push_bricks(grid, &mut base, shifted)?,
+            KernelGrid::Bricked(grid) => self.push_bricks(grid, true, &mut base, shifted)?,
+            KernelGrid::TexturedBricks(grid) => {
+                self.push_bricks(grid, false, &mut base, shifted)?
+            }
             KernelGrid::Nanovdb {
                 bytes, background, ..
             } => {
@@ -205,11 +214,12 @@ impl VolumeArrays {
         })
     }
 
-    /// Appends the bricks of `grid` (indirection, brick table, atlas) and sets their part of
-    /// its parameters `base`; `shifted` translates brick coordinates.
+    /// Appends the bricks of `grid` (indirection, brick table, and with `texels` the atlas)
+    /// and sets their part of its parameters `base`; `shifted` translates brick coordinates.
     fn push_bricks(
         &mut self,
         grid: &BrickedGrid,
+        texels: bool,
         base: &mut VolumeParams,
         shifted: impl Fn([i32; 3], u32) -> Result<[i32; 3], GpuError>,
     ) -> Result<(), GpuError> {
@@ -237,7 +247,9 @@ impl VolumeArrays {
         let bricks: &[u8] = bytemuck::cast_slice(grid.bricks());
         self.bricks.extend_from_slice(bricks);
         self.brick_count = count_u32(self.brick_count as usize + grid.bricks().len(), "bricks")?;
-        self.atlas.extend_from_slice(grid.atlas());
+        if texels {
+            self.atlas.extend_from_slice(grid.atlas());
+        }
         Ok(())
     }
 }
@@ -299,6 +311,23 @@ impl VolumeUpload {
     }
 }
 
+/// Binding (group 0) of the texels' 3D texture (`shaders/volume/bindings.wgsl`).
+const ATLAS_TEXTURE_BINDING: u32 = 8;
+
+/// The layout entry of a 3D texture of floats read with `textureLoad` at `binding`.
+fn texture_layout_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 /// Most storage buffers the volume atlas is split into.
 pub const ATLAS_CHUNKS: u64 = 4;
 
@@ -317,12 +346,31 @@ impl<'a> GpuVolume<'a> {
     /// Uploads `grid` and its range mips and compiles the kernel. Arrays beyond the device's
     /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
     pub fn new(ctx: &GpuContext, grid: &'a BrickedGrid) -> Result<GpuVolume<'a>, GpuError> {
+        Self::with_texels(ctx, grid, TexelStore::Storage)
+    }
+
+    /// [`GpuVolume::new`] with the texels read from `store`: the atlas' storage buffer, or
+    /// a 3D texture ([`TexelStore::Texture`]; a device without the format's texture
+    /// features is a [`GpuError::SceneTooBig`]).
+    pub fn with_texels(
+        ctx: &GpuContext,
+        grid: &'a BrickedGrid,
+        store: TexelStore,
+    ) -> Result<GpuVolume<'a>, GpuError> {
         let t0 = Instant::now();
+        let (kernel_grid, texture) = match store {
+            TexelStore::Storage => (KernelGrid::Bricked(grid), None),
+            TexelStore::Texture => (
+                KernelGrid::TexturedBricks(grid),
+                Some(atlas_texture(ctx, grid)?),
+            ),
+        };
         Self::upload(
             ctx,
             grid,
             Cow::Borrowed(grid.ranges()),
-            KernelGrid::Bricked(grid),
+            kernel_grid,
+            texture,
             t0,
         )
     }
@@ -350,17 +398,20 @@ impl<'a> GpuVolume<'a> {
             grid,
             Cow::Owned(mips.clone()),
             kernel_grid,
+            None,
             t0,
         )?)
     }
 
-    /// Uploads `kernel_grid` (the kernel's form of `grid`, whose walks use `mips`) and
-    /// compiles the kernel with what it needs; `t0` is when the setup began.
+    /// Uploads `kernel_grid` (the kernel's form of `grid`, whose walks use `mips`, and its
+    /// texels' 3D `texture` if it has one) and compiles the kernel with what it needs; `t0`
+    /// is when the setup began.
     fn upload(
         ctx: &GpuContext,
         grid: &'a dyn VoxelGrid,
         mips: Cow<'a, RangeMips>,
         kernel_grid: KernelGrid,
+        texture: Option<wgpu::TextureView>,
         t0: Instant,
     ) -> Result<GpuVolume<'a>, GpuError> {
         let upload = VolumeUpload::new(ctx, &[kernel_grid])?;
@@ -381,6 +432,9 @@ impl<'a> GpuVolume<'a> {
         if upload.split() {
             features.push("atlas_chunks");
         }
+        if texture.is_some() {
+            features.push("atlas_texture");
+        }
         let source = transmittance_source(&features).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
             problem,
@@ -388,8 +442,16 @@ impl<'a> GpuVolume<'a> {
         let (pipeline, volume_layout, ray_layout) =
             ctx.checked("building the transmittance kernel", || {
                 let module = ctx.wgsl_module(KERNEL, &source);
+                let mut entries = ctx.storage_layout_entries(volume_bindings, &[]);
+                if texture.is_some() {
+                    entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
+                }
                 let volume_layout =
-                    ctx.storage_layout("transmittance volume", volume_bindings, &[]);
+                    ctx.device
+                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                            label: Some("transmittance volume"),
+                            entries: &entries,
+                        });
                 // The results are written.
                 let ray_layout = ctx.storage_layout("transmittance rays", 2, &[1]);
                 let pipeline_layout =
@@ -409,6 +471,7 @@ impl<'a> GpuVolume<'a> {
             volume_layout,
             ray_layout,
             upload,
+            texture,
             grid_upload,
             features,
             upload_s: t0.elapsed().as_secs_f64(),
@@ -565,15 +628,23 @@ impl<'a> GpuVolume<'a> {
                 input("volume rays", bytemuck::cast_slice(rays)),
                 results.clone(),
             ];
-            let group = |label, layout, buffers: &[wgpu::Buffer]| {
-                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some(label),
-                    layout,
-                    entries: &whole_buffer_entries(buffers),
-                })
-            };
-            let volume_group = group("transmittance volume", &self.volume_layout, &volume);
-            let ray_group = group("transmittance rays", &self.ray_layout, &ray_buffers);
+            let mut volume_entries = whole_buffer_entries(&volume);
+            if let Some(view) = &self.texture {
+                volume_entries.push(wgpu::BindGroupEntry {
+                    binding: ATLAS_TEXTURE_BINDING,
+                    resource: wgpu::BindingResource::TextureView(view),
+                });
+            }
+            let volume_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("transmittance volume"),
+                layout: &self.volume_layout,
+                entries: &volume_entries,
+            });
+            let ray_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("transmittance rays"),
+                layout: &self.ray_layout,
+                entries: &whole_buffer_entries(&ray_buffers),
+            });
             ctx.submit_pass(
                 "transmittance",
                 &[&self.pipeline],
