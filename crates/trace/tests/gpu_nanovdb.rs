@@ -6,13 +6,12 @@
 mod common;
 
 use std::collections::BTreeSet;
-use std::path::Path;
 
-use common::Rng;
+use common::{nanovdb_fixture, Rng};
 
 use hytrace_trace::gpu::nanovdb::{nanovdb_gpu_bytes, probe_nanovdb, NanoGpuError};
 use hytrace_trace::gpu::GpuContext;
-use hytrace_volume::{parse_nanovdb, Coord, NanoFile, NanoGrid, VoxelGrid};
+use hytrace_volume::{parse_nanovdb, Coord, NanoGrid, VoxelGrid};
 
 /// Most voxels of a bounding box compared one by one; larger boxes are sampled.
 const MAX_BOX_VOXELS: i64 = 1 << 22;
@@ -20,14 +19,6 @@ const MAX_BOX_VOXELS: i64 = 1 << 22;
 const BOX_SAMPLES: usize = 200_000;
 /// Random far points per grid.
 const FAR_SAMPLES: usize = 4_000;
-
-fn parse(name: &str) -> NanoFile {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../tests/data/nanovdb")
-        .join(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    parse_nanovdb(&bytes, name).unwrap_or_else(|e| panic!("{e}"))
-}
 
 /// Integer draws for the twin test.
 trait IntDraws {
@@ -161,7 +152,7 @@ fn raw_nanovdb_lookups_equal_the_cpu_reader_bit_for_bit() {
     let mut rng = Rng(0x6e61_6e6f_7664_6221);
     let (mut total, mut identical, mut grids) = (0, 0, 0);
     for file in files {
-        for grid in &parse(file).grids {
+        for grid in &nanovdb_fixture(file).grids {
             if nanovdb_gpu_bytes(grid, u64::MAX).is_err() {
                 continue; // multi_zip's Vec3f grid: refused, see the test below
             }
@@ -205,7 +196,7 @@ fn refusal(result: Result<&[u8], NanoGpuError>) -> String {
 #[test]
 fn unsupported_grids_and_bad_buffers_are_refused() {
     // Grids of other value types.
-    let multi = parse("multi_zip.nvdb");
+    let multi = nanovdb_fixture("multi_zip.nvdb");
     let velocity = multi.grid("velocity").unwrap();
     let message = refusal(nanovdb_gpu_bytes(velocity, u64::MAX));
     eprintln!("{message}");
@@ -213,13 +204,13 @@ fn unsupported_grids_and_bad_buffers_are_refused() {
         message.contains("'velocity'") && message.contains("Vec3f"),
         "{message}"
     );
-    let temperature = parse("temperature_zip.nvdb");
+    let temperature = nanovdb_fixture("temperature_zip.nvdb");
     let message = refusal(nanovdb_gpu_bytes(&temperature.grids[0], u64::MAX));
     eprintln!("{message}");
     assert!(message.contains("type double"), "{message}");
 
     // A buffer above the device's binding limit.
-    let density = parse("density_zip.nvdb");
+    let density = nanovdb_fixture("density_zip.nvdb");
     let grid = &density.grids[0];
     let len = grid.buffer().len() as u64;
     assert_eq!(nanovdb_gpu_bytes(grid, len).unwrap().len() as u64, len);

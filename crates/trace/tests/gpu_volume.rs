@@ -22,14 +22,13 @@ mod common;
 
 use std::path::Path;
 
-use common::{gpu_stats, hytrace, read_f64, unit, Rng};
+use common::{gpu_stats, hytrace, nanovdb_fixture, read_f64, unit, Rng};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_trace::gpu::{transmittance_source, GpuContext, GpuVolume, TexelStore};
 use hytrace_volume::{
-    fog_sphere, parse_nanovdb, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator,
-    Filter, GridMap, Majorant, NanoFile, NanoGrid, NanoGridType, RangeMips, Ray, TexelFormat,
-    TransmittanceParams, VoxelGrid,
+    fog_sphere, transmittance_batch, BrickedGrid, DenseGrid, Estimate, Estimator, Filter, GridMap,
+    Majorant, NanoGrid, NanoGridType, RangeMips, Ray, TexelFormat, TransmittanceParams, VoxelGrid,
 };
 
 /// Largest |GPU - CPU| of a deterministic estimate.
@@ -469,14 +468,6 @@ fn far_placements_match_the_cpu() {
     let (lo, hi) = bounds(&grid);
     let fams = families(grid.map(), lo, hi, 120);
     check_grid("noisy at 2^20", &ctx, &grid, &fams, 0.02);
-}
-
-fn nanovdb_fixture(name: &str) -> NanoFile {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../tests/data/nanovdb")
-        .join(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    parse_nanovdb(&bytes, name).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Raw NanoVDB grids traced by the kernel (no conversion: it walks the grid's own buffer)

@@ -21,6 +21,23 @@ pub enum TexelStore {
     Texture,
 }
 
+/// Binding (group 0) of the texels' 3D texture (`shaders/volume/bindings.wgsl`).
+pub(super) const ATLAS_TEXTURE_BINDING: u32 = 8;
+
+/// The layout entry of a 3D texture of floats read with `textureLoad` at `binding`.
+pub(super) fn texture_layout_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 /// The texture format holding `format`'s texels, and the device features it needs.
 pub fn texture_format(format: TexelFormat) -> (wgpu::TextureFormat, wgpu::Features) {
     match format {

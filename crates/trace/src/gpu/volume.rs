@@ -31,7 +31,7 @@ use super::records::{
     VOLUME_FORMAT_UNORM8, VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS,
     VOLUME_STATUS_NEGATIVE,
 };
-use super::texels::{atlas_texture, TexelStore};
+use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::GPU_INF;
 
@@ -311,23 +311,6 @@ impl VolumeUpload {
     }
 }
 
-/// Binding (group 0) of the texels' 3D texture (`shaders/volume/bindings.wgsl`).
-const ATLAS_TEXTURE_BINDING: u32 = 8;
-
-/// The layout entry of a 3D texture of floats read with `textureLoad` at `binding`.
-fn texture_layout_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 /// Most storage buffers the volume atlas is split into.
 pub const ATLAS_CHUNKS: u64 = 4;
 
@@ -479,7 +462,8 @@ impl<'a> GpuVolume<'a> {
     }
 
     /// The composition features of the kernel: `nanovdb` for a raw NanoVDB grid,
-    /// `atlas_chunks` for an atlas split over several buffers.
+    /// `atlas_chunks` for an atlas split over several buffers, `atlas_texture` for texels
+    /// in a 3D texture.
     pub fn features(&self) -> &[&'static str] {
         &self.features
     }

@@ -15,6 +15,7 @@ use hytrace_trace::cpu::{CpuScene, Hit};
 use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
 use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
+use hytrace_volume::{parse_nanovdb, NanoFile};
 
 /// A deterministic generator (SplitMix64).
 pub struct Rng(pub u64);
@@ -32,6 +33,13 @@ impl Rng {
     pub fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
+}
+
+/// The NanoVDB fixture `name` of `tests/data/nanovdb`, parsed.
+pub fn nanovdb_fixture(name: &str) -> NanoFile {
+    let path = repo("tests/data/nanovdb").join(name);
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    parse_nanovdb(&bytes, name).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// A path in the repository.
