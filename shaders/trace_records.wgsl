@@ -176,8 +176,8 @@ struct VolumeParams {
     atlas_base: u32,
     probe_trips: u32,
     index_shift: array<i32, 3>,
-    atlas_chunk_log2: u32,
     nanovdb_words: u32,
+    pad: u32,
 }
 
 struct TransmittanceRecord {

@@ -345,7 +345,7 @@ struct MeshWalk {
 // MeshPrim::contains); returns the new limit.
 fn mesh_leaf(m: MeshRecord, first: u32, count: u32, o: vec3<f32>, s: MeshShear, limit: f32, w: ptr<function, MeshWalk>) -> f32 {
     for (var i = first; i < first + count; i += 1u) {
-        let c = mesh_crossing(mesh_triangles[m.triangle_offset + i], o, s);
+        let c = mesh_crossing(mesh_triangle(m.triangle_offset + i), o, s);
         if !c.ok {
             continue;
         }
@@ -381,7 +381,7 @@ fn mesh_leaf(m: MeshRecord, first: u32, count: u32, o: vec3<f32>, s: MeshShear, 
 fn mesh_walk(m: MeshRecord, o: vec3<f32>, d: vec3<f32>, s: MeshShear, w: ptr<function, MeshWalk>) {
     let boxes = slab_ray(o, d);
     var limit = INF;
-    if !mesh_slab_entry(boxes, mesh_nodes[m.node_offset], (*w).after, limit).ok {
+    if !mesh_slab_entry(boxes, mesh_node(m.node_offset), (*w).after, limit).ok {
         return;
     }
     // The farther children and their box entries (one push per level of descent).
@@ -391,13 +391,13 @@ fn mesh_walk(m: MeshRecord, o: vec3<f32>, d: vec3<f32>, s: MeshShear, w: ptr<fun
     var node = 0u;
     var walking = true;
     while walking {
-        let n = mesh_nodes[m.node_offset + node];
+        let n = mesh_node(m.node_offset + node);
         var descended = false;
         if n.count == 0u {
             let a = n.first;
             let b = n.first + 1u;
-            let ea = mesh_slab_entry(boxes, mesh_nodes[m.node_offset + a], (*w).after, limit);
-            let eb = mesh_slab_entry(boxes, mesh_nodes[m.node_offset + b], (*w).after, limit);
+            let ea = mesh_slab_entry(boxes, mesh_node(m.node_offset + a), (*w).after, limit);
+            let eb = mesh_slab_entry(boxes, mesh_node(m.node_offset + b), (*w).after, limit);
             descended = ea.ok || eb.ok;
             if ea.ok && eb.ok {
                 if eb.t < ea.t {
@@ -472,7 +472,7 @@ fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step
     if !w.found {
         return step_miss(false);
     }
-    let tri = mesh_triangles[m.triangle_offset + w.best_index];
+    let tri = mesh_triangle(m.triangle_offset + w.best_index);
     let v0 = tri.v[0].xyz;
     let normal = mesh_cross(tri.v[1].xyz - v0, tri.v[2].xyz - v0);
     return Step(w.best_t + moved.shift, normal, mesh_dot(normal, d) > 0.0);

@@ -10,16 +10,9 @@
 // VOLUME_NO_BRICK.
 @group(0) @binding(2) var<storage, read> indirection: array<u32>;
 @group(0) @binding(3) var<storage, read> bricks: array<BrickEntry>;
-// The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids); above the
-// device's binding limit, split into chunks of 2^atlas_chunk_log2 words, the first here and
-// the others at bindings 5 to 7 (kernels composed with `atlas_chunks`). Read through
-// `atlas_word`.
-@group(0) @binding(4) var<storage, read> atlas: array<u32>;
-// #if atlas_chunks
-@group(0) @binding(5) var<storage, read> atlas_1: array<u32>;
-@group(0) @binding(6) var<storage, read> atlas_2: array<u32>;
-@group(0) @binding(7) var<storage, read> atlas_3: array<u32>;
-// #endif
+// The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids), read
+// through `atlas_word`; above the device's binding limit split over bindings 4 to 7.
+// #chunked atlas u32 0 4 5 atlas_word
 // #if atlas_texture
 // A bricked grid's texels as a 3D texture instead (crates/trace/src/gpu/texels.rs): the 8^3
 // texels of atlas slot s at brick (s % bx, s / bx % by, s / (bx by)) of its bx x by x bz
@@ -40,24 +33,3 @@ fn use_volume(i: u32) {
     }
 }
 
-// Word `i` of the atlas, whichever chunk holds it.
-fn atlas_word(i: u32) -> u32 {
-    var j = i;
-    // #if atlas_chunks
-    let log2 = vparams.atlas_chunk_log2;
-    j = i & ((1u << log2) - 1u);
-    switch i >> log2 {
-        case 1u: {
-            return atlas_1[j];
-        }
-        case 2u: {
-            return atlas_2[j];
-        }
-        case 3u: {
-            return atlas_3[j];
-        }
-        default: {}
-    }
-    // #endif
-    return atlas[j];
-}

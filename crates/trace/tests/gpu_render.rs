@@ -566,7 +566,7 @@ fn media_atlases_above_the_binding_limit_are_split() {
             .map(|p| p.map(f32::to_bits))
             .collect();
         (
-            gpu.features().contains(&"atlas_chunks"),
+            gpu.features().contains(&"chunked_atlas"),
             bits,
             run.cut_short,
         )
@@ -582,5 +582,5 @@ fn media_atlases_above_the_binding_limit_are_split() {
     // Four chunks of 16 KiB do not hold it.
     ctx.limits.max_storage_buffer_binding_size = 16 << 10;
     let err = GpuRenderer::new(&ctx, &renderer).err().unwrap().to_string();
-    assert!(err.contains("the volume atlas has"), "{err}");
+    assert!(err.contains("array `atlas` has"), "{err}");
 }

@@ -8,11 +8,12 @@ mod common;
 use std::path::Path;
 
 use common::{
-    check, gpu_answers, gpu_stats, hytrace, mesh_obj, mesh_scene_rays, rays_for, read_values, repo,
+    check, gpu_answers, gpu_run, gpu_stats, hytrace, mesh_obj, mesh_scene_rays, rays_for,
+    read_values, repo,
 };
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
-use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::cpu::{CpuScene, Hit};
 use hytrace_trace::gpu::{GpuContext, GpuTracer};
 use hytrace_trace::scan::RayRow;
 use hytrace_trace::scene::{default_scene, load_scene, obj_to_foundry};
@@ -271,4 +272,53 @@ fn rays_past_the_driver_loop_budget_are_traced_again_on_the_cpu() {
         );
     }
     assert_eq!(gpu, cpu);
+}
+
+/// Mesh nodes and triangles above the device's binding limit are split over four buffers
+/// each: with the limit lowered under both arrays of the mesh scene (an icosphere, a
+/// heightfield and a far cube), the scan gives, ray by ray and bit for bit, what the
+/// one-buffer kernel gives; an array beyond four buffers is refused, naming it.
+#[test]
+fn mesh_arrays_above_the_binding_limit_are_split() {
+    let Some(mut ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let f = obj_to_foundry(mesh_obj().as_bytes()).unwrap();
+    let rays = mesh_scene_rays(&f);
+    let whole = gpu_run(&ctx, &f, &rays).unwrap();
+    let arrays = CpuScene::<f32>::new(&f).unwrap().gpu_arrays().unwrap();
+    let nodes = std::mem::size_of_val(arrays.meshes.nodes.as_slice());
+    let triangles = std::mem::size_of_val(arrays.meshes.triangles.as_slice());
+    // Under both arrays, and above a quarter of the larger: four chunks hold each.
+    let limit = nodes.min(triangles) - 64;
+    assert!(
+        4 * (limit - 48) >= nodes.max(triangles),
+        "{nodes} {triangles}"
+    );
+    ctx.limits.max_storage_buffer_binding_size = limit as u64;
+    let split = gpu_run(&ctx, &f, &rays).unwrap();
+    for feature in ["chunked_mesh_nodes", "chunked_mesh_triangles"] {
+        assert!(!whole.features.contains(&feature), "{:?}", whole.features);
+        assert!(split.features.contains(&feature), "{:?}", split.features);
+    }
+    let bits = |h: &Option<Hit<f32>>| {
+        h.as_ref().map(|h| {
+            let n = [h.normal.x, h.normal.y, h.normal.z].map(f32::to_bits);
+            (h.t.to_bits(), n, h.instance, h.prim)
+        })
+    };
+    let differ = (whole.hits.iter().zip(&split.hits))
+        .filter(|(a, b)| bits(a) != bits(b))
+        .count();
+    let hits = whole.hits.iter().filter(|h| h.is_some()).count();
+    println!(
+        "{} rays ({hits} hits) at a limit of {limit} bytes: {differ} differ",
+        rays.len()
+    );
+    assert!(hits > rays.len() / 10);
+    assert_eq!(differ, 0, "split and whole mesh arrays differ");
+    // Four chunks of an eighth of the triangles' bytes hold less than they need.
+    ctx.limits.max_storage_buffer_binding_size = (triangles / 8) as u64;
+    let err = gpu_run(&ctx, &f, &rays).err().unwrap().to_string();
+    assert!(err.contains("array `mesh_"), "{err}");
 }

@@ -484,7 +484,7 @@ fn raw_nanovdb_grids_match_the_cpu() {
     assert!(nanovdb.contains("fn nanovdb_voxel(") && !nanovdb.contains(split));
     let bricked = transmittance_source(&[]).unwrap();
     assert!(!bricked.contains("fn nanovdb_") && !bricked.contains(split));
-    assert!(transmittance_source(&["atlas_chunks"])
+    assert!(transmittance_source(&["chunked_atlas"])
         .unwrap()
         .contains("var<storage, read> atlas_3"));
     let Some(ctx) = GpuContext::for_tests() else {
@@ -611,7 +611,7 @@ fn atlases_above_the_binding_limit_are_split() {
             .flat_map(|p| volume.transmittance(ctx, rays, p).unwrap().0)
             .map(|e| e.transmittance.to_bits())
             .collect();
-        (volume.features().contains(&"atlas_chunks"), values)
+        (volume.features().contains(&"chunked_atlas"), values)
     };
     let whole = [run(&ctx, false), run(&ctx, true)];
     ctx.limits.max_storage_buffer_binding_size = 256 << 10;
@@ -627,7 +627,7 @@ fn atlases_above_the_binding_limit_are_split() {
     ctx.limits.max_storage_buffer_binding_size = 64 << 10;
     let err = GpuVolume::new(&ctx, &bricks).err().unwrap().to_string();
     assert!(
-        err.contains("the volume atlas has") && err.contains("4 storage buffers"),
+        err.contains("array `atlas` has") && err.contains("4 storage buffers"),
         "{err}"
     );
     let err = GpuVolume::nanovdb(&ctx, &tiles.grids[0])

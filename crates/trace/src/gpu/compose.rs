@@ -5,6 +5,63 @@
 //! Lines between `// #if FEATURE` and `// #endif` (not nested) are kept only when the
 //! feature is on, imports included: a scene without meshes gets no mesh code, one without
 //! a torus no quartic solver ([`compose_with`]).
+//!
+//! A line `// #chunked ARRAY TYPE GROUP BINDING MORE ACCESSOR` declares a read-only storage
+//! array that may exceed the device's binding limit, read only through `ACCESSOR(i) ->
+//! TYPE`. Without the feature `chunked_ARRAY` it becomes the one binding `@group(GROUP)
+//! @binding(BINDING) ARRAY` and an accessor that indexes it; with it, `ARRAY` holds the
+//! first `ARRAY_CHUNK_LEN` elements and `ARRAY_1` .. `ARRAY_3` at bindings `MORE`,
+//! `MORE + 1`, `MORE + 2` the next ones, as many each (an `override` constant the host
+//! sets when it builds the pipeline: [`chunk_constant`]).
+
+/// Buffers a chunked array is split into (`#chunked`).
+pub const CHUNKS: usize = 4;
+
+/// The `override` constant holding a chunked `array`'s elements per chunk.
+pub fn chunk_constant(array: &str) -> String {
+    format!("{}_CHUNK_LEN", array.to_uppercase())
+}
+
+/// The WGSL of a `#chunked` line's fields (see the module doc); an error names what is
+/// malformed.
+fn chunked_array(fields: &str, enabled: &dyn Fn(&str) -> bool) -> Result<String, String> {
+    let f: Vec<&str> = fields.split_whitespace().collect();
+    let [array, ty, group, binding, more, accessor] = f[..] else {
+        return Err(format!(
+            "`#chunked {fields}`: expected ARRAY TYPE GROUP BINDING MORE ACCESSOR"
+        ));
+    };
+    let number = |v: &str| {
+        v.parse::<u32>()
+            .map_err(|_| format!("`#chunked {fields}`: `{v}` is not a binding number"))
+    };
+    let (group, binding, more) = (number(group)?, number(binding)?, number(more)?);
+    let declare = |name: &str, binding: u32| {
+        format!("@group({group}) @binding({binding}) var<storage, read> {name}: array<{ty}>;\n")
+    };
+    let mut out = declare(array, binding);
+    if !enabled(&format!("chunked_{array}")) {
+        out.push_str(&format!(
+            "fn {accessor}(i: u32) -> {ty} {{\n    return {array}[i];\n}}\n"
+        ));
+        return Ok(out);
+    }
+    let len = chunk_constant(array);
+    out.push_str(&format!("override {len}: u32;\n"));
+    let mut cases = String::new();
+    for c in 1..CHUNKS as u32 {
+        out.push_str(&declare(&format!("{array}_{c}"), more + c - 1));
+        cases.push_str(&format!(
+            "        case {c}u: {{\n            return {array}_{c}[j];\n        }}\n"
+        ));
+    }
+    out.push_str(&format!(
+        "fn {accessor}(i: u32) -> {ty} {{\n    let chunk = i / {len};\n    \
+         let j = i - chunk * {len};\n    switch chunk {{\n{cases}        default: {{}}\n    }}\n    \
+         return {array}[j];\n}}\n"
+    ));
+    Ok(out)
+}
 
 /// Every WGSL module, by name (its path under `shaders/` without `.wgsl`), found by the
 /// build script and compiled into the binary.
@@ -41,8 +98,15 @@ fn preprocess(name: &str, source: &str, enabled: &dyn Fn(&str) -> bool) -> Resul
             continue;
         }
         if block.is_none_or(|(_, on)| on) {
-            out.push_str(line);
-            out.push('\n');
+            match trimmed.strip_prefix("// #chunked ") {
+                Some(fields) => out.push_str(
+                    &chunked_array(fields, enabled).map_err(|e| format!("module `{name}`: {e}"))?,
+                ),
+                None => {
+                    out.push_str(line);
+                    out.push('\n');
+                }
+            }
         }
     }
     match block {

@@ -180,6 +180,19 @@ impl GpuContext {
             })
     }
 
+    /// A bind group layout of read-only storage buffers at `bindings`.
+    pub fn read_only_layout(&self, label: &str, bindings: &[u32]) -> wgpu::BindGroupLayout {
+        let entries: Vec<_> = bindings
+            .iter()
+            .map(|&b| storage_layout_entry(b, true))
+            .collect();
+        self.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
     /// The entries of [`GpuContext::storage_layout`], for a layout with more bindings.
     pub fn storage_layout_entries(
         &self,
@@ -384,20 +397,26 @@ pub fn whole_buffer_entries(buffers: &[wgpu::Buffer]) -> Vec<wgpu::BindGroupEntr
         .collect()
 }
 
-/// A compute pipeline of entry point `entry` of `module` with `layout`.
+/// A compute pipeline of entry point `entry` of `module` with `layout`, its `override`
+/// constants set to `constants` (name, value).
 pub fn compute_pipeline(
     ctx: &GpuContext,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
     entry: &str,
+    constants: &[(String, f64)],
 ) -> wgpu::ComputePipeline {
+    let constants: Vec<(&str, f64)> = constants.iter().map(|(n, v)| (n.as_str(), *v)).collect();
     ctx.device
         .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(entry),
             layout: Some(layout),
             module,
             entry_point: Some(entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &constants,
+                ..Default::default()
+            },
             cache: None,
         })
 }

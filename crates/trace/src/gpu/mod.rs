@@ -1,5 +1,6 @@
 //! GPU compute through wgpu: device setup, WGSL composition, scene upload and kernels.
 
+mod chunks;
 pub mod compose;
 mod context;
 pub mod nanovdb;

@@ -88,12 +88,10 @@ pub fn probe_nanovdb(
     let count = u32::try_from(points.len())
         .map_err(|_| GpuError::SceneTooBig(format!("{} probe points", points.len())))?;
     let items: Vec<i32> = points.iter().flat_map(|p| [p[0], p[1], p[2], 0]).collect();
-    // The grid alone in the atlas, untranslated, all in the first of its chunks (the
-    // probe is composed with every feature, `atlas_chunks` included).
+    // The grid alone in the atlas, untranslated.
     let mut params = VolumeParams::zeroed();
     params.format = VOLUME_FORMAT_NANOVDB;
     params.nanovdb_words = (bytes.len() / 4) as u32;
-    params.atlas_chunk_log2 = 30;
     let out = run(
         ctx,
         "kernels/nanovdb_probe",
@@ -106,9 +104,6 @@ pub fn probe_nanovdb(
                 Buffer::Input(&[]),
                 Buffer::Input(&[]),
                 Buffer::Input(bytes),
-                Buffer::Input(&[]),
-                Buffer::Input(&[]),
-                Buffer::Input(&[]),
             ],
             vec![
                 Buffer::Input(bytemuck::cast_slice(&items)),

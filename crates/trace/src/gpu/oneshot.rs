@@ -3,7 +3,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::compose::compose;
+use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::probe::dispatch_size;
 
@@ -26,9 +26,12 @@ pub fn run(
     invocations: u32,
     groups: &[Vec<Buffer>],
 ) -> Result<Vec<Vec<u8>>, GpuError> {
-    let source = compose(module).map_err(|problem| GpuError::Shader {
-        name: module.to_string(),
-        problem,
+    // Every feature but the chunked arrays' (probes bind each array whole).
+    let source = compose_with(module, &|f| !f.starts_with("chunked_")).map_err(|problem| {
+        GpuError::Shader {
+            name: module.to_string(),
+            problem,
+        }
     })?;
     let (buffers, outputs) = ctx.checked(module, || {
         let shader = ctx.wgsl_module(module, &source);
@@ -84,7 +87,7 @@ pub fn run(
                 bind_group_layouts: &layout_refs,
                 immediate_size: 0,
             });
-        let pipeline = compute_pipeline(ctx, &pipeline_layout, &shader, entry);
+        let pipeline = compute_pipeline(ctx, &pipeline_layout, &shader, entry, &[]);
         let (x, y) = dispatch_size(invocations, ctx.limits.max_compute_workgroups_per_dimension);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {

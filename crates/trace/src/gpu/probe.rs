@@ -105,7 +105,7 @@ impl ProbeKernels {
                     bind_group_layouts: &[Some(&scene.layout), Some(&io_layout)],
                     immediate_size: 0,
                 });
-            let pipeline = |entry: &str| compute_pipeline(ctx, &layout, &module, entry);
+            let pipeline = |entry: &str| compute_pipeline(ctx, &layout, &module, entry, &[]);
             ProbeKernels {
                 apply_itra: pipeline("apply_itra"),
                 locate: pipeline("locate"),

@@ -188,10 +188,10 @@ record! {
         /// What the kernels' index space is translated by: a voxel `c` there is voxel
         /// `c + index_shift` of the grid (read by the raw NanoVDB lookup).
         pub index_shift: [i32; 3],
-        /// The atlas' chunks hold `2^atlas_chunk_log2` words each (`atlas_chunks` kernels).
-        pub atlas_chunk_log2: u32,
         /// Words of a raw NanoVDB grid's buffer in the atlas (0 for bricks).
         pub nanovdb_words: u32,
+        /// Padding.
+        pub pad: u32,
     }
 }
 

@@ -307,6 +307,8 @@ impl GpuRenderer {
     /// calls for.
     pub fn new(ctx: &GpuContext, renderer: &Renderer) -> Result<GpuRenderer, GpuError> {
         let (mut features, mut source) = compose_render_kernel(renderer)?;
+        // Pipeline constants of the arrays split in chunks (their features recompose it).
+        let mut constants = Vec::new();
         // Every medium's grid in the shared arrays, with the trackers' parameters (the
         // CPU's: trilinear lookups, the finest local majorants; the march walks one global
         // segment whatever `global` says).
@@ -317,10 +319,9 @@ impl GpuRenderer {
                     .map(|m| KernelGrid::Bricked(media.scene.grid(m as u32)))
                     .collect();
                 let volume = VolumeUpload::new(ctx, &grids)?;
-                if volume.split() {
-                    features.push("atlas_chunks");
-                    source = kernel_source(KERNEL, &features)?;
-                }
+                let (chunked, volume_constants) = volume.kernel_options();
+                features.extend(chunked);
+                constants.extend(volume_constants);
                 let params: Vec<VolumeParams> = volume
                     .grids
                     .iter()
@@ -347,6 +348,11 @@ impl GpuRenderer {
             "render",
             RENDER_BINDINGS + medium_bindings,
         )?;
+        features.extend(upload.features.iter().filter(|f| f.starts_with("chunked_")));
+        constants.extend(upload.constants.iter().cloned());
+        if !constants.is_empty() {
+            source = kernel_source(KERNEL, &features)?;
+        }
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
@@ -368,7 +374,7 @@ impl GpuRenderer {
                         immediate_size: 0,
                     });
             GpuRenderer {
-                pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render"),
+                pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render", &constants),
                 render_layout,
                 scene_group: upload.group.clone(),
                 medium: medium_group,

@@ -6,6 +6,9 @@ use std::time::Instant;
 
 use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
 
+use hytrace_csg::gpu_layout::mesh::{MeshNode, MeshTriangle};
+
+use super::chunks::chunk;
 use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{HitRecord, RayRecord, ScanParams};
@@ -82,8 +85,11 @@ pub(super) struct SceneUpload {
     pub layout: wgpu::BindGroupLayout,
     /// Group 1.
     pub group: wgpu::BindGroup,
-    /// `csg`, `mesh` and the primitive types the scene uses.
+    /// `csg`, `mesh` and the primitive types the scene uses, and `chunked_mesh_nodes` and
+    /// `chunked_mesh_triangles` for mesh arrays split over several buffers.
     pub features: Vec<&'static str>,
+    /// The pipeline constants of the arrays split in chunks.
+    pub constants: Vec<(String, f64)>,
     /// Whether the scene is hierarchical (the navigator's answers).
     pub hierarchical: bool,
 }
@@ -99,16 +105,9 @@ impl SceneUpload {
         let arrays = scene
             .gpu_arrays()
             .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
-        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < SCENE_BINDINGS + kernel_bindings {
-            return Err(GpuError::SceneTooBig(format!(
-                "the {kernel} kernel binds {} storage buffers, the device allows {per_stage}",
-                SCENE_BINDINGS + kernel_bindings
-            )));
-        }
         let m = &arrays.meshes;
         let c = &arrays.csg;
-        let scene_arrays: [(&str, Vec<u8>); SCENE_BINDINGS as usize] = [
+        let scene_arrays: [(&'static str, Vec<u8>); SCENE_BINDINGS as usize] = [
             ("csg_planes", binding_bytes(&c.planes)),
             ("csg_nodes", binding_bytes(&c.nodes)),
             ("csg_frames", binding_bytes(&c.frames)),
@@ -124,18 +123,58 @@ impl SceneUpload {
             ("solids", binding_bytes(&arrays.solids)),
             ("surface_prims", binding_bytes(&arrays.surface_prims)),
         ];
-        let buffers = ctx.storage_buffers(&scene_arrays)?;
+        // The mesh arrays split above the binding limit: array index, element size, the
+        // binding of its second chunk (`shaders/mesh/bindings.wgsl`), feature.
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        let mut features = scene_features(&arrays);
+        let mut constants = Vec::new();
+        let mut bindings: Vec<u32> = (0..SCENE_BINDINGS).collect();
+        let mut arrays_bytes = Vec::from(scene_arrays);
+        for (index, element, more, feature) in [
+            (4, size_of::<MeshNode>(), 14, "chunked_mesh_nodes"),
+            (5, size_of::<MeshTriangle>(), 17, "chunked_mesh_triangles"),
+        ] {
+            let name = arrays_bytes[index].0;
+            let bytes = std::mem::take(&mut arrays_bytes[index].1);
+            let mut split = chunk(name, bytes, element, limit)?;
+            arrays_bytes[index].1 = split.buffers.remove(0);
+            if let Some(c) = split.constant(name) {
+                features.push(feature);
+                constants.push(c);
+                for (k, b) in split.buffers.into_iter().enumerate() {
+                    bindings.push(more + k as u32);
+                    arrays_bytes.push((name, b));
+                }
+            }
+        }
+        let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
+        let count = bindings.len() as u32 + kernel_bindings;
+        if per_stage < count {
+            return Err(GpuError::SceneTooBig(format!(
+                "the {kernel} kernel binds {count} storage buffers, the device allows {per_stage}"
+            )));
+        }
+        let buffers = ctx.storage_buffers(&arrays_bytes)?;
         ctx.checked("uploading the scene", || {
-            let layout = ctx.storage_layout("scene", SCENE_BINDINGS, &[]);
+            let layout = ctx.read_only_layout("scene", &bindings);
+            let entries: Vec<_> = bindings
+                .iter()
+                .zip(&buffers)
+                .map(|(&binding, b)| wgpu::BindGroupEntry {
+                    binding,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scene"),
                 layout: &layout,
-                entries: &whole_buffer_entries(&buffers),
+                entries: &entries,
             });
             SceneUpload {
                 layout,
                 group,
-                features: scene_features(&arrays),
+                features,
+                constants,
                 hierarchical: arrays.hierarchical,
             }
         })
@@ -179,7 +218,9 @@ impl GpuTracer {
                         bind_group_layouts: &[None, Some(&upload.layout), Some(&ray_layout)],
                         immediate_size: 0,
                     });
-            let entry = |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name);
+            let entry = |name: &str| {
+                compute_pipeline(ctx, &pipeline_layout, &module, name, &upload.constants)
+            };
             GpuTracer {
                 pipeline: entry("scan"),
                 locate: upload.hierarchical.then(|| entry("locate_rays")),

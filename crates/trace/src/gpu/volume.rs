@@ -20,6 +20,7 @@ use hytrace_volume::{
     BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
+use super::chunks::{chunk, chunked_capacity};
 use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::nanovdb::{nanovdb_gpu_bytes, NanoGpuError};
@@ -45,8 +46,9 @@ const TOP_SIDE: i64 = 64;
 const NEAR: f64 = 65_536.0;
 
 /// The transmittance kernel's source with composition `features`: `nanovdb` (the raw
-/// NanoVDB lookup, for such grids) and `atlas_chunks` (an atlas split over several
-/// buffers); without them it reads bricks from one buffer.
+/// NanoVDB lookup, for such grids), `chunked_atlas` (an atlas split over several buffers)
+/// and `atlas_texture` (texels in a 3D texture); without them it reads bricks from one
+/// buffer.
 pub fn transmittance_source(features: &[&str]) -> Result<String, String> {
     compose_with(KERNEL, &|feature| features.contains(&feature))
 }
@@ -89,6 +91,8 @@ pub(super) struct VolumeUpload {
     pub buffers: Vec<wgpu::Buffer>,
     /// Each grid's place in them, in the order given.
     pub grids: Vec<UploadedGrid>,
+    /// The chunk-size constant of an atlas split in chunks.
+    atlas_constant: Option<(String, f64)>,
 }
 
 /// One grid of a [`VolumeUpload`].
@@ -256,27 +260,16 @@ impl VolumeArrays {
 
 impl VolumeUpload {
     /// Uploads `grids` and their range mips into shared arrays. The atlas is split into up
-    /// to [`ATLAS_CHUNKS`] buffers when it exceeds the device's binding limit; it, or any
-    /// other array, still too big is a [`GpuError::SceneTooBig`].
+    /// to four buffers when it exceeds the device's binding limit; it, or any other array,
+    /// still too big is a [`GpuError::SceneTooBig`].
     pub fn new(ctx: &GpuContext, grids: &[KernelGrid]) -> Result<VolumeUpload, GpuError> {
         let limit = ctx.limits.max_storage_buffer_binding_size;
-        let chunk_log2 = atlas_chunk_log2(limit);
         let mut arrays = VolumeArrays::default();
-        let mut grids = grids
+        let grids = grids
             .iter()
             .map(|g| arrays.push(*g))
             .collect::<Result<Vec<_>, _>>()?;
-        for g in &mut grids {
-            g.base.atlas_chunk_log2 = chunk_log2;
-        }
-        let capacity = atlas_capacity(limit);
-        if arrays.atlas.len() as u64 > capacity {
-            return Err(GpuError::SceneTooBig(format!(
-                "the volume atlas has {} bytes, more than the {capacity} bytes of the \
-                 {ATLAS_CHUNKS} storage buffers the device can bind for it",
-                arrays.atlas.len()
-            )));
-        }
+        let atlas = chunk("atlas", storage_bytes(&arrays.atlas), 4, limit)?;
         let mut bytes: Vec<(&str, Vec<u8>)> = vec![
             (
                 "volume ranges",
@@ -288,41 +281,29 @@ impl VolumeUpload {
             ),
             ("volume bricks", storage_bytes(&arrays.bricks)),
         ];
-        let chunk_bytes = 4usize << chunk_log2;
-        bytes.extend(
-            arrays
-                .atlas
-                .chunks(chunk_bytes)
-                .map(|chunk| ("volume atlas", storage_bytes(chunk))),
-        );
-        // One atlas binding, or all of a split atlas' (the unused ones small).
-        let chunks = bytes.len() - 3;
-        let bindings = if chunks > 1 { ATLAS_CHUNKS as usize } else { 1 };
-        for _ in chunks..bindings {
-            bytes.push(("volume atlas", storage_bytes(&[])));
-        }
+        let atlas_constant = atlas.constant("atlas");
+        bytes.extend(atlas.buffers.into_iter().map(|b| ("volume atlas", b)));
         let buffers = ctx.storage_buffers(&bytes)?;
-        Ok(VolumeUpload { buffers, grids })
+        Ok(VolumeUpload {
+            buffers,
+            grids,
+            atlas_constant,
+        })
     }
 
-    /// Whether the atlas is split in chunks (kernels need the `atlas_chunks` feature).
-    pub fn split(&self) -> bool {
-        self.buffers.len() > 4
+    /// The composition features and pipeline constants the kernels reading these arrays
+    /// need: `chunked_atlas` for an atlas split over several buffers.
+    pub fn kernel_options(&self) -> (Vec<&'static str>, Vec<(String, f64)>) {
+        match &self.atlas_constant {
+            Some(c) => (vec!["chunked_atlas"], vec![c.clone()]),
+            None => (Vec::new(), Vec::new()),
+        }
     }
 }
 
-/// Most storage buffers the volume atlas is split into.
-pub const ATLAS_CHUNKS: u64 = 4;
-
-/// Words per atlas chunk, as a power of two: the largest within the binding limit `limit`,
-/// and at most 2^30 (the chunks' words then have u32 indices).
-fn atlas_chunk_log2(limit: u64) -> u32 {
-    (limit / 4).clamp(1, 1 << 30).ilog2()
-}
-
-/// Bytes the volume atlas may hold on a device with binding limit `limit`: its chunks.
+/// Bytes the volume atlas may hold on a device with binding limit `limit`.
 pub fn atlas_capacity(limit: u64) -> u64 {
-    ATLAS_CHUNKS * (4 << atlas_chunk_log2(limit))
+    chunked_capacity(4, limit)
 }
 
 impl<'a> GpuVolume<'a> {
@@ -408,12 +389,9 @@ impl<'a> GpuVolume<'a> {
             )));
         }
         let grid_upload = upload.grids[0];
-        let mut features = Vec::new();
+        let (mut features, constants) = upload.kernel_options();
         if matches!(kernel_grid, KernelGrid::Nanovdb { .. }) {
             features.push("nanovdb");
-        }
-        if upload.split() {
-            features.push("atlas_chunks");
         }
         if texture.is_some() {
             features.push("atlas_texture");
@@ -444,7 +422,8 @@ impl<'a> GpuVolume<'a> {
                             bind_group_layouts: &[Some(&volume_layout), Some(&ray_layout)],
                             immediate_size: 0,
                         });
-                let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance");
+                let pipeline =
+                    compute_pipeline(ctx, &pipeline_layout, &module, "transmittance", &constants);
                 (pipeline, volume_layout, ray_layout)
             })?;
         Ok(GpuVolume {
@@ -462,7 +441,7 @@ impl<'a> GpuVolume<'a> {
     }
 
     /// The composition features of the kernel: `nanovdb` for a raw NanoVDB grid,
-    /// `atlas_chunks` for an atlas split over several buffers, `atlas_texture` for texels
+    /// `chunked_atlas` for an atlas split over several buffers, `atlas_texture` for texels
     /// in a 3D texture.
     pub fn features(&self) -> &[&'static str] {
         &self.features
