@@ -56,10 +56,10 @@ pub fn transmittance_source(features: &[&str]) -> Result<String, String> {
 /// A storage binding's bytes: at least one element of its largest type, a 32-byte brick
 /// entry (bindings cannot be empty, and an array's binding holds one element or more; a
 /// NanoVDB grid leaves the brick table empty).
-fn storage_bytes(bytes: &[u8]) -> Vec<u8> {
-    let mut out = bytes.to_vec();
-    out.resize(out.len().max(size_of::<BrickEntry>()), 0);
-    out
+/// Pads in place: the atlas, which grows with the grid, is never copied here.
+fn storage_bytes(mut bytes: Vec<u8>) -> Vec<u8> {
+    bytes.resize(bytes.len().max(size_of::<BrickEntry>()), 0);
+    bytes
 }
 
 /// A grid on the GPU (bricked, or a raw NanoVDB buffer) with its transmittance pipeline.
@@ -269,17 +269,25 @@ impl VolumeUpload {
             .iter()
             .map(|g| arrays.push(*g))
             .collect::<Result<Vec<_>, _>>()?;
-        let atlas = chunk("atlas", storage_bytes(&arrays.atlas), 4, limit)?;
+        let atlas = chunk(
+            "atlas",
+            storage_bytes(std::mem::take(&mut arrays.atlas)),
+            4,
+            limit,
+        )?;
         let mut bytes: Vec<(&str, Vec<u8>)> = vec![
             (
                 "volume ranges",
-                storage_bytes(bytemuck::cast_slice(&arrays.ranges)),
+                storage_bytes(bytemuck::cast_slice(&arrays.ranges).to_vec()),
             ),
             (
                 "volume indirection",
-                storage_bytes(bytemuck::cast_slice(&arrays.indirection)),
+                storage_bytes(bytemuck::cast_slice(&arrays.indirection).to_vec()),
             ),
-            ("volume bricks", storage_bytes(&arrays.bricks)),
+            (
+                "volume bricks",
+                storage_bytes(std::mem::take(&mut arrays.bricks)),
+            ),
         ];
         let atlas_constant = atlas.constant("atlas");
         bytes.extend(atlas.buffers.into_iter().map(|b| ("volume atlas", b)));
@@ -583,7 +591,8 @@ impl<'a> GpuVolume<'a> {
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "transmittance timestamps");
         let results = ctx.checked("transmittance dispatch", || {
-            let input = |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes));
+            let input =
+                |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes.to_vec()));
             let results = ctx.output_buffer("transmittances", out_size);
             let mut volume = vec![input("volume params", bytemuck::bytes_of(params))];
             volume.extend(self.upload.buffers.iter().cloned());
