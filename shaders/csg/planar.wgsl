@@ -56,7 +56,7 @@ fn box_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 fn polyhedron_spans(first: u32, count: u32, o: vec3<f32>, d: vec3<f32>) -> Spans {
     var span = span_everywhere();
     for (var i = first; i < first + count; i += 1u) {
-        let pl = csg_planes[i];
+        let pl = csg_plane(i);
         let s = plane_span(o, d, pl.xyz, pl.w);
         if !s.ok {
             return spans_empty();
@@ -74,7 +74,7 @@ fn polyhedron_spans(first: u32, count: u32, o: vec3<f32>, d: vec3<f32>) -> Spans
 fn polyhedron_sdf(first: u32, count: u32, x: vec3<f32>) -> f32 {
     var sdf = -INF;
     for (var i = first; i < first + count; i += 1u) {
-        let pl = csg_planes[i];
+        let pl = csg_plane(i);
         sdf = max(sdf, vdot(pl.xyz, x) - pl.w);
     }
     return sdf;

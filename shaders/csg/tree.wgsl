@@ -43,7 +43,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32) ->
     var lo = o;
     var ld = d;
     if n.frame != UNSET {
-        let f = csg_frames[n.frame];
+        let f = csg_frame(n.frame);
         lo = frame_point_to_local(f, o);
         ld = frame_linear(f, d);
     }
@@ -60,7 +60,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32) ->
     let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo + ld * shift, ld);
     var step = first_crossing_of_spans(spans, shift, ld, tmin, tol);
     if n.frame != UNSET {
-        step.normal = frame_normal_to_parent(csg_frames[n.frame], step.normal);
+        step.normal = frame_normal_to_parent(csg_frame(n.frame), step.normal);
     }
     if (n.code & COMPLEMENT_BIT) != 0u {
         step = step_complemented(step);
@@ -72,7 +72,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32) ->
 fn csg_leaf_sdf(n: CsgNode, x: vec3<f32>) -> f32 {
     var local = x;
     if n.frame != UNSET {
-        local = frame_point_to_local(csg_frames[n.frame], x);
+        local = frame_point_to_local(csg_frame(n.frame), x);
     }
     let s = primitive_sdf(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, local);
     if (n.code & COMPLEMENT_BIT) != 0u {
@@ -125,7 +125,7 @@ fn csg_list_inside(code: u32, count: u32, all: u32) -> bool {
 // A leaf slot is the same walk over the leaf alone without culling, which returns the
 // leaf's own step (PrimTree::non_operator_step): so the primitive kernels are inlined once.
 fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
-    let n = csg_nodes[slot];
+    let n = csg_node(slot);
     if n.code == CSG_ZERO {
         return step_miss(false);
     }
@@ -155,7 +155,7 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -
         var entry_normal = vec3<f32>(0.0);
         var exit_normal = vec3<f32>(0.0);
         for (var m = first; m < first + all; m += 1u) {
-            let member = csg_nodes[m];
+            let member = csg_node(m);
             if list && !csg_meets_widened(w, member.bounds, tau, INF) {
                 continue;
             }
@@ -264,7 +264,7 @@ struct CsgOperatorFrame {
 // ray is inside before. Slots are queried at one place (the pending query), so the
 // primitive kernels are inlined once per kind of slot.
 fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
-    let tr = csg_trees[tree];
+    let tr = csg_tree(tree);
     var stack: array<CsgOperatorFrame, MAX_TREE_HEIGHT + 1u>;
     var depth = 0u;
     // The slot to query next (the root first) and after which parameter.
@@ -277,7 +277,7 @@ fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> 
     loop {
         if has_query {
             has_query = false;
-            let n = csg_nodes[tr.node_offset + query - 1u];
+            let n = csg_node(tr.node_offset + query - 1u);
             if csg_is_operator(n.code) {
                 stack[depth] = CsgOperatorFrame(query, query_tmin, step_miss(false), step_miss(false), CSG_PHASE_FIRST_LEFT);
                 depth += 1u;
@@ -313,7 +313,7 @@ fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> 
         }
         let frame = stack[top];
         if frame.phase == CSG_PHASE_DECIDE {
-            let code = csg_nodes[tr.node_offset + frame.position - 1u].code;
+            let code = csg_node(tr.node_offset + frame.position - 1u).code;
             let decision = csg_decide(code, frame.left, frame.right, tr.scale);
             if decision.done {
                 depth -= 1u;
@@ -354,7 +354,7 @@ struct CsgSeam {
 // Signed distance bound of tree `tree` at x with its seam flag for tolerance `near`: a
 // postorder walk of the perfect tree with a value stack (PrimTree::sdf and PrimTree::seam).
 fn csg_tree_walk(tree: u32, x: vec3<f32>, near: f32) -> CsgSeam {
-    let tr = csg_trees[tree];
+    let tr = csg_tree(tree);
     var values: array<f32, MAX_TREE_HEIGHT + 2u>;
     var seams: array<bool, MAX_TREE_HEIGHT + 2u>;
     var top = 0u;
@@ -363,7 +363,7 @@ fn csg_tree_walk(tree: u32, x: vec3<f32>, near: f32) -> CsgSeam {
     let deepest = tr.height;
     var position = 1u << deepest;
     loop {
-        let n = csg_nodes[tr.node_offset + position - 1u];
+        let n = csg_node(tr.node_offset + position - 1u);
         if csg_is_operator(n.code) {
             let a = values[top - 2u];
             let b = values[top - 1u];
@@ -392,7 +392,7 @@ fn csg_tree_walk(tree: u32, x: vec3<f32>, near: f32) -> CsgSeam {
             var v = select(INF, -INF, overlap);
             var close = 0u;
             for (var m = first; m < first + all; m += 1u) {
-                let s = csg_leaf_sdf(csg_nodes[m], x);
+                let s = csg_leaf_sdf(csg_node(m), x);
                 if overlap {
                     v = max(v, s);
                 } else {
@@ -454,7 +454,7 @@ fn csg_inside_by_probes(tree: u32, x: vec3<f32>, near: f32) -> bool {
 // Whether a point of the solid's frame is inside tree `tree`: in its interior, points of
 // its surface outside, points of faces its union members share inside.
 fn csg_tree_contains(tree: u32, x: vec3<f32>) -> bool {
-    let tr = csg_trees[tree];
+    let tr = csg_tree(tree);
     let near = csg_tolerance(tr.scale, tree_max_abs(x));
     let w = csg_tree_walk(tree, x, near);
     if w.value < 0.0 {

@@ -4,6 +4,8 @@
 // #import trace_records
 // #import csg/planes
 
-@group(1) @binding(1) var<storage, read> csg_nodes: array<CsgNode>;
-@group(1) @binding(2) var<storage, read> csg_frames: array<FrameRecord>;
-@group(1) @binding(3) var<storage, read> csg_trees: array<CsgTree>;
+// Read through `csg_node`, `csg_frame` and `csg_tree`; above the device's binding limit each
+// is split over its binding and three more (23 to 31).
+// #chunked csg_nodes CsgNode 1 1 23 csg_node
+// #chunked csg_frames FrameRecord 1 2 26 csg_frame
+// #chunked csg_trees CsgTree 1 3 29 csg_tree

@@ -3,8 +3,9 @@
 // `node_offset` (children) or `triangle_offset` (a leaf's triangles).
 // #import trace_records
 
-// Nodes and triangles are read through `mesh_node` and `mesh_triangle`; above the device's
-// binding limit they are split over bindings 4 and 14 to 16, 5 and 17 to 19.
+// Nodes, triangles and mesh records are read through `mesh_node`, `mesh_triangle` and
+// `mesh_record`; above the device's binding limit each is split over its binding and three
+// more (14 to 16, 17 to 19, 32 to 34).
 // #chunked mesh_nodes MeshNode 1 4 14 mesh_node
 // #chunked mesh_triangles MeshTriangle 1 5 17 mesh_triangle
-@group(1) @binding(6) var<storage, read> meshes: array<MeshRecord>;
+// #chunked meshes MeshRecord 1 6 32 mesh_record

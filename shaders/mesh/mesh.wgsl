@@ -458,7 +458,7 @@ fn mesh_nearest(m: MeshRecord, o: vec3<f32>, d: vec3<f32>, s: MeshShear, after: 
 // tolerance of tmin are the surface the ray starts on), with the triangle's geometric
 // normal (v1 - v0) x (v2 - v0), and whether the ray comes from behind that triangle.
 fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
-    let m = meshes[mesh];
+    let m = mesh_record(mesh);
     if !ray_bounds_span(o, d, mesh_lo(m), mesh_hi(m), tmin, INF).ok {
         return step_miss(false);
     }
@@ -481,7 +481,7 @@ fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step
 // Whether point x of the solid's frame is inside mesh `mesh` (parity of the distinct
 // crossing distances of a ray from it); meaningful for closed meshes only.
 fn mesh_contains(mesh: u32, x: vec3<f32>) -> bool {
-    let m = meshes[mesh];
+    let m = mesh_record(mesh);
     let d = MESH_PARITY_DIRECTION;
     if !ray_bounds_span(x, d, mesh_lo(m), mesh_hi(m), 0.0, INF).ok {
         return false;

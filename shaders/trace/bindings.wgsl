@@ -3,10 +3,12 @@
 // by hytrace_trace::cpu::gpu_export from the prepared f32 scene.
 // #import trace_records
 
-@group(1) @binding(7) var<storage, read> box_nodes: array<BoxNode>;
-@group(1) @binding(8) var<storage, read> box_items: array<u32>;
-@group(1) @binding(9) var<storage, read> placements: array<Placement>;
-@group(1) @binding(10) var<storage, read> groups: array<SearchList>;
-@group(1) @binding(11) var<storage, read> group_members: array<u32>;
-@group(1) @binding(12) var<storage, read> solids: array<SearchList>;
-@group(1) @binding(13) var<storage, read> surface_prims: array<SurfacePrim>;
+// Each array is read through its accessor; above the device's binding limit it is split over
+// its binding and three more (35 to 55, in the order below).
+// #chunked box_nodes BoxNode 1 7 35 box_node
+// #chunked box_items u32 1 8 38 box_item
+// #chunked placements Placement 1 9 41 placement
+// #chunked groups SearchList 1 10 44 group_list
+// #chunked group_members u32 1 11 47 group_member
+// #chunked solids SearchList 1 12 50 solid_list
+// #chunked surface_prims SurfacePrim 1 13 53 surface_prim

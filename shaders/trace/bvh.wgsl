@@ -149,14 +149,14 @@ fn bvh_next(w: ptr<function, BvhWalk>, r: SlabRay, tmin: f32, limit: f32) -> u32
     }
     loop {
         if (*w).next < (*w).end {
-            let item = box_items[(*w).next];
+            let item = box_item((*w).next);
             (*w).next += 1u;
             return item;
         }
         if (*w).root_pending {
             (*w).root_pending = false;
             if (*w).root != UNSET {
-                let root = box_nodes[(*w).root];
+                let root = box_node((*w).root);
                 let e = slab_entry_conservative(r, node_lo(root), node_hi(root), tmin, limit);
                 if e.ok {
                     bvh_push(w, (*w).root, e.t);
@@ -172,14 +172,14 @@ fn bvh_next(w: ptr<function, BvhWalk>, r: SlabRay, tmin: f32, limit: f32) -> u32
         if (*w).entries[(*w).len] > limit {
             continue;
         }
-        let node = box_nodes[index];
+        let node = box_node(index);
         if node.count > 0u {
             (*w).next = node.first;
             (*w).end = node.first + node.count;
             continue;
         }
-        let a = box_nodes[node.first];
-        let b = box_nodes[node.first + 1u];
+        let a = box_node(node.first);
+        let b = box_node(node.first + 1u);
         let ta = slab_entry_conservative(r, node_lo(a), node_hi(a), tmin, limit);
         let tb = slab_entry_conservative(r, node_lo(b), node_hi(b), tmin, limit);
         // Farther child pushed first, so the nearer one is walked first.
@@ -245,7 +245,7 @@ fn point_next(w: ptr<function, PointWalk>, x: vec3<f32>) -> u32 {
     }
     loop {
         if (*w).next < (*w).end {
-            let item = box_items[(*w).next];
+            let item = box_item((*w).next);
             (*w).next += 1u;
             return item;
         }
@@ -253,7 +253,7 @@ fn point_next(w: ptr<function, PointWalk>, x: vec3<f32>) -> u32 {
             return UNSET;
         }
         (*w).len -= 1u;
-        let node = box_nodes[(*w).nodes[(*w).len]];
+        let node = box_node((*w).nodes[(*w).len]);
         if !holds(node_lo(node), node_hi(node), x) {
             continue;
         }

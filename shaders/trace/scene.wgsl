@@ -76,7 +76,7 @@ fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
 // The first crossing in (tmin, limit) of a ray in solid `solid`'s frame; of crossings at
 // the same t, the lowest prim's (twin of SolidAccel::cross). `instance` is left unset.
 fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) -> Hit {
-    let list = solids[solid];
+    let list = solid_list(solid);
     var best_index = UNSET;
     var best_t = INF;
     var best_normal = vec3<f32>(0.0);
@@ -93,7 +93,7 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) ->
         if i >= list.count {
             continue;
         }
-        let p = surface_prims[list.first + i];
+        let p = surface_prim(list.first + i);
         if !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
             continue;
         }
@@ -108,7 +108,7 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) ->
     if best_index == UNSET {
         return no_hit();
     }
-    return Hit(true, best_t, best_normal, UNSET, surface_prims[list.first + best_index].foundry_prim);
+    return Hit(true, best_t, best_normal, UNSET, surface_prim(list.first + best_index).foundry_prim);
 }
 
 fn placement_frame(p: Placement) -> FrameRecord {
@@ -125,7 +125,7 @@ fn placement_hi(p: Placement) -> vec3<f32> {
 
 // The nearer of `best` and the first crossing of instance `index`'s surface.
 fn cross_instance(index: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
-    let p = placements[index];
+    let p = placement(index);
     let limit = hit_limit(best, tmax);
     if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
         return best;
@@ -155,7 +155,7 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
         g = located + 1u;
         phase = PHASE_EXIT;
     }
-    let list = groups[g];
+    let list = group_list(g);
     var best = no_hit();
     // The best is the exit (or a crossing found in order): members visited out of order
     // must then beat it, not tie it.
@@ -170,7 +170,7 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
         if phase == PHASE_EXIT_BAND {
             // An origin within the surface tolerance of the located instance's surface,
             // moving out: the exit it starts on, found again from a start moved back.
-            let p = placements[located];
+            let p = placement(located);
             let size = max(p.hi[0] - p.lo[0], max(p.hi[1] - p.lo[1], p.hi[2] - p.lo[2]));
             let scale = size + max(abs(o.x), max(abs(o.y), abs(o.z)));
             start = tmin - 4.0 * SURFACE_TOLERANCE * scale;
@@ -179,11 +179,11 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
             if k == UNSET {
                 break;
             }
-            index = select(k, group_members[list.first + k], w.linear);
+            index = select(k, group_member(list.first + k), w.linear);
             out_of_order = !w.linear && best.found && !seeded && index < best.instance;
             if out_of_order {
                 // Visited out of order: an earlier member wins a tie with a later one.
-                let p = placements[index];
+                let p = placement(index);
                 if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, best.t).ok {
                     continue;
                 }
@@ -219,7 +219,7 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
         }
     }
     if best.found {
-        let n = frame_normal_to_parent(placement_frame(placements[best.instance]), best.normal);
+        let n = frame_normal_to_parent(placement_frame(placement(best.instance)), best.normal);
         let l = sqrt(dot(n, n));
         if l > 0.0 {
             best.normal = n * (1.0 / l);
@@ -230,9 +230,9 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
 
 // Whether a point of solid `solid`'s frame is inside one of its surface prims.
 fn solid_contains(solid: u32, x: vec3<f32>) -> bool {
-    let list = solids[solid];
+    let list = solid_list(solid);
     for (var i = 0u; i < list.count; i += 1u) {
-        if prim_contains(surface_prims[list.first + i], x) {
+        if prim_contains(surface_prim(list.first + i), x) {
             return true;
         }
     }
@@ -246,7 +246,7 @@ fn solid_contains(solid: u32, x: vec3<f32>) -> bool {
 fn locate_point(x: vec3<f32>, status: ptr<function, u32>) -> u32 {
     var current = UNSET;
     var g = 0u;
-    var list = groups[0];
+    var list = group_list(0);
     var w = point_walk(list);
     var found = UNSET;
     let levels = arrayLength(&placements) + 1u;
@@ -265,18 +265,18 @@ fn locate_point(x: vec3<f32>, status: ptr<function, u32>) -> u32 {
                 break;
             }
             g = found + 1u;
-            list = groups[g];
+            list = group_list(g);
             w = point_walk(list);
             found = UNSET;
             continue;
         }
-        let c = select(k, group_members[list.first + k], w.linear);
+        let c = select(k, group_member(list.first + k), w.linear);
         // Only members above the best so far need the (costly) inside test: the highest
         // containing one is the last placed.
         if found != UNSET && c < found {
             continue;
         }
-        let p = placements[c];
+        let p = placement(c);
         if !holds(placement_lo(p), placement_hi(p), x) {
             continue;
         }

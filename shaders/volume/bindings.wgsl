@@ -1,18 +1,19 @@
 // The bricked grids and their range mips as the volume kernels read them (uploaded by
-// crates/trace/src/gpu/volume.rs): group 0, bindings 0 to 4 (5 to 7 for a split atlas, 8
-// for texels in a 3D texture). Several grids share the arrays (the renderer's media); each
-// has its parameters, with its first entries in them.
+// crates/trace/src/gpu/volume.rs): group 0, bindings 0 to 4 (5 to 7 and 9 to 17 for split
+// arrays, 8 for texels in a 3D texture). Several grids share the arrays (the renderer's
+// media); each has its parameters, with its first entries in them.
 // #import trace_records
 
 @group(0) @binding(0) var<storage, read> volume_params: array<VolumeParams>;
+// The arrays below grow with the grids: each is read through its accessor and, above the
+// device's binding limit, split over its binding and three more.
 // (min, max) of every block of every mip level, level after level (VolumeParams.level_dims.w).
-@group(0) @binding(1) var<storage, read> ranges: array<vec2<f32>>;
+// #chunked ranges vec2<f32> 0 1 9 block_range
 // Brick-table index of every brick of each grid's indirection box (x fastest), or
 // VOLUME_NO_BRICK.
-@group(0) @binding(2) var<storage, read> indirection: array<u32>;
-@group(0) @binding(3) var<storage, read> bricks: array<BrickEntry>;
-// The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids), read
-// through `atlas_word`; above the device's binding limit split over bindings 4 to 7.
+// #chunked indirection u32 0 2 12 indirection_entry
+// #chunked bricks BrickEntry 0 3 15 brick_entry
+// The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids).
 // #chunked atlas u32 0 4 5 atlas_word
 // #if atlas_texture
 // A bricked grid's texels as a 3D texture instead (crates/trace/src/gpu/texels.rs): the 8^3

@@ -131,11 +131,11 @@ fn grid_voxel(c: vec3<i32>) -> f32 {
     }
     let l = vec3<u32>(local);
     let d = vec3<u32>(dims);
-    let e = indirection[vparams.indirection_base + (l.z * d.y + l.y) * d.x + l.x];
+    let e = indirection_entry(vparams.indirection_base + (l.z * d.y + l.y) * d.x + l.x);
     if e == VOLUME_NO_BRICK {
         return vparams.background;
     }
-    let entry = bricks[e];
+    let entry = brick_entry(e);
     if entry.atlas_slot == VOLUME_NO_SLOT {
         return entry.offset;
     }

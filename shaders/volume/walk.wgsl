@@ -50,7 +50,7 @@ fn level_range(level: u32, block: vec3<i32>) -> vec2<f32> {
         return vec2<f32>(vparams.background);
     }
     let l = vec3<u32>(local);
-    return ranges[dims.w + (l.z * dims.y + l.y) * dims.x + l.x];
+    return block_range(dims.w + (l.z * dims.y + l.y) * dims.x + l.x);
 }
 
 // Local t at which the walk's ray meets plane `j * side - 0.5` of axis `k` (dir[k] != 0).

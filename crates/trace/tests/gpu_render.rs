@@ -544,7 +544,8 @@ fn pixels_past_the_driver_loop_budget_are_rendered_again_on_the_cpu() {
 
 /// A media atlas above the device's binding limit is split over several buffers: the
 /// several-media scene rendered with the limit lowered so that its atlas takes three
-/// buffers is, pixel for pixel and bit for bit, what the one-buffer kernel renders.
+/// buffers is, pixel for pixel and bit for bit, what the one-buffer kernel renders; so it
+/// is with its range mips, brick tables and scene arrays split.
 #[test]
 fn media_atlases_above_the_binding_limit_are_split() {
     let Some(mut ctx) = GpuContext::for_tests() else {
@@ -572,6 +573,7 @@ fn media_atlases_above_the_binding_limit_are_split() {
         )
     };
     let whole = render(&ctx);
+    let full = ctx.limits.max_storage_buffer_binding_size;
     // Its atlas holds 96 KiB: three chunks of 32 KiB.
     ctx.limits.max_storage_buffer_binding_size = 32 << 10;
     let split = render(&ctx);
@@ -579,6 +581,18 @@ fn media_atlases_above_the_binding_limit_are_split() {
     assert_eq!(whole.2, split.2, "the same pixels past the loop budget");
     let differ = whole.1.iter().zip(&split.1).filter(|(a, b)| a != b).count();
     assert_eq!(differ, 0, "{differ} pixels differ");
+    // The media's range mips and brick tables, and the scene's arrays, are read through
+    // chunks the same way (split on demand: lavapipe binds 32 storage buffers, two arrays
+    // at a time).
+    ctx.limits.max_storage_buffer_binding_size = full;
+    for arrays in [["ranges", "bricks"], ["indirection", "placements"]] {
+        ctx.split_arrays = arrays.map(String::from).to_vec();
+        let split = render(&ctx);
+        assert_eq!(whole.2, split.2, "{arrays:?}");
+        let differ = whole.1.iter().zip(&split.1).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{arrays:?} split: {differ} pixels differ");
+    }
+    ctx.split_arrays.clear();
     // Four chunks of 16 KiB do not hold it.
     ctx.limits.max_storage_buffer_binding_size = 16 << 10;
     let err = GpuRenderer::new(&ctx, &renderer).err().unwrap().to_string();

@@ -301,16 +301,7 @@ fn mesh_arrays_above_the_binding_limit_are_split() {
         assert!(!whole.features.contains(&feature), "{:?}", whole.features);
         assert!(split.features.contains(&feature), "{:?}", split.features);
     }
-    let bits = |h: &Option<Hit<f32>>| {
-        h.as_ref().map(|h| {
-            let n = [h.normal.x, h.normal.y, h.normal.z].map(f32::to_bits);
-            (h.t.to_bits(), n, h.instance, h.prim)
-        })
-    };
-    let differ = (whole.hits.iter().zip(&split.hits))
-        .filter(|(a, b)| bits(a) != bits(b))
-        .count();
-    let hits = whole.hits.iter().filter(|h| h.is_some()).count();
+    let (hits, differ) = compare_bits(&whole.hits, &split.hits);
     println!(
         "{} rays ({hits} hits) at a limit of {limit} bytes: {differ} differ",
         rays.len()
@@ -321,4 +312,72 @@ fn mesh_arrays_above_the_binding_limit_are_split() {
     ctx.limits.max_storage_buffer_binding_size = (triangles / 8) as u64;
     let err = gpu_run(&ctx, &f, &rays).err().unwrap().to_string();
     assert!(err.contains("array `mesh_"), "{err}");
+}
+
+/// Hits of `whole`, and answers of `split` not bit for bit those of `whole`.
+fn compare_bits(whole: &[Option<Hit<f32>>], split: &[Option<Hit<f32>>]) -> (usize, usize) {
+    let bits = |h: &Option<Hit<f32>>| {
+        h.as_ref().map(|h| {
+            let n = [h.normal.x, h.normal.y, h.normal.z].map(f32::to_bits);
+            (h.t.to_bits(), n, h.instance, h.prim)
+        })
+    };
+    let differ = whole.iter().zip(split).filter(|(a, b)| bits(a) != bits(b));
+    (whole.iter().flatten().count(), differ.count())
+}
+
+/// Every array of a scene is read through its chunks when split: with each array split in
+/// four (`split_arrays`, at most four at a time: lavapipe binds at most 32 storage buffers),
+/// a hierarchical GDML scene of CSG solids and a mesh scene give, ray by ray and bit for
+/// bit, what the one-buffer kernels give.
+#[test]
+fn every_scene_array_split_in_chunks_gives_the_same_hits() {
+    let Some(mut ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let gdml = scene_file("tests/data/gdml/coverage.gdml");
+    let mesh = obj_to_foundry(mesh_obj().as_bytes()).unwrap();
+    // Scene, its rays, and the arrays split together in each run.
+    type SplitRuns<'a> = &'a [&'a [&'a str]];
+    let runs: [(&str, &Foundry, Vec<RayRow>, SplitRuns); 2] = [
+        (
+            "coverage.gdml",
+            &gdml,
+            rays_for(&gdml, 60, 3000),
+            &[
+                &["csg_planes", "csg_nodes", "csg_frames", "csg_trees"],
+                &["box_items", "placements", "groups", "group_members"],
+                &["box_nodes", "solids", "surface_prims"],
+            ],
+        ),
+        (
+            "mesh",
+            &mesh,
+            mesh_scene_rays(&mesh),
+            &[&["mesh_nodes", "mesh_triangles", "meshes", "box_nodes"]],
+        ),
+    ];
+    for (name, f, rays, splits) in runs {
+        ctx.split_arrays.clear();
+        let whole = gpu_run(&ctx, f, &rays).unwrap();
+        assert!(!whole.features.iter().any(|f| f.starts_with("chunked_")));
+        for &some in splits {
+            ctx.split_arrays = some.iter().map(|a| a.to_string()).collect();
+            let split = gpu_run(&ctx, f, &rays).unwrap();
+            let features: Vec<String> = (split.features.iter())
+                .filter(|f| f.starts_with("chunked_"))
+                .map(|f| f.to_string())
+                .collect();
+            let expected: Vec<_> = some.iter().map(|a| format!("chunked_{a}")).collect();
+            assert_eq!(features, expected, "{name}");
+            let (hits, differ) = compare_bits(&whole.hits, &split.hits);
+            println!(
+                "{name}, {some:?} split: {} rays ({hits} hits), {differ} differ",
+                rays.len()
+            );
+            assert!(hits > rays.len() / 10, "{name}");
+            assert_eq!(differ, 0, "{name}: split and whole arrays differ");
+            assert_eq!(split.cut_short, 0, "{name}");
+        }
+    }
 }

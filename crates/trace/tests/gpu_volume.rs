@@ -558,8 +558,9 @@ fn raw_nanovdb_grids_match_the_cpu() {
 
 /// An atlas above the device's binding limit is split over up to four buffers: with the
 /// limit lowered, bricks (756 KB of f32 texels) and a raw NanoVDB grid (614 KB) are read
-/// from three chunks of 256 KiB and every estimate is bit for bit the one-buffer kernel's;
-/// an atlas beyond four chunks is refused, naming it.
+/// from three chunks of 256 KiB and every estimate is bit for bit the one-buffer kernel's,
+/// as with the range mips, indirection and brick table split in chunks; an atlas beyond four
+/// chunks is refused, naming it.
 #[test]
 fn atlases_above_the_binding_limit_are_split() {
     let Some(mut ctx) = GpuContext::for_tests() else {
@@ -611,18 +612,43 @@ fn atlases_above_the_binding_limit_are_split() {
             .flat_map(|p| volume.transmittance(ctx, rays, p).unwrap().0)
             .map(|e| e.transmittance.to_bits())
             .collect();
-        (volume.features().contains(&"chunked_atlas"), values)
+        let chunked: Vec<&str> = (volume.features().iter())
+            .filter(|f| f.starts_with("chunked_"))
+            .copied()
+            .collect();
+        (chunked, values)
+    };
+    let compare = |what: &str, w: &[u64], s: &[u64]| {
+        assert_eq!(w.len(), s.len());
+        let differ = w.iter().zip(s).filter(|(a, b)| a != b).count();
+        println!("{what}: {} estimates, {differ} differ", w.len());
+        assert_eq!(differ, 0, "{what}: split and whole arrays differ");
     };
     let whole = [run(&ctx, false), run(&ctx, true)];
+    let limit = ctx.limits.max_storage_buffer_binding_size;
     ctx.limits.max_storage_buffer_binding_size = 256 << 10;
     let split = [run(&ctx, false), run(&ctx, true)];
     for (what, (w, s)) in ["bricks", "nanovdb"].iter().zip(whole.iter().zip(&split)) {
-        assert!(!w.0 && s.0, "{what}: split only under the lowered limit");
-        assert_eq!(w.1.len(), s.1.len());
-        let differ = w.1.iter().zip(&s.1).filter(|(a, b)| a != b).count();
-        println!("{what}: {} estimates, {differ} differ", w.1.len());
-        assert_eq!(differ, 0, "{what}: split and whole atlases differ");
+        assert!(w.0.is_empty(), "{what}: {:?}", w.0);
+        assert_eq!(
+            s.0,
+            ["chunked_atlas"],
+            "{what}: split under the lowered limit"
+        );
+        compare(what, &w.1, &s.1);
     }
+    // The range mips and brick tables are read through chunks the same way (split on
+    // demand: no grid here is big enough).
+    ctx.limits.max_storage_buffer_binding_size = limit;
+    let tables = ["ranges", "indirection", "bricks"];
+    ctx.split_arrays = tables.map(String::from).to_vec();
+    let split = [run(&ctx, false), run(&ctx, true)];
+    for (what, (w, s)) in ["bricks", "nanovdb"].iter().zip(whole.iter().zip(&split)) {
+        let expected = tables.map(|t| format!("chunked_{t}"));
+        assert_eq!(s.0, expected, "{what}");
+        compare(&format!("{what}, split tables"), &w.1, &s.1);
+    }
+    ctx.split_arrays.clear();
     // Four chunks of 64 KiB hold neither.
     ctx.limits.max_storage_buffer_binding_size = 64 << 10;
     let err = GpuVolume::new(&ctx, &bricks).err().unwrap().to_string();

@@ -22,45 +22,110 @@ pub fn chunk_constant(array: &str) -> String {
     format!("{}_CHUNK_LEN", array.to_uppercase())
 }
 
-/// The WGSL of a `#chunked` line's fields (see the module doc); an error names what is
-/// malformed.
-fn chunked_array(fields: &str, enabled: &dyn Fn(&str) -> bool) -> Result<String, String> {
-    let f: Vec<&str> = fields.split_whitespace().collect();
-    let [array, ty, group, binding, more, accessor] = f[..] else {
-        return Err(format!(
-            "`#chunked {fields}`: expected ARRAY TYPE GROUP BINDING MORE ACCESSOR"
-        ));
-    };
-    let number = |v: &str| {
-        v.parse::<u32>()
-            .map_err(|_| format!("`#chunked {fields}`: `{v}` is not a binding number"))
-    };
-    let (group, binding, more) = (number(group)?, number(binding)?, number(more)?);
-    let declare = |name: &str, binding: u32| {
-        format!("@group({group}) @binding({binding}) var<storage, read> {name}: array<{ty}>;\n")
-    };
-    let mut out = declare(array, binding);
-    if !enabled(&format!("chunked_{array}")) {
+/// The `constants` that composed `source` declares as `override`s: those of arrays whose
+/// code the kernel left out (a split mesh array in a kernel without mesh code) are dropped,
+/// since a pipeline may set only the constants its module has.
+pub fn declared_constants(source: &str, constants: &[(String, f64)]) -> Vec<(String, f64)> {
+    (constants.iter())
+        .filter(|(name, _)| source.contains(&format!("override {name}:")))
+        .cloned()
+        .collect()
+}
+
+/// A `#chunked` declaration: the array, its element type, its group and first binding, the
+/// binding of its second chunk, and its accessor (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkedArray<'a> {
+    /// The array's name.
+    pub array: &'a str,
+    /// The WGSL type of its elements.
+    pub ty: &'a str,
+    /// Its bind group.
+    pub group: u32,
+    /// The binding of its only, or first, buffer.
+    pub binding: u32,
+    /// The binding of its second chunk (the third and fourth follow).
+    pub more: u32,
+    /// The function that reads element `i`.
+    pub accessor: &'a str,
+}
+
+impl<'a> ChunkedArray<'a> {
+    /// Parses a `#chunked` line's fields; an error names what is malformed.
+    fn parse(fields: &'a str) -> Result<ChunkedArray<'a>, String> {
+        let f: Vec<&str> = fields.split_whitespace().collect();
+        let [array, ty, group, binding, more, accessor] = f[..] else {
+            return Err(format!(
+                "`#chunked {fields}`: expected ARRAY TYPE GROUP BINDING MORE ACCESSOR"
+            ));
+        };
+        let number = |v: &str| {
+            v.parse::<u32>()
+                .map_err(|_| format!("`#chunked {fields}`: `{v}` is not a binding number"))
+        };
+        Ok(ChunkedArray {
+            array,
+            ty,
+            group: number(group)?,
+            binding: number(binding)?,
+            more: number(more)?,
+            accessor,
+        })
+    }
+
+    /// The declaration of `array`, wherever a module of [`MODULES`] writes it: the bindings
+    /// the host uploads its buffers to.
+    pub fn declared(array: &str) -> Option<ChunkedArray<'static>> {
+        MODULES
+            .iter()
+            .flat_map(|(_, source)| source.lines())
+            .filter_map(|l| l.trim().strip_prefix("// #chunked "))
+            .filter_map(|fields| ChunkedArray::parse(fields).ok())
+            .find(|c| c.array == array)
+    }
+
+    /// The bindings of its buffers: its own binding, then those of the chunks after the
+    /// first when it is split in `chunks` buffers.
+    pub fn bindings(&self, chunks: usize) -> impl Iterator<Item = u32> + '_ {
+        std::iter::once(self.binding).chain((1..chunks as u32).map(|c| self.more + c - 1))
+    }
+
+    /// Its WGSL: the declarations and the accessor, split when `split`.
+    fn wgsl(&self, split: bool) -> String {
+        let ChunkedArray {
+            array,
+            ty,
+            group,
+            binding,
+            accessor,
+            ..
+        } = *self;
+        let declare = |name: &str, binding: u32| {
+            format!("@group({group}) @binding({binding}) var<storage, read> {name}: array<{ty}>;\n")
+        };
+        let mut out = declare(array, binding);
+        if !split {
+            out.push_str(&format!(
+                "fn {accessor}(i: u32) -> {ty} {{\n    return {array}[i];\n}}\n"
+            ));
+            return out;
+        }
+        let len = chunk_constant(array);
+        out.push_str(&format!("override {len}: u32;\n"));
+        let mut cases = String::new();
+        for (c, binding) in self.bindings(CHUNKS).enumerate().skip(1) {
+            out.push_str(&declare(&format!("{array}_{c}"), binding));
+            cases.push_str(&format!(
+                "        case {c}u: {{\n            return {array}_{c}[j];\n        }}\n"
+            ));
+        }
         out.push_str(&format!(
-            "fn {accessor}(i: u32) -> {ty} {{\n    return {array}[i];\n}}\n"
+            "fn {accessor}(i: u32) -> {ty} {{\n    let chunk = i / {len};\n    \
+             let j = i - chunk * {len};\n    switch chunk {{\n{cases}        default: {{}}\n    }}\n    \
+             return {array}[j];\n}}\n"
         ));
-        return Ok(out);
+        out
     }
-    let len = chunk_constant(array);
-    out.push_str(&format!("override {len}: u32;\n"));
-    let mut cases = String::new();
-    for c in 1..CHUNKS as u32 {
-        out.push_str(&declare(&format!("{array}_{c}"), more + c - 1));
-        cases.push_str(&format!(
-            "        case {c}u: {{\n            return {array}_{c}[j];\n        }}\n"
-        ));
-    }
-    out.push_str(&format!(
-        "fn {accessor}(i: u32) -> {ty} {{\n    let chunk = i / {len};\n    \
-         let j = i - chunk * {len};\n    switch chunk {{\n{cases}        default: {{}}\n    }}\n    \
-         return {array}[j];\n}}\n"
-    ));
-    Ok(out)
 }
 
 /// Every WGSL module, by name (its path under `shaders/` without `.wgsl`), found by the
@@ -99,9 +164,11 @@ fn preprocess(name: &str, source: &str, enabled: &dyn Fn(&str) -> bool) -> Resul
         }
         if block.is_none_or(|(_, on)| on) {
             match trimmed.strip_prefix("// #chunked ") {
-                Some(fields) => out.push_str(
-                    &chunked_array(fields, enabled).map_err(|e| format!("module `{name}`: {e}"))?,
-                ),
+                Some(fields) => {
+                    let c =
+                        ChunkedArray::parse(fields).map_err(|e| format!("module `{name}`: {e}"))?;
+                    out.push_str(&c.wgsl(enabled(&format!("chunked_{}", c.array))));
+                }
                 None => {
                     out.push_str(line);
                     out.push('\n');

@@ -54,6 +54,10 @@ pub struct GpuContext {
     pub adapter_info: wgpu::AdapterInfo,
     /// The limits the device was created with (the adapter's maximum).
     pub limits: wgpu::Limits,
+    /// Arrays (by the names of their `#chunked` declarations,
+    /// [`super::compose::ChunkedArray`]) split in chunks whatever their size, not only above
+    /// the binding limit: the split path on small scenes, for tests. Empty by default.
+    pub split_arrays: Vec<String>,
     /// Why the device was lost, once it is (set by wgpu's device-lost callback).
     lost: Arc<Mutex<Option<String>>>,
 }
@@ -100,6 +104,7 @@ impl GpuContext {
                 queue,
                 adapter_info: adapter.get_info(),
                 limits,
+                split_arrays: Vec::new(),
                 lost,
             })
         })
@@ -176,31 +181,25 @@ impl GpuContext {
         self.device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
-                entries: &self.storage_layout_entries(count, writable),
+                entries: &(0..count)
+                    .map(|b| storage_layout_entry(b, !writable.contains(&b)))
+                    .collect::<Vec<_>>(),
             })
     }
 
     /// A bind group layout of read-only storage buffers at `bindings`.
     pub fn read_only_layout(&self, label: &str, bindings: &[u32]) -> wgpu::BindGroupLayout {
-        let entries: Vec<_> = bindings
-            .iter()
-            .map(|&b| storage_layout_entry(b, true))
-            .collect();
         self.device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
-                entries: &entries,
+                entries: &self.read_only_entries(bindings),
             })
     }
 
-    /// The entries of [`GpuContext::storage_layout`], for a layout with more bindings.
-    pub fn storage_layout_entries(
-        &self,
-        count: u32,
-        writable: &[u32],
-    ) -> Vec<wgpu::BindGroupLayoutEntry> {
-        (0..count)
-            .map(|b| storage_layout_entry(b, !writable.contains(&b)))
+    /// The entries of [`GpuContext::read_only_layout`], for a layout with more entries.
+    pub fn read_only_entries(&self, bindings: &[u32]) -> Vec<wgpu::BindGroupLayoutEntry> {
+        (bindings.iter())
+            .map(|&b| storage_layout_entry(b, true))
             .collect()
     }
 

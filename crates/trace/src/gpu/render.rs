@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{
     RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_EFFECT_SHADING,
@@ -335,13 +336,12 @@ impl GpuRenderer {
                         params
                     })
                     .collect();
-                let mut buffers = vec![ctx.input_buffer("medium params", &binding_bytes(&params))];
-                buffers.extend(volume.buffers.iter().cloned());
+                let params = ctx.input_buffer("medium params", &binding_bytes(&params));
                 let shifts: Vec<[f64; 3]> = volume.grids.iter().map(|g| g.shift).collect();
-                Some((buffers, shifts))
+                Some((volume, params, shifts))
             }
         };
-        let medium_bindings = medium.as_ref().map_or(0, |(b, _)| b.len() as u32);
+        let medium_bindings = medium.as_ref().map_or(0, |(v, _, _)| v.binding_count());
         let upload = SceneUpload::new(
             ctx,
             renderer.scene,
@@ -352,20 +352,26 @@ impl GpuRenderer {
         constants.extend(upload.constants.iter().cloned());
         if !constants.is_empty() {
             source = kernel_source(KERNEL, &features)?;
+            constants = declared_constants(&source, &constants);
         }
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
-            let medium_layout = ctx.storage_layout("medium", medium_bindings, &[]);
-            let medium_group = medium.as_ref().map(|(buffers, shifts)| {
+            let medium_group = medium.as_ref().map(|(volume, params, shifts)| {
+                let layout =
+                    ctx.device
+                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                            label: Some("medium"),
+                            entries: &volume.layout_entries(ctx),
+                        });
                 let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("medium"),
-                    layout: &medium_layout,
-                    entries: &whole_buffer_entries(buffers),
+                    layout: &layout,
+                    entries: &volume.entries(params),
                 });
-                (group, shifts.clone())
+                (layout, group, shifts.clone())
             });
-            let group0 = medium_group.as_ref().map(|_| &medium_layout);
+            let group0 = medium_group.as_ref().map(|(layout, _, _)| layout);
             let pipeline_layout =
                 ctx.device
                     .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -377,7 +383,7 @@ impl GpuRenderer {
                 pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render", &constants),
                 render_layout,
                 scene_group: upload.group.clone(),
-                medium: medium_group,
+                medium: medium_group.map(|(_, group, shifts)| (group, shifts)),
                 hierarchical: upload.hierarchical,
                 features: features.clone(),
                 effects: effect_features(renderer).0,

@@ -6,10 +6,8 @@ use std::time::Instant;
 
 use hytrace_foundry::{PrimKind, TypeCode, COMPLEMENT_BIT};
 
-use hytrace_csg::gpu_layout::mesh::{MeshNode, MeshTriangle};
-
-use super::chunks::chunk;
-use super::compose::compose_with;
+use super::chunks::{named_array, ChunkedUpload};
+use super::compose::{compose_with, declared_constants};
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{HitRecord, RayRecord, ScanParams};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
@@ -21,8 +19,7 @@ const KERNEL: &str = "kernels/scan";
 /// The distance the kernels use for infinity (WGSL may assume no infinities).
 pub const GPU_INF: f32 = 1.0e38;
 
-/// Storage buffers of the scene group (group 1) and the ray group (group 2).
-const SCENE_BINDINGS: u32 = 14;
+/// Storage buffers of the ray group (group 2).
 const RAY_BINDINGS: u32 = 4;
 
 /// The `#if` feature of a primitive typecode's code in `shaders/csg/primitive.wgsl`.
@@ -85,8 +82,8 @@ pub(super) struct SceneUpload {
     pub layout: wgpu::BindGroupLayout,
     /// Group 1.
     pub group: wgpu::BindGroup,
-    /// `csg`, `mesh` and the primitive types the scene uses, and `chunked_mesh_nodes` and
-    /// `chunked_mesh_triangles` for mesh arrays split over several buffers.
+    /// `csg`, `mesh` and the primitive types the scene uses, and `chunked_ARRAY` for each
+    /// array split over several buffers.
     pub features: Vec<&'static str>,
     /// The pipeline constants of the arrays split in chunks.
     pub constants: Vec<(String, f64)>,
@@ -107,74 +104,46 @@ impl SceneUpload {
             .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
         let m = &arrays.meshes;
         let c = &arrays.csg;
-        let scene_arrays: [(&'static str, Vec<u8>); SCENE_BINDINGS as usize] = [
-            ("csg_planes", binding_bytes(&c.planes)),
-            ("csg_nodes", binding_bytes(&c.nodes)),
-            ("csg_frames", binding_bytes(&c.frames)),
-            ("csg_trees", binding_bytes(&c.trees)),
-            ("mesh_nodes", binding_bytes(&m.nodes)),
-            ("mesh_triangles", binding_bytes(&m.triangles)),
-            ("meshes", binding_bytes(&m.meshes)),
-            ("box_nodes", binding_bytes(&arrays.box_nodes)),
-            ("box_items", binding_bytes(&arrays.box_items)),
-            ("placements", binding_bytes(&arrays.placements)),
-            ("groups", binding_bytes(&arrays.groups)),
-            ("group_members", binding_bytes(&arrays.group_members)),
-            ("solids", binding_bytes(&arrays.solids)),
-            ("surface_prims", binding_bytes(&arrays.surface_prims)),
-        ];
-        // The mesh arrays split above the binding limit: array index, element size, the
-        // binding of its second chunk (`shaders/mesh/bindings.wgsl`), feature.
-        let limit = ctx.limits.max_storage_buffer_binding_size;
-        let mut features = scene_features(&arrays);
-        let mut constants = Vec::new();
-        let mut bindings: Vec<u32> = (0..SCENE_BINDINGS).collect();
-        let mut arrays_bytes = Vec::from(scene_arrays);
-        for (index, element, more, feature) in [
-            (4, size_of::<MeshNode>(), 14, "chunked_mesh_nodes"),
-            (5, size_of::<MeshTriangle>(), 17, "chunked_mesh_triangles"),
-        ] {
-            let name = arrays_bytes[index].0;
-            let bytes = std::mem::take(&mut arrays_bytes[index].1);
-            let mut split = chunk(name, bytes, element, limit)?;
-            arrays_bytes[index].1 = split.buffers.remove(0);
-            if let Some(c) = split.constant(name) {
-                features.push(feature);
-                constants.push(c);
-                for (k, b) in split.buffers.into_iter().enumerate() {
-                    bindings.push(more + k as u32);
-                    arrays_bytes.push((name, b));
-                }
-            }
-        }
+        let upload = ChunkedUpload::new(
+            ctx,
+            vec![
+                named_array!("csg_planes", &c.planes),
+                named_array!("csg_nodes", &c.nodes),
+                named_array!("csg_frames", &c.frames),
+                named_array!("csg_trees", &c.trees),
+                named_array!("mesh_nodes", &m.nodes),
+                named_array!("mesh_triangles", &m.triangles),
+                named_array!("meshes", &m.meshes),
+                named_array!("box_nodes", &arrays.box_nodes),
+                named_array!("box_items", &arrays.box_items),
+                named_array!("placements", &arrays.placements),
+                named_array!("groups", &arrays.groups),
+                named_array!("group_members", &arrays.group_members),
+                named_array!("solids", &arrays.solids),
+                named_array!("surface_prims", &arrays.surface_prims),
+            ],
+        )?;
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        let count = bindings.len() as u32 + kernel_bindings;
+        let count = upload.buffers.len() as u32 + kernel_bindings;
         if per_stage < count {
             return Err(GpuError::SceneTooBig(format!(
                 "the {kernel} kernel binds {count} storage buffers, the device allows {per_stage}"
             )));
         }
-        let buffers = ctx.storage_buffers(&arrays_bytes)?;
+        let mut features = scene_features(&arrays);
+        features.extend(&upload.features);
         ctx.checked("uploading the scene", || {
-            let layout = ctx.read_only_layout("scene", &bindings);
-            let entries: Vec<_> = bindings
-                .iter()
-                .zip(&buffers)
-                .map(|(&binding, b)| wgpu::BindGroupEntry {
-                    binding,
-                    resource: b.as_entire_binding(),
-                })
-                .collect();
+            let layout = ctx.read_only_layout("scene", &upload.bindings);
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("scene"),
                 layout: &layout,
-                entries: &entries,
+                entries: &upload.entries(),
             });
             SceneUpload {
                 layout,
                 group,
                 features,
-                constants,
+                constants: upload.constants.clone(),
                 hierarchical: arrays.hierarchical,
             }
         })
@@ -207,6 +176,7 @@ impl GpuTracer {
     pub fn new(ctx: &GpuContext, scene: &CpuScene<f32>) -> Result<GpuTracer, GpuError> {
         let upload = SceneUpload::new(ctx, scene, "scan", RAY_BINDINGS)?;
         let source = kernel_source(KERNEL, &upload.features)?;
+        let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the scan kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let ray_layout = ctx.storage_layout("scan rays", RAY_BINDINGS, &[2, 3]);
@@ -218,9 +188,8 @@ impl GpuTracer {
                         bind_group_layouts: &[None, Some(&upload.layout), Some(&ray_layout)],
                         immediate_size: 0,
                     });
-            let entry = |name: &str| {
-                compute_pipeline(ctx, &pipeline_layout, &module, name, &upload.constants)
-            };
+            let entry =
+                |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name, &constants);
             GpuTracer {
                 pipeline: entry("scan"),
                 locate: upload.hierarchical.then(|| entry("locate_rays")),

@@ -20,7 +20,7 @@ use hytrace_volume::{
     BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
-use super::chunks::{chunk, chunked_capacity};
+use super::chunks::{chunked_capacity, ChunkedUpload, NamedArray};
 use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::nanovdb::{nanovdb_gpu_bytes, NanoGpuError};
@@ -86,13 +86,11 @@ pub struct GpuVolume<'a> {
 /// parameters, every grid's concatenated (the renderer uploads all its media; the
 /// transmittance kernel one grid), and each grid's parameters and index-space translation.
 pub(super) struct VolumeUpload {
-    /// Ranges, indirection, bricks and the atlas' chunks (bindings 1 to 4, and 5 to 7 for
-    /// an atlas split in chunks).
-    pub buffers: Vec<wgpu::Buffer>,
+    /// Ranges, indirection, bricks and the atlas (bindings 1 to 4, and those of their
+    /// chunks when split).
+    arrays: ChunkedUpload,
     /// Each grid's place in them, in the order given.
     pub grids: Vec<UploadedGrid>,
-    /// The chunk-size constant of an atlas split in chunks.
-    atlas_constant: Option<(String, f64)>,
 }
 
 /// One grid of a [`VolumeUpload`].
@@ -259,53 +257,74 @@ impl VolumeArrays {
 }
 
 impl VolumeUpload {
-    /// Uploads `grids` and their range mips into shared arrays. The atlas is split into up
-    /// to four buffers when it exceeds the device's binding limit; it, or any other array,
-    /// still too big is a [`GpuError::SceneTooBig`].
+    /// Uploads `grids` and their range mips into shared arrays, each split into up to four
+    /// buffers when it exceeds the device's binding limit; one still too big is a
+    /// [`GpuError::SceneTooBig`].
     pub fn new(ctx: &GpuContext, grids: &[KernelGrid]) -> Result<VolumeUpload, GpuError> {
-        let limit = ctx.limits.max_storage_buffer_binding_size;
         let mut arrays = VolumeArrays::default();
         let grids = grids
             .iter()
             .map(|g| arrays.push(*g))
             .collect::<Result<Vec<_>, _>>()?;
-        let atlas = chunk(
-            "atlas",
-            storage_bytes(std::mem::take(&mut arrays.atlas)),
-            4,
-            limit,
+        let named = |name, feature, element, bytes| NamedArray {
+            name,
+            feature,
+            element,
+            bytes: storage_bytes(bytes),
+        };
+        let arrays = ChunkedUpload::new(
+            ctx,
+            vec![
+                named(
+                    "ranges",
+                    "chunked_ranges",
+                    8,
+                    bytemuck::cast_slice(&arrays.ranges).to_vec(),
+                ),
+                named(
+                    "indirection",
+                    "chunked_indirection",
+                    4,
+                    bytemuck::cast_slice(&arrays.indirection).to_vec(),
+                ),
+                named(
+                    "bricks",
+                    "chunked_bricks",
+                    size_of::<BrickEntry>(),
+                    arrays.bricks,
+                ),
+                named("atlas", "chunked_atlas", 4, arrays.atlas),
+            ],
         )?;
-        let mut bytes: Vec<(&str, Vec<u8>)> = vec![
-            (
-                "volume ranges",
-                storage_bytes(bytemuck::cast_slice(&arrays.ranges).to_vec()),
-            ),
-            (
-                "volume indirection",
-                storage_bytes(bytemuck::cast_slice(&arrays.indirection).to_vec()),
-            ),
-            (
-                "volume bricks",
-                storage_bytes(std::mem::take(&mut arrays.bricks)),
-            ),
-        ];
-        let atlas_constant = atlas.constant("atlas");
-        bytes.extend(atlas.buffers.into_iter().map(|b| ("volume atlas", b)));
-        let buffers = ctx.storage_buffers(&bytes)?;
-        Ok(VolumeUpload {
-            buffers,
-            grids,
-            atlas_constant,
-        })
+        Ok(VolumeUpload { arrays, grids })
     }
 
     /// The composition features and pipeline constants the kernels reading these arrays
-    /// need: `chunked_atlas` for an atlas split over several buffers.
+    /// need: `chunked_ARRAY` for each array split over several buffers.
     pub fn kernel_options(&self) -> (Vec<&'static str>, Vec<(String, f64)>) {
-        match &self.atlas_constant {
-            Some(c) => (vec!["chunked_atlas"], vec![c.clone()]),
-            None => (Vec::new(), Vec::new()),
-        }
+        (self.arrays.features.clone(), self.arrays.constants.clone())
+    }
+
+    /// The read-only storage layout entries of the parameters (binding 0) and the arrays.
+    pub fn layout_entries(&self, ctx: &GpuContext) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let mut bindings = vec![0];
+        bindings.extend(&self.arrays.bindings);
+        ctx.read_only_entries(&bindings)
+    }
+
+    /// The bind group entries of `params` (binding 0) and the arrays.
+    pub fn entries<'b>(&'b self, params: &'b wgpu::Buffer) -> Vec<wgpu::BindGroupEntry<'b>> {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: params.as_entire_binding(),
+        }];
+        entries.extend(self.arrays.entries());
+        entries
+    }
+
+    /// Storage buffers bound: the parameters and the arrays' buffers.
+    pub fn binding_count(&self) -> u32 {
+        1 + self.arrays.buffers.len() as u32
     }
 }
 
@@ -388,7 +407,7 @@ impl<'a> GpuVolume<'a> {
     ) -> Result<GpuVolume<'a>, GpuError> {
         let upload = VolumeUpload::new(ctx, &[kernel_grid])?;
         // Group 0: the parameters and the grid's arrays; group 1: rays and results.
-        let volume_bindings = 1 + upload.buffers.len() as u32;
+        let volume_bindings = upload.binding_count();
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
         if per_stage < volume_bindings + 2 {
             return Err(GpuError::SceneTooBig(format!(
@@ -411,7 +430,7 @@ impl<'a> GpuVolume<'a> {
         let (pipeline, volume_layout, ray_layout) =
             ctx.checked("building the transmittance kernel", || {
                 let module = ctx.wgsl_module(KERNEL, &source);
-                let mut entries = ctx.storage_layout_entries(volume_bindings, &[]);
+                let mut entries = upload.layout_entries(ctx);
                 if texture.is_some() {
                     entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
                 }
@@ -594,13 +613,12 @@ impl<'a> GpuVolume<'a> {
             let input =
                 |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes.to_vec()));
             let results = ctx.output_buffer("transmittances", out_size);
-            let mut volume = vec![input("volume params", bytemuck::bytes_of(params))];
-            volume.extend(self.upload.buffers.iter().cloned());
+            let params = input("volume params", bytemuck::bytes_of(params));
             let ray_buffers = [
                 input("volume rays", bytemuck::cast_slice(rays)),
                 results.clone(),
             ];
-            let mut volume_entries = whole_buffer_entries(&volume);
+            let mut volume_entries = self.upload.entries(&params);
             if let Some(view) = &self.texture {
                 volume_entries.push(wgpu::BindGroupEntry {
                     binding: ATLAS_TEXTURE_BINDING,
