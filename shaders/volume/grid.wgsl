@@ -57,12 +57,14 @@ fn half_to_f32(h: u32) -> f32 {
     return bitcast<f32>(sign | ((e + 112u) << 23u) | (m << 13u));
 }
 
-// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot` of the grid, from the
-// 3D texture: unorm codes read back exactly, BC4 as the device decodes it.
+// Code-unit value of voxel `i` (x + 8 y + 64 z) of atlas slot `slot` of the grid (its
+// slots start at texture slot `atlas_base`), from the 3D texture: unorm codes read back
+// exactly, BC4 as the device decodes it.
 // #if atlas_texture
 fn texture_texel(slot: u32, i: u32) -> f32 {
     let bricks = textureDimensions(atlas_texture) >> vec3<u32>(3u);
-    let brick = vec3<u32>(slot % bricks.x, (slot / bricks.x) % bricks.y, slot / (bricks.x * bricks.y));
+    let s = vparams.atlas_base + slot;
+    let brick = vec3<u32>(s % bricks.x, (s / bricks.x) % bricks.y, s / (bricks.x * bricks.y));
     let texel = (brick << vec3<u32>(3u)) | vec3<u32>(i & 7u, (i >> 3u) & 7u, i >> 6u);
     let v = textureLoad(atlas_texture, texel, 0).r;
     switch vparams.format {

@@ -16,7 +16,7 @@ mod common;
 use common::{hytrace, repo};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::cpu::CpuScene;
-use hytrace_trace::gpu::{compose_render_kernel, GpuContext, GpuError, GpuRenderer};
+use hytrace_trace::gpu::{compose_render_kernel, GpuContext, GpuError, GpuRenderer, TexelStore};
 use hytrace_trace::render::spec::{RenderSpec, View, VolumeMode};
 use hytrace_trace::render::{Image, Renderer};
 use hytrace_trace::scene::{load_render_scene, render_scene_from_toml};
@@ -347,6 +347,26 @@ fn render_backend_gpu_and_auto_from_the_command_line() {
         "{close} of {} values",
         cpu.len()
     );
+    // `--gpu-texels texture` reads a medium's texels from a 3D texture.
+    let fog = repo("scenes/render/fog-emission.toml");
+    let stats = run(&[
+        "render",
+        fog.to_str().unwrap(),
+        "--backend",
+        "gpu",
+        "--gpu-texels",
+        "texture",
+        "--size",
+        "16x12",
+        "-o",
+        o,
+        "--stats",
+    ]);
+    let features = stats["kernel_features"].as_array().unwrap();
+    assert!(
+        features.iter().any(|f| f == "atlas_texture"),
+        "{features:?}"
+    );
     // A scene with too many media: `gpu` refuses clearly, `auto` falls back to the CPU.
     let fog = dir.path().join("fogs.toml");
     std::fs::write(&fog, many_fogs(17)).unwrap();
@@ -597,4 +617,78 @@ fn media_atlases_above_the_binding_limit_are_split() {
     ctx.limits.max_storage_buffer_binding_size = 16 << 10;
     let err = GpuRenderer::new(&ctx, &renderer).err().unwrap().to_string();
     assert!(err.contains("array `atlas` has"), "{err}");
+}
+
+/// The media's texels read from one 3D texture render, pixel for pixel and bit for bit,
+/// what the kernel reading them from the atlas buffer renders, for f32 and unorm8 media
+/// (read back exactly); media of two texel formats are refused for a texture, naming both.
+#[test]
+fn media_texels_from_a_3d_texture_match_the_buffer_kernel() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = media_scene(dir.path(), "0.0", "[0.8, 0.5, 0.3]");
+    let text = std::fs::read_to_string(&scene).unwrap();
+    for (name, fog, haze) in [
+        ("f32", "f32", "f32"),
+        ("unorm8", "unorm8", "unorm8"),
+        ("mixed", "f32", "bc4"),
+    ] {
+        let with_formats = text
+            .replacen(
+                "density_scale",
+                &format!("format = \"{fog}\"\ndensity_scale"),
+                1,
+            )
+            .replace("g = -0.2", &format!("g = -0.2\nformat = \"{haze}\""));
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&path, with_formats).unwrap();
+        let (f, mut spec) = load(path.to_str().unwrap());
+        small(&mut spec, View::Shaded, 1);
+        spec.settings.step = 0.5;
+        let cpu_scene = CpuScene::<f32>::new(&f).unwrap();
+        let renderer = Renderer::new(&cpu_scene, &f, &spec).unwrap();
+        if fog != haze {
+            let err = GpuRenderer::with_texels(&ctx, &renderer, TexelStore::Texture)
+                .err()
+                .unwrap()
+                .to_string();
+            assert!(
+                err.contains("one texel format") && err.contains("bc4"),
+                "{err}"
+            );
+            continue;
+        }
+        let render = |store| {
+            let gpu = GpuRenderer::with_texels(&ctx, &renderer, store).unwrap();
+            let run = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
+            let bits: Vec<[u32; 3]> = (run.image.pixels.iter())
+                .map(|p| p.map(f32::to_bits))
+                .collect();
+            (
+                gpu.features().contains(&"atlas_texture"),
+                bits,
+                run.cut_short,
+            )
+        };
+        let buffer = render(TexelStore::Storage);
+        let texture = render(TexelStore::Texture);
+        assert!(!buffer.0 && texture.0, "{name}");
+        assert_eq!(
+            buffer.2, texture.2,
+            "{name}: the same pixels past the loop budget"
+        );
+        let lit = buffer
+            .1
+            .iter()
+            .filter(|p| p.iter().any(|&c| c != 0))
+            .count();
+        assert!(lit > buffer.1.len() / 2, "{name}: {lit} lit pixels");
+        let differ = (buffer.1.iter().zip(&texture.1))
+            .filter(|(a, b)| a != b)
+            .count();
+        println!("{name}: {} pixels, {differ} differ", buffer.1.len());
+        assert_eq!(differ, 0, "{name}: {differ} pixels differ");
+    }
 }

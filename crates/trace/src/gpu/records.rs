@@ -181,7 +181,8 @@ record! {
         pub ray_offset: u32,
         /// The grid's first entry in the indirection array (shared by several grids).
         pub indirection_base: u32,
-        /// The grid's first word in the atlas (shared by several grids).
+        /// The grid's first word in the atlas (shared by several grids); for texels in a
+        /// 3D texture, its first brick slot there.
         pub atlas_base: u32,
         /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
         pub probe_trips: u32,

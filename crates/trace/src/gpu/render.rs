@@ -17,13 +17,14 @@ use super::records::{
     RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE,
     VOLUME_FILTER_TRILINEAR,
 };
+use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use super::volume::{KernelGrid, VolumeUpload};
 use crate::render::camera::Projection;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
-use hytrace_volume::global_range;
+use hytrace_volume::{global_range, BrickedGrid};
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
@@ -307,7 +308,20 @@ impl GpuRenderer {
     /// Uploads the scene of `renderer` and compiles its render kernel with the effects it
     /// calls for.
     pub fn new(ctx: &GpuContext, renderer: &Renderer) -> Result<GpuRenderer, GpuError> {
+        Self::with_texels(ctx, renderer, TexelStore::Storage)
+    }
+
+    /// [`GpuRenderer::new`] with the media's texels read from `store`: the atlas' storage
+    /// buffer, or one 3D texture ([`TexelStore::Texture`]; media of several texel formats,
+    /// or a device without the format's texture features, are a [`GpuError::SceneTooBig`]).
+    pub fn with_texels(
+        ctx: &GpuContext,
+        renderer: &Renderer,
+        store: TexelStore,
+    ) -> Result<GpuRenderer, GpuError> {
         let (mut features, mut source) = compose_render_kernel(renderer)?;
+        // Features the arrays and texels add recompose the kernel.
+        let composed = features.len();
         // Pipeline constants of the arrays split in chunks (their features recompose it).
         let mut constants = Vec::new();
         // Every medium's grid in the shared arrays, with the trackers' parameters (the
@@ -316,12 +330,28 @@ impl GpuRenderer {
         let medium = match &renderer.media {
             None => None,
             Some(media) => {
-                let grids: Vec<KernelGrid> = (0..media.scene.medium_count())
-                    .map(|m| KernelGrid::Bricked(media.scene.grid(m as u32)))
+                let bricked: Vec<&BrickedGrid> = (0..media.scene.medium_count())
+                    .map(|m| media.scene.grid(m as u32))
                     .collect();
+                let (grids, texture): (Vec<KernelGrid>, _) = match store {
+                    TexelStore::Storage => (
+                        bricked.iter().map(|g| KernelGrid::Bricked(g)).collect(),
+                        None,
+                    ),
+                    TexelStore::Texture => (
+                        bricked
+                            .iter()
+                            .map(|g| KernelGrid::TexturedBricks(g))
+                            .collect(),
+                        Some(atlas_texture(ctx, &bricked)?),
+                    ),
+                };
                 let volume = VolumeUpload::new(ctx, &grids)?;
                 let (chunked, volume_constants) = volume.kernel_options();
                 features.extend(chunked);
+                if texture.is_some() {
+                    features.push("atlas_texture");
+                }
                 constants.extend(volume_constants);
                 let params: Vec<VolumeParams> = volume
                     .grids
@@ -338,10 +368,10 @@ impl GpuRenderer {
                     .collect();
                 let params = ctx.input_buffer("medium params", &binding_bytes(&params));
                 let shifts: Vec<[f64; 3]> = volume.grids.iter().map(|g| g.shift).collect();
-                Some((volume, params, shifts))
+                Some((volume, params, texture, shifts))
             }
         };
-        let medium_bindings = medium.as_ref().map_or(0, |(v, _, _)| v.binding_count());
+        let medium_bindings = medium.as_ref().map_or(0, |(v, ..)| v.binding_count());
         let upload = SceneUpload::new(
             ctx,
             renderer.scene,
@@ -350,24 +380,33 @@ impl GpuRenderer {
         )?;
         features.extend(upload.features.iter().filter(|f| f.starts_with("chunked_")));
         constants.extend(upload.constants.iter().cloned());
-        if !constants.is_empty() {
+        if features.len() > composed {
             source = kernel_source(KERNEL, &features)?;
             constants = declared_constants(&source, &constants);
         }
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
-            let medium_group = medium.as_ref().map(|(volume, params, shifts)| {
+            let medium_group = medium.as_ref().map(|(volume, params, texture, shifts)| {
+                let mut layout_entries = volume.layout_entries(ctx);
+                let mut entries = volume.entries(params);
+                if let Some(view) = texture {
+                    layout_entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
+                    entries.push(wgpu::BindGroupEntry {
+                        binding: ATLAS_TEXTURE_BINDING,
+                        resource: wgpu::BindingResource::TextureView(view),
+                    });
+                }
                 let layout =
                     ctx.device
                         .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                             label: Some("medium"),
-                            entries: &volume.layout_entries(ctx),
+                            entries: &layout_entries,
                         });
                 let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("medium"),
                     layout: &layout,
-                    entries: &volume.entries(params),
+                    entries: &entries,
                 });
                 (layout, group, shifts.clone())
             });

@@ -66,12 +66,12 @@ fn brick_box(slots: usize, max_bricks: usize) -> Option<[usize; 3]> {
     (z <= max_bricks).then_some([x, y, z])
 }
 
-/// The atlas of `grid` rearranged in texture order for a box of `bricks`: for uncompressed
-/// formats rows of texels; for BC4 rows of 4x4 blocks (the atlas keeps each brick's slice
-/// as four blocks, by block row then column). Returns the bytes, the bytes per row and the
-/// rows per z slice.
-fn texture_bytes(grid: &BrickedGrid, bricks: [usize; 3]) -> (Vec<u8>, usize, usize) {
-    let format = grid.format();
+/// The atlases of `grids` (one format), slot after slot, rearranged in texture order for a
+/// box of `bricks`: for uncompressed formats rows of texels; for BC4 rows of 4x4 blocks (the
+/// atlas keeps each brick's slice as four blocks, by block row then column). Returns the
+/// bytes, the bytes per row and the rows per z slice.
+fn texture_bytes(grids: &[&BrickedGrid], bricks: [usize; 3]) -> (Vec<u8>, usize, usize) {
+    let format = grids[0].format();
     let slot_bytes = format.bytes_per_brick();
     let [bx, by, bz] = bricks;
     // Units of a row and their bytes: texels, or BC4 blocks of 4x4 texels.
@@ -83,7 +83,10 @@ fn texture_bytes(grid: &BrickedGrid, bricks: [usize; 3]) -> (Vec<u8>, usize, usi
     let row_bytes = bx * per_brick * unit_bytes;
     let rows = by * per_brick;
     let mut out = vec![0u8; row_bytes * rows * bz * 8];
-    for (slot, texels) in grid.atlas().chunks_exact(slot_bytes).enumerate() {
+    let slots = grids
+        .iter()
+        .flat_map(|g| g.atlas().chunks_exact(slot_bytes));
+    for (slot, texels) in slots.enumerate() {
         let brick = [slot % bx, (slot / bx) % by, slot / (bx * by)];
         for z in 0..8 {
             for row in 0..per_brick {
@@ -99,28 +102,42 @@ fn texture_bytes(grid: &BrickedGrid, bricks: [usize; 3]) -> (Vec<u8>, usize, usi
     (out, row_bytes, rows)
 }
 
-/// Uploads the atlas of `grid` as a 3D texture. A device without the format's features, or
-/// an atlas beyond the device's largest 3D texture, is a [`GpuError::SceneTooBig`].
+/// Uploads the atlases of `grids` as one 3D texture, the slots of each grid after those of
+/// the grids before (a grid's first slot is its `atlas_base`). Grids of several formats, a
+/// device without the format's features, or atlases beyond the device's largest 3D texture,
+/// are a [`GpuError::SceneTooBig`].
 pub(super) fn atlas_texture(
     ctx: &GpuContext,
-    grid: &BrickedGrid,
+    grids: &[&BrickedGrid],
 ) -> Result<wgpu::TextureView, GpuError> {
-    let (format, needs) = texture_format(grid.format());
+    let Some(first) = grids.first() else {
+        return Err(GpuError::SceneTooBig(
+            "texels in a 3D texture need a grid".to_string(),
+        ));
+    };
+    if let Some(other) = grids.iter().find(|g| g.format() != first.format()) {
+        return Err(GpuError::SceneTooBig(format!(
+            "texels in one 3D texture need grids of one texel format, not {} and {}",
+            first.format(),
+            other.format()
+        )));
+    }
+    let (format, needs) = texture_format(first.format());
     if !ctx.device.features().contains(needs) {
         return Err(GpuError::SceneTooBig(format!(
             "{} texels in a 3D texture need the device features {needs:?}, which it lacks",
-            grid.format()
+            first.format()
         )));
     }
     let max_bricks = ctx.limits.max_texture_dimension_3d as usize / 8;
-    let bricks = brick_box(grid.atlas_slots(), max_bricks).ok_or_else(|| {
+    let slots: usize = grids.iter().map(|g| g.atlas_slots()).sum();
+    let bricks = brick_box(slots, max_bricks).ok_or_else(|| {
         GpuError::SceneTooBig(format!(
-            "{} bricks do not fit a 3D texture of at most {} texels a side",
-            grid.atlas_slots(),
+            "{slots} bricks do not fit a 3D texture of at most {} texels a side",
             ctx.limits.max_texture_dimension_3d
         ))
     })?;
-    let (bytes, row_bytes, rows) = texture_bytes(grid, bricks);
+    let (bytes, row_bytes, rows) = texture_bytes(grids, bricks);
     let size = wgpu::Extent3d {
         width: (bricks[0] * 8) as u32,
         height: (bricks[1] * 8) as u32,

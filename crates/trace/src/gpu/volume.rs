@@ -140,7 +140,8 @@ impl KernelGrid<'_> {
     }
 }
 
-/// The shared arrays being filled: ranges, indirection, brick table, atlas words.
+/// The shared arrays being filled: ranges, indirection, brick table, atlas words, and the
+/// count of brick slots of the grids whose texels are in a 3D texture.
 #[derive(Default)]
 struct VolumeArrays {
     ranges: Vec<[f32; 2]>,
@@ -148,6 +149,7 @@ struct VolumeArrays {
     bricks: Vec<u8>,
     brick_count: u32,
     atlas: Vec<u8>,
+    texture_slots: u32,
 }
 
 impl VolumeArrays {
@@ -216,8 +218,9 @@ impl VolumeArrays {
         })
     }
 
-    /// Appends the bricks of `grid` (indirection, brick table, and with `texels` the atlas)
-    /// and sets their part of its parameters `base`; `shifted` translates brick coordinates.
+    /// Appends the bricks of `grid` (indirection, brick table, and with `texels` the atlas,
+    /// else slots of the 3D texture) and sets their part of its parameters `base`; `shifted`
+    /// translates brick coordinates.
     fn push_bricks(
         &mut self,
         grid: &BrickedGrid,
@@ -251,6 +254,13 @@ impl VolumeArrays {
         self.brick_count = count_u32(self.brick_count as usize + grid.bricks().len(), "bricks")?;
         if texels {
             self.atlas.extend_from_slice(grid.atlas());
+        } else {
+            // Its slots in the 3D texture follow those of the textured grids before.
+            base.atlas_base = self.texture_slots;
+            self.texture_slots = count_u32(
+                self.texture_slots as usize + grid.atlas_slots(),
+                "texture slots",
+            )?;
         }
         Ok(())
     }
@@ -353,7 +363,7 @@ impl<'a> GpuVolume<'a> {
             TexelStore::Storage => (KernelGrid::Bricked(grid), None),
             TexelStore::Texture => (
                 KernelGrid::TexturedBricks(grid),
-                Some(atlas_texture(ctx, grid)?),
+                Some(atlas_texture(ctx, &[grid])?),
             ),
         };
         Self::upload(

@@ -11,7 +11,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::spec::{View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{add_gpu_stats, gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes};
+use crate::gpu::{
+    add_gpu_stats, gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore,
+};
 use crate::scene::load_render_scene;
 
 /// Where a render runs.
@@ -40,9 +42,10 @@ struct GpuRun {
 fn render_gpu(
     ctx: &GpuContext,
     renderer: &Renderer,
+    texels: TexelStore,
     progress: &dyn Fn(u64),
 ) -> anyhow::Result<(Image, GpuRun)> {
-    let gpu = GpuRenderer::new(ctx, renderer)?;
+    let gpu = GpuRenderer::with_texels(ctx, renderer, texels)?;
     let mut run = gpu.render(ctx, renderer, progress)?;
     run.redo_cut_short(renderer)?;
     warn_redone(
@@ -73,6 +76,11 @@ pub struct RenderArgs {
     /// Where it renders.
     #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
     pub backend: RenderBackend,
+    /// Where the GPU reads the media's texels from: a storage buffer, decoded as on the CPU,
+    /// or one 3D texture of their texel format (BC4 then decoded by the device; every
+    /// medium in one format).
+    #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
+    pub gpu_texels: TexelStore,
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<[u32; 2]>,
@@ -173,7 +181,8 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let progress = |rows| bar.set_position(rows);
     let cpu = || renderer.render(&progress).map(|image| (image, None));
     let gpu = |ctx: GpuContext| {
-        render_gpu(&ctx, &renderer, &progress).map(|(image, run)| (image, Some(run)))
+        render_gpu(&ctx, &renderer, args.gpu_texels, &progress)
+            .map(|(image, run)| (image, Some(run)))
     };
     let (image, gpu_run) = match args.backend {
         RenderBackend::Cpu => cpu()?,
