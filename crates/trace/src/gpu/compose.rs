@@ -242,4 +242,29 @@ mod tests {
             .unwrap_err()
             .contains("unknown module"));
     }
+
+    /// With every feature on (every array split, every optional binding present), no
+    /// kernel declares two variables at one group and binding: the `#chunked` lines'
+    /// extra bindings collide with nothing.
+    #[test]
+    fn no_kernel_binds_two_variables_at_one_binding() {
+        let mut kernels = 0;
+        for (name, _) in MODULES.iter().filter(|(n, _)| n.starts_with("kernels/")) {
+            let source = compose(name).unwrap();
+            let mut seen = std::collections::HashMap::new();
+            for line in source.lines().map(str::trim) {
+                let Some(rest) = line.strip_prefix("@group(") else {
+                    continue;
+                };
+                let (group, rest) = rest.split_once(") @binding(").unwrap();
+                let (binding, variable) = rest.split_once(')').unwrap();
+                let key = (group.to_string(), binding.to_string());
+                if let Some(other) = seen.insert(key, variable.to_string()) {
+                    panic!("{name}: group {group} binding {binding}: {other} and {variable}");
+                }
+            }
+            kernels += 1;
+        }
+        assert!(kernels >= 5);
+    }
 }
