@@ -16,9 +16,10 @@
 // The atlas bytes as little-endian words (brick texels, or raw NanoVDB grids).
 // #chunked atlas u32 0 4 5 atlas_word
 // #if atlas_texture
-// A bricked grid's texels as a 3D texture instead (crates/trace/src/gpu/texels.rs): the 8^3
-// texels of atlas slot s at brick (s % bx, s / bx % by, s / (bx by)) of its bx x by x bz
-// bricks, in the format's own texture format.
+// The grids' texels as one 3D texture instead (crates/trace/src/gpu/texels.rs): the 8^3
+// texels of texture slot s at brick (s % bx, s / bx % by, s / (bx by)) of its bx x by x bz
+// bricks, in the format's own texture format; each grid's slots follow those of the grids
+// before it, from its `atlas_base`.
 @group(0) @binding(8) var atlas_texture: texture_3d<f32>;
 // #endif
 // The parameters of the grid the walks and lookups read (`use_volume`), and their entry.

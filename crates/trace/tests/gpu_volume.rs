@@ -31,6 +31,15 @@ use hytrace_volume::{
     Majorant, NanoGrid, NanoGridType, RangeMips, Ray, TexelFormat, TransmittanceParams, VoxelGrid,
 };
 
+/// Estimates of `a` whose transmittance is not bit for bit that of `b`'s.
+fn bits_differ(a: &[Estimate], b: &[Estimate]) -> usize {
+    assert_eq!(a.len(), b.len());
+    let differ = a.iter().zip(b);
+    differ
+        .filter(|(x, y)| x.transmittance.to_bits() != y.transmittance.to_bits())
+        .count()
+}
+
 /// Largest |GPU - CPU| of a deterministic estimate.
 const DETERMINISTIC_TOL: f64 = 1e-5;
 /// A tracked estimate counts as the same samples within this.
@@ -422,11 +431,7 @@ fn texels_from_3d_textures_match_the_cpu() {
             check_volume(&name, &ctx, &textured, &twin, &fams, scale, &ESTIMATORS);
             let storage = GpuVolume::new(&ctx, &grid).unwrap();
             let from_storage = storage.transmittance(&ctx, &rays, &exact).unwrap().0;
-            let differ = from_texture
-                .iter()
-                .zip(&from_storage)
-                .filter(|(a, b)| a.transmittance.to_bits() != b.transmittance.to_bits())
-                .count();
+            let differ = bits_differ(&from_texture, &from_storage);
             assert_eq!(
                 differ, 0,
                 "{name}: texture and storage differ on {differ} rays"
@@ -528,11 +533,7 @@ fn raw_nanovdb_grids_match_the_cpu() {
             let p = params(Estimator::Exact, Filter::Trilinear, MAJORANTS[0], scale);
             let raw = gpu.transmittance(&ctx, &rays, &p).unwrap().0;
             let via_bricks = converted.transmittance(&ctx, &rays, &p).unwrap().0;
-            let differ = raw
-                .iter()
-                .zip(&via_bricks)
-                .filter(|(a, b)| a.transmittance.to_bits() != b.transmittance.to_bits())
-                .count();
+            let differ = bits_differ(&raw, &via_bricks);
             assert_eq!(differ, 0, "{name}: raw and bricked differ on {differ} rays");
         }
     }
