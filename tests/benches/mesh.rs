@@ -16,6 +16,8 @@
 //! gets the same float32 mesh and rays from `tests/oracle/mesh_bench.py`, which times only
 //! the intersection calls; the hit/miss and distance agreement of the two is printed.
 
+#[path = "common/batched.rs"]
+mod batched;
 #[path = "common/heightfield.rs"]
 mod heightfield;
 
@@ -23,18 +25,29 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
+use batched::trace_batches;
 use heightfield::{coherent, heightfield, incoherent, write_obj};
-use hytrace_csg::MeshPrim;
+use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
 use hytrace_tests::oracle_python;
-use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::cpu::{CpuScene, Hit, BATCH};
 use hytrace_trace::scene::load_scene;
 use rayon::prelude::*;
 
 /// Timed runs per measurement (the best is reported).
 const RUNS: usize = 3;
+
+/// Alternating runs of hytrace's default backend and Embree whose speeds are compared pair
+/// by pair.
+#[cfg(feature = "embree")]
+const PAIRS: usize = 7;
+
+/// A hit's distance, `inf` for a miss.
+fn distance(hit: &Option<Hit<f32>>) -> f32 {
+    hit.map_or(f32::INFINITY, |h| h.t)
+}
 
 fn env_usize(name: &str, default: usize) -> usize {
     std::env::var(name)
@@ -120,23 +133,50 @@ fn main() {
     let mut rows = Vec::new();
     let mut ours_t = Vec::new();
     let mut scene_rates = Vec::new();
+    let mut batch_rates = Vec::new();
+    let mut many_rates = Vec::new();
     let mut prim_rates = Vec::new();
     for set in &sets {
         let rays = set.rays();
         let (scene_s, hits) = best(|| {
             rays.par_iter()
-                .map(|r| {
-                    scene
-                        .trace(r, 0.0, f32::INFINITY)
-                        .map_or(f32::INFINITY, |h| h.t)
-                })
+                .map(|r| distance(&scene.trace(r, 0.0, f32::INFINITY)))
                 .collect::<Vec<f32>>()
         });
+        let (batch_s, batch_hits) = best(|| trace_batches(&scene, &rays, distance));
         let (prim_s, prim_hits) = best(|| {
             rays.par_iter()
                 .map(|r| prim.first_crossing(r, 0.0).t)
                 .collect::<Vec<f32>>()
         });
+        let (many_s, many_hits) = best(|| {
+            rays.par_chunks(BATCH)
+                .map_init(
+                    || (CrossingScratch::default(), Vec::new()),
+                    |(scratch, out), chunk| {
+                        let queries: Vec<MeshQuery<f32>> = chunk
+                            .iter()
+                            .map(|r| MeshQuery {
+                                mesh: &prim,
+                                ray: *r,
+                                tmin: 0.0,
+                            })
+                            .collect();
+                        MeshPrim::first_crossings(&queries, scratch, out);
+                        out.iter().map(|s| s.t).collect::<Vec<f32>>()
+                    },
+                )
+                .flatten_iter()
+                .collect::<Vec<f32>>()
+        });
+        assert!(
+            many_hits
+                .iter()
+                .zip(&prim_hits)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "first_crossings and first_crossing differ"
+        );
+        many_rates.push(mrays(rays.len(), many_s));
         let hit_fraction = hits.iter().filter(|t| t.is_finite()).count() as f64 / rays.len() as f64;
         let (same, _) = agreement(&hits, &prim_hits);
         println!(
@@ -146,7 +186,18 @@ fn main() {
             100.0 * hit_fraction,
             100.0 * same
         );
+        let identical = batch_hits
+            .iter()
+            .zip(&hits)
+            .filter(|(a, b)| a.to_bits() == b.to_bits())
+            .count();
+        println!(
+            "{}: CpuScene::trace_batch and CpuScene::trace give the same bits on {identical} of {} rays",
+            set.name,
+            rays.len()
+        );
         scene_rates.push(mrays(rays.len(), scene_s));
+        batch_rates.push(mrays(rays.len(), batch_s));
         prim_rates.push(mrays(rays.len(), prim_s));
         ours_t.push(hits);
     }
@@ -157,10 +208,22 @@ fn main() {
         scene_rates[1]
     ));
     rows.push(format!(
+        "| hytrace CpuScene::<f32>::trace_batch, as `hytrace scan` ({} threads) | {build_s:.2} | {:.2} | {:.2} |",
+        rayon::current_num_threads(),
+        batch_rates[0],
+        batch_rates[1]
+    ));
+    rows.push(format!(
         "| hytrace MeshPrim::<f32>::first_crossing ({} threads) | {prim_build_s:.2} | {:.2} | {:.2} |",
         rayon::current_num_threads(),
         prim_rates[0],
         prim_rates[1]
+    ));
+    rows.push(format!(
+        "| hytrace MeshPrim::<f32>::first_crossings, interleaved ({} threads) | {prim_build_s:.2} | {:.2} | {:.2} |",
+        rayon::current_num_threads(),
+        many_rates[0],
+        many_rates[1]
     ));
 
     match oracle_python(&["numpy", "embreex"]) {
@@ -259,12 +322,7 @@ fn embree_backend_row(
         let rays = set.rays();
         let (secs, hits) = best(|| {
             rays.par_iter()
-                .map(|r| {
-                    embree
-                        .trace(r, 0.0, f32::INFINITY)
-                        .unwrap()
-                        .map_or(f32::INFINITY, |h| h.t)
-                })
+                .map(|r| distance(&embree.trace(r, 0.0, f32::INFINITY).unwrap()))
                 .collect::<Vec<f32>>()
         });
         let (same, differ) = agreement(ours, &hits);
@@ -274,6 +332,31 @@ fn embree_backend_row(
             100.0 * same
         );
         rates.push(mrays(rays.len(), secs));
+    }
+    // The machine's speed drifts between the rows: time the default backend and Embree
+    // in alternation and compare each pair.
+    for set in sets {
+        let rays = set.rays();
+        let mut ratios: Vec<f64> = (0..PAIRS)
+            .map(|_| {
+                let t = Instant::now();
+                trace_batches(scene, &rays, distance);
+                let ours = t.elapsed().as_secs_f64();
+                let t = Instant::now();
+                rays.par_iter().for_each(|r| {
+                    embree.trace(r, 0.0, f32::INFINITY).unwrap();
+                });
+                t.elapsed().as_secs_f64() / ours
+            })
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        println!(
+            "{}: CpuScene::trace_batch over Embree 3 (hytrace backend), {PAIRS} alternating pairs: median {:.2}x, range {:.2}-{:.2}x",
+            set.name,
+            ratios[PAIRS / 2],
+            ratios[0],
+            ratios[PAIRS - 1]
+        );
     }
     format!(
         "| Embree 3 through hytrace's backend ({} threads) | {build_s:.2} | {:.2} | {:.2} |",

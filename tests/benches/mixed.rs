@@ -11,11 +11,14 @@
 //! down through the fog and past the rock, on a square grid in 8x8 tiles; "incoherent",
 //! origins uniform in the tank with uniform random directions.
 
+#[path = "common/batched.rs"]
+mod batched;
 #[path = "common/mixed_scene.rs"]
 mod mixed_scene;
 
 use std::time::Instant;
 
+use batched::trace_batches;
 use hytrace_csg::Ray;
 use hytrace_trace::cpu::media::SceneMedia;
 use hytrace_trace::cpu::CpuScene;
@@ -86,6 +89,17 @@ fn main() {
             build_s,
             secs,
             cpu_hits.iter().flatten().count(),
+        );
+        let rays32: Vec<Ray<f32>> = rays.iter().map(ray32).collect();
+        let (secs, batch_hits) =
+            best(|| trace_batches(&cpu, &rays32, |h| h.map(|h| (h.t, h.instance))));
+        assert!(batch_hits == cpu_hits, "trace_batch and trace differ");
+        row(
+            "closest hit, batches (as `hytrace scan`)",
+            "hytrace cpu",
+            build_s,
+            secs,
+            batch_hits.iter().flatten().count(),
         );
         let (secs, occluded) = best(|| {
             rays.par_iter()

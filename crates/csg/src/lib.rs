@@ -31,7 +31,7 @@ mod test_common;
 pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
 pub use expr::{parse_shape, ExprError};
 pub use mesh::bvh2_depth;
-pub use mesh::MeshPrim;
+pub use mesh::{CrossingScratch, MeshPrim, MeshQuery};
 pub use prepared::PreparedPrim;
 pub use prim_tree::{
     ray_bounds_entry, ray_bounds_span, ray_meets_bounds, Bounds, PrimTree, SlabRay,

@@ -48,6 +48,37 @@ use crate::wide_tree::ray_f32;
 
 mod wide;
 
+use wide::{Search, WideBvh};
+
+/// How many mesh searches [`MeshPrim::first_crossings`] interleaves on one thread. Measured
+/// on the 1M-triangle heightfield of `cargo bench -p hytrace-tests --bench mesh` (2-core VM,
+/// incoherent rays, BENCHMARKS.md): 5, 8 and 16 gave the same speed within the noise, and
+/// 8 beat 4 and 16 when finished searches were not replaced until all of them were done.
+pub const INTERLEAVED: usize = 8;
+
+/// A first-crossing query of a mesh ([`MeshPrim::first_crossings`]).
+#[derive(Clone, Copy, Debug)]
+pub struct MeshQuery<'a, T> {
+    /// The mesh.
+    pub mesh: &'a MeshPrim<T>,
+    /// The ray, in the mesh's frame.
+    pub ray: Ray<T>,
+    /// Crossings count after this parameter (and its surface tolerance).
+    pub tmin: T,
+}
+
+/// Working space of [`MeshPrim::first_crossings`], kept from call to call (it is large).
+#[derive(Default)]
+pub struct CrossingScratch {
+    searches: Vec<Search>,
+}
+
+/// A crossing of the f32 wide search in precision `T` (exact: `T` is f32 there).
+fn from_wide<T: Real>(found: Option<(f32, usize, V3<f32>)>) -> Option<(T, V3<T>)> {
+    let from_f32 = |v: V3<f32>| V3::new(T::from_f32(v.x), T::from_f32(v.y), T::from_f32(v.z));
+    found.map(|(t, _, normal)| (T::from_f32(t), from_f32(normal)))
+}
+
 /// A triangle mesh ready for intersection in precision `T`, closed or open.
 ///
 /// [`Self::first_crossing`] assumes nothing about closure: it is the nearest triangle
@@ -65,7 +96,7 @@ pub struct MeshPrim<T> {
     pub(crate) scale: T,
     pub(crate) nodes: Vec<MeshNode<T>>,
     /// The 4-wide form of the BVH the f32 kernel traverses on the CPU (`None` in f64).
-    wide: Option<wide::WideBvh>,
+    wide: Option<WideBvh>,
 }
 
 /// A BVH node: padded bounds, then either children `first, first + 1` (`count == 0`) or
@@ -412,11 +443,10 @@ impl<T: Real> MeshPrim<T> {
     /// (triangles are numbered in the order a depth-first walk visiting second children
     /// first meets them, the order earlier versions searched them in).
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
-        let from_f32 = |v: V3<f32>| V3::new(T::from_f32(v.x), T::from_f32(v.y), T::from_f32(v.z));
         match &self.wide {
-            Some(wide) => wide
-                .nearest(&ray_f32(ray), after.to_f64() as f32, f32::INFINITY)
-                .map(|(t, _, normal)| (T::from_f32(t), from_f32(normal))),
+            Some(wide) => {
+                from_wide(wide.nearest(&ray_f32(ray), after.to_f64() as f32, f32::INFINITY))
+            }
             None => self.nearest_binary(ray, after).map(|(t, i)| {
                 let [v0, v1, v2] = self.triangles[i];
                 (t, (v1 - v0).cross(v2 - v0))
@@ -515,18 +545,87 @@ impl<T: Real> MeshPrim<T> {
     /// geometric normal (outward on a closed mesh) and whether the ray comes from behind
     /// that triangle (from inside, on a closed mesh).
     pub fn first_crossing(&self, ray: &Ray<T>, tmin: T) -> Step<T> {
+        match self.search_start(ray, tmin) {
+            Some((moved, shift, after)) => Self::step_at(self.nearest(&moved, after), shift, ray),
+            None => Step::miss(false),
+        }
+    }
+
+    /// Where [`Self::first_crossing`]'s search starts: the recentred ray, the shift of its
+    /// parameter and the recentred parameter after which crossings count; `None` when the
+    /// ray misses the mesh's box.
+    fn search_start(&self, ray: &Ray<T>, tmin: T) -> Option<(Ray<T>, T, T)> {
         if !ray_meets_bounds(ray, &self.bounds, tmin, T::INFINITY) {
-            return Step::miss(false);
+            return None;
         }
         let after = tmin + tolerance(self.scale, tmin);
         let (moved, shift) = self.recentred(ray);
-        match self.nearest(&moved, after - shift) {
+        Some((moved, shift, after - shift))
+    }
+
+    /// [`Self::first_crossing`]'s answer from the `found` crossing of the search recentred
+    /// by `shift`.
+    fn step_at(found: Option<(T, V3<T>)>, shift: T, ray: &Ray<T>) -> Step<T> {
+        match found {
             Some((t, normal)) => Step {
                 t: t + shift,
                 normal,
                 inside_before: normal.dot(ray.direction) > T::ZERO,
             },
             None => Step::miss(false),
+        }
+    }
+
+    /// [`Self::first_crossing`] of every query, in `out` (cleared first), bit for bit. In
+    /// f32 the searches of [`INTERLEAVED`] queries at a time run interleaved on this
+    /// thread, one step of each in turn, each step asking for the memory its next one
+    /// reads: a search of a large mesh mostly waits on memory, and so waits for several at
+    /// once. A finished search's place goes to the next query at once, so the searches
+    /// stay that many until the queries run out. Meshes in f64 are searched one query
+    /// after another.
+    pub fn first_crossings(
+        queries: &[MeshQuery<'_, T>],
+        scratch: &mut CrossingScratch,
+        out: &mut Vec<Step<T>>,
+    ) {
+        out.clear();
+        out.resize(queries.len(), Step::miss(false));
+        let searches = &mut scratch.searches;
+        if searches.len() < INTERLEAVED {
+            searches.resize_with(INTERLEAVED, Search::new);
+        }
+        // Per place: the query its search answers, the mesh's wide BVH, the search's shift.
+        let mut running: [Option<(usize, &WideBvh, T)>; INTERLEAVED] = [None; INTERLEAVED];
+        let mut next = 0;
+        loop {
+            let mut busy = false;
+            for (place, search) in running.iter_mut().zip(searches.iter_mut()) {
+                if let Some((i, wide, shift)) = *place {
+                    if !wide.advance::<true>(search) {
+                        let found = from_wide(wide.answer(search));
+                        out[i] = Self::step_at(found, shift, &queries[i].ray);
+                        *place = None;
+                    }
+                }
+                // An empty place takes the next query needing a search.
+                while place.is_none() && next < queries.len() {
+                    let q = &queries[next];
+                    match (&q.mesh.wide, q.mesh.search_start(&q.ray, q.tmin)) {
+                        (Some(wide), Some((moved, shift, after))) => {
+                            let after = after.to_f64() as f32;
+                            search.start(&ray_f32(&moved), after, f32::INFINITY);
+                            *place = Some((next, wide, shift));
+                        }
+                        (None, _) => out[next] = q.mesh.first_crossing(&q.ray, q.tmin),
+                        (Some(_), None) => {}
+                    }
+                    next += 1;
+                }
+                busy |= place.is_some();
+            }
+            if !busy {
+                return;
+            }
         }
     }
 

@@ -3,7 +3,8 @@
 //! faces and through vertices, grazing rays, and random rays checked against a brute force
 //! over every triangle, in f32 and f64.
 
-use hytrace_csg::{MeshPrim, Ray, Real, V3};
+use hytrace_csg::mesh::INTERLEAVED;
+use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery, Ray, Real, V3};
 
 mod common;
 use common::{grid, Rng};
@@ -294,4 +295,109 @@ fn contains_with_many_crossings() {
             assert_eq!(m32.contains(V3::from_f64(x)), want, "f32 cube {k} {x:?}");
         }
     }
+}
+
+/// Queries over several meshes, for [`interleaved_searches_answer_as_one_at_a_time`]:
+/// random rays (some with zero direction components), rays from the surfaces' own points
+/// with `tmin` there, and rays that miss every box.
+fn mixed_queries<'a, T: Real>(
+    meshes: &'a [(MeshPrim<T>, [f64; 3])],
+    rng: &mut Rng,
+) -> Vec<MeshQuery<'a, T>> {
+    (0..500)
+        .map(|k| {
+            let (mesh, centre) = &meshes[k % meshes.len()];
+            // Aimed at a point near the mesh's centre, some with a zero component.
+            let o = [0, 1, 2].map(|c| centre[c] + rng.range(-12.0, 12.0));
+            let target = [0, 1, 2].map(|c| centre[c] + rng.range(-4.0, 4.0));
+            let mut d = [0, 1, 2].map(|c| target[c] - o[c]);
+            if k % 5 == 0 {
+                d[k % 3] = 0.0;
+            }
+            let d = unit(d);
+            let (o, tmin) = match k % 7 {
+                // Away from every mesh.
+                0 => ([0, 1, 2].map(|c| centre[c] + 1.0e3), 0.0),
+                // From a point the ray reaches, tmin there (a surface it may start on).
+                1 => (o, rng.range(0.0, 20.0)),
+                _ => (o, 0.0),
+            };
+            let (o, d) = if k % 7 == 0 {
+                (o, [1.0, 0.0, 0.0])
+            } else {
+                (o, d)
+            };
+            MeshQuery {
+                mesh,
+                ray: Ray::from_f64(o, d),
+                tmin: T::from_f64(tmin),
+            }
+        })
+        .collect()
+}
+
+fn interleaved_case<T: Real>() {
+    let mut rng = Rng(17);
+    let heights: Vec<f64> = (0..17 * 17).map(|_| rng.range(0.0, 3.0)).collect();
+    let hills = grid(16, |x, y| heights[x as usize * 17 + y as usize]);
+    let shifted = |tris: &[Tri], by: [f64; 3]| -> Vec<Tri> {
+        tris.iter()
+            .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
+            .collect()
+    };
+    let far = [1.0e5, -2.0e5, 3.0e4];
+    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [
+        (shifted(&hills, [-8.0, -8.0, 0.0]), [0.0, 0.0, 1.5]),
+        (
+            shifted(&hills, far),
+            [far[0] + 8.0, far[1] + 8.0, far[2] + 1.5],
+        ),
+        (cube([1.0, 2.0, 3.0], 4.0), [1.0, 2.0, 3.0]),
+    ]
+    .into_iter()
+    .map(|(tris, centre)| (MeshPrim::<T>::new(&tris).unwrap(), centre))
+    .collect();
+    let queries = mixed_queries(&meshes, &mut rng);
+    let mut scratch = CrossingScratch::default();
+    let mut out = Vec::new();
+    let mut hits = 0;
+    // Windows of every size up to past the interleaving width, then all at once.
+    for len in (1..=INTERLEAVED + 3).chain([queries.len()]) {
+        for batch in queries.chunks(len) {
+            MeshPrim::first_crossings(batch, &mut scratch, &mut out);
+            assert_eq!(out.len(), batch.len());
+            for (q, got) in batch.iter().zip(&out) {
+                let want = q.mesh.first_crossing(&q.ray, q.tmin);
+                let bits = |s: &hytrace_csg::kernel::Step<T>| {
+                    (
+                        s.t.to_f64().to_bits(),
+                        s.normal.to_f64().map(f64::to_bits),
+                        s.inside_before,
+                    )
+                };
+                assert_eq!(
+                    bits(got),
+                    bits(&want),
+                    "{} query {q:?} in windows of {len}",
+                    T::NAME
+                );
+                hits += got.t.is_finite() as usize;
+            }
+        }
+    }
+    assert!(
+        hits > 2000,
+        "only {hits} crossings among the {} {} queries",
+        12 * queries.len(),
+        T::NAME
+    );
+}
+
+/// [`MeshPrim::first_crossings`], searches interleaved, answers every query bit for bit as
+/// [`MeshPrim::first_crossing`] does, whatever the windows, meshes (one far from the
+/// origin) and starting points.
+#[test]
+fn interleaved_searches_answer_as_one_at_a_time() {
+    interleaved_case::<f32>();
+    interleaved_case::<f64>();
 }

@@ -1,6 +1,7 @@
 //! Mesh-file scenes: OBJ objects and glTF node hierarchies become solids and instances,
-//! traced first hits land where the geometry says, bad files are errors naming the file,
-//! and truncated or mutated OBJ and GLB bytes never panic the loader.
+//! traced first hits land where the geometry says, scans of a large mesh (interleaved
+//! searches) answer as single traces, bad files are errors naming the file, and truncated
+//! or mutated OBJ and GLB bytes never panic the loader.
 
 use std::path::Path;
 
@@ -235,4 +236,84 @@ fn truncated_and_mutated_files_never_panic() {
         }
         let _ = gltf_to_foundry(&g, None);
     }
+}
+
+/// A scan of a mesh large enough for its searches to be interleaved (`hytrace scan`'s
+/// batches) answers every ray bit for bit as tracing it alone does, and agrees with the
+/// f64 scan (its own kernel, one box at a time) within f32's tolerance: incoherent rays
+/// from above, some with a `tmax` short of the surface or a `tmin` past it.
+#[test]
+fn scans_of_a_large_mesh_equal_single_traces() {
+    // A 128 x 128 heightfield: 32 768 triangles.
+    let n = 128;
+    let height = |i: usize, j: usize| 3.0 * ((i as f64 * 0.31).sin() + (j as f64 * 0.17).cos());
+    let mut obj = String::new();
+    for i in 0..=n {
+        for j in 0..=n {
+            obj.push_str(&format!("v {i} {j} {}\n", height(i, j)));
+        }
+    }
+    let at = |i: usize, j: usize| i * (n + 1) + j + 1;
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+            obj.push_str(&format!("f {a} {b} {c}\nf {a} {c} {d}\n"));
+        }
+    }
+    let f = obj_to_foundry(obj.as_bytes()).unwrap();
+    let mesh = hytrace_csg::PreparedPrim::<f32>::from_foundry(&f, 0).unwrap();
+    match mesh {
+        Some(hytrace_csg::PreparedPrim::Mesh(m)) => assert!(
+            m.bvh_bytes() >= hytrace_trace::cpu::INTERLEAVE_MIN_BYTES,
+            "the mesh ({} bytes) is too small to be interleaved",
+            m.bvh_bytes()
+        ),
+        _ => panic!("prim 0 is not a mesh"),
+    }
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = || {
+        seed ^= seed >> 12;
+        seed ^= seed << 25;
+        seed ^= seed >> 27;
+        (seed.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let rows: Vec<[f64; 8]> = (0..20_000)
+        .map(|k| {
+            let o = [uniform() * 140.0 - 6.0, uniform() * 140.0 - 6.0, 10.0];
+            let d = [uniform() - 0.5, uniform() - 0.5, -uniform()];
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let (tmin, tmax) = match k % 5 {
+                0 => (0.0, 4.0),
+                1 => (9.0, f64::INFINITY),
+                _ => (0.0, f64::INFINITY),
+            };
+            [o[0], o[1], o[2], tmin, d[0] / l, d[1] / l, d[2] / l, tmax]
+        })
+        .collect();
+    let rays = rays_from_rows(&rows, "test rays").unwrap();
+    let (batched, _) = scan(&f, &rays, Precision::F32).unwrap();
+    let (exact, _) = scan(&f, &rays, Precision::F64).unwrap();
+    let scene = hytrace_trace::cpu::CpuScene::<f32>::new(&f).unwrap();
+    let (mut hits, mut far) = (0, 0);
+    for (i, r) in rays.iter().enumerate() {
+        let ray = hytrace_csg::Ray::<f32>::from_f64(r.origin, r.direction);
+        let tmax = if r.tmax.is_finite() {
+            r.tmax as f32
+        } else {
+            f32::INFINITY
+        };
+        let alone = scene.trace(&ray, r.tmin as f32, tmax);
+        let t = alone.map_or(f64::INFINITY, |h| f64::from(h.t));
+        assert_eq!(batched.hits[i][3].to_bits(), t.to_bits(), "ray {i} {r:?}");
+        let n = alone.map_or([0.0; 3], |h| h.normal.to_f64());
+        assert_eq!(batched.hits[i][..3], n, "normal, ray {i}");
+        assert_eq!(batched.ids[i][0], alone.map_or(-1, |h| h.instance as i32));
+        let want = exact.hits[i][3];
+        if want.is_finite() != t.is_finite() || (t.is_finite() && (t - want).abs() > 1e-3) {
+            far += 1;
+        }
+        hits += usize::from(t.is_finite());
+    }
+    assert!(hits > 8000 && hits < 19_000, "{hits} of 20000 rays hit");
+    assert!(far <= 2, "{far} rays disagree with the f64 scan");
 }

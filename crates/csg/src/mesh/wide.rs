@@ -15,7 +15,7 @@ use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
-use crate::wide_tree::{point_f32, BinaryNode, WideSlabs, WideTree};
+use crate::wide_tree::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
 
 /// Triangles per block.
 const LANES: usize = 4;
@@ -101,13 +101,7 @@ impl WideBvh {
         limit: f32,
     ) -> Option<(f32, usize, V3<f32>)> {
         let triangles = WideRay::new(ray);
-        let mut best = Best {
-            t: limit,
-            number: 0,
-            block: 0,
-            lane: 0,
-            found: false,
-        };
+        let mut best = Best::none(limit);
         self.tree
             .walk(&WideSlabs::new(ray), after, limit, |first, count| {
                 for b in first..first + count {
@@ -115,12 +109,95 @@ impl WideBvh {
                 }
                 best.t
             });
+        self.found(&best)
+    }
+
+    /// Advances `search` by one node visit or one leaf (see [`Walker::step`] for `AHEAD`);
+    /// false once it is over.
+    #[inline(always)]
+    pub(crate) fn advance<const AHEAD: bool>(&self, search: &mut Search) -> bool {
+        let Search {
+            ray,
+            triangles,
+            slabs,
+            after,
+            best,
+            walker,
+        } = search;
+        let after = *after;
+        walker.step::<AHEAD>(
+            &self.tree,
+            slabs,
+            after,
+            &mut |first, count| {
+                for b in first..first + count {
+                    triangles.test(&self.blocks[b as usize], b, ray, after, best);
+                }
+                best.t
+            },
+            |first, count| {
+                for block in &self.blocks[first as usize..(first + count) as usize] {
+                    prefetch_lines(block);
+                }
+            },
+        )
+    }
+
+    /// What a finished `search` found: as [`Self::nearest`].
+    pub(crate) fn answer(&self, search: &Search) -> Option<(f32, usize, V3<f32>)> {
+        self.found(&search.best)
+    }
+
+    /// The crossing `best` holds, with its triangle number and geometric normal.
+    fn found(&self, best: &Best) -> Option<(f32, usize, V3<f32>)> {
         best.found.then(|| {
             let v = &self.blocks[best.block as usize].vertex;
             let [v0, v1, v2] = [0, 1, 2]
                 .map(|j| V3::new(v[j][0][best.lane], v[j][1][best.lane], v[j][2][best.lane]));
             (best.t, best.number as usize, (v1 - v0).cross(v2 - v0))
         })
+    }
+}
+
+/// One ray's search of a [`WideBvh`] for its nearest crossing, advanced a step at a time
+/// ([`WideBvh::advance`]) so that one thread can interleave the searches of several rays.
+/// Large (its walker's stack): reused from ray to ray, not rebuilt.
+pub(crate) struct Search {
+    ray: Ray<f32>,
+    triangles: WideRay,
+    slabs: WideSlabs,
+    after: f32,
+    best: Best,
+    walker: Walker,
+}
+
+impl Search {
+    /// A search to be [`Search::start`]ed.
+    pub(crate) fn new() -> Self {
+        let ray = Ray {
+            origin: V3::new(0.0, 0.0, 0.0),
+            direction: V3::new(0.0, 0.0, 1.0),
+        };
+        Search {
+            triangles: WideRay::new(&ray),
+            slabs: WideSlabs::new(&ray),
+            ray,
+            after: 0.0,
+            best: Best::none(f32::NEG_INFINITY),
+            walker: Walker::new(),
+        }
+    }
+
+    /// Starts the search for the nearest crossing of `ray` after `after` and strictly
+    /// before `limit`.
+    #[inline]
+    pub(crate) fn start(&mut self, ray: &Ray<f32>, after: f32, limit: f32) {
+        self.ray = *ray;
+        self.triangles = WideRay::new(ray);
+        self.slabs = WideSlabs::new(ray);
+        self.after = after;
+        self.best = Best::none(limit);
+        self.walker.restart(limit);
     }
 }
 
@@ -136,6 +213,17 @@ struct Best {
 }
 
 impl Best {
+    /// Nothing found yet, searching strictly before `limit`.
+    fn none(limit: f32) -> Self {
+        Best {
+            t: limit,
+            number: 0,
+            block: 0,
+            lane: 0,
+            found: false,
+        }
+    }
+
     /// Takes a crossing at `t` of triangle `number` if it is nearer, or as near with a
     /// lower number; before any is found, only one strictly before the limit (an
     /// overflowed, infinite distance is no crossing).

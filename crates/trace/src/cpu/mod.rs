@@ -18,6 +18,10 @@
 //! and the clusters of its volume bricks ([`solid`]), two levels in all (instances, then
 //! each solid's leaves), so repeated solids cost one structure.
 //!
+//! [`CpuScene::trace_batch`] answers many rays as [`CpuScene::trace`] does, bit for bit, with
+//! the searches of large meshes interleaved across the rays ([`batch`]); `hytrace scan`
+//! traces through it.
+//!
 //! Volume prims are media, not surfaces: [`CpuScene::trace`] and [`CpuScene::occluded`] go
 //! through them, and [`media::SceneMedia`] adds the transmittance of the media along a ray
 //! up to its first surface crossing, finding them through a BVH over the instances that hold
@@ -25,9 +29,10 @@
 
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
-use hytrace_csg::{transform_bounds, Bounds, Ray, Real, SlabRay, V3};
+use hytrace_csg::{transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, V3};
 use hytrace_foundry::{Foundry, UNSET};
 
+mod batch;
 mod bvh;
 pub mod gpu_export;
 pub mod media;
@@ -37,12 +42,19 @@ pub(crate) mod solid;
 #[cfg(test)]
 mod tests;
 
+use batch::{Crossings, Direct};
+pub use batch::{TraceScratch, INTERLEAVE_MIN_BYTES};
 use bvh::{holds, BoxBvh, RaySlabs};
 
 /// Deepest box BVH (instances, a solid's leaves) a scene may have: the traversal stacks'
 /// size, on the CPU and in the GPU kernels.
 pub const BOX_BVH_MAX_DEPTH: usize = bvh::MAX_DEPTH;
 use solid::SolidAccel;
+
+/// Rays `hytrace scan` hands [`CpuScene::trace_batch`] at a time: enough to keep its
+/// interleaved searches (8 at a time) busy, few enough that rayon's threads share the
+/// work evenly.
+pub const BATCH: usize = 256;
 
 /// Groups of more instances than this are searched through a BVH.
 pub const BVH_MIN_MEMBERS: usize = 8;
@@ -120,6 +132,9 @@ pub struct CpuScene<T> {
     layout: Layout<T>,
     /// The instances whose solids hold media.
     media: Group<T>,
+    /// Bytes of the search structures of the largest mesh prim ([`batch`]: whether a
+    /// batch may interleave any mesh searches).
+    largest_mesh_bytes: usize,
 }
 
 fn world_bounds<T: Real>(aabb: &[f32; 6], t: &hytrace_foundry::Transform64) -> Bounds<T> {
@@ -185,25 +200,37 @@ impl<T: Real> CpuScene<T> {
             .filter(|&i| !solids[placements[i as usize].solid].clusters.is_empty())
             .collect();
         let media = Group::new(holding_media, &placements)?;
+        let largest_mesh_bytes = solids
+            .iter()
+            .flat_map(|s| &s.prims)
+            .map(|p| match p {
+                PreparedPrim::Mesh(m) => m.bvh_bytes(),
+                PreparedPrim::Csg(_) => 0,
+            })
+            .max()
+            .unwrap_or(0);
         Ok(CpuScene {
             placements,
             solids,
             layout,
             media,
+            largest_mesh_bytes,
         })
     }
 
     /// The first crossing of instance `index`'s surface in `(tmin, limit)`. `cull`: the
     /// ray's slab-test form, to skip the instance when the ray misses its box; `None` when
     /// the caller's BVH walk found the ray meeting that box.
+    /// Prims' first crossings come from `crossings` (see [`SolidAccel::cross`]).
     #[inline]
-    fn cross_instance(
-        &self,
+    fn cross_instance<'a>(
+        &'a self,
         index: usize,
         ray: &Ray<T>,
         cull: Option<&SlabRay<T>>,
         tmin: T,
         limit: T,
+        crossings: &mut impl Crossings<'a, T>,
     ) -> Option<Hit<T>> {
         let p = &self.placements[index];
         if let Some(slabs) = cull {
@@ -212,7 +239,7 @@ impl<T: Real> CpuScene<T> {
         }
         let local = p.frame.ray_to_local(ray);
         self.solids[p.solid]
-            .cross(&local, tmin, limit, p.aligned)
+            .cross(&local, tmin, limit, p.aligned, crossings)
             .map(|c| Hit {
                 t: c.t,
                 normal: c.normal,
@@ -223,22 +250,30 @@ impl<T: Real> CpuScene<T> {
 
     /// The nearer of `seed` and the first crossing of a member of `group`: what folding
     /// [`Self::cross_instance`] over the members in placement order gives, that is the
-    /// nearest crossing, ties going to `seed`, then to the lowest instance index.
-    fn enter(
-        &self,
+    /// nearest crossing, ties going to `seed`, then to the lowest instance index. Stops
+    /// early, its answer meaningless, when `crossings` abandons the trace.
+    fn enter<'a>(
+        &'a self,
         group: &Group<T>,
         ray: &Ray<T>,
         tmin: T,
         tmax: T,
         seed: Option<Hit<T>>,
+        crossings: &mut impl Crossings<'a, T>,
     ) -> Option<Hit<T>> {
         let Some(bvh) = &group.bvh else {
             let slabs = SlabRay::new(ray);
-            return group.members.iter().fold(seed, |best, &i| {
+            let mut best = seed;
+            for &i in &group.members {
                 let limit = best.map_or(tmax, |b| b.t);
-                self.cross_instance(i as usize, ray, Some(&slabs), tmin, limit)
-                    .or(best)
-            });
+                best = self
+                    .cross_instance(i as usize, ray, Some(&slabs), tmin, limit, crossings)
+                    .or(best);
+                if crossings.abandoned() {
+                    break;
+                }
+            }
+            return best;
         };
         let slabs = RaySlabs::new(ray);
         let mut best = seed;
@@ -250,9 +285,12 @@ impl<T: Real> CpuScene<T> {
                 Some(b) if !seeded && i < b.instance => b.t.next_up(),
                 Some(b) => b.t,
             };
-            if let Some(h) = self.cross_instance(i as usize, ray, None, tmin, limit) {
+            if let Some(h) = self.cross_instance(i as usize, ray, None, tmin, limit, crossings) {
                 best = Some(h);
                 seeded = false;
+            }
+            if crossings.abandoned() {
+                return -T::INFINITY;
             }
             best.map_or(tmax, |b| b.t)
         });
@@ -286,32 +324,58 @@ impl<T: Real> CpuScene<T> {
 
     /// Geant4's navigator step: locate the origin, then the nearer of leaving the located
     /// instance and entering one of its daughters.
-    fn navigate(&self, h: &Hierarchy<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-        let mut current = None;
-        let mut group = &h.roots;
-        let mut scratch = Vec::new();
-        while let Some(c) = self.locate(group, ray.origin, &mut scratch) {
+    fn navigate<'a>(
+        &'a self,
+        h: &Hierarchy<T>,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        crossings: &mut impl Crossings<'a, T>,
+    ) -> Option<Hit<T>> {
+        let current = crossings.located(|| self.locate_deepest(h, ray.origin));
+        let group = current.map_or(&h.roots, |c| &h.daughters[c as usize]);
+        let exit = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax, crossings));
+        if crossings.abandoned() {
+            return None;
+        }
+        self.enter(group, ray, tmin, tmax, exit, crossings)
+    }
+
+    /// The deepest instance containing `x` as the navigator locates it (daughters tried
+    /// last-placed first); `None` outside every root.
+    fn locate_deepest(&self, h: &Hierarchy<T>, x: V3<T>) -> Option<u32> {
+        let (mut current, mut group, mut scratch) = (None, &h.roots, Vec::new());
+        while let Some(c) = self.locate(group, x, &mut scratch) {
             current = Some(c);
             group = &h.daughters[c as usize];
         }
-        let exit = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax));
-        self.enter(group, ray, tmin, tmax, exit)
+        current
     }
 
     /// Where the ray leaves the instance its origin was located in. An origin within the
     /// surface tolerance of that instance's surface, moving out, has its exit suppressed as
     /// the surface it starts on; the navigator's answer is then that surface, found again
     /// with the start moved back by the tolerance band.
-    fn exit(&self, index: usize, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+    fn exit<'a>(
+        &'a self,
+        index: usize,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        crossings: &mut impl Crossings<'a, T>,
+    ) -> Option<Hit<T>> {
         let slabs = SlabRay::new(ray);
-        self.cross_instance(index, ray, Some(&slabs), tmin, tmax)
+        self.cross_instance(index, ray, Some(&slabs), tmin, tmax, crossings)
             .or_else(|| {
+                if crossings.abandoned() {
+                    return None;
+                }
                 let [lo, hi] = &self.placements[index].bounds;
                 let size = (hi.x - lo.x).max(hi.y - lo.y).max(hi.z - lo.z);
                 let o = ray.origin;
                 let scale = size + o.x.abs().max(o.y.abs()).max(o.z.abs());
                 let band = T::from_f64(4.0) * T::SURFACE_TOLERANCE * scale;
-                self.cross_instance(index, ray, Some(&slabs), tmin - band, tmax)
+                self.cross_instance(index, ray, Some(&slabs), tmin - band, tmax, crossings)
                     .map(|h| Hit {
                         t: h.t.max(tmin),
                         ..h
@@ -322,9 +386,21 @@ impl<T: Real> CpuScene<T> {
     /// The first surface crossing with `tmin < t < tmax` of a ray with a unit direction,
     /// wherever it starts (inside or outside any solid).
     pub fn trace(&self, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+        self.trace_with(ray, tmin, tmax, &mut Direct)
+    }
+
+    /// [`Self::trace`], prims' first crossings coming from `crossings`; meaningless when
+    /// `crossings` abandons the trace.
+    fn trace_with<'a>(
+        &'a self,
+        ray: &Ray<T>,
+        tmin: T,
+        tmax: T,
+        crossings: &mut impl Crossings<'a, T>,
+    ) -> Option<Hit<T>> {
         let best = match &self.layout {
-            Layout::Tree(h) => self.navigate(h, ray, tmin, tmax),
-            Layout::Flat(all) => self.enter(all, ray, tmin, tmax, None),
+            Layout::Tree(h) => self.navigate(h, ray, tmin, tmax, crossings),
+            Layout::Flat(all) => self.enter(all, ray, tmin, tmax, None, crossings),
         };
         best.map(|mut h| {
             let p = &self.placements[h.instance as usize];
@@ -345,7 +421,7 @@ impl<T: Real> CpuScene<T> {
         let Some(bvh) = &all.bvh else {
             let slabs = SlabRay::new(ray);
             return all.members.iter().any(|&i| {
-                self.cross_instance(i as usize, ray, Some(&slabs), tmin, tmax)
+                self.cross_instance(i as usize, ray, Some(&slabs), tmin, tmax, &mut Direct)
                     .is_some()
             });
         };
@@ -353,7 +429,7 @@ impl<T: Real> CpuScene<T> {
         let mut found = false;
         bvh.visit_ray(ray, &slabs, tmin, tmax, |i| {
             found = self
-                .cross_instance(i as usize, ray, None, tmin, tmax)
+                .cross_instance(i as usize, ray, None, tmin, tmax, &mut Direct)
                 .is_some();
             if found {
                 -T::INFINITY

@@ -5,6 +5,7 @@
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{PreparedPrim, Ray, Real, V3};
 
+use super::batch::Direct;
 #[cfg(feature = "embree")]
 use super::solid::Cluster;
 use super::{CpuScene, Hit, Layout};
@@ -60,12 +61,7 @@ impl<T: Real> CpuScene<T> {
         let Layout::Tree(h) = &self.layout else {
             return None;
         };
-        let (mut current, mut group, mut scratch) = (None, &h.roots, Vec::new());
-        while let Some(c) = self.locate(group, x, &mut scratch) {
-            current = Some(c);
-            group = &h.daughters[c as usize];
-        }
-        current
+        self.locate_deepest(h, x)
     }
 
     /// Where the ray leaves instance `instance`, the navigator's exit (normal in the
@@ -77,6 +73,6 @@ impl<T: Real> CpuScene<T> {
         tmin: T,
         tmax: T,
     ) -> Option<Hit<T>> {
-        self.exit(instance as usize, ray, tmin, tmax)
+        self.exit(instance as usize, ray, tmin, tmax, &mut Direct)
     }
 }

@@ -15,6 +15,7 @@ use hytrace_csg::{
 };
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
+use super::batch::Crossings;
 use super::bvh::{BoxBvh, RaySlabs};
 use super::{widened_bounds, BVH_MIN_MEMBERS};
 
@@ -128,9 +129,18 @@ impl<T: Real> SolidAccel<T> {
     /// crossings at the same `t`, the lowest prim's. `boxed`: the caller found the ray
     /// meeting a box as tight as the solid's (an axis-aligned placement's world box), so a
     /// lone prim's own box test would cull nothing more.
-    pub fn cross(&self, ray: &Ray<T>, tmin: T, limit: T, boxed: bool) -> Option<PrimCrossing<T>> {
+    /// The prims' first crossings come from `crossings`; when it abandons the trace, the
+    /// search stops and its answer means nothing.
+    pub fn cross<'a>(
+        &'a self,
+        ray: &Ray<T>,
+        tmin: T,
+        limit: T,
+        boxed: bool,
+        crossings: &mut impl Crossings<'a, T>,
+    ) -> Option<PrimCrossing<T>> {
         if boxed && self.prims.len() == 1 {
-            let step = self.prims[0].first_crossing(ray, tmin);
+            let step = crossings.first_crossing(&self.prims[0], ray, tmin)?;
             return (step.t > tmin && step.t < limit).then(|| PrimCrossing {
                 t: step.t,
                 normal: step.normal,
@@ -144,7 +154,8 @@ impl<T: Real> SolidAccel<T> {
         }
         // `cull`: the ray's slab form to skip a prim whose box it misses; `None` when a BVH
         // walk found it meeting the box.
-        let try_prim =
+        // False when `crossings` abandons the trace.
+        let mut try_prim =
             |i: usize, cull: Option<&SlabRay<T>>, best: &mut Option<(usize, T, V3<T>)>| {
                 let within = best.map_or(limit, |b| b.1);
                 let prim = &self.prims[i];
@@ -153,25 +164,39 @@ impl<T: Real> SolidAccel<T> {
                     s.entry_conservative(ray, prim.bounds(), tmin, within)
                         .is_none()
                 }) {
-                    return;
+                    return true;
                 }
-                let step = prim.first_crossing(ray, tmin);
+                let Some(step) = crossings.first_crossing(prim, ray, tmin) else {
+                    return false;
+                };
                 let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
                 if step.t > tmin && (step.t < within || tie_won) {
                     *best = Some((i, step.t, step.normal));
                 }
+                true
             };
         match &self.bvh {
             None => {
                 let slabs = SlabRay::new(ray);
-                (0..self.prims.len()).for_each(|i| try_prim(i, Some(&slabs), &mut best));
-            }
-            Some(bvh) => bvh.visit_ray(ray, &RaySlabs::new(ray), tmin, limit, |id| {
-                if (id as usize) < self.prims.len() {
-                    try_prim(id as usize, None, &mut best);
+                for i in 0..self.prims.len() {
+                    if !try_prim(i, Some(&slabs), &mut best) {
+                        return None;
+                    }
                 }
-                best.map_or(limit, |b| b.1)
-            }),
+            }
+            Some(bvh) => {
+                let mut abandoned = false;
+                bvh.visit_ray(ray, &RaySlabs::new(ray), tmin, limit, |id| {
+                    if (id as usize) < self.prims.len() && !try_prim(id as usize, None, &mut best) {
+                        abandoned = true;
+                        return -T::INFINITY;
+                    }
+                    best.map_or(limit, |b| b.1)
+                });
+                if abandoned {
+                    return None;
+                }
+            }
         }
         best.map(|(i, t, normal)| PrimCrossing {
             t,

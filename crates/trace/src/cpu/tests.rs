@@ -1,6 +1,7 @@
 //! The BVH searches against brute-force linear loops over the same instances: identical
 //! hits (parameter and instance), ties and awkward rays included.
 
+use super::batch;
 use super::*;
 use hytrace_csg::{box3, sphere, to_tree, Shape};
 use hytrace_foundry::Transform64;
@@ -27,38 +28,63 @@ fn random_scene(seed: u32, centre: [f64; 3], mother: bool) -> Foundry {
     let cube = add_solid(&mut f, "cube", box3(10.0, 10.0, 10.0).unwrap());
     let slab = add_solid(&mut f, "slab", box3(14.0, 3.0, 7.0).unwrap());
     let ball = add_solid(&mut f, "ball", sphere(4.0).unwrap());
+    let world = mother.then_some(world);
+    place_layout(
+        f,
+        (seed, 0),
+        centre,
+        world,
+        cube,
+        600,
+        |n, rng, at| match n % 3 {
+            0 => (cube, at),
+            1 => {
+                let axis = [0; 3].map(|_| uniform(rng, -1.0, 1.0));
+                let rot = Transform64::rotation(axis, uniform(rng, 0.0, 6.0));
+                (slab, at.compose(&rot))
+            }
+            _ => (ball, at),
+        },
+    )
+}
+
+/// Places the test scenes' instances about `centre`, in a cube of half side 100: `world`
+/// first when given (every other instance becomes its daughter), touching `cube`s on a
+/// 6 x 6 grid (faces shared exactly: coordinates are multiples of 10), `count` solids at
+/// random points as `pick(n, rng, translation)` chooses, then 20 pairs of `cube`s, each
+/// pair at the same place (exactly tied crossings). Random numbers come from
+/// `Rng::new(seed, stream, 0)` for `(seed, stream)` = `random`.
+fn place_layout(
+    mut f: Foundry,
+    random: (u32, u32),
+    centre: [f64; 3],
+    world: Option<u32>,
+    cube: u32,
+    count: usize,
+    mut pick: impl FnMut(usize, &mut Rng, Transform64) -> (u32, Transform64),
+) -> Foundry {
     let at = |p: [f64; 3]| Transform64::translation([0, 1, 2].map(|k| centre[k] + p[k]));
-    if mother {
+    if let Some(world) = world {
         f.add_instance(world, at([0.0; 3]), 0, 0).unwrap();
     }
-    // Touching cubes: faces shared exactly (coordinates are multiples of 10).
     for i in 0..6 {
         for j in 0..6 {
             let p = [10.0 * i as f64 - 30.0, 10.0 * j as f64 - 30.0, -60.0];
             f.add_instance(cube, at(p), 0, 0).unwrap();
         }
     }
-    let mut rng = Rng::new(seed, 0, 0);
-    for n in 0..600 {
+    let mut rng = Rng::new(random.0, random.1, 0);
+    for n in 0..count {
         let p = [0; 3].map(|_| uniform(&mut rng, -100.0, 100.0));
-        let (solid, transform) = match n % 3 {
-            0 => (cube, at(p)),
-            1 => {
-                let axis = [0; 3].map(|_| uniform(&mut rng, -1.0, 1.0));
-                let rot = Transform64::rotation(axis, uniform(&mut rng, 0.0, 6.0));
-                (slab, at(p).compose(&rot))
-            }
-            _ => (ball, at(p)),
-        };
+        let (solid, transform) = pick(n, &mut rng, at(p));
         f.add_instance(solid, transform, 0, 0).unwrap();
     }
-    // Duplicates: same solid, same place (exactly tied crossings).
     for _ in 0..20 {
         let p = [0; 3].map(|_| (uniform(&mut rng, -9.0, 9.0) * 10.0).round());
         f.add_instance(cube, at(p), 0, 0).unwrap();
         f.add_instance(cube, at(p), 0, 0).unwrap();
     }
-    if mother {
+    if world.is_some() {
         for m in &mut f.inst_mother[1..] {
             m.index = 0;
         }
@@ -106,7 +132,8 @@ fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Opti
     let slabs = SlabRay::new(ray);
     (0..s.placements.len()).fold(None, |best, i| {
         let limit = best.map_or(tmax, |b| b.t);
-        s.cross_instance(i, ray, Some(&slabs), tmin, limit).or(best)
+        s.cross_instance(i, ray, Some(&slabs), tmin, limit, &mut Direct)
+            .or(best)
     })
 }
 
@@ -127,11 +154,11 @@ fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> 
         }
         break;
     }
-    let exit = current.and_then(|c| s.exit(c as usize, ray, tmin, tmax));
+    let exit = current.and_then(|c| s.exit(c as usize, ray, tmin, tmax, &mut Direct));
     let slabs = SlabRay::new(ray);
     members.iter().fold(exit, |best, &d| {
         let limit = best.map_or(tmax, |b| b.t);
-        s.cross_instance(d as usize, ray, Some(&slabs), tmin, limit)
+        s.cross_instance(d as usize, ray, Some(&slabs), tmin, limit, &mut Direct)
             .or(best)
     })
 }
@@ -267,4 +294,159 @@ fn f32_boxes_round_outward() {
     for v in [0.1, -0.1, 1e6 + 1e-3, -3.3e7, 1.0, 0.0, 16_777_217.0] {
         assert!(f64::from(bvh::f32_down(v)) <= v && f64::from(bvh::f32_up(v)) >= v);
     }
+}
+
+/// A triangle, f64 vertices.
+type Tri = [[f64; 3]; 3];
+
+/// A mesh prim of `tris` (f64 vertices) offset by `at`.
+fn add_mesh_prim(s: &mut hytrace_foundry::SolidBuilder<'_>, tris: &[Tri], at: [f64; 3]) {
+    let triangles: Vec<hytrace_foundry::Triangle> = tris
+        .iter()
+        .map(|t| hytrace_foundry::Triangle {
+            v: t.map(|v| {
+                [
+                    (v[0] + at[0]) as f32,
+                    (v[1] + at[1]) as f32,
+                    (v[2] + at[2]) as f32,
+                    0.0,
+                ]
+            }),
+        })
+        .collect();
+    s.add_mesh(&triangles, None, 0, UNSET).unwrap();
+}
+
+/// The triangles of an icosphere of radius `r` and of an axis-aligned cube of half side `h`,
+/// both closed and outward wound.
+fn ball_and_cube(r: f64, h: f64) -> (Vec<Tri>, Vec<Tri>) {
+    let (verts, faces) = hytrace_csg::tessellate::icosphere(2);
+    let ball = faces
+        .iter()
+        .map(|f| f.map(|i| verts[i].map(|c| r * c)))
+        .collect();
+    let square = |z: f64| vec![[-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z]];
+    let cube =
+        hytrace_csg::tessellate::section_stack(&[square(-h), square(h)], &[0, 1, 2, 3]).unwrap();
+    (ball, cube)
+}
+
+/// Mesh solids placed many times about `centre` ([`place_layout`]): balls, cubes (touching
+/// on the grid, and tied pairs), CSG boxes among them, and a solid of twelve prims (meshes and CSG, searched through the solid's BVH). With `mother`, the first
+/// instance is a big mesh cube and all others its daughters, so locating an origin and
+/// leaving the located volume ask mesh prims too.
+fn mesh_instances(seed: u32, centre: [f64; 3], mother: bool) -> Foundry {
+    let (ball, cube) = ball_and_cube(6.0, 5.0);
+    let (_, world_cube) = ball_and_cube(1.0, 400.0);
+    let mut f = Foundry::new();
+    let mesh_solid = |f: &mut Foundry, name: &str, tris: &[Tri]| {
+        let mut s = f.begin_solid(name);
+        add_mesh_prim(&mut s, tris, [0.0; 3]);
+        s.finish(0).unwrap()
+    };
+    let world = mesh_solid(&mut f, "world", &world_cube);
+    let ball_id = mesh_solid(&mut f, "ball", &ball);
+    let cube_id = mesh_solid(&mut f, "cube", &cube);
+    let csg_box = add_solid(&mut f, "box", box3(8.0, 3.0, 6.0).unwrap());
+    let cluster = {
+        let mut s = f.begin_solid("cluster");
+        for k in 0..12 {
+            let at = [(k % 4) as f64 * 9.0 - 13.5, (k / 4) as f64 * 9.0 - 9.0, 0.0];
+            if k % 3 == 0 {
+                let tree = to_tree(&sphere(4.0).unwrap().translate(at[0], at[1], at[2])).unwrap();
+                s.add_csg(tree, 0, UNSET).unwrap();
+            } else {
+                add_mesh_prim(&mut s, if k % 2 == 0 { &ball } else { &cube }, at);
+            }
+        }
+        s.finish(0).unwrap()
+    };
+    let world = mother.then_some(world);
+    place_layout(f, (seed, 2), centre, world, cube_id, 300, |n, rng, at| {
+        let axis = [0; 3].map(|_| uniform(rng, -1.0, 1.0));
+        let turned = at.compose(&Transform64::rotation(axis, uniform(rng, 0.0, 6.0)));
+        let solid = [ball_id, ball_id, cube_id, csg_box, cluster][n % 5];
+        (solid, turned)
+    })
+}
+
+/// `trace_batch` answers every ray bit for bit as `trace` does, on scenes whose rays meet
+/// from none to dozens of mesh prims, flat and navigated, near and far from the origin,
+/// in batches of every size.
+fn batch_case<T: Real>(mother: bool) {
+    let bits = |h: &Option<Hit<T>>| {
+        h.map(|h| {
+            (
+                h.t.to_f64().to_bits(),
+                h.normal.to_f64().map(f64::to_bits),
+                h.instance,
+                h.prim,
+            )
+        })
+    };
+    let mut out = Vec::new();
+    let mut by_queries = [0usize; 3];
+    for (seed, centre) in [(1, [0.0; 3]), (2, [2.0e4, -1.0e4, 5.0e3])] {
+        let scene = CpuScene::<T>::new(&mesh_instances(seed, centre, mother)).unwrap();
+        let rays: Vec<(Ray<T>, T, T)> = random_rays::<T>(seed, centre, 3000)
+            .into_iter()
+            .enumerate()
+            .map(|(n, r)| match n % 3 {
+                0 => (r, T::ZERO, T::INFINITY),
+                1 => (r, T::ZERO, T::from_f64(25.0)),
+                _ => (r, T::from_f64(7.0), T::INFINITY),
+            })
+            .collect();
+        let want: Vec<Option<Hit<T>>> = rays
+            .iter()
+            .map(|(r, a, b)| scene.trace(r, *a, *b))
+            .collect();
+        for (ray, tmin, tmax) in &rays {
+            by_queries[match scene.mesh_queries(ray, *tmin, *tmax) {
+                0 => 0,
+                n if n <= batch::REPLAYS => 1,
+                _ => 2,
+            }] += 1;
+        }
+        // Every mesh interleaved (these are small), and none (the default for them).
+        for min_bytes in [0, INTERLEAVE_MIN_BYTES] {
+            let mut scratch = TraceScratch::interleaving_from(min_bytes);
+            for size in [1, 3, 8, 13, BATCH] {
+                for (chunk, want) in rays.chunks(size).zip(want.chunks(size)) {
+                    scene.trace_batch(chunk, &mut scratch, &mut out);
+                    assert_eq!(out.len(), chunk.len());
+                    for ((ray, got), want) in chunk.iter().zip(&out).zip(want) {
+                        assert_eq!(
+                            bits(got),
+                            bits(want),
+                            "{} batches of {size}, interleaving from {min_bytes} bytes, ray {ray:?}",
+                            T::NAME
+                        );
+                    }
+                }
+            }
+        }
+        let hits = want.iter().filter(|h| h.is_some()).count();
+        assert!(hits > 1000 && hits < 2900, "{hits} of 3000 rays hit");
+    }
+    // Rays with no mesh query, with a few, and with more than the replays take.
+    assert!(
+        by_queries.iter().all(|&n| n > 100),
+        "rays by mesh queries: {by_queries:?}"
+    );
+}
+
+#[test]
+fn batch_traces_answer_as_single_traces_flat_f32() {
+    batch_case::<f32>(false);
+}
+
+#[test]
+fn batch_traces_answer_as_single_traces_navigated_f32() {
+    batch_case::<f32>(true);
+}
+
+#[test]
+fn batch_traces_answer_as_single_traces_f64() {
+    batch_case::<f64>(false);
 }
