@@ -28,8 +28,8 @@ pub(super) const REPLAYS: usize = 4;
 /// searched at once, not interleaved: their searches run from the caches, where stepping
 /// several in turn only adds work. A core's L2 cache here holds 1 MiB. Measured with
 /// `cargo bench -p hytrace-tests --bench mixed` and `--bench mesh` (BENCHMARKS.md): the
-/// mixed scene's 1280-triangle mesh (0.2 MB) traced 10-20% slower interleaved, the
-/// 1M-triangle heightfield (84 MB) 30-60% faster on incoherent rays.
+/// mixed scene's 1280-triangle mesh (about 0.2 MB) traced 5-25% slower interleaved, the
+/// 1M-triangle heightfield (tens of MB) 30-60% faster on incoherent rays.
 pub const INTERLEAVE_MIN_BYTES: usize = 1 << 20;
 
 /// Where a trace gets its prims' first crossings (in the solid's frame) and the location
