@@ -20,6 +20,9 @@
 mod batched;
 #[path = "common/heightfield.rs"]
 mod heightfield;
+#[cfg(feature = "embree")]
+#[path = "common/pairs.rs"]
+mod pairs;
 
 use std::path::Path;
 use std::process::Command;
@@ -34,15 +37,12 @@ use hytrace_foundry::npy::{read_array, write_array};
 use hytrace_tests::oracle_python;
 use hytrace_trace::cpu::{CpuScene, Hit, BATCH};
 use hytrace_trace::scene::load_scene;
+#[cfg(feature = "embree")]
+use pairs::{paired_speed_ratio, PAIRS};
 use rayon::prelude::*;
 
 /// Timed runs per measurement (the best is reported).
 const RUNS: usize = 3;
-
-/// Alternating runs of hytrace's default backend and Embree whose speeds are compared pair
-/// by pair.
-#[cfg(feature = "embree")]
-const PAIRS: usize = 7;
 
 /// A hit's distance, `inf` for a miss.
 fn distance(hit: &Option<Hit<f32>>) -> f32 {
@@ -333,29 +333,21 @@ fn embree_backend_row(
         );
         rates.push(mrays(rays.len(), secs));
     }
-    // The machine's speed drifts between the rows: time the default backend and Embree
-    // in alternation and compare each pair.
     for set in sets {
         let rays = set.rays();
-        let mut ratios: Vec<f64> = (0..PAIRS)
-            .map(|_| {
-                let t = Instant::now();
+        let [median, low, high] = paired_speed_ratio(
+            || {
                 trace_batches(scene, &rays, distance);
-                let ours = t.elapsed().as_secs_f64();
-                let t = Instant::now();
+            },
+            || {
                 rays.par_iter().for_each(|r| {
                     embree.trace(r, 0.0, f32::INFINITY).unwrap();
-                });
-                t.elapsed().as_secs_f64() / ours
-            })
-            .collect();
-        ratios.sort_by(f64::total_cmp);
+                })
+            },
+        );
         println!(
-            "{}: CpuScene::trace_batch over Embree 3 (hytrace backend), {PAIRS} alternating pairs: median {:.2}x, range {:.2}-{:.2}x",
-            set.name,
-            ratios[PAIRS / 2],
-            ratios[0],
-            ratios[PAIRS - 1]
+            "{}: CpuScene::trace_batch over Embree 3 (hytrace backend), {PAIRS} alternating pairs: median {median:.2}x, range {low:.2}-{high:.2}x",
+            set.name
         );
     }
     format!(

@@ -15,6 +15,9 @@
 mod batched;
 #[path = "common/mixed_scene.rs"]
 mod mixed_scene;
+#[cfg(feature = "embree")]
+#[path = "common/pairs.rs"]
+mod pairs;
 
 use std::time::Instant;
 
@@ -26,6 +29,8 @@ use hytrace_trace::scan::RayRow;
 use hytrace_trace::scene::scene_from_toml;
 use hytrace_volume::{Estimator, TransmittanceParams};
 use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
+#[cfg(feature = "embree")]
+use pairs::{paired_speed_ratio, PAIRS};
 use rayon::prelude::*;
 
 fn ray32(r: &RayRow) -> Ray<f32> {
@@ -150,6 +155,35 @@ fn main() {
                 embree_build_s,
                 secs,
                 embree_occluded,
+            );
+            // The rows above come from different moments; these pairs are side by side.
+            let [median, low, high] = paired_speed_ratio(
+                || {
+                    trace_batches(&cpu, &rays32, |h| h.map(|h| h.t));
+                },
+                || {
+                    rays32.par_iter().for_each(|r| {
+                        embree.trace(r, 0.0, f32::INFINITY).unwrap();
+                    })
+                },
+            );
+            println!(
+                "|  | closest hit, batches over Embree 3: {PAIRS} alternating pairs, median {median:.2}x, range {low:.2}-{high:.2}x | | | | |"
+            );
+            let [median, low, high] = paired_speed_ratio(
+                || {
+                    rays32.par_iter().for_each(|r| {
+                        cpu.occluded(r, 0.0, f32::INFINITY);
+                    })
+                },
+                || {
+                    rays32.par_iter().for_each(|r| {
+                        embree.occluded(r, 0.0, f32::INFINITY).unwrap();
+                    })
+                },
+            );
+            println!(
+                "|  | any hit over Embree 3: {PAIRS} alternating pairs, median {median:.2}x, range {low:.2}-{high:.2}x | | | | |"
             );
         }
         for (label, estimator) in [

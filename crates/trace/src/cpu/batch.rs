@@ -5,18 +5,26 @@
 //! A trace asks for its prims' first crossings through [`Crossings`]. [`Direct`] computes
 //! each at once (the per-ray [`CpuScene::trace`]). A batch trace runs each ray's ordinary
 //! trace through a [`Replay`] instead: it answers CSG prims and small meshes at once
-//! ([`INTERLEAVE_MIN_BYTES`]), and other mesh prims from the ray's log of earlier answers, in the order the trace asks for them; the first mesh
-//! query past the end of the log abandons the trace. The batch then answers the abandoned
-//! rays' queries together, interleaved, appends each answer to its ray's log, and replays
-//! those rays. A replay makes the same decisions as the trace before it up to the new
-//! answer (same limits, same order), so it asks the same queries, and the last replay
-//! returns exactly what [`CpuScene::trace`] returns, bit for bit. Each replay walks the
-//! instance levels again, which costs little next to a mesh search (those nodes are
-//! cached); after [`REPLAYS`] rounds a ray is finished with direct answers, so rays that
-//! meet many meshes do not pay for their walks over and over.
+//! ([`INTERLEAVE_MIN_BYTES`]), and other mesh prims from the ray's log of earlier answers,
+//! in the order the trace asks for them; the first mesh query past the end of the log
+//! abandons the trace. The batch then answers the abandoned rays' queries together,
+//! interleaved, appends each answer to its ray's log, and replays those rays. A replay
+//! makes the same decisions as the trace before it up to the new answer (same limits, same
+//! order), so it asks the same queries, and the last replay returns exactly what
+//! [`CpuScene::trace`] returns, bit for bit. After [`REPLAYS`] rounds a ray is finished
+//! with direct answers, so rays that meet many meshes do not pay for their walks over and
+//! over.
+//!
+//! The replays cost: tracing each ray twice (abandoned, then replayed) took a fifth to a
+//! quarter of a batch's time on the 1M-triangle heightfield, measured against the bare
+//! interleaved searches. A scene that is one axis-aligned placement of one mesh (an OBJ or
+//! glTF mesh scanned alone, [`CpuScene::lone_mesh`]) needs none: its trace asks that mesh
+//! one query, as its last act, so the batch makes each ray's query and finishes its answer
+//! with the trace's own steps (`Placement::local_ray`, `SolidAccel::lone_crossing`,
+//! `CpuScene::in_world`), and traces nothing.
 
 use hytrace_csg::kernel::Step;
-use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery, PreparedPrim, Ray, Real};
+use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery, PreparedPrim, Ray, Real, SlabRay};
 
 use super::{CpuScene, Hit};
 
@@ -197,6 +205,12 @@ impl<T: Real> CpuScene<T> {
             return;
         }
         out.resize(rays.len(), None);
+        if let Some((index, mesh)) = self.lone_mesh() {
+            if mesh.bvh_bytes() >= scratch.min_bytes {
+                self.trace_lone_mesh(index, mesh, rays, scratch, out);
+                return;
+            }
+        }
         let TraceScratch {
             min_bytes,
             logs,
@@ -240,6 +254,51 @@ impl<T: Real> CpuScene<T> {
             for (&i, step) in askers.iter().zip(steps.iter()) {
                 logs[i].answers.push(*step);
             }
+        }
+    }
+}
+
+impl<T: Real> CpuScene<T> {
+    /// [`Self::trace_batch`] of a scene that is one placed mesh, instance `index`
+    /// ([`CpuScene::lone_mesh`]): each ray's trace asks that mesh one query, its last act,
+    /// so the queries are made and their answers finished here as the trace does, and no
+    /// trace is replayed.
+    fn trace_lone_mesh(
+        &self,
+        index: usize,
+        mesh: &MeshPrim<T>,
+        rays: &[(Ray<T>, T, T)],
+        scratch: &mut TraceScratch<T>,
+        out: &mut [Option<Hit<T>>],
+    ) {
+        let TraceScratch {
+            askers,
+            steps,
+            searches,
+            ..
+        } = scratch;
+        let placement = &self.placements[index];
+        askers.clear();
+        let mut queries = Vec::with_capacity(rays.len());
+        for (i, (ray, tmin, tmax)) in rays.iter().enumerate() {
+            // `trace`'s walk of a one-member group: the member's box, then its frame.
+            let slabs = SlabRay::new(ray);
+            if let Some(local) = placement.local_ray(ray, Some(&slabs), *tmin, *tmax) {
+                queries.push(MeshQuery {
+                    mesh,
+                    ray: local,
+                    tmin: *tmin,
+                });
+                askers.push(i);
+            }
+        }
+        MeshPrim::first_crossings(&queries, searches, steps);
+        let solid = &self.solids[placement.solid];
+        for (&i, step) in askers.iter().zip(steps.iter()) {
+            let (_, tmin, tmax) = rays[i];
+            out[i] = solid
+                .lone_crossing(step, tmin, tmax)
+                .map(|c| self.in_world(c.hit(index as u32)));
         }
     }
 }

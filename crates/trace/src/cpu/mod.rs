@@ -91,6 +91,25 @@ struct Group<T> {
     bvh: Option<Box<BoxBvh<T>>>,
 }
 
+impl<T: Real> Placement<T> {
+    /// `ray` in the placed solid's frame; `None` when `cull` (the ray's slab-test form) is
+    /// given and the ray misses the placement's world box within `[tmin, limit]`.
+    #[inline]
+    fn local_ray(
+        &self,
+        ray: &Ray<T>,
+        cull: Option<&SlabRay<T>>,
+        tmin: T,
+        limit: T,
+    ) -> Option<Ray<T>> {
+        if let Some(slabs) = cull {
+            // A superset of the exact test's boxes: culling only, the solid decides.
+            slabs.entry_conservative(ray, &self.bounds, tmin, limit)?;
+        }
+        Some(self.frame.ray_to_local(ray))
+    }
+}
+
 impl<T: Real> Group<T> {
     fn new(members: Vec<u32>, placements: &[Placement<T>]) -> anyhow::Result<Self> {
         let bvh = if members.len() > BVH_MIN_MEMBERS {
@@ -233,19 +252,35 @@ impl<T: Real> CpuScene<T> {
         crossings: &mut impl Crossings<'a, T>,
     ) -> Option<Hit<T>> {
         let p = &self.placements[index];
-        if let Some(slabs) = cull {
-            // A superset of the exact test's boxes: culling only, the solid decides.
-            slabs.entry_conservative(ray, &p.bounds, tmin, limit)?;
-        }
-        let local = p.frame.ray_to_local(ray);
+        let local = p.local_ray(ray, cull, tmin, limit)?;
         self.solids[p.solid]
             .cross(&local, tmin, limit, p.aligned, crossings)
-            .map(|c| Hit {
-                t: c.t,
-                normal: c.normal,
-                instance: index as u32,
-                prim: c.prim,
-            })
+            .map(|c| c.hit(index as u32))
+    }
+
+    /// `hit`, found in its instance's frame, with its normal turned into the world frame
+    /// and normalized.
+    fn in_world(&self, mut hit: Hit<T>) -> Hit<T> {
+        let p = &self.placements[hit.instance as usize];
+        hit.normal = p.frame.normal_to_parent(hit.normal).normalized();
+        hit
+    }
+
+    /// The instance and its mesh when the scene is one axis-aligned placement of a solid
+    /// whose only surface prim is a mesh (an OBJ or glTF mesh traced alone): a trace then
+    /// asks that mesh one query at most, and answers from it alone.
+    fn lone_mesh(&self) -> Option<(usize, &hytrace_csg::MeshPrim<T>)> {
+        let Layout::Flat(group) = &self.layout else {
+            return None;
+        };
+        let [index] = group.members[..] else {
+            return None;
+        };
+        let p = &self.placements[index as usize];
+        match &self.solids[p.solid].prims[..] {
+            [PreparedPrim::Mesh(mesh)] if p.aligned => Some((index as usize, mesh)),
+            _ => None,
+        }
     }
 
     /// The nearer of `seed` and the first crossing of a member of `group`: what folding
@@ -402,11 +437,7 @@ impl<T: Real> CpuScene<T> {
             Layout::Tree(h) => self.navigate(h, ray, tmin, tmax, crossings),
             Layout::Flat(all) => self.enter(all, ray, tmin, tmax, None, crossings),
         };
-        best.map(|mut h| {
-            let p = &self.placements[h.instance as usize];
-            h.normal = p.frame.normal_to_parent(h.normal).normalized();
-            h
-        })
+        best.map(|h| self.in_world(h))
     }
 
     /// Whether any surface crosses the ray with `tmin < t < tmax` (shadow rays): the

@@ -10,6 +10,7 @@
 use std::collections::BTreeMap;
 
 use anyhow::Context;
+use hytrace_csg::kernel::Step;
 use hytrace_csg::{
     ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, EMPTY_AABB, V3,
 };
@@ -17,7 +18,7 @@ use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
 use super::batch::Crossings;
 use super::bvh::{BoxBvh, RaySlabs};
-use super::{widened_bounds, BVH_MIN_MEMBERS};
+use super::{widened_bounds, Hit, BVH_MIN_MEMBERS};
 
 /// Side, in voxels, of the regions whose bricks form one cluster.
 pub const CLUSTER_SIDE: i32 = 64;
@@ -39,6 +40,18 @@ pub(super) struct PrimCrossing<T> {
     pub normal: V3<T>,
     /// The Foundry prim crossed.
     pub prim: u32,
+}
+
+impl<T> PrimCrossing<T> {
+    /// The crossing as a hit of instance `instance` (the normal still in the solid's frame).
+    pub fn hit(self, instance: u32) -> Hit<T> {
+        Hit {
+            t: self.t,
+            normal: self.normal,
+            instance,
+            prim: self.prim,
+        }
+    }
 }
 
 /// A solid's prims and clusters.
@@ -141,11 +154,7 @@ impl<T: Real> SolidAccel<T> {
     ) -> Option<PrimCrossing<T>> {
         if boxed && self.prims.len() == 1 {
             let step = crossings.first_crossing(&self.prims[0], ray, tmin)?;
-            return (step.t > tmin && step.t < limit).then(|| PrimCrossing {
-                t: step.t,
-                normal: step.normal,
-                prim: self.prim_ids[0],
-            });
+            return self.lone_crossing(&step, tmin, limit);
         }
         // (local prim index, t, normal)
         let mut best: Option<(usize, T, V3<T>)> = None;
@@ -202,6 +211,17 @@ impl<T: Real> SolidAccel<T> {
             t,
             normal,
             prim: self.prim_ids[i],
+        })
+    }
+
+    /// The crossing in `(tmin, limit)` of a solid of one surface prim, from that prim's
+    /// first crossing `step`.
+    #[inline]
+    pub fn lone_crossing(&self, step: &Step<T>, tmin: T, limit: T) -> Option<PrimCrossing<T>> {
+        (step.t > tmin && step.t < limit).then(|| PrimCrossing {
+            t: step.t,
+            normal: step.normal,
+            prim: self.prim_ids[0],
         })
     }
 

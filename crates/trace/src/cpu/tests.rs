@@ -370,33 +370,68 @@ fn mesh_instances(seed: u32, centre: [f64; 3], mother: bool) -> Foundry {
     })
 }
 
+/// A hit's bits: distance, normal, instance and prim.
+type HitBits = Option<(u64, [u64; 3], u32, u32)>;
+
+fn hit_bits<T: Real>(h: &Option<Hit<T>>) -> HitBits {
+    h.map(|h| {
+        (
+            h.t.to_f64().to_bits(),
+            h.normal.to_f64().map(f64::to_bits),
+            h.instance,
+            h.prim,
+        )
+    })
+}
+
+/// Asserts that `trace_batch` answers `rays` as `want` (their `trace`s) bit for bit, in
+/// batches of several sizes, interleaving the searches of meshes of at least `min_bytes`.
+fn assert_batches_answer<T: Real>(
+    scene: &CpuScene<T>,
+    rays: &[(Ray<T>, T, T)],
+    want: &[Option<Hit<T>>],
+    min_bytes: usize,
+) {
+    let mut out = Vec::new();
+    let mut scratch = TraceScratch::interleaving_from(min_bytes);
+    for size in [1, 3, 8, 13, BATCH] {
+        for (chunk, want) in rays.chunks(size).zip(want.chunks(size)) {
+            scene.trace_batch(chunk, &mut scratch, &mut out);
+            assert_eq!(out.len(), chunk.len());
+            for ((ray, got), want) in chunk.iter().zip(&out).zip(want) {
+                assert_eq!(
+                    hit_bits(got),
+                    hit_bits(want),
+                    "{} batches of {size}, interleaving from {min_bytes} bytes, ray {ray:?}",
+                    T::NAME
+                );
+            }
+        }
+    }
+}
+
+/// `rays` with three `(tmin, tmax)` windows in turn: the whole ray, a short one, a late
+/// start.
+fn windowed<T: Real>(rays: Vec<Ray<T>>) -> Vec<(Ray<T>, T, T)> {
+    rays.into_iter()
+        .enumerate()
+        .map(|(n, r)| match n % 3 {
+            0 => (r, T::ZERO, T::INFINITY),
+            1 => (r, T::ZERO, T::from_f64(25.0)),
+            _ => (r, T::from_f64(7.0), T::INFINITY),
+        })
+        .collect()
+}
+
 /// `trace_batch` answers every ray bit for bit as `trace` does, on scenes whose rays meet
 /// from none to dozens of mesh prims, flat and navigated, near and far from the origin,
 /// in batches of every size.
 fn batch_case<T: Real>(mother: bool) {
-    let bits = |h: &Option<Hit<T>>| {
-        h.map(|h| {
-            (
-                h.t.to_f64().to_bits(),
-                h.normal.to_f64().map(f64::to_bits),
-                h.instance,
-                h.prim,
-            )
-        })
-    };
-    let mut out = Vec::new();
     let mut by_queries = [0usize; 3];
     for (seed, centre) in [(1, [0.0; 3]), (2, [2.0e4, -1.0e4, 5.0e3])] {
         let scene = CpuScene::<T>::new(&mesh_instances(seed, centre, mother)).unwrap();
-        let rays: Vec<(Ray<T>, T, T)> = random_rays::<T>(seed, centre, 3000)
-            .into_iter()
-            .enumerate()
-            .map(|(n, r)| match n % 3 {
-                0 => (r, T::ZERO, T::INFINITY),
-                1 => (r, T::ZERO, T::from_f64(25.0)),
-                _ => (r, T::from_f64(7.0), T::INFINITY),
-            })
-            .collect();
+        assert!(scene.lone_mesh().is_none());
+        let rays = windowed(random_rays::<T>(seed, centre, 3000));
         let want: Vec<Option<Hit<T>>> = rays
             .iter()
             .map(|(r, a, b)| scene.trace(r, *a, *b))
@@ -410,21 +445,7 @@ fn batch_case<T: Real>(mother: bool) {
         }
         // Every mesh interleaved (these are small), and none (the default for them).
         for min_bytes in [0, INTERLEAVE_MIN_BYTES] {
-            let mut scratch = TraceScratch::interleaving_from(min_bytes);
-            for size in [1, 3, 8, 13, BATCH] {
-                for (chunk, want) in rays.chunks(size).zip(want.chunks(size)) {
-                    scene.trace_batch(chunk, &mut scratch, &mut out);
-                    assert_eq!(out.len(), chunk.len());
-                    for ((ray, got), want) in chunk.iter().zip(&out).zip(want) {
-                        assert_eq!(
-                            bits(got),
-                            bits(want),
-                            "{} batches of {size}, interleaving from {min_bytes} bytes, ray {ray:?}",
-                            T::NAME
-                        );
-                    }
-                }
-            }
+            assert_batches_answer(&scene, &rays, &want, min_bytes);
         }
         let hits = want.iter().filter(|h| h.is_some()).count();
         assert!(hits > 1000 && hits < 2900, "{hits} of 3000 rays hit");
@@ -434,6 +455,53 @@ fn batch_case<T: Real>(mother: bool) {
         by_queries.iter().all(|&n| n > 100),
         "rays by mesh queries: {by_queries:?}"
     );
+}
+
+/// A scene of one placed mesh takes `trace_batch`'s lone-mesh path (no replays) when the
+/// placement is axis-aligned, and the replayed traces when it is not; either way every
+/// ray's answer is `trace`'s, bit for bit: near and far (2e4) from the origin, turned by a
+/// right angle, with `tmin`/`tmax` windows, along the axes, and from the surface.
+#[test]
+fn lone_mesh_batches_answer_as_single_traces() {
+    let (ball, cube) = ball_and_cube(60.0, 40.0);
+    let cases = [
+        (&ball, [0.0; 3], 0.0, true),
+        (
+            &cube,
+            [2.0e4, -1.0e4, 5.0e3],
+            std::f64::consts::FRAC_PI_2,
+            true,
+        ),
+        (&ball, [-3.0e3, 0.0, 1.0e4], std::f64::consts::PI, true),
+        (&cube, [0.0; 3], 0.6, false),
+    ];
+    for (seed, (tris, centre, turn, lone)) in cases.into_iter().enumerate() {
+        let mut f = Foundry::new();
+        let solid = {
+            let mut s = f.begin_solid("mesh");
+            add_mesh_prim(&mut s, tris, [0.0; 3]);
+            s.finish(0).unwrap()
+        };
+        let place =
+            Transform64::translation(centre).compose(&Transform64::rotation([0.0, 0.0, 1.0], turn));
+        f.add_instance(solid, place, 0, 0).unwrap();
+        let scene = CpuScene::<f32>::new(&f).unwrap();
+        assert_eq!(scene.lone_mesh().is_some(), lone, "case {seed}");
+        let mut rays = windowed(random_rays::<f32>(seed as u32 + 10, centre, 3000));
+        // From the surface: each hit's point, `tmin` its distance.
+        let from_surface: Vec<_> = rays
+            .iter()
+            .filter_map(|(r, a, b)| scene.trace(r, *a, *b).map(|h| (*r, h.t, f32::INFINITY)))
+            .collect();
+        rays.extend(from_surface);
+        let want: Vec<_> = rays
+            .iter()
+            .map(|(r, a, b)| scene.trace(r, *a, *b))
+            .collect();
+        let hits = want.iter().filter(|h| h.is_some()).count();
+        assert!(hits > 500, "case {seed}: {hits} of {} rays hit", rays.len());
+        assert_batches_answer(&scene, &rays, &want, 0);
+    }
 }
 
 #[test]
