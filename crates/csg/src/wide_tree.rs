@@ -442,28 +442,39 @@ impl WideSlabs {
     /// The slab-test form of `ray`.
     #[inline]
     pub fn new(ray: &Ray<f32>) -> Self {
-        let d = [ray.direction.x, ray.direction.y, ray.direction.z];
-        let inv = d.map(|c| 1.0 / c);
-        let axis = [0, 1, 2].map(|k| {
-            if d[k] == 0.0 {
-                Axis::Parallel
-            } else if inv[k].is_finite() {
-                Axis::Multiply
+        // Axis by axis: maps of closures over `[0, 1, 2]` were left as calls, a fifth of the
+        // instructions of a walk over one or two nodes.
+        // Per axis: how it is tested, and the reciprocal (or, to divide by, the component).
+        let axis = |d: f32| -> (Axis, f32x8) {
+            let inv = 1.0 / d;
+            if d == 0.0 {
+                (Axis::Parallel, f32x8::splat(inv))
+            } else if inv.is_finite() {
+                (Axis::Multiply, f32x8::splat(inv))
             } else {
-                Axis::Divide
+                (Axis::Divide, f32x8::splat(d))
             }
-        });
+        };
+        let ((ax, sx), (ay, sy), (az, sz)) = (
+            axis(ray.direction.x),
+            axis(ray.direction.y),
+            axis(ray.direction.z),
+        );
+        let near = |d: f32, k: usize| if d >= 0.0 { k } else { k + 3 };
+        let near = [
+            near(ray.direction.x, 0),
+            near(ray.direction.y, 1),
+            near(ray.direction.z, 2),
+        ];
         WideSlabs {
-            origin: [ray.origin.x, ray.origin.y, ray.origin.z].map(f32x8::splat),
-            scale: [0, 1, 2].map(|k| {
-                f32x8::splat(if axis[k] == Axis::Divide {
-                    d[k]
-                } else {
-                    inv[k]
-                })
-            }),
-            near: [0, 1, 2].map(|k| if d[k] >= 0.0 { k } else { k + 3 }),
-            axis,
+            origin: [
+                f32x8::splat(ray.origin.x),
+                f32x8::splat(ray.origin.y),
+                f32x8::splat(ray.origin.z),
+            ],
+            scale: [sx, sy, sz],
+            near,
+            axis: [ax, ay, az],
         }
     }
 

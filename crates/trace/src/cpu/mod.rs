@@ -287,6 +287,9 @@ impl<T: Real> CpuScene<T> {
     /// [`Self::cross_instance`] over the members in placement order gives, that is the
     /// nearest crossing, ties going to `seed`, then to the lowest instance index. Stops
     /// early, its answer meaningless, when `crossings` abandons the trace.
+    // Inlined into the trace, as `trace_with` is into its callers: the nearest hit then
+    // reaches the caller without a round trip through memory.
+    #[inline(always)]
     fn enter<'a>(
         &'a self,
         group: &Group<T>,
@@ -426,6 +429,10 @@ impl<T: Real> CpuScene<T> {
 
     /// [`Self::trace`], prims' first crossings coming from `crossings`; meaningless when
     /// `crossings` abandons the trace.
+    // Inlined so that the hit is built where the caller keeps it: returned through memory,
+    // the caller's copy read it back in wider pieces than it had been written in, a
+    // store-forwarding stall on every ray (measured: 2-3% of a batch's time).
+    #[inline(always)]
     fn trace_with<'a>(
         &'a self,
         ray: &Ray<T>,
