@@ -442,9 +442,9 @@ impl WideSlabs {
     /// The slab-test form of `ray`.
     #[inline]
     pub fn new(ray: &Ray<f32>) -> Self {
-        // Axis by axis: maps of closures over `[0, 1, 2]` were left as calls, a fifth of the
-        // instructions of a walk over one or two nodes.
         // Per axis: how it is tested, and the reciprocal (or, to divide by, the component).
+        // Written out axis by axis: maps of closures over `[0, 1, 2]` were left as calls, a
+        // fifth of the instructions of a walk over one or two nodes.
         let axis = |d: f32| -> (Axis, f32x8) {
             let inv = 1.0 / d;
             if d == 0.0 {
