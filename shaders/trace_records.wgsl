@@ -110,6 +110,10 @@ struct Placement {
     solid: u32,
     hi: array<f32, 3>,
     pad: u32,
+    origin_lo: array<f32, 3>,
+    pad_lo: u32,
+    centre: array<f32, 3>,
+    reach: f32,
 }
 
 struct SurfacePrim {
@@ -133,6 +137,8 @@ struct RayRecord {
     tmin: f32,
     direction: array<f32, 3>,
     tmax: f32,
+    origin_lo: array<f32, 3>,
+    pad: u32,
 }
 
 struct HitRecord {
@@ -247,6 +253,8 @@ const STATUS_DEPTH_LIMIT: u32 = 1u;
 const STATUS_LOOPS_CUT: u32 = 2u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
 const SURFACE_TOLERANCE: f32 = 2e-6;
+// The gap between 1 and the next f32 (hytrace_csg::Real::EPSILON).
+const EPSILON: f32 = 1.1920929e-7;
 // Deepest box BVH the CPU accepts when it prepares a scene.
 const BOX_BVH_MAX_DEPTH: u32 = 64u;
 const VOLUME_ESTIMATOR_EXACT: u32 = 0u;

@@ -107,9 +107,10 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
     var located = UNSET;
     if rparams.hierarchical != 0u {
         var status = 0u;
-        located = locate_point(o, &status);
+        located = locate_point(o, vec3<f32>(0.0), &status);
     }
-    return cross_from(located, o, d, 0.0, tmax);
+    // Render rays are f32 throughout: their origins have no rest.
+    return cross_from(located, o, vec3<f32>(0.0), d, 0.0, tmax);
 }
 
 // Geometry views: the colour of the first non-transparent surface.

@@ -19,6 +19,11 @@ fn ray_origin(r: RayRecord) -> vec3<f32> {
     return vec3<f32>(r.origin[0], r.origin[1], r.origin[2]);
 }
 
+// The rest of the origin after its rounding to f32 (`ray_origin`).
+fn ray_origin_lo(r: RayRecord) -> vec3<f32> {
+    return vec3<f32>(r.origin_lo[0], r.origin_lo[1], r.origin_lo[2]);
+}
+
 @compute @workgroup_size(64)
 fn locate_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
     let i = ray_index(gid, groups_);
@@ -26,7 +31,7 @@ fn locate_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
         return;
     }
     var status = 0u;
-    located[i] = locate_point(ray_origin(rays[i]), &status);
+    located[i] = locate_point(ray_origin(rays[i]), ray_origin_lo(rays[i]), &status);
     if loops_cut_short(params.probe_trips) {
         status |= STATUS_LOOPS_CUT;
     }
@@ -47,7 +52,7 @@ fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         start_in = located[i];
         status = hits[i].status;
     }
-    let h = cross_from(start_in, ray_origin(r), d, r.tmin, min(r.tmax, INF));
+    let h = cross_from(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin, min(r.tmax, INF));
     var out: HitRecord;
     out.normal = array<f32, 3>(h.normal.x, h.normal.y, h.normal.z);
     out.t = h.t;

@@ -123,16 +123,44 @@ fn placement_hi(p: Placement) -> vec3<f32> {
     return vec3<f32>(p.hi[0], p.hi[1], p.hi[2]);
 }
 
-// The nearer of `best` and the first crossing of instance `index`'s surface.
-fn cross_instance(index: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
+// The world point o + o_lo (two f32 parts) in the placed solid's frame, the offset from
+// the translation formed part by part (Placement::offset_of).
+fn placement_offset_of(p: Placement, o: vec3<f32>, o_lo: vec3<f32>) -> vec3<f32> {
+    let f = placement_frame(p);
+    let hi = o - frame_origin(f);
+    let lo = o_lo - vec3<f32>(p.origin_lo[0], p.origin_lo[1], p.origin_lo[2]);
+    return frame_linear(f, hi + lo);
+}
+
+// The nearer of `best` and the first crossing of instance `index`'s surface. The ray is
+// taken into the solid's frame as Placement::rebase takes it (a ray starting beyond the
+// solid's reach moved along itself to its closest approach to the centre of the solid's
+// box), the solid asked up to a few ulps past the local limit (LocalRay::past_local) and
+// its crossing kept if its world parameter is below the limit.
+fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
     let p = placement(index);
     let limit = hit_limit(best, tmax);
     if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
         return best;
     }
-    let f = placement_frame(p);
-    var c = solid_cross(p.solid, frame_point_to_local(f, o), frame_linear(f, d), tmin, limit);
+    let offset = placement_offset_of(p, o, o_lo);
+    let ld = frame_linear(placement_frame(p), d);
+    let centre = vec3<f32>(p.centre[0], p.centre[1], p.centre[2]);
+    var shift = 0.0;
+    if max(abs(offset.x), max(abs(offset.y), abs(offset.z))) > p.reach {
+        shift = dot(centre - offset, ld) / dot(ld, ld);
+    }
+    if !is_finite_t(shift) {
+        shift = 0.0;
+    }
+    let past = limit - shift;
+    let limit_local = past + 4.0 * EPSILON * abs(past);
+    var c = solid_cross(p.solid, offset + ld * shift, ld, tmin - shift, limit_local);
     if !c.found {
+        return best;
+    }
+    c.t = shift + c.t;
+    if !(c.t < limit) {
         return best;
     }
     c.instance = index;
@@ -148,7 +176,7 @@ const PHASE_ENTER: u32 = 2u;
 // flat scenes): the nearer of leaving it (CpuScene::exit) and entering one of the members
 // of its group of daughters (CpuScene::enter; the roots or the whole flat scene when
 // UNSET). Ties go to the exit, then to the lowest instance index.
-fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Hit {
+fn cross_from(located: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Hit {
     var g = 0u;
     var phase = PHASE_ENTER;
     if located != UNSET {
@@ -169,11 +197,13 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
         var out_of_order = false;
         if phase == PHASE_EXIT_BAND {
             // An origin within the surface tolerance of the located instance's surface,
-            // moving out: the exit it starts on, found again from a start moved back.
+            // moving out: the exit it starts on, found again from a start moved back by
+            // the solid's tolerance there (its size plus the origin's distance from the
+            // centre of its box).
             let p = placement(located);
             let size = max(p.hi[0] - p.lo[0], max(p.hi[1] - p.lo[1], p.hi[2] - p.lo[2]));
-            let scale = size + max(abs(o.x), max(abs(o.y), abs(o.z)));
-            start = tmin - 4.0 * SURFACE_TOLERANCE * scale;
+            let far = max(abs(o.x - 0.5 * (p.lo[0] + p.hi[0])), max(abs(o.y - 0.5 * (p.lo[1] + p.hi[1])), abs(o.z - 0.5 * (p.lo[2] + p.hi[2]))));
+            start = tmin - 4.0 * SURFACE_TOLERANCE * (size + far);
         } else if phase == PHASE_ENTER {
             let k = bvh_next(&w, r, tmin, hit_limit(best, tmax));
             if k == UNSET {
@@ -191,7 +221,7 @@ fn cross_from(located: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) ->
                 seed = best;
             }
         }
-        let h = cross_instance(index, o, d, start, tmax, seed);
+        let h = cross_instance(index, o, o_lo, d, start, tmax, seed);
         if phase == PHASE_EXIT {
             if h.found {
                 best = h;
@@ -243,7 +273,7 @@ fn solid_contains(solid: u32, x: vec3<f32>) -> bool {
 // roots down, the last-placed member containing x. UNSET when none; `status` gets
 // STATUS_DEPTH_LIMIT if the placement tree is deeper than the instances (impossible for a
 // validated Foundry: a guard, never silent).
-fn locate_point(x: vec3<f32>, status: ptr<function, u32>) -> u32 {
+fn locate_point(x: vec3<f32>, x_lo: vec3<f32>, status: ptr<function, u32>) -> u32 {
     var current = UNSET;
     var g = 0u;
     var list = group_list(0);
@@ -280,7 +310,7 @@ fn locate_point(x: vec3<f32>, status: ptr<function, u32>) -> u32 {
         if !holds(placement_lo(p), placement_hi(p), x) {
             continue;
         }
-        if solid_contains(p.solid, frame_point_to_local(placement_frame(p), x)) {
+        if solid_contains(p.solid, placement_offset_of(p, x, x_lo)) {
             found = c;
         }
     }

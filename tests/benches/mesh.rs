@@ -45,6 +45,13 @@ use rayon::prelude::*;
 const RUNS: usize = 3;
 
 /// A hit's distance, `inf` for a miss.
+/// The same rays in f64, as hytrace's CPU tracer takes them (exact conversions).
+fn exactly_f64(rays: &[hytrace_csg::Ray<f32>]) -> Vec<hytrace_csg::Ray<f64>> {
+    rays.iter()
+        .map(|r| hytrace_csg::Ray::from_f64(r.origin.to_f64(), r.direction.to_f64()))
+        .collect()
+}
+
 fn distance(hit: &Option<Hit<f32>>) -> f32 {
     hit.map_or(f32::INFINITY, |h| h.t)
 }
@@ -138,12 +145,14 @@ fn main() {
     let mut prim_rates = Vec::new();
     for set in &sets {
         let rays = set.rays();
+        let rays64 = exactly_f64(&rays);
         let (scene_s, hits) = best(|| {
-            rays.par_iter()
+            rays64
+                .par_iter()
                 .map(|r| distance(&scene.trace(r, 0.0, f32::INFINITY)))
                 .collect::<Vec<f32>>()
         });
-        let (batch_s, batch_hits) = best(|| trace_batches(&scene, &rays, distance));
+        let (batch_s, batch_hits) = best(|| trace_batches(&scene, &rays64, distance));
         let (prim_s, prim_hits) = best(|| {
             rays.par_iter()
                 .map(|r| prim.first_crossing(r, 0.0).t)
@@ -335,9 +344,10 @@ fn embree_backend_row(
     }
     for set in sets {
         let rays = set.rays();
+        let rays64 = exactly_f64(&rays);
         let [median, low, high] = paired_speed_ratio(
             || {
-                trace_batches(scene, &rays, distance);
+                trace_batches(scene, &rays64, distance);
             },
             || {
                 rays.par_iter().for_each(|r| {

@@ -33,7 +33,13 @@ use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
 use pairs::{paired_speed_ratio, PAIRS};
 use rayon::prelude::*;
 
+#[cfg(feature = "embree")]
 fn ray32(r: &RayRow) -> Ray<f32> {
+    Ray::from_f64(r.origin, r.direction)
+}
+
+/// The ray as hytrace's CPU tracer takes it (f64, as `hytrace scan` reads it).
+fn ray64(r: &RayRow) -> Ray<f64> {
     Ray::from_f64(r.origin, r.direction)
 }
 
@@ -83,7 +89,7 @@ fn main() {
         let (secs, cpu_hits) = best(|| {
             rays.par_iter()
                 .map(|r| {
-                    cpu.trace(&ray32(r), 0.0, f32::INFINITY)
+                    cpu.trace(&ray64(r), 0.0, f32::INFINITY)
                         .map(|h| (h.t, h.instance))
                 })
                 .collect::<Vec<_>>()
@@ -95,9 +101,11 @@ fn main() {
             secs,
             cpu_hits.iter().flatten().count(),
         );
+        #[cfg(feature = "embree")]
         let rays32: Vec<Ray<f32>> = rays.iter().map(ray32).collect();
+        let rays64: Vec<Ray<f64>> = rays.iter().map(ray64).collect();
         let (secs, batch_hits) =
-            best(|| trace_batches(&cpu, &rays32, |h| h.map(|h| (h.t, h.instance))));
+            best(|| trace_batches(&cpu, &rays64, |h| h.map(|h| (h.t, h.instance))));
         assert!(batch_hits == cpu_hits, "trace_batch and trace differ");
         row(
             "closest hit, batches (as `hytrace scan`)",
@@ -108,7 +116,7 @@ fn main() {
         );
         let (secs, occluded) = best(|| {
             rays.par_iter()
-                .filter(|r| cpu.occluded(&ray32(r), 0.0, f32::INFINITY))
+                .filter(|r| cpu.occluded(&ray64(r), 0.0, f32::INFINITY))
                 .count()
         });
         row("any hit", "hytrace cpu", build_s, secs, occluded);
@@ -159,7 +167,7 @@ fn main() {
             // The rows above come from different moments; these pairs are side by side.
             let [median, low, high] = paired_speed_ratio(
                 || {
-                    trace_batches(&cpu, &rays32, |h| h.map(|h| h.t));
+                    trace_batches(&cpu, &rays64, |h| h.map(|h| h.t));
                 },
                 || {
                     rays32.par_iter().for_each(|r| {
@@ -172,7 +180,7 @@ fn main() {
             );
             let [median, low, high] = paired_speed_ratio(
                 || {
-                    rays32.par_iter().for_each(|r| {
+                    rays64.par_iter().for_each(|r| {
                         cpu.occluded(r, 0.0, f32::INFINITY);
                     })
                 },

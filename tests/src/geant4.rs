@@ -9,7 +9,8 @@ use hytrace_csg::geant4::{G4Mapping, G4Solid};
 use hytrace_csg::{add_geometry, to_tree, PreparedPrim, Ray, Real};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
-use hytrace_foundry::{Foundry, UNSET};
+use hytrace_foundry::{Foundry, Transform64, UNSET};
+use hytrace_trace::cpu::CpuScene;
 use serde::Deserialize;
 
 use crate::f64_array;
@@ -179,7 +180,53 @@ pub struct KindStats {
 /// Compares hytrace in precision `T` with the oracle's answers, per kind.
 pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
     let trees = prepare::<T>(&data.solids);
-    compare_rays(data, &|solid| Some(&trees[solid]), "")
+    compare_rays(
+        data,
+        &|solid, r| Some(answer(&trees[solid], r)),
+        &tolerance,
+        "",
+    )
+}
+
+/// Like [`compare`], with every solid placed alone in a scene at `offset` (a translation)
+/// and traced by the CPU tracer in precision `T` from the oracle's origins moved by
+/// `offset` (added in f64, within 1e-10 mm of the exact sum), against Geant4's answers
+/// (a translation changes no distance), within `allowed` mm.
+pub fn compare_placed<T: Real>(
+    data: &OracleData,
+    offset: [f64; 3],
+    allowed: f64,
+) -> BTreeMap<String, KindStats> {
+    let scenes: Vec<CpuScene<T>> = data
+        .solids
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let geometry = s
+                .to_geometry(TESSELLATION_TOLERANCE)
+                .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
+            let mut f = Foundry::new();
+            let solid = add_geometry(&mut f, "placed", &geometry, 0)
+                .unwrap_or_else(|e| panic!("solid {i}: {e}"));
+            f.add_instance(solid, Transform64::translation(offset), 0, 0)
+                .unwrap();
+            f.validate().unwrap();
+            CpuScene::new(&f).unwrap_or_else(|e| panic!("solid {i}: {e:#}"))
+        })
+        .collect();
+    let trace = |solid: usize, r: &[f64; 8]| {
+        let origin = [0, 1, 2].map(|k| r[k] + offset[k]);
+        let ray = Ray::from_f64(origin, [r[4], r[5], r[6]]);
+        let hit = scenes[solid].trace(&ray, T::from_f64(r[3]), T::INFINITY);
+        let t = hit.map_or(f64::INFINITY, |h| h.t.to_f64());
+        let cos = hit.map_or(1.0, |h| {
+            let n = h.normal.to_f64();
+            (n[0] * r[4] + n[1] * r[5] + n[2] * r[6]).abs()
+        });
+        let inside = scenes[solid].locate_point(origin).is_some();
+        Some((t, cos, inside))
+    };
+    compare_rays(data, &trace, &|_, _| allowed, "")
 }
 
 /// Like [`compare`] for the solids of `kinds` only, each built from its exact CSG
@@ -213,14 +260,21 @@ pub fn compare_csg<T: Real>(data: &OracleData, kinds: &[&str]) -> BTreeMap<Strin
             })
         })
         .collect();
-    compare_rays(data, &|solid| trees[solid].as_ref(), " (csg)")
+    let answer = |solid: usize, r: &[f64; 8]| trees[solid].as_ref().map(|p| answer(p, r));
+    compare_rays(data, &answer, &tolerance, " (csg)")
 }
 
-/// Compares the rays of the solids that `prim` prepares (`None`: skipped), per kind
-/// (the kind's name followed by `suffix`).
-fn compare_rays<'a, T: Real>(
+/// hytrace's answer for one oracle ray: the first crossing distance (inf: none), the cosine
+/// of incidence there, and whether the origin is inside.
+type Answer = (f64, f64, bool);
+
+/// Compares the rays of the solids that `answer` answers (`None`: skipped; else distance,
+/// cosine of incidence and whether the origin is inside), per kind (the kind's name
+/// followed by `suffix`), within `tolerance(ray, geant4's distance)` for exact solids.
+fn compare_rays(
     data: &OracleData,
-    prim: &dyn Fn(usize) -> Option<&'a PreparedPrim<T>>,
+    answer: &dyn Fn(usize, &[f64; 8]) -> Option<Answer>,
+    tolerance: &dyn Fn(&[f64; 8], f64) -> f64,
     suffix: &str,
 ) -> BTreeMap<String, KindStats> {
     let mut stats: BTreeMap<String, KindStats> = BTreeMap::new();
@@ -230,7 +284,7 @@ fn compare_rays<'a, T: Real>(
             continue;
         }
         let solid = data.ray_solid[i] as usize;
-        let Some(tree) = prim(solid) else {
+        let Some((got, cos, inside)) = answer(solid, r) else {
             continue;
         };
         let s = stats
@@ -245,7 +299,6 @@ fn compare_rays<'a, T: Real>(
             s.in_band += 1;
             continue;
         }
-        let (got, cos, inside) = answer(tree, r);
         s.rays += 1;
         let ok = if want.is_infinite() {
             got.is_infinite()
@@ -261,11 +314,10 @@ fn compare_rays<'a, T: Real>(
         s.inside_ok += (inside == (code == 2.0)) as usize;
         if !ok && s.examples.len() < 5 {
             s.examples.push(format!(
-                "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {} {got} \
+                "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {got} \
                  (cosine of incidence {cos:.2e}); ray {r:?}",
                 data.ray_family[i],
                 if code == 2.0 { "inside" } else { "outside" },
-                T::NAME,
             ));
         }
     }

@@ -24,7 +24,7 @@ use hytrace_volume::TransmittanceParams;
 
 use crate::cpu::media::{MediumSegment, SceneMedia};
 use crate::cpu::{CpuScene, Hit, TraceScratch, BATCH};
-use crate::gpu::records::{RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
+use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
 
 /// Which tracer answers a scan.
@@ -177,7 +177,8 @@ fn answers<T: Real>(
 ) -> anyhow::Result<Vec<Answer>> {
     rays.par_iter()
         .map(|r| {
-            let (ray, tmin, tmax) = query_of(r);
+            let (_, tmin, tmax) = query_of::<T>(r);
+            let ray = Ray::from_f64(r.origin, r.direction);
             Ok(answer_of(trace(&ray, tmin, tmax)?))
         })
         .collect()
@@ -204,8 +205,9 @@ fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
     answers
 }
 
-/// A ray row as the tracers take it: ray, tmin, tmax (`+inf` for an infinite one).
-fn query_of<T: Real>(r: &RayRow) -> (Ray<T>, T, T) {
+/// A ray row as the CPU tracer takes it: ray (in f64), tmin, tmax (`+inf` for an infinite
+/// one).
+fn query_of<T: Real>(r: &RayRow) -> (Ray<f64>, T, T) {
     let tmax = if r.tmax.is_finite() {
         T::from_f64(r.tmax)
     } else {
@@ -319,12 +321,14 @@ pub fn scan_with(
 /// A ray in the form the GPU kernels read: rounded to f32 as the CPU's f32 tracer rounds
 /// it, infinite `tmax` as the kernels' [`GPU_INF`].
 pub fn ray_record(r: &RayRow) -> RayRecord {
-    let f = |v: [f64; 3]| v.map(|c| c as f32);
+    let (origin, origin_lo) = split_f64(r.origin);
     RayRecord {
-        origin: f(r.origin),
+        origin,
         tmin: r.tmin as f32,
-        direction: f(r.direction),
+        direction: r.direction.map(|c| c as f32),
         tmax: (r.tmax as f32).min(GPU_INF),
+        origin_lo,
+        pad: 0,
     }
 }
 

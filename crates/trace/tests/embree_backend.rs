@@ -253,14 +253,16 @@ mod with_embree {
             let (mut queries, mut blocked, mut differ) = (0usize, 0usize, Vec::new());
             for (i, r) in rays.iter().enumerate() {
                 let (ray, tmin, tmax) = f32_ray(r);
+                // The CPU tracer takes rays in f64: the same ray, exactly.
+                let exact = Ray::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
                 let mut segments = vec![(tmin, tmax)];
-                if let Some(h) = cpu.trace(&ray, tmin, tmax) {
+                if let Some(h) = cpu.trace(&exact, tmin, tmax) {
                     let to_hit = h.t - tmin;
                     segments.push((tmin, tmin + 0.5 * to_hit));
                     segments.push((tmin, (h.t + 0.01 * to_hit).min(tmax)));
                 }
                 for (a, b) in segments {
-                    let want = cpu.occluded(&ray, a, b);
+                    let want = cpu.occluded(&exact, a, b);
                     let got = embree.occluded(&ray, a, b).unwrap();
                     queries += 1;
                     blocked += want as usize;
@@ -498,7 +500,8 @@ mod with_embree {
         for r in rays_for(&f, 40, 2000) {
             let ray = Ray::from_f64(r.origin, r.direction);
             let want: Option<Hit<f32>> = cpu.trace(&ray, 0.0, f32::INFINITY);
-            let got = embree.trace(&ray, 0.0, f32::INFINITY).unwrap();
+            let got = embree.trace(&Ray::from_f64(r.origin, r.direction), 0.0, f32::INFINITY);
+            let got = got.unwrap();
             if let (Some(w), Some(g)) = (want, got) {
                 total += 1;
                 same += usize::from(w.instance == g.instance && w.prim == g.prim);

@@ -451,6 +451,8 @@ fn scattering_media_match_the_cpu_in_mean_and_variance() {
     // independent streams (another seed on the GPU) the images agree in distribution: the
     // mean of the pixel differences is within four standard errors of 0, and the spread
     // of the pixel values (the scene's structure plus the noise) is the same within 10%.
+    // The images are 128 x 96: at 64 x 48 the default scene's pixel variance moved by 8%
+    // between two seeds of the CPU alone, most of the 10% bound.
     let dir = tempfile::tempdir().unwrap();
     let several = media_scene(dir.path(), "0.9", "[0, 0, 0]");
     for (scene, exact) in [
@@ -462,7 +464,7 @@ fn scattering_media_match_the_cpu_in_mean_and_variance() {
         let tweak = |seed: u32| {
             move |s: &mut RenderSpec| {
                 small(s, View::Shaded, 1);
-                s.settings.size = [64, 48];
+                s.settings.size = [128, 96];
                 s.settings.seed = seed;
             }
         };

@@ -296,7 +296,7 @@ fn scans_of_a_large_mesh_equal_single_traces() {
     let scene = hytrace_trace::cpu::CpuScene::<f32>::new(&f).unwrap();
     let (mut hits, mut far) = (0, 0);
     for (i, r) in rays.iter().enumerate() {
-        let ray = hytrace_csg::Ray::<f32>::from_f64(r.origin, r.direction);
+        let ray = hytrace_csg::Ray::<f64>::from_f64(r.origin, r.direction);
         let tmax = if r.tmax.is_finite() {
             r.tmax as f32
         } else {

@@ -5,10 +5,11 @@ use hytrace_csg::Ray;
 use hytrace_trace::cpu::{CpuScene, Hit, TraceScratch, BATCH};
 use rayon::prelude::*;
 
-/// `keep` of the closest hit of every ray (`tmin` 0, no `tmax`), in order.
+/// `keep` of the closest hit of every ray (`tmin` 0, no `tmax`; rays in f64, as the
+/// tracer takes them), in order.
 pub fn trace_batches<R: Send + Clone + Default>(
     scene: &CpuScene<f32>,
-    rays: &[Ray<f32>],
+    rays: &[Ray<f64>],
     keep: impl Fn(&Option<Hit<f32>>) -> R + Sync,
 ) -> Vec<R> {
     let mut kept = vec![R::default(); rays.len()];

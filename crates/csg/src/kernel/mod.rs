@@ -59,7 +59,13 @@ impl<T: Real> Frame<T> {
         })
     }
 
-    fn linear(&self, v: V3<T>) -> V3<T> {
+    /// Where the frame's origin lies in the parent frame.
+    pub fn origin(&self) -> V3<T> {
+        self.origin
+    }
+
+    /// A parent-frame offset (a vector: no origin subtracted) in this frame.
+    pub fn linear(&self, v: V3<T>) -> V3<T> {
         V3::new(
             self.inverse[0].dot(v),
             self.inverse[1].dot(v),

@@ -26,7 +26,7 @@
 use hytrace_csg::kernel::Step;
 use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery, PreparedPrim, Ray, Real, SlabRay};
 
-use super::{CpuScene, Hit};
+use super::{CpuScene, Hit, WorldRay};
 
 /// Rounds of interleaved mesh searches a ray of a batch takes part in; past them its trace
 /// answers its remaining mesh queries directly.
@@ -192,7 +192,7 @@ impl<T: Real> CpuScene<T> {
     /// on its own.
     pub fn trace_batch(
         &self,
-        rays: &[(Ray<T>, T, T)],
+        rays: &[(Ray<f64>, T, T)],
         scratch: &mut TraceScratch<T>,
         out: &mut Vec<Option<Hit<T>>>,
     ) {
@@ -240,7 +240,7 @@ impl<T: Real> CpuScene<T> {
                     pending: None,
                     min_bytes: *min_bytes,
                 };
-                let hit = self.trace_with(ray, *tmin, *tmax, &mut replay);
+                let hit = self.trace_with(&WorldRay::new(ray), *tmin, *tmax, &mut replay);
                 match replay.pending {
                     Some(query) => queries.push(query),
                     None => out[i] = hit,
@@ -267,7 +267,7 @@ impl<T: Real> CpuScene<T> {
         &self,
         index: usize,
         mesh: &MeshPrim<T>,
-        rays: &[(Ray<T>, T, T)],
+        rays: &[(Ray<f64>, T, T)],
         scratch: &mut TraceScratch<T>,
         out: &mut [Option<Hit<T>>],
     ) {
@@ -280,25 +280,35 @@ impl<T: Real> CpuScene<T> {
         let placement = &self.placements[index];
         askers.clear();
         let mut queries = Vec::with_capacity(rays.len());
+        let mut shifts = Vec::with_capacity(rays.len());
         for (i, (ray, tmin, tmax)) in rays.iter().enumerate() {
             // `trace`'s walk of a one-member group: the member's box, then its frame.
-            let slabs = SlabRay::new(ray);
-            if let Some(local) = placement.local_ray(ray, Some(&slabs), *tmin, *tmax) {
+            let world = WorldRay::new(ray);
+            let slabs = SlabRay::new(&world.rounded);
+            if let Some(local) = placement.local_ray(&world, Some(&slabs), *tmin, *tmax) {
                 queries.push(MeshQuery {
                     mesh,
-                    ray: local,
-                    tmin: *tmin,
+                    ray: local.ray,
+                    tmin: local.local_t(*tmin),
                 });
+                shifts.push(local);
                 askers.push(i);
             }
         }
         MeshPrim::first_crossings(&queries, searches, steps);
         let solid = &self.solids[placement.solid];
-        for (&i, step) in askers.iter().zip(steps.iter()) {
+        for ((&i, step), local) in askers.iter().zip(steps.iter()).zip(&shifts) {
             let (_, tmin, tmax) = rays[i];
+            let limit = local.past_local(tmax);
             out[i] = solid
-                .lone_crossing(step, tmin, tmax)
-                .map(|c| self.in_world(c.hit(index as u32)));
+                .lone_crossing(step, local.local_t(tmin), limit)
+                .map(|c| {
+                    let mut hit = c.hit(index as u32);
+                    hit.t = local.world_t(hit.t);
+                    hit
+                })
+                .filter(|hit| hit.t < tmax)
+                .map(|hit| self.in_world(hit));
         }
     }
 }
@@ -307,7 +317,7 @@ impl<T: Real> CpuScene<T> {
 impl<T: Real> CpuScene<T> {
     /// How many mesh queries the trace of `ray` asks (tests: which rays replay how often,
     /// every mesh interleaved).
-    pub(super) fn mesh_queries(&self, ray: &Ray<T>, tmin: T, tmax: T) -> usize {
+    pub(super) fn mesh_queries(&self, ray: &Ray<f64>, tmin: T, tmax: T) -> usize {
         let mut log = RayLog::default();
         let mut replay = Replay {
             log: &mut log,
@@ -316,7 +326,7 @@ impl<T: Real> CpuScene<T> {
             pending: None,
             min_bytes: 0,
         };
-        self.trace_with(ray, tmin, tmax, &mut replay);
+        self.trace_with(&WorldRay::new(ray), tmin, tmax, &mut replay);
         replay.asked
     }
 }

@@ -103,6 +103,10 @@ impl CpuScene<f32> {
                     solid: p.solid as u32,
                     hi,
                     pad: 0,
+                    origin_lo: p.origin_lo.to_f64().map(|c| c as f32),
+                    pad_lo: 0,
+                    centre: p.centre.to_f64().map(|c| c as f32),
+                    reach: p.reach,
                 }
             })
             .collect();

@@ -153,7 +153,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmax: f64,
         ray_index: u32,
     ) -> anyhow::Result<Transmitted<T>> {
-        let ray = Ray::<T>::from_f64(origin, direction);
+        let ray = Ray::from_f64(origin, direction);
         let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
         let (transmittance, lookups) =

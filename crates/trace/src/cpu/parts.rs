@@ -8,7 +8,7 @@ use hytrace_csg::{PreparedPrim, Ray, Real, V3};
 use super::batch::Direct;
 #[cfg(feature = "embree")]
 use super::solid::Cluster;
-use super::{CpuScene, Hit, Layout};
+use super::{CpuScene, Hit, Layout, WorldPoint, WorldRay};
 
 impl<T: Real> CpuScene<T> {
     /// The surface prims (CSG trees and meshes) of solid `solid`, in the solid's frame.
@@ -57,11 +57,11 @@ impl<T: Real> CpuScene<T> {
 
     /// The deepest instance containing `x` as the navigator locates it; `None` outside every
     /// root and in flat scenes (which [`CpuScene::trace`] does not navigate).
-    pub(crate) fn locate_origin(&self, x: V3<T>) -> Option<u32> {
+    pub(crate) fn locate_origin(&self, x: V3<f64>) -> Option<u32> {
         let Layout::Tree(h) = &self.layout else {
             return None;
         };
-        self.locate_deepest(h, x)
+        self.locate_deepest(h, &WorldPoint::new(x))
     }
 
     /// Where the ray leaves instance `instance`, the navigator's exit (normal in the
@@ -69,10 +69,16 @@ impl<T: Real> CpuScene<T> {
     pub(crate) fn exit_from(
         &self,
         instance: u32,
-        ray: &Ray<T>,
+        ray: &Ray<f64>,
         tmin: T,
         tmax: T,
     ) -> Option<Hit<T>> {
-        self.exit(instance as usize, ray, tmin, tmax, &mut Direct)
+        self.exit(
+            instance as usize,
+            &WorldRay::new(ray),
+            tmin,
+            tmax,
+            &mut Direct,
+        )
     }
 }

@@ -95,7 +95,7 @@ fn place_layout(
 
 /// Random rays about `centre`: random and axis-aligned directions (zero components),
 /// origins inside instances, on the shared grid faces and outside everything.
-fn random_rays<T: Real>(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<T>> {
+fn random_rays(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<f64>> {
     let mut rng = Rng::new(seed, 1, 0);
     (0..count)
         .map(|n| {
@@ -128,8 +128,9 @@ fn random_rays<T: Real>(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<T>
 }
 
 /// The flat scene's answer by the linear loop over all instances.
-fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
-    let slabs = SlabRay::new(ray);
+fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<f64>, tmin: T, tmax: T) -> Option<Hit<T>> {
+    let ray = &WorldRay::new(ray);
+    let slabs = SlabRay::new(&ray.rounded);
     (0..s.placements.len()).fold(None, |best, i| {
         let limit = best.map_or(tmax, |b| b.t);
         s.cross_instance(i, ray, Some(&slabs), tmin, limit, &mut Direct)
@@ -138,7 +139,8 @@ fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Opti
 }
 
 /// The navigator's answer by linear loops over roots and daughters.
-fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> Option<Hit<T>> {
+fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<f64>, tmin: T, tmax: T) -> Option<Hit<T>> {
+    let ray = &WorldRay::new(ray);
     let Layout::Tree(h) = &s.layout else {
         panic!("not a hierarchy")
     };
@@ -146,7 +148,7 @@ fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> 
     let mut members = &h.roots.members;
     'descend: loop {
         for &c in members.iter().rev() {
-            if s.contains(c, ray.origin) {
+            if s.contains(c, &ray.origin) {
                 current = Some(c);
                 members = &h.daughters[c as usize].members;
                 continue 'descend;
@@ -155,7 +157,7 @@ fn linear_navigate<T: Real>(s: &CpuScene<T>, ray: &Ray<T>, tmin: T, tmax: T) -> 
         break;
     }
     let exit = current.and_then(|c| s.exit(c as usize, ray, tmin, tmax, &mut Direct));
-    let slabs = SlabRay::new(ray);
+    let slabs = SlabRay::new(&ray.rounded);
     members.iter().fold(exit, |best, &d| {
         let limit = best.map_or(tmax, |b| b.t);
         s.cross_instance(d as usize, ray, Some(&slabs), tmin, limit, &mut Direct)
@@ -177,7 +179,7 @@ fn compare<T: Real>(mother: bool) {
         };
         assert!(group.bvh.is_some(), "the group must be searched by BVH");
         let (mut hits, mut inside) = (0, 0);
-        for ray in random_rays::<T>(seed, centre, 4000) {
+        for ray in random_rays(seed, centre, 4000) {
             for (tmin, tmax) in [(T::ZERO, T::INFINITY), (T::ZERO, T::from_f64(20.0))] {
                 let expected = if mother {
                     linear_navigate(&scene, &ray, tmin, tmax)
@@ -198,13 +200,14 @@ fn compare<T: Real>(mother: bool) {
                 hits += usize::from(got.is_some());
             }
             let mut scratch = Vec::new();
-            let located = scene.locate(group, ray.origin, &mut scratch);
+            let origin = WorldPoint::new(ray.origin);
+            let located = scene.locate(group, &origin, &mut scratch);
             let linear = group
                 .members
                 .iter()
                 .rev()
                 .copied()
-                .find(|&c| scene.contains(c, ray.origin));
+                .find(|&c| scene.contains(c, &origin));
             assert_eq!(located, linear, "seed {seed} origin {:?}", ray.origin);
             inside += usize::from(linear.is_some());
         }
@@ -236,7 +239,9 @@ fn navigator_bvh_matches_linear_f32() {
 
 /// One solid of many CSG prims (searched through the solid's own BVH) against the same
 /// prims as separate one-prim solids placed where they are (searched by the instance BVH):
-/// the same crossings, bit for bit, the prim index standing for the instance index.
+/// the same crossings, the prim index standing for the instance index. Each solid is
+/// solved on the ray rebased to its own centre, so parameters agree up to rounding at the
+/// solids' scale (200 mm), and a tie within that may go to either prim.
 fn many_prims_in_one_solid<T: Real>() {
     let (mut together, mut apart) = (Foundry::new(), Foundry::new());
     let mut rng = Rng::new(7, 0, 0);
@@ -263,20 +268,28 @@ fn many_prims_in_one_solid<T: Real>() {
         CpuScene::<T>::new(&apart).unwrap(),
     );
     assert!(together.solids[0].prims.len() == 40 && together.placements.len() == 1);
-    let mut hits = 0;
-    for ray in random_rays::<T>(8, [0.0; 3], 4000) {
+    let (mut hits, mut ties) = (0, 0);
+    for ray in random_rays(8, [0.0; 3], 4000) {
         let (a, b) = (
             together.trace(&ray, T::ZERO, T::INFINITY),
             apart.trace(&ray, T::ZERO, T::INFINITY),
         );
-        assert_eq!(
-            a.map(|h| (h.t.to_f64(), h.normal.to_f64(), h.prim)),
-            b.map(|h| (h.t.to_f64(), h.normal.to_f64(), h.instance)),
-            "ray {ray:?}"
-        );
+        let close = match (a, b) {
+            (None, None) => true,
+            (Some(a), Some(b)) => {
+                let tol = 16.0 * T::EPSILON.to_f64() * 200.0;
+                let same_t = (a.t.to_f64() - b.t.to_f64()).abs() <= tol;
+                let normal = a.normal.dot(b.normal).to_f64() > 1.0 - 1e-3;
+                same_t && (normal || a.prim != b.instance)
+            }
+            _ => false,
+        };
+        assert!(close, "ray {ray:?}: solid {a:?}, instances {b:?}");
+        ties += usize::from(a.zip(b).is_some_and(|(a, b)| a.prim != b.instance));
         hits += usize::from(a.is_some());
     }
     assert!(hits > 1000, "hits {hits}");
+    assert!(ties * 1000 <= hits, "{ties} ties of {hits} hits");
 }
 
 #[test]
@@ -388,7 +401,7 @@ fn hit_bits<T: Real>(h: &Option<Hit<T>>) -> HitBits {
 /// batches of several sizes, interleaving the searches of meshes of at least `min_bytes`.
 fn assert_batches_answer<T: Real>(
     scene: &CpuScene<T>,
-    rays: &[(Ray<T>, T, T)],
+    rays: &[(Ray<f64>, T, T)],
     want: &[Option<Hit<T>>],
     min_bytes: usize,
 ) {
@@ -412,7 +425,7 @@ fn assert_batches_answer<T: Real>(
 
 /// `rays` with three `(tmin, tmax)` windows in turn: the whole ray, a short one, a late
 /// start.
-fn windowed<T: Real>(rays: Vec<Ray<T>>) -> Vec<(Ray<T>, T, T)> {
+fn windowed<T: Real>(rays: Vec<Ray<f64>>) -> Vec<(Ray<f64>, T, T)> {
     rays.into_iter()
         .enumerate()
         .map(|(n, r)| match n % 3 {
@@ -431,7 +444,7 @@ fn batch_case<T: Real>(mother: bool) {
     for (seed, centre) in [(1, [0.0; 3]), (2, [2.0e4, -1.0e4, 5.0e3])] {
         let scene = CpuScene::<T>::new(&mesh_instances(seed, centre, mother)).unwrap();
         assert!(scene.lone_mesh().is_none());
-        let rays = windowed(random_rays::<T>(seed, centre, 3000));
+        let rays = windowed(random_rays(seed, centre, 3000));
         let want: Vec<Option<Hit<T>>> = rays
             .iter()
             .map(|(r, a, b)| scene.trace(r, *a, *b))
@@ -487,7 +500,7 @@ fn lone_mesh_batches_answer_as_single_traces() {
         f.add_instance(solid, place, 0, 0).unwrap();
         let scene = CpuScene::<f32>::new(&f).unwrap();
         assert_eq!(scene.lone_mesh().is_some(), lone, "case {seed}");
-        let mut rays = windowed(random_rays::<f32>(seed as u32 + 10, centre, 3000));
+        let mut rays = windowed(random_rays(seed as u32 + 10, centre, 3000));
         // From the surface: each hit's point, `tmin` its distance.
         let from_surface: Vec<_> = rays
             .iter()

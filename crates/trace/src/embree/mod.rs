@@ -147,8 +147,9 @@ impl<'a> EmbreeScene<'a> {
     /// as [`CpuScene::trace`] answers it (up to ties and rounding). Fails only if one of
     /// our intersection callbacks panicked.
     pub fn trace(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> anyhow::Result<Option<Hit<f32>>> {
-        let located = self.cpu.locate_origin(ray.origin);
-        let exit = located.and_then(|c| self.cpu.exit_from(c, ray, tmin, tmax));
+        let exact = Ray::<f64>::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
+        let located = self.cpu.locate_origin(exact.origin);
+        let exit = located.and_then(|c| self.cpu.exit_from(c, &exact, tmin, tmax));
         let group = match located {
             Some(c) => self.daughters[c as usize].as_ref(),
             None => self.top.as_ref(),
@@ -171,7 +172,11 @@ impl<'a> EmbreeScene<'a> {
     /// instance of a hierarchy, whether [`Self::trace`] finds a crossing. Fails only if one
     /// of our intersection callbacks panicked.
     pub fn occluded(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> anyhow::Result<bool> {
-        if self.cpu.locate_origin(ray.origin).is_some() {
+        if self
+            .cpu
+            .locate_origin(V3::from_f64(ray.origin.to_f64()))
+            .is_some()
+        {
             return Ok(self.trace(ray, tmin, tmax)?.is_some());
         }
         // From outside every root, a crossing of a daughter comes after one of its mother,

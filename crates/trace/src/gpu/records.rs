@@ -64,6 +64,16 @@ record! {
         pub hi: [f32; 3],
         /// Padding.
         pub pad: u32,
+        /// The rest of the frame's origin (the translation) after rounding to f32 (the
+        /// rows' `w`): rays are taken into the frame part by part.
+        pub origin_lo: [f32; 3],
+        /// Padding.
+        pub pad_lo: u32,
+        /// The centre of the solid's box in its own frame, where rays are rebased to.
+        pub centre: [f32; 3],
+        /// Twice the largest coordinate of the solid's box in its own frame: rays starting
+        /// farther out are rebased.
+        pub reach: f32,
     }
 }
 
@@ -110,7 +120,21 @@ record! {
         pub direction: [f32; 3],
         /// End of the interval (`INF` in the kernels stands for infinity).
         pub tmax: f32,
+        /// The rest of the origin after rounding to f32 (`origin`), for the rebasing into
+        /// instances' frames.
+        pub origin_lo: [f32; 3],
+        /// Padding.
+        pub pad: u32,
     }
+}
+
+/// An f64 point as two f32 parts: the point rounded, and the rest rounded.
+pub fn split_f64(v: [f64; 3]) -> ([f32; 3], [f32; 3]) {
+    let hi = v.map(|c| c as f32);
+    (
+        hi,
+        std::array::from_fn(|k| (v[k] - f64::from(hi[k])) as f32),
+    )
 }
 
 record! {
@@ -457,9 +481,12 @@ pub fn generate() -> String {
          const STATUS_LOOPS_CUT: u32 = {STATUS_LOOPS_CUT}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
          const SURFACE_TOLERANCE: f32 = {:e};\n\
+         // The gap between 1 and the next f32 (hytrace_csg::Real::EPSILON).\n\
+         const EPSILON: f32 = {:e};\n\
          // Deepest box BVH the CPU accepts when it prepares a scene.\n\
          const BOX_BVH_MAX_DEPTH: u32 = {}u;\n",
         <f32 as hytrace_csg::Real>::SURFACE_TOLERANCE,
+        <f32 as hytrace_csg::Real>::EPSILON,
         crate::cpu::BOX_BVH_MAX_DEPTH,
     ));
     let consts = [

@@ -25,12 +25,12 @@ use super::compose::compose_with;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::nanovdb::{nanovdb_gpu_bytes, NanoGpuError};
 use super::records::{
-    RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA, VOLUME_ESTIMATOR_EXACT,
-    VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO, VOLUME_ESTIMATOR_RESIDUAL,
-    VOLUME_FILTER_NEAREST, VOLUME_FILTER_STOCHASTIC, VOLUME_FILTER_TRILINEAR, VOLUME_FORMAT_BC4,
-    VOLUME_FORMAT_F16, VOLUME_FORMAT_F32, VOLUME_FORMAT_NANOVDB, VOLUME_FORMAT_UNORM16,
-    VOLUME_FORMAT_UNORM8, VOLUME_STATUS_LOOPS_CUT, VOLUME_STATUS_MARCH_STEPS,
-    VOLUME_STATUS_NEGATIVE,
+    split_f64, RayRecord, TransmittanceRecord, VolumeParams, VOLUME_ESTIMATOR_DELTA,
+    VOLUME_ESTIMATOR_EXACT, VOLUME_ESTIMATOR_MARCH, VOLUME_ESTIMATOR_RATIO,
+    VOLUME_ESTIMATOR_RESIDUAL, VOLUME_FILTER_NEAREST, VOLUME_FILTER_STOCHASTIC,
+    VOLUME_FILTER_TRILINEAR, VOLUME_FORMAT_BC4, VOLUME_FORMAT_F16, VOLUME_FORMAT_F32,
+    VOLUME_FORMAT_NANOVDB, VOLUME_FORMAT_UNORM16, VOLUME_FORMAT_UNORM8, VOLUME_STATUS_LOOPS_CUT,
+    VOLUME_STATUS_MARCH_STEPS, VOLUME_STATUS_NEGATIVE,
 };
 use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
@@ -507,11 +507,14 @@ impl<'a> GpuVolume<'a> {
         };
         let gpu_f32 = f64::from(GPU_INF);
         let local = |t: f64| (t - base).clamp(-gpu_f32, gpu_f32) as f32;
+        let (origin, origin_lo) = split_f64(std::array::from_fn(|k| origin[k] + base * r.dir[k]));
         Ok(RayRecord {
-            origin: std::array::from_fn(|k| (origin[k] + base * r.dir[k]) as f32),
+            origin,
             tmin: local(r.tmin),
             direction: r.dir.map(|v| v as f32),
             tmax: local(r.tmax),
+            origin_lo,
+            pad: 0,
         })
     }
 

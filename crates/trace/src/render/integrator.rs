@@ -50,6 +50,13 @@ pub(super) fn spawn(p: DVec3, n: DVec3, w: DVec3) -> DVec3 {
     p + side * surface_offset(p) * n
 }
 
+/// The ray as the GPU renderer holds it: origin and direction in f32 (so the tracer's
+/// two-part origin has no rest).
+fn f32_ray(origin: DVec3, dir: DVec3) -> Ray<f64> {
+    let f32_exactly = |v: DVec3| <[f64; 3]>::from(v).map(|c| f64::from(c as f32));
+    Ray::from_f64(f32_exactly(origin), f32_exactly(dir))
+}
+
 fn uniforms2(rng: &mut Rng) -> [f64; 2] {
     [rng.next_f64(), rng.next_f64()]
 }
@@ -57,8 +64,7 @@ fn uniforms2(rng: &mut Rng) -> [f64; 2] {
 impl Renderer<'_> {
     /// The first surface crossing along the ray (f32, as the GPU traces).
     pub(super) fn trace(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit<f32>> {
-        let ray = Ray::from_f64(origin.into(), dir.into());
-        self.scene.trace(&ray, 0.0, tmax as f32)
+        self.scene.trace(&f32_ray(origin, dir), 0.0, tmax as f32)
     }
 
     /// The fraction of light arriving at `origin` along `-dir` from distance `dist`
@@ -80,8 +86,7 @@ impl Renderer<'_> {
             }
         };
         if !self.see_through {
-            let ray = Ray::from_f64(origin.into(), dir.into());
-            if self.scene.occluded(&ray, 0.0, dist as f32) {
+            if self.scene.occluded(&f32_ray(origin, dir), 0.0, dist as f32) {
                 return Ok(0.0);
             }
             return media_t(origin, dist, rng);

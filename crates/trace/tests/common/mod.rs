@@ -271,8 +271,8 @@ pub fn compare(name: &str, f: &Foundry, rays: &[RayRow], got: &[Option<Hit<f32>>
     };
     let mut shown = 0;
     for (i, (r, &got)) in rays.iter().zip(got).enumerate() {
-        let (ray, tmin, tmax) = f32_ray(r);
-        let want = cpu.trace(&ray, tmin, tmax);
+        let (_, tmin, tmax) = f32_ray(r);
+        let want = cpu.trace(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
         a.hits += usize::from(want.is_some());
         let ok = match (want, got) {
             (None, None) => true,
