@@ -164,7 +164,7 @@ pub const ID_COLUMNS: usize = 3;
 fn trace_all<T: Real>(
     f: &Foundry,
     rays: &[RayRow],
-    trace: impl Fn(&Ray<T>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
+    trace: impl Fn(&Ray<f64>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
 ) -> anyhow::Result<ScanResult> {
     Ok(result_from(f, &answers(rays, trace)?))
 }
@@ -173,12 +173,11 @@ fn trace_all<T: Real>(
 #[cfg(feature = "embree")]
 fn answers<T: Real>(
     rays: &[RayRow],
-    trace: impl Fn(&Ray<T>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
+    trace: impl Fn(&Ray<f64>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
 ) -> anyhow::Result<Vec<Answer>> {
     rays.par_iter()
         .map(|r| {
-            let (_, tmin, tmax) = query_of::<T>(r);
-            let ray = Ray::from_f64(r.origin, r.direction);
+            let (ray, tmin, tmax) = query_of(r);
             Ok(answer_of(trace(&ray, tmin, tmax)?))
         })
         .collect()
@@ -205,8 +204,8 @@ fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
     answers
 }
 
-/// A ray row as the CPU tracer takes it: ray (in f64), tmin, tmax (`+inf` for an infinite
-/// one).
+/// A ray row as the tracers are handed it: ray (in f64), tmin, tmax (`+inf` for an
+/// infinite one).
 fn query_of<T: Real>(r: &RayRow) -> (Ray<f64>, T, T) {
     let tmax = if r.tmax.is_finite() {
         T::from_f64(r.tmax)
@@ -318,8 +317,8 @@ pub fn scan_with(
     }
 }
 
-/// A ray in the form the GPU kernels read: rounded to f32 as the CPU's f32 tracer rounds
-/// it, infinite `tmax` as the kernels' [`GPU_INF`].
+/// A ray in the form the GPU kernels read: the origin in two f32 parts as the CPU's f32
+/// tracer carries it, the rest rounded to f32, infinite `tmax` as the kernels' [`GPU_INF`].
 pub fn ray_record(r: &RayRow) -> RayRecord {
     let (origin, origin_lo) = split_f64(r.origin);
     RayRecord {
@@ -629,7 +628,14 @@ fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, Scan
     let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let result = trace_all(f, rays, |r, tmin, tmax| scene.trace(r, tmin, tmax))?;
+    // Embree takes rays in f32.
+    let result = trace_all(f, rays, |r, tmin, tmax| {
+        scene.trace(
+            &Ray::from_f64(r.origin.to_f64(), r.direction.to_f64()),
+            tmin,
+            tmax,
+        )
+    })?;
     let trace_s = t1.elapsed().as_secs_f64();
     let times = ScanTimes {
         build_s,

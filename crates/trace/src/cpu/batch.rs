@@ -280,7 +280,7 @@ impl<T: Real> CpuScene<T> {
         let placement = &self.placements[index];
         askers.clear();
         let mut queries = Vec::with_capacity(rays.len());
-        let mut shifts = Vec::with_capacity(rays.len());
+        let mut locals = Vec::with_capacity(rays.len());
         for (i, (ray, tmin, tmax)) in rays.iter().enumerate() {
             // `trace`'s walk of a one-member group: the member's box, then its frame.
             let world = WorldRay::new(ray);
@@ -291,23 +291,17 @@ impl<T: Real> CpuScene<T> {
                     ray: local.ray,
                     tmin: local.local_t(*tmin),
                 });
-                shifts.push(local);
+                locals.push(local);
                 askers.push(i);
             }
         }
         MeshPrim::first_crossings(&queries, searches, steps);
         let solid = &self.solids[placement.solid];
-        for ((&i, step), local) in askers.iter().zip(steps.iter()).zip(&shifts) {
+        for ((&i, step), local) in askers.iter().zip(steps.iter()).zip(&locals) {
             let (_, tmin, tmax) = rays[i];
-            let limit = local.past_local(tmax);
             out[i] = solid
-                .lone_crossing(step, local.local_t(tmin), limit)
-                .map(|c| {
-                    let mut hit = c.hit(index as u32);
-                    hit.t = local.world_t(hit.t);
-                    hit
-                })
-                .filter(|hit| hit.t < tmax)
+                .lone_crossing(step, local.local_t(tmin), local.past_local(tmax))
+                .and_then(|c| local.world_hit(c, index as u32, tmax))
                 .map(|hit| self.in_world(hit));
         }
     }

@@ -60,7 +60,7 @@ use bvh::{holds, BoxBvh, RaySlabs};
 /// Deepest box BVH (instances, a solid's leaves) a scene may have: the traversal stacks'
 /// size, on the CPU and in the GPU kernels.
 pub const BOX_BVH_MAX_DEPTH: usize = bvh::MAX_DEPTH;
-use solid::SolidAccel;
+use solid::{PrimCrossing, SolidAccel};
 
 /// Rays `hytrace scan` hands [`CpuScene::trace_batch`] at a time: enough to keep its
 /// interleaved searches (8 at a time) busy, few enough that rayon's threads share the
@@ -113,13 +113,13 @@ struct Group<T> {
 /// `lo`, the rest rounded (zero in f64, where `hi` is exact). Their sum holds 48 bits of
 /// an f64 coordinate in f32.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct WorldPoint<T> {
-    pub(crate) hi: V3<T>,
-    pub(crate) lo: V3<T>,
+struct WorldPoint<T> {
+    hi: V3<T>,
+    lo: V3<T>,
 }
 
 impl<T: Real> WorldPoint<T> {
-    pub(crate) fn new(x: V3<f64>) -> Self {
+    fn new(x: V3<f64>) -> Self {
         let hi = V3::<T>::from_f64(x.to_f64());
         let rest = x - V3::from_f64(hi.to_f64());
         WorldPoint {
@@ -133,13 +133,13 @@ impl<T: Real> WorldPoint<T> {
 /// each instance's frame, and `rounded` (the origin's `hi` part and the direction) for the
 /// searches over instance boxes.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct WorldRay<T> {
-    pub(crate) origin: WorldPoint<T>,
-    pub(crate) rounded: Ray<T>,
+struct WorldRay<T> {
+    origin: WorldPoint<T>,
+    rounded: Ray<T>,
 }
 
 impl<T: Real> WorldRay<T> {
-    pub(crate) fn new(ray: &Ray<f64>) -> Self {
+    fn new(ray: &Ray<f64>) -> Self {
         let origin = WorldPoint::new(ray.origin);
         WorldRay {
             origin,
@@ -155,32 +155,36 @@ impl<T: Real> WorldRay<T> {
 /// approach to the centre of the solid's box, so the solid is solved with coordinates of
 /// its own size.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct LocalRay<T> {
-    pub(crate) ray: Ray<T>,
+struct LocalRay<T> {
+    ray: Ray<T>,
     /// The world ray's parameter at the local ray's origin: `t_world = shift + t_local`.
-    pub(crate) shift: T,
+    shift: T,
 }
 
 impl<T: Real> LocalRay<T> {
     /// A world parameter as a parameter of the local ray.
     #[inline]
-    pub(crate) fn local_t(&self, t: T) -> T {
+    fn local_t(&self, t: T) -> T {
         t - self.shift
     }
 
     /// A local parameter at or past every local one whose world parameter is below `limit`
     /// (four epsilons past its rounded difference): the solid is searched up to it, and
-    /// the world parameter decides.
+    /// [`Self::world_hit`] decides on the world parameter.
     #[inline]
-    pub(crate) fn past_local(&self, limit: T) -> T {
+    fn past_local(&self, limit: T) -> T {
         let past = limit - self.shift;
         past + T::from_f64(4.0) * T::EPSILON * past.abs()
     }
 
-    /// A local parameter as a parameter of the world ray.
+    /// Crossing `c` of instance `index`, found on this ray up to `past_local(limit)`, as a
+    /// hit at its world parameter; `None` unless that is below `limit`, so ties between
+    /// instances are decided on world parameters, as the searches' tie rules expect.
     #[inline]
-    pub(crate) fn world_t(&self, t: T) -> T {
-        self.shift + t
+    fn world_hit(&self, c: PrimCrossing<T>, index: u32, limit: T) -> Option<Hit<T>> {
+        let mut hit = c.hit(index);
+        hit.t = self.shift + hit.t;
+        (hit.t < limit).then_some(hit)
     }
 }
 
@@ -394,19 +398,10 @@ impl<T: Real> CpuScene<T> {
     ) -> Option<Hit<T>> {
         let p = &self.placements[index];
         let local = p.local_ray(ray, cull, tmin, limit)?;
-        // The solid is asked up to a few ulps past the local limit, and its crossing kept
-        // only if its world parameter is below `limit`: ties between instances are
-        // decided on the world parameters, as the searches' tie rules expect.
-        let tmin_local = local.local_t(tmin);
-        let limit_local = local.past_local(limit);
+        let (tmin_local, limit_local) = (local.local_t(tmin), local.past_local(limit));
         self.solids[p.solid]
             .cross(&local.ray, tmin_local, limit_local, p.aligned, crossings)
-            .map(|c| {
-                let mut hit = c.hit(index as u32);
-                hit.t = local.world_t(hit.t);
-                hit
-            })
-            .filter(|hit| hit.t < limit)
+            .and_then(|c| local.world_hit(c, index as u32, limit))
     }
 
     /// `hit`, found in its instance's frame, with its normal turned into the world frame
