@@ -142,7 +142,14 @@ genericTrap   dz, vertices: [[x, y] x 8]
               face has exactly parallel bottom and top edges: all faces
               planar), twisted (top = bottom scaled by 0.6..1.4, rotated by
               5..40 deg either way and shifted: four twisted faces), mixed
-              (planar with one top vertex moved: two twisted faces).
+              (planar with one top vertex moved: two twisted faces).  Three
+              solids in ten (i % 10 >= 7) have coincident vertices instead,
+              in turn (COLLAPSED_TRAPS): a pyramid (top a point), a wedge
+              (top a segment), a triangular prism or frustum (vertices j,
+              j + 1 equal at both ends), one end a triangle, a twisted top
+              with one vertex on its neighbour, both ends crossing
+              segments (a tetrahedron); every section between the ends is
+              still convex and clockwise.
 xtru          polygon: [[x, y], ...],
               sections: [{"z": z, "offset": [x, y], "scale": s}, ...]
               G4ExtrudedSolid(name, polygon, [ZSection(z, offset, scale)]).
@@ -345,9 +352,9 @@ the wrong candidates disagree at many points: rotation sign flipped
 starting at 0 at the bottom 4355 / 3512 / 3790, x and y swapped
 5160 / 4714 (box / trd), theta/phi offset rotated with the section 433,
 alpha sign flipped 1599, dx1/dx2 exchanged 1184 (twistedTrap), vertices
-interpolated in polar coordinates 358 (genericTrap).  The boundary found by
+interpolated in polar coordinates 792 (genericTrap).  The boundary found by
 bisecting Geant4's Inside along 1600 rays per kind is within 5.0e-10 mm
-(6.7e-10 for genericTrap) of the formula's surface, i.e. at Geant4's half
+(5.8e-10 for genericTrap) of the formula's surface, i.e. at Geant4's half
 surface tolerance; the hit points of Geant4's DistanceToIn / DistanceToOut
 (about 3000 per kind) lie within 1e-13 mm of it, so the distance functions
 use the same surfaces; 1600 points per kind on the straight segments
@@ -454,7 +461,10 @@ Geant4 quirks handled here
   re-ordered (v1 <-> v3, v5 <-> v7) with a GeomSolids1001 warning; bottom
   and top in opposite orientations, non-convex quadruples, more than one
   collapsed edge or a lateral face twisted by more than 90 degrees are
-  fatal.
+  fatal.  Coincident vertices are fine (consecutive vertices equal at both
+  ends, a lateral face collapsed to a line, at most once); with both ends
+  of no area nothing tells the direction, and anticlockwise vertices then
+  give a negative volume: "Degenerated solid", fatal.
 * G4ExtrudedSolid silently reverses an anticlockwise polygon, removes
   collinear or coincident vertices with a warning, and aborts ("Making
   facets failed") when its ear clipping meets three collinear vertices
@@ -1015,9 +1025,17 @@ def _strictly_convex_cw(quad, margin):
     return bool(np.all(_cross2(e, np.roll(e, -1, axis=0)) < -margin))
 
 
+# Variants of gen_generic_trap with coincident vertices, in turn.
+COLLAPSED_TRAPS = ["pyramid", "wedge", "prism", "triangle", "twisted",
+                   "segments"]
+
+
 def gen_generic_trap(rng, i, s):
     # Geant4 wants each end polygon convex and clockwise (an anticlockwise
     # pair is re-ordered with a warning); vertex k + 4 is joined to vertex k.
+    if i % 10 >= 7:  # 3 solids in 10 have coincident vertices
+        c = (i % 10 - 7 + 3 * (i // 10)) % len(COLLAPSED_TRAPS)
+        return _gen_collapsed_trap(rng, COLLAPSED_TRAPS[c], s)
     v = ["planar", "twisted", "mixed"][i % 3]
     dz = f32(s * rng.uniform(0.2, 1.0))
     while True:
@@ -1060,6 +1078,118 @@ def gen_generic_trap(rng, i, s):
         et = np.roll(top, -1, axis=0) - top
         cosang = np.einsum("ij,ij->i", eb, et) / (
             np.linalg.norm(eb, axis=1) * np.linalg.norm(et, axis=1))
+        ok = ok and bool(np.all(cosang > math.cos(math.radians(60.0))))
+        if ok and all(f32(x) == x for x in np.concatenate([bot, top]).flat):
+            break
+    verts = [[float(x), float(y)] for x, y in np.concatenate([bot, top])]
+    return {"type": "genericTrap", "dz": dz, "vertices": verts}
+
+
+def _cw_quad(rng, s):
+    """Clockwise quadrilateral inscribed in an ellipse, on the 1/64 grid, or
+    None when its corners are too close in angle."""
+    ang = np.sort(rng.uniform(0.0, TWO_PI, 4))[::-1]
+    gaps = np.diff(np.concatenate([ang, [ang[0] - TWO_PI]]))
+    if np.any(-gaps < 0.6) or np.any(-gaps > PI - 0.3):
+        return None
+    ax, by = s * rng.uniform(0.3, 1.0), s * rng.uniform(0.3, 1.0)
+    c = s * rng.uniform(-0.2, 0.2, 2)
+    quad = np.stack([c[0] + ax * np.cos(ang), c[1] + by * np.sin(ang)], 1)
+    return np.vectorize(_on_grid_signed)(quad)
+
+
+def _convex_cw_or_flat(quad, size):
+    """The polygon without its repeated corners (within 1e-12 of size) is
+    clockwise with every turn sharper than 1e-3 rad, or has fewer than three
+    corners (a segment or a point)."""
+    q = [p for k, p in enumerate(np.asarray(quad, dtype=np.float64))
+         if np.linalg.norm(p - quad[k - 1]) > 1e-12 * size]
+    if len(q) < 3:
+        return True
+    e = np.roll(np.array(q), -1, axis=0) - np.array(q)
+    turns = _cross2(e, np.roll(e, -1, axis=0))
+    lens = np.linalg.norm(e, axis=1) * np.linalg.norm(np.roll(e, -1, axis=0),
+                                                      axis=1)
+    return bool(np.all(turns < -1e-3 * lens))
+
+
+def _g4_trap_volume(bot, top, dz):
+    """G4GenericTrap::GetCubicVolume (clockwise vertices: positive)."""
+    a, b = bot[3] - bot[1], bot[2] - bot[0]
+    c, d = top[3] - top[1], top[2] - top[0]
+    return ((_cross2(a, b) + _cross2(c, d)) / 3.0 +
+            (_cross2(a, d) + _cross2(c, b)) / 6.0) * dz
+
+
+def _gen_collapsed_trap(rng, variant, s):
+    """A genericTrap with coincident vertices (Geant4 allows them as long
+    as at most one lateral edge collapses at both ends and the solid has
+    volume): "pyramid" (top a point), "wedge" (top a segment), "prism"
+    (vertices j and j + 1 equal at both ends: a triangular prism or
+    frustum), "triangle" (one end a triangle, the other a quadrilateral),
+    "twisted" (twisted top with one top vertex on its neighbour) and
+    "segments" (both ends segments, crossing: a tetrahedron).  Every
+    section between the ends is convex and clockwise, the twisted faces
+    turn by less than 60 degrees."""
+    dz = f32(s * rng.uniform(0.2, 1.0))
+    grid = np.vectorize(_on_grid_signed)
+    while True:
+        quad = _cw_quad(rng, s)
+        if quad is None:
+            continue
+        j = int(rng.integers(4))
+        nxt = [(j + k) % 4 for k in range(4)]  # j, j+1, j+2, j+3
+        k = float(rng.choice([0.5, 0.75, 1.0, 1.25]))
+        shift = grid(s * rng.uniform(-0.25, 0.25, 2))
+        bot = quad.copy()
+        if variant == "pyramid":
+            top = np.tile(grid(quad.mean(axis=0) +
+                               s * rng.uniform(-0.3, 0.3, 2)), (4, 1))
+        elif variant == "wedge":
+            # ridge between the midpoints of edges j and j + 2, pulled in
+            m1 = 0.5 * (quad[nxt[0]] + quad[nxt[1]])
+            m2 = 0.5 * (quad[nxt[2]] + quad[nxt[3]])
+            cen = quad.mean(axis=0)
+            u = rng.uniform(0.3, 1.0)
+            top = np.empty((4, 2))
+            top[nxt[0]] = top[nxt[1]] = grid(cen + u * (m1 - cen) + shift)
+            top[nxt[2]] = top[nxt[3]] = grid(cen + u * (m2 - cen) + shift)
+        elif variant == "prism":
+            bot[nxt[1]] = bot[nxt[0]]
+            top = k * bot + shift
+        elif variant == "triangle":
+            bot[nxt[1]] = bot[nxt[0]]
+            top = k * quad + shift
+            if rng.uniform() < 0.5:  # the triangle at the top instead
+                bot, top = top, bot
+        elif variant == "twisted":
+            rot = math.radians(rng.uniform(5.0, 35.0)) * rng.choice([-1, 1])
+            cr, sr = math.cos(rot), math.sin(rot)
+            top = (k * quad) @ np.array([[cr, sr], [-sr, cr]]) + shift
+            top = np.vectorize(f32)(top)
+            top[nxt[1]] = top[nxt[0]]
+        else:  # "segments": both ends segments, crossing
+            a = rng.uniform(0.0, PI)
+            da = rng.uniform(0.5, PI - 0.5)
+            r1, r2 = s * rng.uniform(0.3, 1.0, 2)
+            cen = s * rng.uniform(-0.2, 0.2, 2)
+            d1 = r1 * np.array([math.cos(a), math.sin(a)])
+            d2 = r2 * np.array([math.cos(a + da), math.sin(a + da)])
+            bot = grid(np.array([cen - d1, cen - d1, cen + d1, cen + d1]))
+            top = grid(np.array([cen - d2 + shift, cen + d2 + shift,
+                                 cen + d2 + shift, cen - d2 + shift]))
+            if _g4_trap_volume(bot, top, dz) < 0.0:
+                top = top[[1, 0, 3, 2]]
+        size = float(np.max(np.abs(np.concatenate([bot, top]))))
+        ok = all(_convex_cw_or_flat((1.0 - t) * bot + t * top, size)
+                 for t in np.linspace(0.0, 1.0, 33))
+        ok = ok and _g4_trap_volume(bot, top, dz) > 0.05 * size * size * dz
+        # twisted faces (both edges non-zero) turn by less than 60 degrees
+        eb = np.roll(bot, -1, axis=0) - bot
+        et = np.roll(top, -1, axis=0) - top
+        lb, lt = np.linalg.norm(eb, axis=1), np.linalg.norm(et, axis=1)
+        both = (lb > 0.0) & (lt > 0.0)
+        cosang = np.einsum("ij,ij->i", eb, et)[both] / (lb * lt)[both]
         ok = ok and bool(np.all(cosang > math.cos(math.radians(60.0))))
         if ok and all(f32(x) == x for x in np.concatenate([bot, top]).flat):
             break
@@ -2157,9 +2287,16 @@ def twisted_signed_distance(spec, pts, variant="exact"):
     rel = pts[:, None, :2] - a
     area = np.sum(_cross2(a, b), axis=1)  # 2 * signed area
     orient = np.where(area > 0.0, 1.0, -1.0)[:, None]  # +1 ccw, -1 cw
-    # outward distance beyond each edge line
-    d_edge = -orient * _cross2(e, rel) / np.linalg.norm(e, axis=2)
-    return np.maximum(np.abs(z) - spec["dz"], np.max(d_edge, axis=1))
+    # outward distance beyond each edge line; edges of zero length (coincident
+    # genericTrap vertices) bound nothing, and a section collapsed to a point
+    # is at the distance of that point
+    ln = np.linalg.norm(e, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_edge = np.where(ln > 0.0, -orient * _cross2(e, rel) / ln, -np.inf)
+    d_sec = np.max(d_edge, axis=1)
+    point = np.all(ln == 0.0, axis=1)
+    d_sec[point] = np.linalg.norm(rel[point, 0], axis=1)
+    return np.maximum(np.abs(z) - spec["dz"], d_sec)
 
 
 def twisted_tubs_params(spec, variant="exact"):
@@ -2517,8 +2654,13 @@ def _ruled_points(spec, rng, n):
     rows = np.arange(n)
     pa = poly[rows, ks]
     e = poly[rows, (ks + 1) % 4] - pa
-    nrm = np.stack([e[:, 1], -e[:, 0]], 1) / np.linalg.norm(e, axis=1)[:,
-                                                                     None]
+    ln = np.linalg.norm(e, axis=1)
+    # a side of zero length (coincident genericTrap vertices) is a vertex:
+    # u = 0 there, so that only the point itself is checked
+    us[ln == 0.0] = 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nrm = np.where(ln[:, None] > 0.0,
+                       np.stack([e[:, 1], -e[:, 0]], 1) / ln[:, None], 0.0)
     area = np.sum(_cross2(poly, np.roll(poly, -1, axis=1)), axis=1)
     nrm[area < 0] *= -1.0  # outward normal of a clockwise section
     return pa + us[:, None] * e, nrm, zs, us

@@ -52,9 +52,7 @@ use crate::shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Shape,
 };
-use crate::tessellate::{
-    convex_pieces, ruled_solid, section_stack, signed_area2, simple_polygon, Tri,
-};
+use crate::tessellate::{convex_pieces, ruled_solid, section_stack, simple_polygon, Tri};
 use hytrace_foundry::Transform64;
 
 pub use hytrace_foundry::g4solid::{Boolean, G4Solid, PlacedSolid, XtruSection};
@@ -215,6 +213,101 @@ fn twisted_trap_mesh(
             .to_vec()
     };
     ruled_solid(&section, -dz, dz, tolerance)
+}
+
+/// Geant4's kCarTolerance (mm): G4GenericTrap takes lengths below it for zero.
+const CAR_TOLERANCE: f64 = 1e-9;
+
+/// The bottom and top quadruples of a G4GenericTrap, counter-clockwise seen from +z, after
+/// the checks of Geant4 11.4's `G4GenericTrap::CheckParameters` and
+/// `ComputeLateralSurfaces`, which refuse the same solids: dz under 2e-9 mm, other than 8
+/// vertices, bottom and top running in opposite directions, more than one lateral edge
+/// collapsed at both ends, no volume, a non-convex end or a lateral face twisted by more
+/// than 90 degrees. Coincident vertices are allowed (an end may collapse to a triangle, a
+/// segment or a point); vertices of an end closer than kCarTolerance to the one before
+/// are made equal to it, as Geant4 takes them for one.
+fn generic_trap_ends(dz: f64, vertices: &[[f64; 2]]) -> Result<[[[f64; 2]; 4]; 2], CsgError> {
+    let fail = |problem: String| Err(bad("genericTrap", problem));
+    if !(dz.is_finite() && dz >= 2.0 * CAR_TOLERANCE) {
+        return fail(format!("dz must be finite and at least 2e-9 mm, got {dz}"));
+    }
+    if vertices.len() != 8 || !vertices.iter().flatten().all(|v| v.is_finite()) {
+        return fail(format!("needs 8 finite vertices, got {vertices:?}"));
+    }
+    let mut v: [[f64; 2]; 8] = std::array::from_fn(|k| vertices[k]);
+    let d = |a: [f64; 2], b: [f64; 2]| [a[0] - b[0], a[1] - b[1]];
+    let cross = |a: [f64; 2], b: [f64; 2]| a[0] * b[1] - a[1] * b[0];
+    let len = |a: [f64; 2]| a[0].hypot(a[1]);
+    // Twice the signed area of each end by its diagonals (> 0: counter-clockwise), zero
+    // within Geant4's tolerance, and the longer diagonal.
+    let end_area = |v: &[[f64; 2]; 8], o: usize| {
+        let (d1, d2) = (d(v[o + 2], v[o]), d(v[o + 3], v[o + 1]));
+        let l = len(d1).max(len(d2));
+        let z = cross(d1, d2);
+        (if z.abs() < l * CAR_TOLERANCE { 0.0 } else { z }, l)
+    };
+    let ((zbot, lbot), (ztop, ltop)) = (end_area(&v, 0), end_area(&v, 4));
+    if zbot * ztop < 0.0 {
+        return fail(format!(
+            "the bottom and top vertices run in opposite directions: {vertices:?}"
+        ));
+    }
+    // Geant4 lists them clockwise (it re-orders anticlockwise ones, with a warning).
+    if zbot > 0.0 || ztop > 0.0 {
+        v.swap(1, 3);
+        v.swap(5, 7);
+    }
+    let collapsed = (0..4)
+        .filter(|&i| {
+            let j = (i + 1) % 4;
+            len(d(v[j], v[i])).max(len(d(v[j + 4], v[i + 4]))) < CAR_TOLERANCE
+        })
+        .count();
+    // Geant4's volume formula (clockwise vertices: positive).
+    let (a, b) = (d(v[3], v[1]), d(v[2], v[0]));
+    let (c, e) = (d(v[7], v[5]), d(v[6], v[4]));
+    let volume = ((cross(a, b) + cross(c, e)) / 3.0 + (cross(a, e) + cross(c, b)) / 6.0) * dz;
+    if collapsed > 1 || volume.is_nan() || volume < dz * lbot.max(ltop) * CAR_TOLERANCE {
+        return fail(format!(
+            "degenerate ({collapsed} lateral edges collapsed at both ends, volume {volume} \
+             mm^3): {vertices:?}"
+        ));
+    }
+    for o in [0, 4] {
+        for i in 0..4 {
+            let (j, k) = ((i + 1) % 4, (i + 2) % 4);
+            if cross(d(v[o + j], v[o + i]), d(v[o + k], v[o + j])) >= CAR_TOLERANCE {
+                return fail(format!(
+                    "the bottom and top faces must be convex: {vertices:?}"
+                ));
+            }
+        }
+    }
+    for i in 0..4 {
+        let j = (i + 1) % 4;
+        let (eb, et) = (d(v[i], v[j]), d(v[i + 4], v[j + 4]));
+        let (lb, lt) = (len(eb), len(et));
+        let twisted =
+            lb.min(lt) >= CAR_TOLERANCE && cross(eb, et).abs() >= CAR_TOLERANCE * lb.max(lt);
+        if twisted && eb[0] * et[0] + eb[1] * et[1] < 0.0 {
+            return fail(format!(
+                "lateral face {i} is twisted by more than 90 degrees: {vertices:?}"
+            ));
+        }
+    }
+    for o in [0, 4] {
+        for k in 1..4 {
+            if len(d(v[o + k], v[o + k - 1])) < CAR_TOLERANCE {
+                v[o + k] = v[o + k - 1];
+            }
+        }
+        if len(d(v[o], v[o + 3])) < CAR_TOLERANCE {
+            v[o + 3] = v[o];
+        }
+    }
+    // Clockwise to counter-clockwise, vertex k + 4 still above vertex k.
+    let ccw = |o: usize| [v[o], v[o + 3], v[o + 2], v[o + 1]];
+    Ok([ccw(0), ccw(4)])
 }
 
 /// The union of `parts` (at least one).
@@ -1171,33 +1264,24 @@ impl G4Mapping for G4Solid {
             )?),
             G4Solid::GenericTrap { dz, vertices } => {
                 let dz = *dz;
-                if dz.is_nan() || dz <= 0.0 || dz.is_infinite() {
-                    return Err(bad(
-                        "genericTrap",
-                        format!("dz must be finite and > 0, got {dz}"),
-                    ));
-                }
-                if vertices.len() != 8 || !vertices.iter().flatten().all(|v| v.is_finite()) {
-                    return Err(bad(
-                        "genericTrap",
-                        format!("needs 8 finite vertices, got {}", vertices.len()),
-                    ));
-                }
-                let (mut bottom, mut top) = (vertices[..4].to_vec(), vertices[4..].to_vec());
-                // Geant4 lists the vertices clockwise; sections run counter-clockwise.
-                let area = signed_area2(&bottom) + signed_area2(&top);
-                if area < 0.0 {
-                    bottom.reverse();
-                    top.reverse();
-                } else if area == 0.0 {
-                    return Err(bad("genericTrap", "the faces have no area".into()));
-                }
+                let [bottom, top] = generic_trap_ends(dz, vertices)?;
                 let section = |z: f64| {
                     let f = (z + dz) / (2.0 * dz);
+                    // Exactly the given vertices at the ends, so that coincident ones stay
+                    // coincident at every height.
+                    let at = |b: f64, t: f64| {
+                        if f <= 0.0 {
+                            b
+                        } else if f >= 1.0 {
+                            t
+                        } else {
+                            b + f * (t - b)
+                        }
+                    };
                     (0..4)
                         .map(|k| {
                             let (b, t) = (bottom[k], top[k]);
-                            [b[0] + f * (t[0] - b[0]), b[1] + f * (t[1] - b[1]), z]
+                            [at(b[0], t[0]), at(b[1], t[1]), z]
                         })
                         .collect()
                 };

@@ -2,6 +2,8 @@
 //! (extrusions, twisted and generic trapezoids), refined until the mesh is within a stated
 //! distance of the true surface.
 
+use std::collections::HashMap;
+
 use crate::shape::CsgError;
 
 /// A triangle, vertices counter-clockwise seen from outside.
@@ -28,6 +30,21 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The point at `s` of the segment from `a` to `b`: exactly `a` at 0, `b` at 1 and `a` all
+/// along when `a == b`, and bit for bit `along(b, a, 1 - s)` when `1 - s` is exact, so that
+/// coincident corners and edges run both ways get identical points.
+fn along(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
+    std::array::from_fn(|k| {
+        if s < 0.5 {
+            a[k] + s * (b[k] - a[k])
+        } else if s > 0.5 {
+            b[k] + (1.0 - s) * (a[k] - b[k])
+        } else {
+            0.5 * (a[k] + b[k])
+        }
+    })
 }
 
 fn lerp(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
@@ -320,12 +337,25 @@ fn merge_convex(
         .collect()
 }
 
+/// Twice the area (mm^2) per mm of size below which an end section counts as having no area
+/// (a point or a segment): Geant4's kCarTolerance, the bound G4GenericTrap applies to its
+/// faces.
+const NO_AREA: f64 = 1e-9;
+
 /// The closed mesh of a stack of cross-sections: `levels[i]` are the polygon's vertices at
 /// the i-th level (same count everywhere, ascending z, counter-clockwise seen from +z);
 /// consecutive levels are joined by quads split into two triangles, and the first and last
 /// levels are capped with the triangulation of `cap` (a subset of the level's vertices:
-/// the indices of the polygon's corners, so that collinear edge points do not upset ear
-/// clipping).
+/// the indices of the polygon's corners, ascending, so that collinear edge points do not
+/// upset ear clipping; the cap's triangles are then refined by longest-edge bisection
+/// until they meet the side triangles vertex to vertex, growing away from the edges).
+///
+/// Vertices may coincide (collapsed corners of a G4GenericTrap): triangles with two equal
+/// vertices are left out, repeated corners count once, and an end level with no area (a
+/// point or a segment: twice its area under 1e-9 mm times its size) gets no cap, its side
+/// triangles being split at every point of that level between their ends, so that the
+/// side faces meeting there share their edges. The mesh stays closed: every edge is shared
+/// by two triangles, in opposite directions.
 pub fn section_stack(levels: &[Vec<[f64; 3]>], corners: &[usize]) -> Result<Vec<Tri>, CsgError> {
     let n = levels.first().map_or(0, Vec::len);
     if levels.len() < 2 || n < 3 || levels.iter().any(|l| l.len() != n) {
@@ -333,29 +363,336 @@ pub fn section_stack(levels: &[Vec<[f64; 3]>], corners: &[usize]) -> Result<Vec<
             "a section stack needs 2 levels of the same polygon".into()
         ));
     }
+    if !levels.iter().flatten().flatten().all(|c| c.is_finite()) {
+        return Err(err("a section stack needs finite vertices".into()));
+    }
+    if corners.len() < 3
+        || corners.windows(2).any(|w| w[0] >= w[1])
+        || corners.last().is_some_and(|&c| c >= n)
+    {
+        return Err(err(format!(
+            "a section stack needs 3 or more ascending corner indices below {n}, got {corners:?}"
+        )));
+    }
+    let last = levels.len() - 1;
     let mut out = Vec::new();
-    for pair in levels.windows(2) {
+    let bottom = end_cap(&levels[0], corners, false, &mut out)?;
+    let top = end_cap(&levels[last], corners, true, &mut out)?;
+    for (i, pair) in levels.windows(2).enumerate() {
         let (lo, hi) = (&pair[0], &pair[1]);
+        let lo_line = if i == 0 { bottom.as_ref() } else { None };
+        let hi_line = if i + 1 == last { top.as_ref() } else { None };
         for k in 0..n {
             let j = (k + 1) % n;
             // Counter-clockwise polygon: outward is to the right of the edge k -> j seen
-            // from +z, so (lo k, lo j, hi j) runs counter-clockwise seen from outside.
-            out.push([lo[k], lo[j], hi[j]]);
-            out.push([lo[k], hi[j], hi[k]]);
-        }
-    }
-    for (level, up) in [(&levels[0], false), (&levels[levels.len() - 1], true)] {
-        let poly: Vec<[f64; 2]> = corners
-            .iter()
-            .map(|&c| [level[c][0], level[c][1]])
-            .collect();
-        for [a, b, c] in triangulate(&poly)? {
-            let (a, b, c) = (level[corners[a]], level[corners[b]], level[corners[c]]);
-            // Counter-clockwise from +z faces up: right for the top cap, flipped at the bottom.
-            out.push(if up { [a, b, c] } else { [a, c, b] });
+            // from +z, so (lo k, lo j, hi j) runs counter-clockwise seen from outside. The
+            // first edge of each triangle lies in a level.
+            side_triangle(&mut out, [lo[k], lo[j], hi[j]], lo_line);
+            side_triangle(&mut out, [hi[j], hi[k], lo[k]], hi_line);
         }
     }
     Ok(out)
+}
+
+/// Adds the triangle unless two of its vertices coincide.
+fn push_proper(out: &mut Vec<Tri>, t: Tri) {
+    if t[0] != t[1] && t[1] != t[2] && t[2] != t[0] {
+        out.push(t);
+    }
+}
+
+/// Adds the triangle `t`, counter-clockwise seen from outside, split into fans at the
+/// points `paths[e]` (in order) lying on its edge `t[e] -> t[e + 1]`; `flip` reverses the
+/// triangles added.
+fn split_triangle(out: &mut Vec<Tri>, t: Tri, paths: [&[[f64; 3]]; 3], flip: bool) {
+    let Some(e) = (0..3).find(|&e| !paths[e].is_empty()) else {
+        push_proper(out, if flip { [t[0], t[2], t[1]] } else { t });
+        return;
+    };
+    let (a, b, c) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+    let (bc, ca) = (paths[(e + 1) % 3], paths[(e + 2) % 3]);
+    let q: Vec<[f64; 3]> = std::iter::once(a)
+        .chain(paths[e].iter().copied())
+        .chain(std::iter::once(b))
+        .collect();
+    let end = q.len() - 2;
+    for i in 0..=end {
+        let rest: [&[[f64; 3]]; 3] = [
+            &[],
+            if i == end { bc } else { &[] },
+            if i == 0 { ca } else { &[] },
+        ];
+        split_triangle(out, [q[i], q[i + 1], c], rest, flip);
+    }
+}
+
+/// Adds a side triangle whose first edge lies in a level: split at the level's points
+/// between the edge's ends when the level has no area (`line`).
+fn side_triangle(out: &mut Vec<Tri>, t: Tri, line: Option<&Line>) {
+    match line {
+        Some(line) => split_triangle(out, t, [&line.between(t[0], t[1]), &[], &[]], false),
+        None => push_proper(out, t),
+    }
+}
+
+/// The distinct points of a level with no area (a segment or a point), in order along it.
+struct Line {
+    origin: [f64; 3],
+    direction: [f64; 3],
+    points: Vec<[f64; 3]>,
+}
+
+impl Line {
+    fn new(level: &[[f64; 3]]) -> Line {
+        let origin = level[0];
+        let far = level
+            .iter()
+            .map(|&p| sub(p, origin))
+            .fold([0.0; 3], |a, d| if dot(d, d) > dot(a, a) { d } else { a });
+        let l = dot(far, far).sqrt();
+        let direction = if l > 0.0 { far.map(|c| c / l) } else { far };
+        let mut line = Line {
+            origin,
+            direction,
+            points: Vec::new(),
+        };
+        let mut points = level.to_vec();
+        points.sort_by(|&p, &q| line.order(p, q));
+        points.dedup();
+        line.points = points;
+        line
+    }
+
+    /// Position along the line, then coordinates (equal only for equal points).
+    fn order(&self, p: [f64; 3], q: [f64; 3]) -> std::cmp::Ordering {
+        let cmp = |a: f64, b: f64| a.partial_cmp(&b).unwrap_or(std::cmp::Ordering::Equal);
+        let t = |p: [f64; 3]| dot(sub(p, self.origin), self.direction);
+        cmp(t(p), t(q))
+            .then(cmp(p[0], q[0]))
+            .then(cmp(p[1], q[1]))
+            .then(cmp(p[2], q[2]))
+    }
+
+    /// The points strictly between `a` and `b`, in order from `a` to `b`.
+    fn between(&self, a: [f64; 3], b: [f64; 3]) -> Vec<[f64; 3]> {
+        use std::cmp::Ordering::{Greater, Less};
+        let forward = self.order(a, b) == Less;
+        let (lo, hi) = if forward { (a, b) } else { (b, a) };
+        let i = self
+            .points
+            .partition_point(|&p| self.order(p, lo) != Greater);
+        let j = self.points.partition_point(|&p| self.order(p, hi) == Less);
+        let mut mid = self.points[i..j.max(i)].to_vec();
+        if !forward {
+            mid.reverse();
+        }
+        mid
+    }
+}
+
+/// Points strictly inside each edge of a triangulation, by the edge's ends (the lower
+/// index first), in order from the lower index.
+type Pending = HashMap<(usize, usize), Vec<usize>>;
+
+/// Records `between` (points in order from `from` to `to`) as inside the edge `from`-`to`,
+/// with those recorded there already, in order along it.
+fn set_pending(
+    pending: &mut Pending,
+    points: &[[f64; 3]],
+    from: usize,
+    to: usize,
+    between: Vec<usize>,
+) {
+    if between.is_empty() {
+        return;
+    }
+    let (lo, hi) = (from.min(to), from.max(to));
+    let list = pending.entry((lo, hi)).or_default();
+    for p in between {
+        if !list.contains(&p) {
+            list.push(p);
+        }
+    }
+    let from_lo = |p: usize| {
+        let d = sub(points[p], points[lo]);
+        dot(d, d)
+    };
+    list.sort_by(|&x, &y| from_lo(x).total_cmp(&from_lo(y)));
+}
+
+/// The points of `pending` inside the edge `a`-`b`, in order from `a`.
+fn pending_on(pending: &Pending, points: &[[f64; 3]], a: usize, b: usize) -> Vec<[f64; 3]> {
+    let mut list: Vec<[f64; 3]> = pending
+        .get(&(a.min(b), a.max(b)))
+        .map_or_else(Vec::new, |l| l.iter().map(|&p| points[p]).collect());
+    if a > b {
+        list.reverse();
+    }
+    list
+}
+
+/// The triangles of a cap: `tris` (indices into `points`, whose points run round the cap,
+/// counter-clockwise seen from +z) refined by longest-edge bisection (Rivara) until no
+/// edge has a point of `pending` inside it: a triangle with such a point is split across
+/// its longest edge (not a piece of the cap's edge: those take no new points), at the
+/// pending point nearest the edge's middle or at a new middle point (recorded for the
+/// triangle on the other side, which then splits there too). The triangles stay about as
+/// well shaped as the first ones and grow away from the pending points, so that a cap
+/// meets finely divided sides vertex to vertex with few triangles. (Past a generous
+/// number of splits, which rounding on degenerate input could cause, the rest are split
+/// into fans at their pending points instead.)
+fn refine_cap(
+    points: &mut Vec<[f64; 3]>,
+    tris: Vec<[usize; 3]>,
+    mut pending: Pending,
+    flip: bool,
+    out: &mut Vec<Tri>,
+) {
+    // Points below `boundary` run round the cap; consecutive ones make its edge.
+    let boundary = points.len();
+    let mut splits_left = 64 * (points.len() + 16);
+    let mut work = tris;
+    // Finished triangles, and which holds each directed edge: a new middle point on an
+    // edge sends the triangle on its other side back to work.
+    let mut done: Vec<Option<[usize; 3]>> = Vec::new();
+    let mut holder: HashMap<(usize, usize), usize> = HashMap::new();
+    while let Some(t) = work.pop() {
+        let edge_pending = |e: usize, pending: &Pending| {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            pending
+                .get(&(a.min(b), a.max(b)))
+                .is_some_and(|l| !l.is_empty())
+        };
+        if splits_left == 0 || !(0..3).any(|e| edge_pending(e, &pending)) {
+            for e in 0..3 {
+                holder.insert((t[e], t[(e + 1) % 3]), done.len());
+            }
+            done.push(Some(t));
+            continue;
+        }
+        splits_left -= 1;
+        // The longest edge, except a piece of the boundary, which takes no new points.
+        let length2 = |e: usize| {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            let piece = a < boundary
+                && b < boundary
+                && (b == (a + 1) % boundary || a == (b + 1) % boundary);
+            if edge_pending(e, &pending) || !piece {
+                let d = sub(points[b], points[a]);
+                dot(d, d)
+            } else {
+                -1.0
+            }
+        };
+        let e = (0..3)
+            .max_by(|&x, &y| length2(x).total_cmp(&length2(y)))
+            .unwrap_or(0);
+        let (a, b, c) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+        let (lo, hi) = (a.min(b), a.max(b));
+        let list = pending.get(&(lo, hi)).cloned().unwrap_or_default();
+        let middle = lerp(points[lo], points[hi], 0.5);
+        let off = |p: usize| {
+            let d = sub(points[p], middle);
+            dot(d, d)
+        };
+        let nearest = (0..list.len()).min_by(|&x, &y| off(list[x]).total_cmp(&off(list[y])));
+        let m = match nearest {
+            Some(k) => {
+                set_pending(&mut pending, points, lo, list[k], list[..k].to_vec());
+                set_pending(&mut pending, points, list[k], hi, list[k + 1..].to_vec());
+                list[k]
+            }
+            None => {
+                points.push(middle);
+                let m = points.len() - 1;
+                pending.insert((lo, hi), vec![m]);
+                if let Some(other) = holder.get(&(b, a)).and_then(|&k| done[k].take()) {
+                    work.push(other);
+                }
+                m
+            }
+        };
+        work.push([a, m, c]);
+        work.push([m, b, c]);
+    }
+    for t in done.into_iter().flatten() {
+        let paths = [0, 1, 2].map(|e| pending_on(&pending, points, t[e], t[(e + 1) % 3]));
+        split_triangle(
+            out,
+            t.map(|i| points[i]),
+            [&paths[0], &paths[1], &paths[2]],
+            flip,
+        );
+    }
+}
+
+/// Adds the cap of an end level (seen from +z when `up`, else from -z), or returns the
+/// level as a [`Line`] when it has no area.
+fn end_cap(
+    level: &[[f64; 3]],
+    corners: &[usize],
+    up: bool,
+    out: &mut Vec<Tri>,
+) -> Result<Option<Line>, CsgError> {
+    let xy = |i: usize| [level[i][0], level[i][1]];
+    // Corners once each, and without those exactly in line with their neighbours (the
+    // cap's split at edge points puts them back).
+    let mut kept = corners.to_vec();
+    'clean: while kept.len() >= 3 {
+        let m = kept.len();
+        for k in 0..m {
+            let (a, b, c) = (kept[(k + m - 1) % m], kept[k], kept[(k + 1) % m]);
+            if level[a] == level[b] || orient(xy(a), xy(b), xy(c)) == 0.0 {
+                kept.remove(k);
+                continue 'clean;
+            }
+        }
+        break;
+    }
+    let size = level
+        .iter()
+        .map(|&p| dist(xy(0), [p[0], p[1]]))
+        .fold(0.0, f64::max);
+    let poly: Vec<[f64; 2]> = kept.iter().map(|&c| xy(c)).collect();
+    if kept.len() < 3 || signed_area2(&poly).abs() <= NO_AREA * size {
+        return Ok(Some(Line::new(level)));
+    }
+    // The level's points once each (consecutive repeats dropped), the kept corners'
+    // places among them, and the points between consecutive kept corners.
+    let mut points: Vec<[f64; 3]> = Vec::with_capacity(level.len());
+    let mut place = vec![0; level.len()];
+    for (i, &p) in level.iter().enumerate() {
+        if points.last() != Some(&p) {
+            points.push(p);
+        }
+        place[i] = points.len() - 1;
+    }
+    if points.len() > 1 && points.first() == points.last() {
+        points.pop();
+        for i in place.iter_mut().filter(|i| **i == points.len()) {
+            *i = 0;
+        }
+    }
+    let corner_at: Vec<usize> = kept.iter().map(|&c| place[c]).collect();
+    let m = kept.len();
+    let mut pending = HashMap::new();
+    for x in 0..m {
+        let (from, to) = (corner_at[x], corner_at[(x + 1) % m]);
+        let mut between = Vec::new();
+        let mut i = (from + 1) % points.len();
+        while i != to {
+            between.push(i);
+            i = (i + 1) % points.len();
+        }
+        set_pending(&mut pending, &points, from, to, between);
+    }
+    let tris: Vec<[usize; 3]> = triangulate(&poly)?
+        .into_iter()
+        .map(|t| t.map(|x| corner_at[x]))
+        .collect();
+    // Counter-clockwise from +z faces up: right for the top cap, flipped at the bottom.
+    refine_cap(&mut points, tris, pending, !up, out);
+    Ok(None)
 }
 
 /// Distance from `p` to the plane of triangle `t`.
@@ -374,6 +711,12 @@ fn plane_distance(p: [f64; 3], t: &Tri) -> f64 {
 /// edge subdivisions are doubled until every patch centre and every corner path lies within
 /// `tolerance` of the mesh (a patch too far off is split across its longer side, so
 /// triangles stay well shaped). Fails when that needs more than about 2^20 triangles.
+/// Corners may coincide, at one end or all along (collapsed G4GenericTrap vertices): their
+/// edge points coincide too, and [`section_stack`] leaves out what has no area. A face that
+/// one patch a level follows within `tolerance` (a planar one, such as any face with a
+/// collapsed end) keeps its full subdivision only where it is widest: where it narrows,
+/// its edge points are repeated, so that its patches stay about as wide and no fan of
+/// slivers converges on a collapsed corner (which also made BVHs too deep).
 pub fn ruled_solid(
     section: &dyn Fn(f64) -> Vec<[f64; 3]>,
     z1: f64,
@@ -391,10 +734,16 @@ pub fn ruled_solid(
     let corners = section(z1).len();
     let (mut nz, mut nu) = (2usize, 1usize);
     loop {
-        let z_at = |i: usize| z1 + (z2 - z1) * i as f64 / nz as f64;
+        let z_at = |i: usize| {
+            if i == nz {
+                z2
+            } else {
+                z1 + (z2 - z1) * i as f64 / nz as f64
+            }
+        };
         let point = |z: f64, edge: usize, s: f64| {
             let p = section(z);
-            lerp(p[edge], p[(edge + 1) % corners], s)
+            along(p[edge], p[(edge + 1) % corners], s)
         };
         let levels: Vec<Vec<[f64; 3]>> = (0..=nz)
             .map(|i| {
@@ -405,6 +754,15 @@ pub fn ruled_solid(
                     .collect()
             })
             .collect();
+        // Distance from the mesh of the centre of the patch of edge `e` between levels `i`
+        // and `i + 1` and between `s0` and `s1` along the edge.
+        let patch_deviation = |i: usize, e: usize, s0: f64, s1: f64| {
+            let zm = 0.5 * (z_at(i) + z_at(i + 1));
+            let centre = point(zm, e, 0.5 * (s0 + s1));
+            let (a, b) = (point(z_at(i), e, s0), point(z_at(i), e, s1));
+            let (c2, d2) = (point(z_at(i + 1), e, s1), point(z_at(i + 1), e, s0));
+            plane_distance(centre, &[a, b, c2]).min(plane_distance(centre, &[a, c2, d2]))
+        };
         // Deviation along the corner paths (levels) and across patches (subdivisions).
         let (mut dev_z, mut dev_u) = (0.0f64, 0.0f64);
         for i in 0..nz {
@@ -415,16 +773,47 @@ pub fn ruled_solid(
                 dev_z = dev_z.max(dot(sub(c, chord), sub(c, chord)).sqrt());
                 for k in 0..nu {
                     let (s0, s1) = (k as f64 / nu as f64, (k + 1) as f64 / nu as f64);
-                    let centre = point(zm, e, 0.5 * (s0 + s1));
-                    let (a, b) = (point(z_at(i), e, s0), point(z_at(i), e, s1));
-                    let (c2, d2) = (point(z_at(i + 1), e, s1), point(z_at(i + 1), e, s0));
-                    let t1 = [a, b, c2];
-                    let t2 = [a, c2, d2];
-                    dev_u = dev_u.max(plane_distance(centre, &t1).min(plane_distance(centre, &t2)));
+                    dev_u = dev_u.max(patch_deviation(i, e, s0, s1));
                 }
             }
         }
         if dev_z <= tolerance && dev_u <= tolerance {
+            // A face within the tolerance of one patch a level (a planar one: any face
+            // with a collapsed end) needs no division across; where it narrows, its
+            // levels get fewer distinct points (the others repeated), keeping its patches
+            // about as wide as at its widest, so that no fan of slivers converges on a
+            // collapsed corner.
+            let flat: Vec<bool> = (0..corners)
+                .map(|e| (0..nz).all(|i| patch_deviation(i, e, 0.0, 1.0) <= tolerance))
+                .collect();
+            let sections: Vec<Vec<[f64; 3]>> = (0..=nz).map(|i| section(z_at(i))).collect();
+            let width = |i: usize, e: usize| {
+                let d = sub(sections[i][(e + 1) % corners], sections[i][e]);
+                dot(d, d).sqrt()
+            };
+            let widest: Vec<f64> = (0..corners)
+                .map(|e| (0..=nz).map(|i| width(i, e)).fold(0.0, f64::max))
+                .collect();
+            // Distinct points of edge `e` at level `i`: a power of two, nu where widest.
+            let columns = |i: usize, e: usize| {
+                let mut c = if flat[e] { 1 } else { nu };
+                while c < nu && (c as f64) * widest[e] < (nu as f64) * width(i, e) {
+                    c *= 2;
+                }
+                c
+            };
+            let levels: Vec<Vec<[f64; 3]>> = (0..=nz)
+                .map(|i| {
+                    let p = &sections[i];
+                    (0..corners)
+                        .flat_map(|e| {
+                            let c = columns(i, e);
+                            (0..nu).map(move |k| (e, (k * c / nu) as f64 / c as f64))
+                        })
+                        .map(|(e, s)| along(p[e], p[(e + 1) % corners], s))
+                        .collect()
+                })
+                .collect();
             let corner_index: Vec<usize> = (0..corners).map(|e| e * nu).collect();
             return section_stack(&levels, &corner_index);
         }
