@@ -156,11 +156,11 @@ fn step_complemented(s: Step) -> Step {
 // The first span end after tmin + tol among `spans` shifted by `shift`, skipping spans
 // shorter than tol (tangent touches). Normals face against the ray at entries, along it at
 // exits.
-fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, tol: f32) -> Step {
+fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, tol: f32, touch: f32) -> Step {
     let after = tmin + tol;
     for (var i = 0u; i < spans.len; i += 1u) {
         let s = spans.items[i];
-        if s.t1 - s.t0 <= tol {
+        if s.t1 - s.t0 <= touch {
             continue;
         }
         let t0 = s.t0 + shift;

@@ -33,13 +33,56 @@ fn csg_is_list(code: u32) -> bool {
     return code >= CSG_LIST_CONTIGUOUS && code <= CSG_LIST_OVERLAP;
 }
 
+// Twin of hytrace_csg::kernel::is_planar (over the primitives a composition has).
+fn csg_is_planar(code: u32) -> bool {
+    var planar = false;
+    // #if box
+    planar = planar || code == CSG_BOX3;
+    // #endif
+    // #if polyhedron
+    planar = planar || code == CSG_CONVEX_POLYHEDRON;
+    // #endif
+    // #if halfspace
+    planar = planar || code == CSG_HALFSPACE;
+    // #endif
+    // #if slab
+    planar = planar || code == CSG_SLAB;
+    // #endif
+    // #if phicut
+    planar = planar || code == CSG_PHICUT;
+    // #endif
+    return planar;
+}
+
+// Twin of hytrace_csg::kernel::is_axial (over the primitives a composition has).
+fn csg_is_axial(code: u32) -> bool {
+    var axial = false;
+    // #if cylinder
+    axial = axial || code == CSG_CYLINDER;
+    // #endif
+    // #if tube
+    axial = axial || code == CSG_DISC;
+    // #endif
+    return axial;
+}
+
+// Twin of hytrace_csg::kernel::centre: the middle of a cone frustum's axis, else the origin.
+fn csg_leaf_centre(code: u32, p: array<f32, 6>) -> vec3<f32> {
+    // #if cone
+    if code == CSG_CONE {
+        return vec3<f32>(0.0, 0.0, (p[1] + p[3]) * 0.5);
+    }
+    // #endif
+    return vec3<f32>(0.0);
+}
+
 fn csg_node_params(n: CsgNode) -> array<f32, 6> {
     return array<f32, 6>(n.param.x, n.param.y, n.param.z, n.param.w, n.param_ext[0], n.param_ext[1]);
 }
 
 // The first crossing of a leaf's surface by the ray o + t d (in the tree's frame) after
 // tmin + tol; normal in the tree's frame.
-fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32) -> Step {
+fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool) -> Step {
     var lo = o;
     var ld = d;
     if n.frame != UNSET {
@@ -47,18 +90,38 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32) ->
         lo = frame_point_to_local(f, o);
         ld = frame_linear(f, d);
     }
-    // The origin moved to the closest approach to the primitive's origin (0 where the CPU's
-    // quotient is not finite: a zero direction).
-    let len2 = tree_dot(ld, ld);
+    // The origin moved to the closest approach to the primitive's centre, or to its axis
+    // for the axial primitives (0 where the CPU's quotient is not finite: a zero
+    // direction). Twin of Leaf::step.
+    // The move to the axis is made only when no longer than the origin's distance from the
+    // primitive's origin.
     var shift = 0.0;
-    if len2 != 0.0 {
-        shift = -tree_dot(lo, ld) / len2;
-        if !is_finite_t(shift) {
-            shift = 0.0;
+    if csg_is_axial(n.code & ~COMPLEMENT_BIT) && n.frame == UNSET {
+        let sd = vec3<f32>(ld.x, ld.y, 0.0);
+        let len2 = tree_dot(sd, sd);
+        if len2 != 0.0 {
+            let s = -tree_dot(vec3<f32>(lo.x, lo.y, 0.0), sd) / len2;
+            if s * s * tree_dot(ld, ld) <= tree_dot(lo, lo) {
+                shift = s;
+            }
+        }
+    } else {
+        let len2 = tree_dot(ld, ld);
+        if len2 != 0.0 {
+            shift = -tree_dot(lo - csg_leaf_centre(n.code & ~COMPLEMENT_BIT, csg_node_params(n)), ld) / len2;
+            if !is_finite_t(shift) {
+                shift = 0.0;
+            }
         }
     }
     let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo + ld * shift, ld);
-    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol);
+    // Short spans of curved primitives and of leaves sharing faces are touches; a planar
+    // leaf alone skips spans within a few ulps of the solid's size of empty only.
+    var touch = tol;
+    if alone && csg_is_planar(n.code & ~COMPLEMENT_BIT) {
+        touch = tol / 4.0;
+    }
+    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch);
     if n.frame != UNSET {
         step.normal = frame_normal_to_parent(csg_frame(n.frame), step.normal);
     }
@@ -124,7 +187,8 @@ fn csg_list_inside(code: u32, count: u32, all: u32) -> bool {
 // threshold (PrimTree::list_step; members whose widened bounds the ray misses are skipped).
 // A leaf slot is the same walk over the leaf alone without culling, which returns the
 // leaf's own step (PrimTree::non_operator_step): so the primitive kernels are inlined once.
-fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
+// `root`: the slot is the tree's root (a leaf there is the whole prim).
+fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, root: bool) -> Step {
     let n = csg_node(slot);
     if n.code == CSG_ZERO {
         return step_miss(false);
@@ -159,7 +223,7 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -
             if list && !csg_meets_widened(w, member.bounds, tau, INF) {
                 continue;
             }
-            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau));
+            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau), root && !list);
             count += select(0u, 1u, s.inside_before);
             if !step_is_hit(s) {
                 continue;
@@ -282,7 +346,7 @@ fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> 
                 stack[depth] = CsgOperatorFrame(query, query_tmin, step_miss(false), step_miss(false), CSG_PHASE_FIRST_LEFT);
                 depth += 1u;
             } else {
-                incoming = csg_slot_step(tr.scale, tr.node_offset + query - 1u, o, d, query_tmin);
+                incoming = csg_slot_step(tr.scale, tr.node_offset + query - 1u, o, d, query_tmin, query == 1u);
                 has_incoming = true;
                 if depth == 0u {
                     break;

@@ -81,6 +81,7 @@ fn compare_file(
     name: &str,
     g4: &NavigatorSample,
     dir: &Path,
+    precision: Precision,
 ) -> FileResult {
     let f: Foundry = match load_gdml_scene(gdml, &GdmlOptions::default()) {
         Ok(f) => f,
@@ -98,9 +99,9 @@ fn compare_file(
         kind_of.entry(s.name.as_str()).or_insert(s.solid.kind());
     }
     let rows = rays_from_rows(&g4.rays, name).unwrap();
-    let (ours, _) = scan(&f, &rows, Precision::F64).unwrap();
+    let (ours, _) = scan(&f, &rows, precision).unwrap();
     let mut r = FileResult {
-        name: name.to_string(),
+        name: format!("{name} ({precision:?})"),
         rays: rows.len(),
         ..FileResult::default()
     };
@@ -222,8 +223,10 @@ fn every_shared_gdml_file_navigates_like_geant4() {
                 .to_string();
             let dir = tempfile::tempdir().unwrap();
             let g4 = sample(&python, gdml, RAYS_PER_FILE, 20261121, dir.path());
-            compare_file(&python, gdml, &name, &g4, dir.path())
+            [Precision::F64, Precision::F32]
+                .map(|p| compare_file(&python, gdml, &name, &g4, dir.path(), p))
         })
+        .flatten()
         .collect();
     report(&results);
     let failed: Vec<&str> = results
@@ -384,7 +387,14 @@ fn files_written_by_geant4_read_back_the_same() {
     );
     let samples = dir.path().join("sample");
     let g4 = sample(&python, &gdml, RAYS_PER_FILE, 7, &samples);
-    let r = compare_file(&python, &gdml, "roundtrip.gdml", &g4, dir.path());
+    let r = compare_file(
+        &python,
+        &gdml,
+        "roundtrip.gdml",
+        &g4,
+        dir.path(),
+        Precision::F32,
+    );
     report(std::slice::from_ref(&r));
     assert!(r.passes());
     assert!(r.exact > RAYS_PER_FILE / 2);

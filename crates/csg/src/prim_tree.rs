@@ -394,6 +394,15 @@ impl<T: Real> PrimTree<T> {
         &self.bounds
     }
 
+    /// Whether some leaf of the tree (or member of a list) is the primitive `code`.
+    pub fn has_primitive(&self, code: TypeCode) -> bool {
+        self.members.iter().any(|(leaf, _)| leaf.code == code)
+            || self
+                .slots
+                .iter()
+                .any(|s| matches!(s, Slot::Leaf(leaf) if leaf.code == code))
+    }
+
     /// Height of the tree (0 for a single primitive).
     pub fn height(&self) -> u32 {
         self.height
@@ -414,7 +423,9 @@ impl<T: Real> PrimTree<T> {
         let code = match &self.slots[position - 1] {
             Slot::Operator(code) => *code,
             Slot::Empty => return Step::miss(false),
-            Slot::Leaf(leaf) => return leaf.step(&self.planes, ray, tmin, self.tol(tmin)),
+            Slot::Leaf(leaf) => {
+                return leaf.step(&self.planes, ray, tmin, self.tol(tmin), position == 1)
+            }
             Slot::List {
                 code,
                 members,
@@ -481,7 +492,7 @@ impl<T: Real> PrimTree<T> {
                 if !meets_widened(&widened, b, tau, T::INFINITY) {
                     continue;
                 }
-                let s = leaf.step(&self.planes, ray, tau, self.tol(tau));
+                let s = leaf.step(&self.planes, ray, tau, self.tol(tau), false);
                 count += s.inside_before as usize;
                 if !s.is_hit() {
                     continue;

@@ -116,6 +116,39 @@ pub fn is_bounded(code: TypeCode) -> bool {
     )
 }
 
+/// Whether a primitive's curved wall does not depend on z (cylinder, tube): a leaf of it
+/// without a frame of its own has its origin moved to the ray's closest approach to the z
+/// axis, not to the primitive's origin. (Cones, hyperboloids and paraboloids, whose walls
+/// depend on z, and leaves in frames of their own, such as the scaled cylinder of an
+/// elliptical tube, keep the move to the origin, which measured better against Geant4 for
+/// them.)
+pub fn is_axial(code: TypeCode) -> bool {
+    matches!(code, TypeCode::Cylinder | TypeCode::Disc)
+}
+
+/// Whether a primitive's surfaces are planes (box, convex polyhedron, half-space, slab, phi
+/// cut): its spans' ends are as exact as the planes, with no near-double roots.
+pub fn is_planar(code: TypeCode) -> bool {
+    matches!(
+        code,
+        TypeCode::Box3
+            | TypeCode::ConvexPolyhedron
+            | TypeCode::HalfSpace
+            | TypeCode::Slab
+            | TypeCode::PhiCut
+    )
+}
+
+/// The point a leaf's rays are moved toward before its quadric is solved: the middle of a
+/// cone frustum's axis (a polycone's segments lie far along z from their frame's origin,
+/// where the cone's radius, extrapolated, would cancel badly), the origin for the others.
+pub fn centre<T: Real>(code: TypeCode, p: &[T; 6]) -> V3<T> {
+    match code {
+        TypeCode::Cone => V3::new(T::ZERO, T::ZERO, (p[1] + p[3]) * T::HALF),
+        _ => V3::zero(),
+    }
+}
+
 /// The spans of a ray (in the primitive's own frame) inside a primitive.
 pub fn primitive_spans<T: Real>(
     code: TypeCode,
@@ -208,12 +241,19 @@ impl<T: Real> Step<T> {
 }
 
 /// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
-/// spans shorter than `tol` (tangent touches, not crossings). Normals are oriented outward
-/// from the span's role (entries face against the ray, exits along it).
-pub fn first_crossing<T: Real>(spans: &Spans<T>, shift: T, d: V3<T>, tmin: T, tol: T) -> Step<T> {
+/// spans no longer than `touch` (tangent touches, not crossings). Normals are oriented
+/// outward from the span's role (entries face against the ray, exits along it).
+pub fn first_crossing<T: Real>(
+    spans: &Spans<T>,
+    shift: T,
+    d: V3<T>,
+    tmin: T,
+    tol: T,
+    touch: T,
+) -> Step<T> {
     let after = tmin + tol;
     for s in spans.as_slice() {
-        if s.t1 - s.t0 <= tol {
+        if s.t1 - s.t0 <= touch {
             continue;
         }
         let (t0, t1) = (s.t0 + shift, s.t1 + shift);
@@ -239,20 +279,56 @@ pub fn first_crossing<T: Real>(spans: &Spans<T>, shift: T, d: V3<T>, tmin: T, to
 
 impl<T: Real> Leaf<T> {
     /// The first crossing of the leaf's surface by `ray` (in the tree's frame) after
-    /// `tmin + tol`; normals in the tree's frame.
-    pub fn step(&self, planes: &[[T; 4]], ray: &Ray<T>, tmin: T, tol: T) -> Step<T> {
+    /// `tmin + tol`; normals in the tree's frame. `alone`: the leaf is the whole prim (no
+    /// other leaf shares its faces).
+    pub fn step(&self, planes: &[[T; 4]], ray: &Ray<T>, tmin: T, tol: T, alone: bool) -> Step<T> {
         let local = match &self.frame {
             Some(f) => f.ray_to_local(ray),
             None => *ray,
         };
-        // Move the origin to the closest approach to the primitive's origin: the quadrics
-        // are then solved with O(size) coefficients however far away the ray starts.
+        // Move the origin to the closest approach to the primitive's centre (to its axis for
+        // the primitives whose walls do not depend on z): the quadrics are then solved with
+        // O(size) coefficients however far away the ray starts. A move along the axis would
+        // only make such walls worse: a ray starting inside a long thin tube, moved by its
+        // length along itself, solves the tube's wall with coordinates of that length
+        // instead of the tube's radius. The move to the axis is made only when it is no
+        // longer than the origin's distance from the primitive's origin: a ray (nearly)
+        // along the axis would be moved far along itself, and its crossings found as
+        // differences of large parameters.
         let d = local.direction;
-        let shift = -local.origin.dot(d) / d.length_squared();
-        let shift = if shift.is_finite() { shift } else { T::ZERO };
+        let shift = if is_axial(self.code) && self.frame.is_none() {
+            let o_s = V3::new(local.origin.x, local.origin.y, T::ZERO);
+            let d_s = V3::new(d.x, d.y, T::ZERO);
+            let shift = -o_s.dot(d_s) / d_s.length_squared();
+            let short = shift * shift * d.length_squared() <= local.origin.length_squared();
+            if short {
+                shift
+            } else {
+                T::ZERO
+            }
+        } else {
+            let toward = local.origin - centre(self.code, &self.params);
+            let shift = -toward.dot(d) / d.length_squared();
+            if shift.is_finite() {
+                shift
+            } else {
+                T::ZERO
+            }
+        };
         let o = local.origin.at(d, shift);
         let spans = primitive_spans(self.code, &self.params, &planes[self.planes.clone()], o, d);
-        let mut step = first_crossing(&spans, shift, d, tmin, tol);
+        // A curved surface's near-double roots (a tangent ray) are uncertain by more than
+        // their distance: such short spans are touches, and so are the slivers that the
+        // rounded planes of faces that leaves share leave along a ray near those faces.
+        // A planar leaf alone meets a ray in roots exact to a few ulps of the solid's size:
+        // only spans within that of empty are touches, a longer short span is a thin part
+        // of it (a ray past the edge of a long bar).
+        let touch = if alone && is_planar(self.code) {
+            tol / T::from_f64(4.0)
+        } else {
+            tol
+        };
+        let mut step = first_crossing(&spans, shift, d, tmin, tol, touch);
         if let Some(f) = &self.frame {
             step.normal = f.normal_to_parent(step.normal);
         }

@@ -125,7 +125,12 @@ impl<E: Copy> Stack<E> {
 
 /// Whether `bounds` contain `x` (faces included).
 pub(super) fn holds<T: Real>(bounds: &Bounds<T>, x: V3<T>) -> bool {
-    (0..3).all(|k| x.get(k) >= bounds[0].get(k) && x.get(k) <= bounds[1].get(k))
+    holds_within(bounds, x, T::ZERO)
+}
+
+/// Whether `bounds` widened by `margin` contain `x` (faces included).
+pub(super) fn holds_within<T: Real>(bounds: &Bounds<T>, x: V3<T>, margin: T) -> bool {
+    (0..3).all(|k| x.get(k) >= bounds[0].get(k) - margin && x.get(k) <= bounds[1].get(k) + margin)
 }
 
 impl<T: Real> BoxBvh<T> {
@@ -316,9 +321,9 @@ impl<T: Real> BoxBvh<T> {
         (node_base, unbounded)
     }
 
-    /// Appends to `out` every item whose node boxes contain `x` (a superset of those whose
-    /// own bounds do), in no particular order.
-    pub(super) fn candidates_at(&self, x: V3<T>, out: &mut Vec<u32>) {
+    /// Appends to `out` every item whose node boxes, widened by `margin`, contain `x` (a
+    /// superset of those whose own bounds do), in no particular order.
+    pub(super) fn candidates_near(&self, x: V3<T>, margin: T, out: &mut Vec<u32>) {
         out.extend_from_slice(&self.unbounded);
         if self.nodes.is_empty() {
             return;
@@ -327,7 +332,7 @@ impl<T: Real> BoxBvh<T> {
         stack.push(0);
         while let Some(index) = stack.pop() {
             let node = &self.nodes[index as usize];
-            if !holds(&node.bounds, x) {
+            if !holds_within(&node.bounds, x, margin) {
                 continue;
             }
             if node.count > 0 {

@@ -41,7 +41,7 @@
 use anyhow::Context;
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, V3};
-use hytrace_foundry::{Foundry, UNSET};
+use hytrace_foundry::{Foundry, TypeCode, UNSET};
 
 mod batch;
 mod bvh;
@@ -55,7 +55,7 @@ mod tests;
 
 use batch::{Crossings, Direct};
 pub use batch::{TraceScratch, INTERLEAVE_MIN_BYTES};
-use bvh::{holds, BoxBvh, RaySlabs};
+use bvh::{holds, holds_within, BoxBvh, RaySlabs};
 
 /// Deepest box BVH (instances, a solid's leaves) a scene may have: the traversal stacks'
 /// size, on the CPU and in the GPU kernels.
@@ -107,6 +107,9 @@ pub struct Hit<T> {
 struct Group<T> {
     members: Vec<u32>,
     bvh: Option<Box<BoxBvh<T>>>,
+    /// The largest extent of a member's world bounds (0 for no members): the scale of the
+    /// widest tolerance band around the members.
+    largest: T,
 }
 
 /// A world point carried in precision `T` as two parts: `hi`, the point rounded, and
@@ -257,8 +260,41 @@ impl<T: Real> Group<T> {
         } else {
             None
         };
-        Ok(Group { members, bvh })
+        let largest = members
+            .iter()
+            .map(|&i| extent(&placements[i as usize].bounds))
+            .fold(T::ZERO, T::max);
+        Ok(Group {
+            members,
+            bvh,
+            largest,
+        })
     }
+
+    /// Appends to `out` the members whose bounds, widened by `margin`, may hold `x`.
+    fn near(&self, placements: &[Placement<T>], x: V3<T>, margin: T, out: &mut Vec<u32>) {
+        match &self.bvh {
+            Some(bvh) => bvh.candidates_near(x, margin, out),
+            None => out.extend(
+                self.members
+                    .iter()
+                    .filter(|&&i| holds_within(&placements[i as usize].bounds, x, margin)),
+            ),
+        }
+    }
+}
+
+/// The largest side of a box.
+fn extent<T: Real>(b: &Bounds<T>) -> T {
+    (b[1].x - b[0].x).max(b[1].y - b[0].y).max(b[1].z - b[0].z)
+}
+
+/// A band about a query's start `tmin` in which the tracer's surface tolerance decides, for
+/// solids of size up to `size` (their largest world extent): four times the tolerance of
+/// crossings there (the solids' own scale is at most this size, their frames' at most
+/// twice it), so a crossing the tolerance skipped at the start lies inside.
+fn band<T: Real>(size: T, tmin: T) -> T {
+    T::from_f64(8.0) * T::SURFACE_TOLERANCE * (size + tmin.abs())
 }
 
 /// The placement tree of a hierarchical scene.
@@ -501,7 +537,7 @@ impl<T: Real> CpuScene<T> {
         };
         scratch.clear();
         // The boxes are padded by more than the rounding of a point inside them.
-        bvh.candidates_at(x.hi, scratch);
+        bvh.candidates_near(x.hi, T::ZERO, scratch);
         scratch.sort_unstable_by(|a, b| b.cmp(a));
         scratch.iter().copied().find(|&c| self.contains(c, x))
     }
@@ -643,6 +679,75 @@ impl<T: Real> CpuScene<T> {
             }
         });
         found
+    }
+
+    /// Whether the ray starts (at `tmin`) so near a surface that the tracer's surface
+    /// tolerance decides about it: a crossing there may have been taken for the surface the
+    /// ray starts on, and which side of it the start lies on is within rounding (in f32,
+    /// scans trace such rays again in f64). The instances the trace asks about where the
+    /// ray starts (in a hierarchical scene the one its origin is located in and that one's
+    /// daughters, in a flat scene all) whose boxes hold the start are asked whether the
+    /// start lies within a band wider than their tolerance ([`band`]) of a CSG surface (by
+    /// the signed distance, which catches rays along a surface they start on), and searched,
+    /// as the trace searches them, for a crossing within that band about `tmin` (which
+    /// catches meshes, and frames that scale distances).
+    pub fn starts_near_surface(&self, ray: &Ray<f64>, tmin: T) -> bool {
+        let world = WorldRay::new(ray);
+        let start = WorldPoint::<T>::new(ray.origin.at(ray.direction, tmin.to_f64())).hi;
+        let mut candidates = Vec::new();
+        let group = match &self.layout {
+            Layout::Tree(h) => {
+                let current = self.locate_deepest(h, &world.origin);
+                candidates.extend(current);
+                current.map_or(&h.roots, |c| &h.daughters[c as usize])
+            }
+            Layout::Flat(all) => all,
+        };
+        group.near(
+            &self.placements,
+            start,
+            band(group.largest, tmin),
+            &mut candidates,
+        );
+        candidates.iter().any(|&i| {
+            let p = &self.placements[i as usize];
+            let b = band(extent(&p.bounds), tmin);
+            if !holds_within(&p.bounds, start, b) {
+                return false;
+            }
+            let local = p.rebase(&world);
+            let t = local.local_t(tmin);
+            let x = local.ray.origin.at(local.ray.direction, t);
+            self.solids[p.solid].near_surface(x, b)
+                || self
+                    .cross_instance(i as usize, &world, None, tmin - b, tmin + b, &mut Direct)
+                    .is_some()
+        })
+    }
+
+    /// Whether instance `instance`'s solid has a torus among its CSG primitives (whose f32
+    /// roots, of a quartic, are the least certain; see `scan`).
+    pub fn has_torus(&self, instance: u32) -> bool {
+        let p = &self.placements[instance as usize];
+        self.solids[p.solid].prims.iter().any(
+            |prim| matches!(prim, PreparedPrim::Csg(tree) if tree.has_primitive(TypeCode::Torus)),
+        )
+    }
+
+    /// How far the world point `x` lies from the surface of instance `instance`'s CSG
+    /// prims: the least magnitude of their signed distance bounds there (a lower bound of
+    /// the distance; infinite for a solid without CSG prims).
+    pub fn surface_distance(&self, instance: u32, x: [f64; 3]) -> T {
+        let p = &self.placements[instance as usize];
+        let local = p.offset_of(&WorldPoint::new(V3::from_f64(x)));
+        self.solids[p.solid]
+            .prims
+            .iter()
+            .filter_map(|prim| match prim {
+                PreparedPrim::Csg(tree) => Some(tree.sdf(local).abs()),
+                PreparedPrim::Mesh(_) => None,
+            })
+            .fold(T::INFINITY, T::min)
     }
 
     /// The instance whose solid contains the world point `x` (taken into each solid's frame

@@ -230,6 +230,14 @@ impl<T: Real> SolidAccel<T> {
         self.prims.iter().any(|p| p.contains(x))
     }
 
+    /// Whether the point `x` of the solid's frame lies within `band` of a CSG prim's
+    /// surface, by the prim's signed distance bound (meshes have none: never near).
+    pub fn near_surface(&self, x: V3<T>, band: T) -> bool {
+        self.prims
+            .iter()
+            .any(|p| matches!(p, PreparedPrim::Csg(tree) if tree.sdf(x).abs() <= band))
+    }
+
     /// Calls `visit(cluster, t0, t1)` for every cluster whose box the ray (solid frame)
     /// meets within `[tmin, tmax]`, `[t0, t1]` the part inside the box.
     pub fn visit_clusters(

@@ -1,0 +1,426 @@
+//! Named hard cases where an f32 scan's surface tolerance would decide, checked in f32 and
+//! f64 against answers written from the geometry in f64: rays starting within 1e-6 to
+//! 1e-3 mm of a face (inward and outward, near the origin and 1e5 mm out), rays starting
+//! on a face and running along it, grazing crossings of a large sphere, thin chords past
+//! the edge of a long box, rays from inside a long thin tube (an optical fibre), and a
+//! thin horn torus seen from metres away. An f32 scan answers these as f64 does: it traces
+//! again in f64 the rays that start within its tolerance of a surface, that cross at
+//! grazing incidence, or whose crossing of a torus lies off the f64 surface
+//! (`scan::redo_near_surface_in_f64`); each f32 test checks that the scan did so. On a GPU
+//! (lavapipe in CI) the f32 scan must give the CPU's f32 scan bit for bit.
+
+mod common;
+
+use common::{unit, Rng};
+use hytrace_csg::{box3, sphere, to_tree, torus, tube, Shape};
+use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
+use hytrace_trace::gpu::GpuContext;
+use hytrace_trace::scan::{scan, scan_with, Backend, Precision, RayRow, ScanResult};
+
+/// A scene of one CSG solid placed by `at`.
+fn placed(shape: Shape, at: Transform64) -> Foundry {
+    let mut f = Foundry::new();
+    let mut s = f.begin_solid("solid");
+    s.add_csg(to_tree(&shape).unwrap(), 0, UNSET).unwrap();
+    let solid = s.finish(0).unwrap();
+    f.add_instance(solid, at, 0, 0).unwrap();
+    f
+}
+
+/// A ray from `origin` along the unit `direction`, from 0 on.
+fn row(origin: [f64; 3], direction: [f64; 3]) -> RayRow {
+    RayRow {
+        origin,
+        direction,
+        tmin: 0.0,
+        tmax: f64::INFINITY,
+    }
+}
+
+/// A uniformly random unit vector.
+fn isotropic(rng: &mut Rng) -> [f64; 3] {
+    let z = 2.0 * rng.unit() - 1.0;
+    let phi = std::f64::consts::TAU * rng.unit();
+    let r = (1.0 - z * z).sqrt();
+    [r * phi.cos(), r * phi.sin(), z]
+}
+
+/// The scan of `rows` in precision `p`; in f32 it must have traced some rays again in
+/// f64, and a GPU (where one is found) must give the same answers bit for bit.
+fn scanned(f: &Foundry, rows: &[RayRow], p: Precision) -> ScanResult {
+    let (result, times) = scan(f, rows, p).unwrap();
+    if p == Precision::F32 {
+        assert!(times.redone_in_f64 > 0, "no ray was traced again in f64");
+        eprintln!(
+            "{} of {} rays traced again in f64",
+            times.redone_in_f64,
+            rows.len()
+        );
+        if GpuContext::for_tests().is_some() {
+            let (gpu, _) = scan_with(f, rows, p, Backend::Gpu).unwrap();
+            for (i, r) in rows.iter().enumerate() {
+                let same = result.hits[i]
+                    .iter()
+                    .zip(&gpu.hits[i])
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(
+                    same && result.ids[i] == gpu.ids[i],
+                    "GPU, ray {i} {r:?}: {:?} {:?}, CPU {:?} {:?}",
+                    gpu.hits[i],
+                    gpu.ids[i],
+                    result.hits[i],
+                    result.ids[i]
+                );
+            }
+        }
+    }
+    result
+}
+
+/// Checks every answer against `want` within `tolerance(row, want)`, listing the first
+/// disagreements.
+fn check(
+    name: &str,
+    rows: &[RayRow],
+    got: &ScanResult,
+    want: &[f64],
+    tolerance: impl Fn(&RayRow, f64) -> f64,
+) {
+    let mut wrong = Vec::new();
+    for (i, (r, &w)) in rows.iter().zip(want).enumerate() {
+        let g = got.hits[i][3];
+        let ok = (g.is_infinite() && w.is_infinite()) || (g - w).abs() <= tolerance(r, w);
+        if !ok {
+            wrong.push(format!("ray {i} {r:?}: {g}, exact {w}"));
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "{name}: {} of {} rays wrong, e.g.\n{}",
+        wrong.len(),
+        rows.len(),
+        wrong[..wrong.len().min(5)].join("\n")
+    );
+}
+
+/// The oracle tests' tolerance: 2e-6 of the origin's distance from the world origin plus
+/// the distance travelled, at least 1e-9 mm.
+fn relative(r: &RayRow, t: f64) -> f64 {
+    let o = r.origin.iter().map(|c| c * c).sum::<f64>().sqrt();
+    (2e-6 * (o + if t.is_finite() { t } else { 0.0 })).max(1e-9)
+}
+
+/// Where a ray from `o` along `d` first leaves (`inside`) or enters the axis-aligned box
+/// of half sides `h` centred on the origin: slab intersection in f64.
+fn box_distance(h: [f64; 3], o: [f64; 3], d: [f64; 3]) -> f64 {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..3 {
+        if d[k] == 0.0 {
+            if o[k].abs() > h[k] {
+                return f64::INFINITY;
+            }
+            continue;
+        }
+        let (a, b) = ((-h[k] - o[k]) / d[k], (h[k] - o[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    match () {
+        _ if t0 > t1 || t1 <= 0.0 => f64::INFINITY,
+        _ if t0 > 0.0 => t0,
+        _ => t1,
+    }
+}
+
+/// Rays starting 1e-6 to 1e-3 mm off a face of a 2 x 1 x 0.5 m box (f32 tolerance there:
+/// 2e-3 mm), inward and outward, isotropic: the entry just ahead (or the exit through the
+/// face just behind) is a crossing, not the surface the ray starts on.
+fn near_surface_starts(p: Precision) {
+    let h = [1000.0, 500.0, 250.0];
+    for distance in [0.0, 1e5] {
+        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
+        let f = placed(
+            box3(2000.0, 1000.0, 500.0).unwrap(),
+            Transform64::translation(at),
+        );
+        let mut rng = Rng(7 + distance as u64);
+        let (mut rows, mut want) = (Vec::new(), Vec::new());
+        for i in 0..4000 {
+            let axis = i % 3;
+            let side = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
+            let offset = 10f64.powf(-6.0 + 3.0 * rng.unit()) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            let mut local = [0, 1, 2].map(|k| h[k] * (2.0 * rng.unit() - 1.0) * 0.9);
+            local[axis] = side * (h[axis] + offset);
+            let d = isotropic(&mut rng);
+            rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
+            want.push(box_distance(h, local, d));
+        }
+        let got = scanned(&f, &rows, p);
+        check(
+            &format!("box at {distance} mm"),
+            &rows,
+            &got,
+            &want,
+            relative,
+        );
+    }
+}
+
+#[test]
+fn near_surface_starts_f32() {
+    near_surface_starts(Precision::F32);
+}
+
+#[test]
+fn near_surface_starts_f64() {
+    near_surface_starts(Precision::F64);
+}
+
+/// Rays starting 1e-6 to 1e-3 mm inside or outside the top face of a 2 x 1 x 0.5 m box and
+/// running along it: inside they leave through a side, outside they miss. Which side of the
+/// face the start lies on decides, within f32 rounding of the start.
+fn along_a_face(p: Precision) {
+    let h = [1000.0, 500.0, 250.0];
+    for distance in [0.0, 1e5] {
+        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
+        let f = placed(
+            box3(2000.0, 1000.0, 500.0).unwrap(),
+            Transform64::translation(at),
+        );
+        let mut rng = Rng(11 + distance as u64);
+        let (mut rows, mut want) = (Vec::new(), Vec::new());
+        for i in 0..2000 {
+            let offset = 10f64.powf(-6.0 + 3.0 * rng.unit()) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            let local = [
+                h[0] * (2.0 * rng.unit() - 1.0) * 0.9,
+                h[1] * (2.0 * rng.unit() - 1.0) * 0.9,
+                h[2] - offset,
+            ];
+            let phi = std::f64::consts::TAU * rng.unit();
+            let d = [phi.cos(), phi.sin(), 0.0];
+            rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
+            want.push(box_distance(h, local, d));
+        }
+        let got = scanned(&f, &rows, p);
+        check(
+            &format!("face at {distance} mm"),
+            &rows,
+            &got,
+            &want,
+            relative,
+        );
+    }
+}
+
+#[test]
+fn along_a_face_f32() {
+    along_a_face(Precision::F32);
+}
+
+#[test]
+fn along_a_face_f64() {
+    along_a_face(Precision::F64);
+}
+
+/// Rays from 1.5 m passing a sphere of radius 1 m at 0.001 to 30 mm inside its rim (half
+/// chords of 1.4 to 245 mm): near tangency the f32 root is off by the sphere's size times
+/// epsilon over the cosine of incidence, which the scan must not let through.
+fn grazing_sphere(p: Precision) {
+    let radius = 1000.0;
+    let f = placed(sphere(radius).unwrap(), Transform64::IDENTITY);
+    let mut rng = Rng(13);
+    let (mut rows, mut want) = (Vec::new(), Vec::new());
+    for _ in 0..3000 {
+        let d = isotropic(&mut rng);
+        // A unit vector across `d`.
+        let a = if d[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let dot = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+        let u = unit([0, 1, 2].map(|k| a[k] - dot * d[k]));
+        let pass = radius - 10f64.powf(-3.0 + 4.5 * rng.unit());
+        let origin = [0, 1, 2].map(|k| -1500.0 * d[k] + pass * u[k]);
+        rows.push(row(origin, d));
+        want.push(1500.0 - (radius * radius - pass * pass).sqrt());
+    }
+    let got = scanned(&f, &rows, p);
+    check("grazing sphere", &rows, &got, &want, relative);
+}
+
+#[test]
+fn grazing_sphere_f32() {
+    grazing_sphere(Precision::F32);
+}
+
+#[test]
+fn grazing_sphere_f64() {
+    grazing_sphere(Precision::F64);
+}
+
+/// A box 9.5 x 90000 x 27 mm (a long bar, f32 tolerance 0.09 mm) crossed near an edge
+/// along its length by rays whose chord inside it is 0.028 to 0.09 mm: a thin part of a
+/// planar solid, not a tangent touch.
+fn thin_chord_of_a_long_box(p: Precision) {
+    let h = [4.75, 45000.0, 13.5];
+    let f = placed(box3(9.5, 90000.0, 27.0).unwrap(), Transform64::IDENTITY);
+    let mut rng = Rng(17);
+    let (mut rows, mut want) = (Vec::new(), Vec::new());
+    for _ in 0..2000 {
+        // In the xz plane, at 45 degrees past the corner (h_x, h_z), cutting the corner by
+        // a chord of length c: the line x + z = h_x + h_z - c / sqrt(2).
+        let c = 10f64.powf(-1.55 + 0.5 * rng.unit());
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let y = h[1] * (2.0 * rng.unit() - 1.0) * 0.9;
+        let along = 0.2 * (2.0 * rng.unit() - 1.0);
+        let d = unit([s, along, -s]);
+        let back = 50.0;
+        let corner = [h[0] - c * s * s, y, h[2] - c * s * s];
+        let origin = [0, 1, 2].map(|k| corner[k] - back * d[k]);
+        rows.push(row(origin, d));
+        want.push(box_distance(h, origin, d));
+    }
+    let got = scanned_allowing_none(&f, &rows, p);
+    check("thin chords", &rows, &got, &want, relative);
+}
+
+/// [`scanned`] without requiring f32 rays to be traced again (thin chords need none).
+fn scanned_allowing_none(f: &Foundry, rows: &[RayRow], p: Precision) -> ScanResult {
+    let (result, _) = scan(f, rows, p).unwrap();
+    result
+}
+
+#[test]
+fn thin_chord_of_a_long_box_f32() {
+    thin_chord_of_a_long_box(Precision::F32);
+}
+
+#[test]
+fn thin_chord_of_a_long_box_f64() {
+    thin_chord_of_a_long_box(Precision::F64);
+}
+
+/// Rays from inside an optical fibre (a tube of radius 0.1825 mm and length 1 m, f32
+/// tolerance 1e-3 mm) at up to 400 mm from its middle, isotropic: the exit through the
+/// wall, within 1e-5 mm plus 2e-6 of the distance, as exact as the fibre's radius allows
+/// (the error must not grow with the start's distance along the fibre).
+fn inside_a_long_thin_tube(p: Precision) {
+    let (r, half) = (0.1825, 500.0);
+    let f = placed(tube(0.0, r, -half, half).unwrap(), Transform64::IDENTITY);
+    let mut rng = Rng(19);
+    let (mut rows, mut want) = (Vec::new(), Vec::new());
+    for _ in 0..3000 {
+        let rho = r * rng.unit().sqrt() * 0.99;
+        let phi = std::f64::consts::TAU * rng.unit();
+        let o = [
+            rho * phi.cos(),
+            rho * phi.sin(),
+            400.0 * (2.0 * rng.unit() - 1.0),
+        ];
+        let d = isotropic(&mut rng);
+        // The exit: the wall's root of |o_xy + t d_xy| = r, or a cap.
+        let (a, b) = (d[0] * d[0] + d[1] * d[1], o[0] * d[0] + o[1] * d[1]);
+        let c = o[0] * o[0] + o[1] * o[1] - r * r;
+        let wall = if a > 0.0 {
+            (-b + (b * b - a * c).sqrt()) / a
+        } else {
+            f64::INFINITY
+        };
+        let cap = if d[2] != 0.0 {
+            ((half * d[2].signum()) - o[2]) / d[2]
+        } else {
+            f64::INFINITY
+        };
+        rows.push(row(o, d));
+        want.push(wall.min(cap));
+    }
+    let got = scanned(&f, &rows, p);
+    check("fibre", &rows, &got, &want, |_, t| 1e-5 + 2e-6 * t);
+}
+
+#[test]
+fn inside_a_long_thin_tube_f32() {
+    inside_a_long_thin_tube(Precision::F32);
+}
+
+#[test]
+fn inside_a_long_thin_tube_f64() {
+    inside_a_long_thin_tube(Precision::F64);
+}
+
+/// A field-shaper tube of DUNE's vertical drift detector: a 9 m aluminium pipe (radii 5
+/// and 22.85 mm) with a horn torus corner (22.85 mm about a 23 mm circle) at its end,
+/// placed 4.5 m out and turned by 30 degrees, hit by rays from 6 m away aimed at the
+/// corner. In f32 against the f64 scan (itself checked against Geant4 on the oracle tests'
+/// tori), whose hit points lie on the torus or the pipe to 1e-9 mm.
+fn horn_torus_from_afar(p: Precision) {
+    let (rmin, rmax, rtor, half) = (5.0, 22.85, 23.0, 4482.6);
+    let corner = Transform64::translation([-rtor, 0.0, half]).compose(&Transform64::rotation(
+        [1.0, 0.0, 0.0],
+        std::f64::consts::FRAC_PI_2,
+    ));
+    let shape = Shape::Op(
+        TypeCode::Union,
+        Box::new(tube(rmin, rmax, -half, half).unwrap()),
+        Box::new(torus(rmin, rmax, rtor).unwrap().placed(corner)),
+    );
+    let place = Transform64::translation([0.4, 0.0, 4482.6]).compose(&Transform64::rotation(
+        [0.0, 1.0, 0.0],
+        std::f64::consts::PI / 6.0,
+    ));
+    let f = placed(shape, place);
+    let aim_at = place.apply_point(corner.apply_point([0.0; 3]));
+    let mut rng = Rng(23);
+    let rows: Vec<RayRow> = (0..4000)
+        .map(|_| {
+            let d = isotropic(&mut rng);
+            let target: [f64; 3] =
+                std::array::from_fn(|k| aim_at[k] + 50.0 * (2.0 * rng.unit() - 1.0));
+            row([0, 1, 2].map(|k| target[k] - 6000.0 * d[k]), d)
+        })
+        .collect();
+    let (exact, _) = scan(&f, &rows, Precision::F64).unwrap();
+    // The f64 answers lie on the pipe or the torus.
+    let (to_solid, to_corner) = (place.inverse().unwrap(), corner.inverse().unwrap());
+    let mut hits = 0;
+    for (r, h) in rows
+        .iter()
+        .zip(&exact.hits)
+        .filter(|(_, h)| h[3].is_finite())
+    {
+        let x: [f64; 3] = std::array::from_fn(|k| r.origin[k] + h[3] * r.direction[k]);
+        let s = to_solid.apply_point(x);
+        let rho = (s[0] * s[0] + s[1] * s[1]).sqrt();
+        let on_pipe = s[2].abs() <= half + 1e-9
+            && ((rho - rmax).abs() < 1e-9
+                || (rho - rmin).abs() < 1e-9
+                || (s[2].abs() - half).abs() < 1e-9);
+        let c = to_corner.apply_point(s);
+        let tube_r = (((c[0] * c[0] + c[1] * c[1]).sqrt() - rtor).powi(2) + c[2] * c[2]).sqrt();
+        let on_torus = (tube_r - rmax).abs() < 1e-9 || (tube_r - rmin).abs() < 1e-9;
+        assert!(
+            on_pipe || on_torus,
+            "f64 answer off the surface: {r:?} {h:?}"
+        );
+        hits += 1;
+    }
+    assert!(hits > 1000, "{hits} hits");
+    let want: Vec<f64> = exact.hits.iter().map(|h| h[3]).collect();
+    let got = if p == Precision::F32 {
+        scanned_allowing_none(&f, &rows, p)
+    } else {
+        exact
+    };
+    check("field shaper corner", &rows, &got, &want, relative);
+}
+
+#[test]
+fn horn_torus_from_afar_f32() {
+    horn_torus_from_afar(Precision::F32);
+}
+
+#[test]
+fn horn_torus_from_afar_f64() {
+    horn_torus_from_afar(Precision::F64);
+}
