@@ -54,23 +54,58 @@ fn csg_is_planar(code: u32) -> bool {
     return planar;
 }
 
-// Twin of hytrace_csg::kernel::is_axial (over the primitives a composition has).
-fn csg_is_axial(code: u32) -> bool {
-    var axial = false;
+// Twin of hytrace_csg::kernel::origin_shift: to the closest approach to the leaf's centre,
+// 0 for a ray starting beside the wall of a cylinder or tube (or with a zero direction).
+fn csg_origin_shift(code: u32, p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> f32 {
+    var walled = false;
     // #if cylinder
-    axial = axial || code == CSG_CYLINDER;
+    walled = walled || code == CSG_CYLINDER;
     // #endif
     // #if tube
-    axial = axial || code == CSG_DISC;
+    walled = walled || code == CSG_DISC;
     // #endif
-    return axial;
+    if walled {
+        let x = o.x - p[0];
+        let y = o.y - p[1];
+        let beside = x * x + y * y <= 4.0 * p[3] * p[3];
+        if beside && o.z >= p[4] && o.z <= p[5] {
+            return 0.0;
+        }
+        let across = x * d.x + y * d.y;
+        let d2 = d.x * d.x + d.y * d.y;
+        let s = -across / d2;
+        let c = o - csg_leaf_centre(code, p);
+        if s * s * tree_dot(d, d) <= tree_dot(c, c) {
+            return s;
+        }
+    }
+    let len2 = tree_dot(d, d);
+    if len2 == 0.0 {
+        return 0.0;
+    }
+    let shift = -tree_dot(o - csg_leaf_centre(code, p), d) / len2;
+    if !is_finite_t(shift) {
+        return 0.0;
+    }
+    return shift;
 }
 
-// Twin of hytrace_csg::kernel::centre: the middle of a cone frustum's axis, else the origin.
+// Twin of hytrace_csg::kernel::centre: the middle of the axis of a cone frustum, cylinder or
+// tube, else the origin.
 fn csg_leaf_centre(code: u32, p: array<f32, 6>) -> vec3<f32> {
     // #if cone
     if code == CSG_CONE {
         return vec3<f32>(0.0, 0.0, (p[1] + p[3]) * 0.5);
+    }
+    // #endif
+    // #if cylinder
+    if code == CSG_CYLINDER {
+        return vec3<f32>(p[0], p[1], (p[4] + p[5]) * 0.5);
+    }
+    // #endif
+    // #if tube
+    if code == CSG_DISC {
+        return vec3<f32>(p[0], p[1], (p[4] + p[5]) * 0.5);
     }
     // #endif
     return vec3<f32>(0.0);
@@ -90,30 +125,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
         lo = frame_point_to_local(f, o);
         ld = frame_linear(f, d);
     }
-    // The origin moved to the closest approach to the primitive's centre, or to its axis
-    // for the axial primitives (0 where the CPU's quotient is not finite: a zero
-    // direction). Twin of Leaf::step.
-    // The move to the axis is made only when no longer than the origin's distance from the
-    // primitive's origin.
-    var shift = 0.0;
-    if csg_is_axial(n.code & ~COMPLEMENT_BIT) && n.frame == UNSET {
-        let sd = vec3<f32>(ld.x, ld.y, 0.0);
-        let len2 = tree_dot(sd, sd);
-        if len2 != 0.0 {
-            let s = -tree_dot(vec3<f32>(lo.x, lo.y, 0.0), sd) / len2;
-            if s * s * tree_dot(ld, ld) <= tree_dot(lo, lo) {
-                shift = s;
-            }
-        }
-    } else {
-        let len2 = tree_dot(ld, ld);
-        if len2 != 0.0 {
-            shift = -tree_dot(lo - csg_leaf_centre(n.code & ~COMPLEMENT_BIT, csg_node_params(n)), ld) / len2;
-            if !is_finite_t(shift) {
-                shift = 0.0;
-            }
-        }
-    }
+    let shift = csg_origin_shift(n.code & ~COMPLEMENT_BIT, csg_node_params(n), lo, ld);
     let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo + ld * shift, ld);
     // Short spans of curved primitives and of leaves sharing faces are touches; a planar
     // leaf alone skips spans within a few ulps of the solid's size of empty only.

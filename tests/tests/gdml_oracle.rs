@@ -58,6 +58,8 @@ struct FileResult {
     defective: usize,
     /// Disagreements where Geant4's step contradicts Geant4's own point location.
     inconsistent: usize,
+    /// Rays an f32 scan traced again in f64.
+    redone_in_f64: usize,
     worst: Vec<String>,
     error: Option<String>,
 }
@@ -99,10 +101,11 @@ fn compare_file(
         kind_of.entry(s.name.as_str()).or_insert(s.solid.kind());
     }
     let rows = rays_from_rows(&g4.rays, name).unwrap();
-    let (ours, _) = scan(&f, &rows, precision).unwrap();
+    let (ours, times) = scan(&f, &rows, precision).unwrap();
     let mut r = FileResult {
         name: format!("{name} ({precision:?})"),
         rays: rows.len(),
+        redone_in_f64: times.redone_in_f64,
         ..FileResult::default()
     };
     let mut disagreements = Vec::new();
@@ -183,7 +186,7 @@ fn report(results: &[FileResult]) {
         }
         eprintln!(
             "{:>55}: {} rays, exact {}/{} ({:.5}), meshed {}/{}, Geant4-defective {}, \
-             Geant4 self-contradicting {}{}",
+             Geant4 self-contradicting {}, traced again in f64 {}{}",
             r.name,
             r.rays,
             r.exact_ok,
@@ -193,6 +196,7 @@ fn report(results: &[FileResult]) {
             r.approximated,
             r.defective,
             r.inconsistent,
+            r.redone_in_f64,
             if r.passes() { "" } else { "  FAIL" }
         );
         for w in &r.worst {

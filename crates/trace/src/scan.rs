@@ -253,8 +253,9 @@ pub struct ScanTimes {
     pub trace_s: f64,
     /// Set when the scan ran on the GPU.
     pub gpu: Option<GpuScanInfo>,
-    /// Rays of an f32 scan traced again in f64 because they start within the f32 surface
-    /// tolerance of a surface ([`redo_near_surface_in_f64`]).
+    /// Rays of an f32 scan traced again in f64 because f32 could not tell their answers
+    /// (starts within the f32 tolerance of a surface, grazing crossings, torus crossings
+    /// off the f64 surface; see `docs/f32-precision.md`).
     pub redone_in_f64: usize,
 }
 
@@ -310,7 +311,7 @@ pub fn scan_with(
     }
     let f32_cpu = || {
         cpu::<f32>(foundry, rays, |scene, answers| {
-            redo_near_surface_in_f64(foundry, scene, rays, answers)
+            redo_uncertain_in_f64(foundry, scene, rays, answers)
         })
     };
     match (backend, precision) {
@@ -343,62 +344,58 @@ fn grazes(ray: &RayRow, answer: &Answer) -> bool {
     answer.0[3].is_finite() && (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]).abs() < GRAZING_COSINE
 }
 
-/// Traces again in f64 the rays of an f32 scan that start so near a CSG surface that the
-/// f32 surface tolerance decided their answers ([`CpuScene::starts_near_surface`]): whether
-/// the start is inside or outside, and whether a crossing there is the surface the ray
-/// starts on, are within f32 rounding, and f64 resolves them as Geant4 does. Every other
-/// ray keeps its f32 answer. `scene` is the scan's f32 scene; the f64 scene is built only
-/// when some ray needs it. Returns how many rays were traced again.
-fn redo_near_surface_in_f64(
+/// Traces again in f64 the rays of an f32 scan whose answers the f32 tolerance or f32
+/// rounding may have decided, as Geant4 (in f64) would not: rays that start within the
+/// tolerance of a surface ([`CpuScene::starts_near_surface`]: which side the start lies
+/// on, and whether a crossing there is the surface it starts on, are within rounding),
+/// rays that cross at grazing incidence ([`GRAZING_COSINE`]), and crossings of solids with
+/// a torus whose point lies off the f64 surface by more than an eighth of the f32 band (so
+/// off by the band at most at the incidences the grazing test lets through: the f32 roots
+/// of the quartic can stray further than its tolerance). Every other ray keeps its f32
+/// answer. `scene` is the scan's f32 scene; the f64 scene is built only when some ray
+/// needs it. Returns how many rays were traced again.
+fn redo_uncertain_in_f64(
     f: &Foundry,
     scene: &CpuScene<f32>,
     rays: &[RayRow],
     answers: &mut [Answer],
 ) -> anyhow::Result<usize> {
-    let near: Vec<usize> = rays
+    let torus: Vec<bool> = (0..scene.instances() as u32)
+        .map(|i| scene.has_torus(i))
+        .collect();
+    let on_torus = |a: &Answer| usize::try_from(a.1).is_ok_and(|i| torus[i]);
+    let (mut again, checked): (Vec<usize>, Vec<usize>) = rays
         .par_iter()
         .zip(answers.par_iter())
         .enumerate()
-        .filter(|(_, (r, a))| {
+        .filter_map(|(i, (r, a))| {
             let (ray, tmin, _) = query_of::<f32>(r);
-            grazes(r, a) || scene.starts_near_surface(&ray, tmin)
+            if grazes(r, a) || scene.starts_near_surface(&ray, tmin) {
+                Some((i, true))
+            } else {
+                on_torus(a).then_some((i, false))
+            }
         })
-        .map(|(i, _)| i)
-        .collect();
-    let on_torus: Vec<usize> = (0..rays.len())
-        .filter(|&i| answers[i].1 >= 0 && scene.has_torus(answers[i].1 as u32))
-        .filter(|i| near.binary_search(i).is_err())
-        .collect();
-    if near.is_empty() && on_torus.is_empty() {
+        .partition_map(|(i, uncertain)| match uncertain {
+            true => rayon::iter::Either::Left(i),
+            false => rayon::iter::Either::Right(i),
+        });
+    if again.is_empty() && checked.is_empty() {
         return Ok(0);
     }
     let exact = CpuScene::<f64>::new(f)?;
-    // Crossings of solids with a torus are checked against the f64 surface: the f32 roots
-    // of the quartic can stray further than its tolerance (thin horn tori seen 0.06 mm
-    // off), and a crossing whose point is off the surface by more than an eighth of the f32
-    // band (so off by the band at most at incidences the grazing test lets through) is
-    // traced again.
-    let off: Vec<usize> = on_torus
-        .into_par_iter()
-        .filter(|&i| {
-            let (r, t) = (&rays[i], answers[i].0[3]);
-            let x: [f64; 3] = std::array::from_fn(|k| r.origin[k] + t * r.direction[k]);
-            let reach = r.origin.iter().map(|c| c * c).sum::<f64>().sqrt() + t;
-            let allowed = f64::from(<f32 as Real>::SURFACE_TOLERANCE) * reach / 8.0;
-            exact.surface_distance(answers[i].1 as u32, x) > allowed
-        })
-        .collect();
-    let mut near = near;
-    near.extend(off);
-    near.sort_unstable();
-    if near.is_empty() {
-        return Ok(0);
-    }
-    let again: Vec<RayRow> = near.iter().map(|&i| rays[i]).collect();
-    for (&i, answer) in near.iter().zip(cpu_answers(&exact, &again)) {
+    again.par_extend(checked.into_par_iter().filter(|&i| {
+        let (r, t) = (&rays[i], answers[i].0[3]);
+        let x: [f64; 3] = std::array::from_fn(|k| r.origin[k] + t * r.direction[k]);
+        let reach = r.origin.iter().map(|c| c * c).sum::<f64>().sqrt() + t;
+        let allowed = f64::from(<f32 as Real>::SURFACE_TOLERANCE) * reach / 8.0;
+        exact.surface_distance(answers[i].1 as u32, x) > allowed
+    }));
+    let rows: Vec<RayRow> = again.iter().map(|&i| rays[i]).collect();
+    for (&i, answer) in again.iter().zip(cpu_answers(&exact, &rows)) {
         answers[i] = answer;
     }
-    Ok(near.len())
+    Ok(again.len())
 }
 
 /// A ray in the form the GPU kernels read: the origin in two f32 parts as the CPU's f32
@@ -429,7 +426,7 @@ fn gpu_scan(
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let (mut answers, gpu_times) = gpu_trace(&ctx, &tracer, &cpu, rays)?;
-    let redone_in_f64 = redo_near_surface_in_f64(f, &cpu, rays, &mut answers)?;
+    let redone_in_f64 = redo_uncertain_in_f64(f, &cpu, rays, &mut answers)?;
     let trace_s = t1.elapsed().as_secs_f64();
     let gpu = GpuScanInfo {
         adapter: ctx.describe(),

@@ -6,7 +6,7 @@
 //! thin horn torus seen from metres away. An f32 scan answers these as f64 does: it traces
 //! again in f64 the rays that start within its tolerance of a surface, that cross at
 //! grazing incidence, or whose crossing of a torus lies off the f64 surface
-//! (`scan::redo_near_surface_in_f64`); each f32 test checks that the scan did so. On a GPU
+//! (`scan::redo_uncertain_in_f64`); each f32 test checks that the scan did so. On a GPU
 //! (lavapipe in CI) the f32 scan must give the CPU's f32 scan bit for bit.
 
 mod common;

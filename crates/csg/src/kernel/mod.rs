@@ -116,14 +116,38 @@ pub fn is_bounded(code: TypeCode) -> bool {
     )
 }
 
-/// Whether a primitive's curved wall does not depend on z (cylinder, tube): a leaf of it
-/// without a frame of its own has its origin moved to the ray's closest approach to the z
-/// axis, not to the primitive's origin. (Cones, hyperboloids and paraboloids, whose walls
-/// depend on z, and leaves in frames of their own, such as the scaled cylinder of an
-/// elliptical tube, keep the move to the origin, which measured better against Geant4 for
-/// them.)
-pub fn is_axial(code: TypeCode) -> bool {
-    matches!(code, TypeCode::Cylinder | TypeCode::Disc)
+/// How far along itself a ray from `o` along `d` (in the primitive's frame) is moved
+/// before the primitive's spans are solved: to its closest approach to the primitive's
+/// [`centre`], so that its quadric has coefficients of the primitive's size however far
+/// away the ray starts (0 where that is not finite: a zero direction). The walls of
+/// cylinders and tubes do not depend on z: a ray starting beside the wall (within the z
+/// range, within twice the radius of the axis) is not moved, and others are moved to their
+/// closest approach to the axis when that is no farther along the ray than the start is
+/// from the centre. A move toward the centre would carry a start beside a long thin tube
+/// far across its axis (a ray from inside a 1 m optical fibre of radius 0.18 mm was solved
+/// with coordinates of hundreds of mm).
+pub fn origin_shift<T: Real>(code: TypeCode, p: &[T; 6], o: V3<T>, d: V3<T>) -> T {
+    if matches!(code, TypeCode::Cylinder | TypeCode::Disc) {
+        let (x, y) = (o.x - p[0], o.y - p[1]);
+        let beside = x * x + y * y <= T::from_f64(4.0) * p[3] * p[3];
+        if beside && o.z >= p[4] && o.z <= p[5] {
+            return T::ZERO;
+        }
+        // Elsewhere to the closest approach to the axis, when that is no farther along the
+        // ray than the origin is from the centre.
+        let (across, d2) = (x * d.x + y * d.y, d.x * d.x + d.y * d.y);
+        let shift = -across / d2;
+        let c = o - centre(code, p);
+        if shift * shift * d.length_squared() <= c.length_squared() {
+            return shift;
+        }
+    }
+    let shift = -(o - centre(code, p)).dot(d) / d.length_squared();
+    if shift.is_finite() {
+        shift
+    } else {
+        T::ZERO
+    }
 }
 
 /// Whether a primitive's surfaces are planes (box, convex polyhedron, half-space, slab, phi
@@ -139,12 +163,14 @@ pub fn is_planar(code: TypeCode) -> bool {
     )
 }
 
-/// The point a leaf's rays are moved toward before its quadric is solved: the middle of a
-/// cone frustum's axis (a polycone's segments lie far along z from their frame's origin,
-/// where the cone's radius, extrapolated, would cancel badly), the origin for the others.
+/// The point a leaf's rays are moved toward before its quadric is solved: the middle of the
+/// axis of a cone frustum, cylinder or tube (a polycone's segments lie far along z from
+/// their frame's origin, where the cone's radius, extrapolated, would cancel badly), the
+/// frame's origin for the others.
 pub fn centre<T: Real>(code: TypeCode, p: &[T; 6]) -> V3<T> {
     match code {
         TypeCode::Cone => V3::new(T::ZERO, T::ZERO, (p[1] + p[3]) * T::HALF),
+        TypeCode::Cylinder | TypeCode::Disc => V3::new(p[0], p[1], (p[4] + p[5]) * T::HALF),
         _ => V3::zero(),
     }
 }
@@ -286,35 +312,12 @@ impl<T: Real> Leaf<T> {
             Some(f) => f.ray_to_local(ray),
             None => *ray,
         };
-        // Move the origin to the closest approach to the primitive's centre (to its axis for
-        // the primitives whose walls do not depend on z): the quadrics are then solved with
-        // O(size) coefficients however far away the ray starts. A move along the axis would
-        // only make such walls worse: a ray starting inside a long thin tube, moved by its
-        // length along itself, solves the tube's wall with coordinates of that length
-        // instead of the tube's radius. The move to the axis is made only when it is no
-        // longer than the origin's distance from the primitive's origin: a ray (nearly)
-        // along the axis would be moved far along itself, and its crossings found as
-        // differences of large parameters.
+        // The quadrics are solved from the ray's closest approach to the primitive's centre,
+        // with coefficients of the primitive's size however far away the ray starts; a ray
+        // starting beside the wall of a cylinder or tube is solved where it starts
+        // ([`origin_shift`]).
         let d = local.direction;
-        let shift = if is_axial(self.code) && self.frame.is_none() {
-            let o_s = V3::new(local.origin.x, local.origin.y, T::ZERO);
-            let d_s = V3::new(d.x, d.y, T::ZERO);
-            let shift = -o_s.dot(d_s) / d_s.length_squared();
-            let short = shift * shift * d.length_squared() <= local.origin.length_squared();
-            if short {
-                shift
-            } else {
-                T::ZERO
-            }
-        } else {
-            let toward = local.origin - centre(self.code, &self.params);
-            let shift = -toward.dot(d) / d.length_squared();
-            if shift.is_finite() {
-                shift
-            } else {
-                T::ZERO
-            }
-        };
+        let shift = origin_shift(self.code, &self.params, local.origin, d);
         let o = local.origin.at(d, shift);
         let spans = primitive_spans(self.code, &self.params, &planes[self.planes.clone()], o, d);
         // A curved surface's near-double roots (a tangent ray) are uncertain by more than
