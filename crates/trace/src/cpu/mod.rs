@@ -687,7 +687,7 @@ impl<T: Real> CpuScene<T> {
     /// scans trace such rays again in f64). The instances the trace asks about where the
     /// ray starts (in a hierarchical scene the one its origin is located in and that one's
     /// daughters, in a flat scene all) whose boxes hold the start are asked whether the
-    /// start lies within a band wider than their tolerance ([`band`]) of a CSG surface (by
+    /// start lies within a band of eight tolerances (of their size and `tmin`) of a CSG surface (by
     /// the signed distance, which catches rays along a surface they start on), and searched,
     /// as the trace searches them, for a crossing within that band about `tmin` (which
     /// catches meshes, and frames that scale distances).
