@@ -394,6 +394,18 @@ impl<T: Real> PrimTree<T> {
         &self.bounds
     }
 
+    /// Whether the signed distance ([`Self::sdf`]) bounds true distances: every leaf's frame
+    /// (if any) keeps distances. A scaled leaf (an elliptical tube, a scaled solid) has its
+    /// distance in its own units.
+    pub fn sdf_is_distance(&self) -> bool {
+        let rigid = |leaf: &Leaf<T>| leaf.frame.as_ref().is_none_or(|f| f.is_rigid());
+        self.members.iter().all(|(leaf, _)| rigid(leaf))
+            && self.slots.iter().all(|s| match s {
+                Slot::Leaf(leaf) => rigid(leaf),
+                _ => true,
+            })
+    }
+
     /// Whether some leaf of the tree (or member of a list) is the primitive `code`.
     pub fn has_primitive(&self, code: TypeCode) -> bool {
         self.members.iter().any(|(leaf, _)| leaf.code == code)

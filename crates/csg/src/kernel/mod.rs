@@ -59,6 +59,19 @@ impl<T: Real> Frame<T> {
         })
     }
 
+    /// Whether the frame keeps distances (a rotation or reflection, rows of its inverse
+    /// orthonormal within 1e-6): signed distances in it are distances in the parent.
+    pub fn is_rigid(&self) -> bool {
+        let tol = T::from_f64(1e-6);
+        let r = &self.inverse;
+        (0..3).all(|i| {
+            (0..3).all(|j| {
+                let want = if i == j { T::ONE } else { T::ZERO };
+                (r[i].dot(r[j]) - want).abs() <= tol
+            })
+        })
+    }
+
     /// Where the frame's origin lies in the parent frame.
     pub fn origin(&self) -> V3<T> {
         self.origin
@@ -361,6 +374,25 @@ impl<T: Real> Leaf<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rotations_and_reflections_are_rigid_and_scalings_are_not() {
+        let frame = |t: &Transform64| Frame::<f32>::from_transform(t).unwrap();
+        for t in [
+            Transform64::IDENTITY,
+            Transform64::translation([3.0, -1e6, 2.0]),
+            Transform64::rotation([1.0, 1.0, 1.0], 0.7),
+            Transform64::rotation([0.0, 1.0, 0.0], 3.0),
+        ] {
+            assert!(frame(&t).is_rigid(), "{t:?}");
+        }
+        let mut scaled = Transform64::rotation([1.0, 0.0, 0.0], 0.3);
+        scaled.rows[0][0] *= 1.5;
+        assert!(!frame(&scaled).is_rigid());
+        let mut mirrored = Transform64::IDENTITY;
+        mirrored.rows[2][2] = -1.0;
+        assert!(frame(&mirrored).is_rigid());
+    }
 
     #[test]
     fn right_angle_placements_are_axis_aligned_and_others_are_not() {

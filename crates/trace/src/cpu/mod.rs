@@ -84,6 +84,8 @@ struct Placement<T> {
     /// Whether `frame` is axis-aligned ([`Frame::is_axis_aligned`]): `bounds` are then as
     /// tight as the solid's own box.
     aligned: bool,
+    /// Whether `frame` keeps distances ([`Frame::is_rigid`]).
+    rigid: bool,
     solid: usize,
     bounds: Bounds<T>,
 }
@@ -365,6 +367,7 @@ impl<T: Real> CpuScene<T> {
             let reach = 2.0 * aabb.iter().fold(0.0f64, |m, &c| m.max(f64::from(c).abs()));
             placements.push(Placement {
                 aligned: frame.is_axis_aligned(),
+                rigid: frame.is_rigid(),
                 frame,
                 origin_lo: V3::from_f64(origin_lo),
                 centre: V3::from_f64(centre),
@@ -687,10 +690,10 @@ impl<T: Real> CpuScene<T> {
     /// scans trace such rays again in f64). The instances the trace asks about where the
     /// ray starts (in a hierarchical scene the one its origin is located in and that one's
     /// daughters, in a flat scene all) whose boxes hold the start are asked whether the
-    /// start lies within a band of eight tolerances (of their size and `tmin`) of a CSG surface (by
-    /// the signed distance, which catches rays along a surface they start on), and searched,
-    /// as the trace searches them, for a crossing within that band about `tmin` (which
-    /// catches meshes, and frames that scale distances).
+    /// start lies within a band of eight tolerances (of their size and `tmin`) of a CSG
+    /// surface by the signed distance (which catches rays along a surface they start on);
+    /// solids with meshes, or in frames that scale distances, are also searched, as the
+    /// trace searches them, for a crossing within that band about `tmin`.
     pub fn starts_near_surface(&self, ray: &Ray<f64>, tmin: T) -> bool {
         let world = WorldRay::new(ray);
         let start = WorldPoint::<T>::new(ray.origin.at(ray.direction, tmin.to_f64())).hi;
@@ -718,8 +721,14 @@ impl<T: Real> CpuScene<T> {
             let local = p.rebase(&world);
             let t = local.local_t(tmin);
             let x = local.ray.origin.at(local.ray.direction, t);
-            self.solids[p.solid].near_surface(x, b)
-                || self
+            let solid = &self.solids[p.solid];
+            if solid.near_surface(x, b) {
+                return true;
+            }
+            // The signed distance says "not near" for certain only when it measures true
+            // distances, in a placement that keeps them: otherwise the band is searched.
+            !(solid.sdf_decides && p.rigid)
+                && self
                     .cross_instance(i as usize, &world, None, tmin - b, tmin + b, &mut Direct)
                     .is_some()
         })

@@ -66,6 +66,10 @@ pub(super) struct SolidAccel<T> {
     /// Over surface prims (ids `0..prims.len()`) then clusters (the ids after), when there
     /// are more than [`BVH_MIN_MEMBERS`] of them.
     pub bvh: Option<BoxBvh<T>>,
+    /// Whether every surface prim is a CSG tree whose signed distance bounds true
+    /// distances ([`hytrace_csg::PrimTree::sdf_is_distance`]): [`Self::near_surface`]
+    /// then decides alone whether a point is near the surface.
+    pub sdf_decides: bool,
 }
 
 /// The prim transform of `prim` (identity for none).
@@ -130,11 +134,15 @@ impl<T: Real> SolidAccel<T> {
         } else {
             None
         };
+        let sdf_decides = prims
+            .iter()
+            .all(|p| matches!(p, PreparedPrim::Csg(tree) if tree.sdf_is_distance()));
         Ok(SolidAccel {
             prims,
             prim_ids,
             clusters,
             bvh,
+            sdf_decides,
         })
     }
 
