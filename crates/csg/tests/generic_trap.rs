@@ -4,6 +4,9 @@
 //! Simpson's rule on the cross-sections (each vertex moves linearly in z, so the section
 //! area is quadratic in z and the rule is exact). Solids Geant4 refuses are errors.
 
+mod common;
+
+use common::{cross, sub};
 use hytrace_csg::geant4::{G4Geometry, G4Mapping, G4Solid};
 use hytrace_csg::MeshPrim;
 
@@ -22,18 +25,6 @@ fn mesh_of(solid: &G4Solid, tol: f64) -> Vec<Tri> {
         Ok(G4Geometry::Csg(_)) => panic!("expected a mesh"),
         Err(e) => panic!("{solid:?}: {e}"),
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// Signed volume of a closed mesh (divergence theorem): positive when outward-facing.

@@ -5,21 +5,9 @@
 use hytrace_csg::{tessellate, MeshPrim, Ray, Real, V3};
 
 mod common;
-use common::{grid, Rng};
+use common::{cross, grid, sub, Rng};
 
 type Tri = [[f64; 3]; 3];
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

@@ -58,3 +58,19 @@ pub fn grid(n: usize, z: impl Fn(f64, f64) -> f64) -> Vec<[[f64; 3]; 3]> {
     }
     tris
 }
+
+/// `a - b`.
+#[allow(dead_code)] // not every test file uses it
+pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// The cross product `a x b`.
+#[allow(dead_code)] // not every test file uses it
+pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
