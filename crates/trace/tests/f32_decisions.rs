@@ -17,6 +17,21 @@ use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scan::{scan, scan_with, Backend, Precision, RayRow, ScanResult};
 
+/// Tests `$case` in f32 and in f64, as `$f32` and `$f64`.
+macro_rules! both_precisions {
+    ($case:ident, $f32:ident, $f64:ident) => {
+        #[test]
+        fn $f32() {
+            $case(Precision::F32);
+        }
+
+        #[test]
+        fn $f64() {
+            $case(Precision::F64);
+        }
+    };
+}
+
 /// A scene of one CSG solid placed by `at`.
 fn placed(shape: Shape, at: Transform64) -> Foundry {
     let mut f = Foundry::new();
@@ -132,95 +147,86 @@ fn box_distance(h: [f64; 3], o: [f64; 3], d: [f64; 3]) -> f64 {
     }
 }
 
-/// Rays starting 1e-6 to 1e-3 mm off a face of a 2 x 1 x 0.5 m box (f32 tolerance there:
-/// 2e-3 mm), inward and outward, isotropic: the entry just ahead (or the exit through the
-/// face just behind) is a crossing, not the surface the ray starts on.
+/// Half sides of the 2 x 1 x 0.5 m box of the near-surface cases (f32 tolerance there:
+/// 2e-3 mm).
+const BOX: [f64; 3] = [1000.0, 500.0, 250.0];
+
+/// `count` rays `ray(rng, i)` (a start in the box's frame and a direction) traced through
+/// the box placed at the origin and 1e5 mm out, against the exact slab answer.
+fn box_cases(
+    name: &str,
+    p: Precision,
+    seed: u64,
+    count: usize,
+    mut ray: impl FnMut(&mut Rng, usize) -> ([f64; 3], [f64; 3]),
+) {
+    for distance in [0.0, 1e5] {
+        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
+        let size = BOX.map(|h| 2.0 * h);
+        let f = placed(
+            box3(size[0], size[1], size[2]).unwrap(),
+            Transform64::translation(at),
+        );
+        let mut rng = Rng(seed + distance as u64);
+        let (mut rows, mut want) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let (local, d) = ray(&mut rng, i);
+            rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
+            want.push(box_distance(BOX, local, d));
+        }
+        let got = scanned(&f, &rows, p);
+        check(
+            &format!("{name} at {distance} mm"),
+            &rows,
+            &got,
+            &want,
+            relative,
+        );
+    }
+}
+
+/// 1e-6 to 1e-3 mm, alternately outward and inward.
+fn offset(rng: &mut Rng, i: usize) -> f64 {
+    10f64.powf(-6.0 + 3.0 * rng.unit()) * if i.is_multiple_of(2) { 1.0 } else { -1.0 }
+}
+
+/// Rays starting 1e-6 to 1e-3 mm off a face of the box, inward and outward, isotropic: the
+/// entry just ahead (or the exit through the face just behind) is a crossing, not the
+/// surface the ray starts on.
 fn near_surface_starts(p: Precision) {
-    let h = [1000.0, 500.0, 250.0];
-    for distance in [0.0, 1e5] {
-        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
-        let f = placed(
-            box3(2000.0, 1000.0, 500.0).unwrap(),
-            Transform64::translation(at),
-        );
-        let mut rng = Rng(7 + distance as u64);
-        let (mut rows, mut want) = (Vec::new(), Vec::new());
-        for i in 0..4000 {
-            let axis = i % 3;
-            let side = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
-            let offset = 10f64.powf(-6.0 + 3.0 * rng.unit()) * if i % 2 == 0 { 1.0 } else { -1.0 };
-            let mut local = [0, 1, 2].map(|k| h[k] * (2.0 * rng.unit() - 1.0) * 0.9);
-            local[axis] = side * (h[axis] + offset);
-            let d = isotropic(&mut rng);
-            rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
-            want.push(box_distance(h, local, d));
-        }
-        let got = scanned(&f, &rows, p);
-        check(
-            &format!("box at {distance} mm"),
-            &rows,
-            &got,
-            &want,
-            relative,
-        );
-    }
+    box_cases("near a face", p, 7, 4000, |rng, i| {
+        let axis = i % 3;
+        let side = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
+        let off = offset(rng, i);
+        let mut local = [0, 1, 2].map(|k| BOX[k] * (2.0 * rng.unit() - 1.0) * 0.9);
+        local[axis] = side * (BOX[axis] + off);
+        (local, isotropic(rng))
+    });
 }
 
-#[test]
-fn near_surface_starts_f32() {
-    near_surface_starts(Precision::F32);
-}
+both_precisions!(
+    near_surface_starts,
+    near_surface_starts_f32,
+    near_surface_starts_f64
+);
 
-#[test]
-fn near_surface_starts_f64() {
-    near_surface_starts(Precision::F64);
-}
-
-/// Rays starting 1e-6 to 1e-3 mm inside or outside the top face of a 2 x 1 x 0.5 m box and
-/// running along it: inside they leave through a side, outside they miss. Which side of the
-/// face the start lies on decides, within f32 rounding of the start.
+/// Rays starting 1e-6 to 1e-3 mm inside or outside the top face of the box and running
+/// along it: inside they leave through a side, outside they miss. Which side of the face
+/// the start lies on decides, within f32 rounding of the start.
 fn along_a_face(p: Precision) {
-    let h = [1000.0, 500.0, 250.0];
-    for distance in [0.0, 1e5] {
-        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
-        let f = placed(
-            box3(2000.0, 1000.0, 500.0).unwrap(),
-            Transform64::translation(at),
-        );
-        let mut rng = Rng(11 + distance as u64);
-        let (mut rows, mut want) = (Vec::new(), Vec::new());
-        for i in 0..2000 {
-            let offset = 10f64.powf(-6.0 + 3.0 * rng.unit()) * if i % 2 == 0 { 1.0 } else { -1.0 };
-            let local = [
-                h[0] * (2.0 * rng.unit() - 1.0) * 0.9,
-                h[1] * (2.0 * rng.unit() - 1.0) * 0.9,
-                h[2] - offset,
-            ];
-            let phi = std::f64::consts::TAU * rng.unit();
-            let d = [phi.cos(), phi.sin(), 0.0];
-            rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
-            want.push(box_distance(h, local, d));
-        }
-        let got = scanned(&f, &rows, p);
-        check(
-            &format!("face at {distance} mm"),
-            &rows,
-            &got,
-            &want,
-            relative,
-        );
-    }
+    box_cases("along a face", p, 11, 2000, |rng, i| {
+        let off = offset(rng, i);
+        let local = [
+            BOX[0] * (2.0 * rng.unit() - 1.0) * 0.9,
+            BOX[1] * (2.0 * rng.unit() - 1.0) * 0.9,
+            BOX[2] - off,
+        ];
+        let phi = std::f64::consts::TAU * rng.unit();
+        (local, [phi.cos(), phi.sin(), 0.0])
+    });
 }
 
-#[test]
-fn along_a_face_f32() {
-    along_a_face(Precision::F32);
-}
-
-#[test]
-fn along_a_face_f64() {
-    along_a_face(Precision::F64);
-}
+both_precisions!(along_a_face, along_a_face_f32, along_a_face_f64);
 
 /// Rays from 1.5 m passing a sphere of radius 1 m at 0.001 to 30 mm inside its rim (half
 /// chords of 1.4 to 245 mm): near tangency the f32 root is off by the sphere's size times
@@ -249,15 +255,7 @@ fn grazing_sphere(p: Precision) {
     check("grazing sphere", &rows, &got, &want, relative);
 }
 
-#[test]
-fn grazing_sphere_f32() {
-    grazing_sphere(Precision::F32);
-}
-
-#[test]
-fn grazing_sphere_f64() {
-    grazing_sphere(Precision::F64);
-}
+both_precisions!(grazing_sphere, grazing_sphere_f32, grazing_sphere_f64);
 
 /// A box 9.5 x 90000 x 27 mm (a long bar, f32 tolerance 0.09 mm) crossed near an edge
 /// along its length by rays whose chord inside it is 0.028 to 0.09 mm: a thin part of a
@@ -291,15 +289,11 @@ fn scanned_allowing_none(f: &Foundry, rows: &[RayRow], p: Precision) -> ScanResu
     result
 }
 
-#[test]
-fn thin_chord_of_a_long_box_f32() {
-    thin_chord_of_a_long_box(Precision::F32);
-}
-
-#[test]
-fn thin_chord_of_a_long_box_f64() {
-    thin_chord_of_a_long_box(Precision::F64);
-}
+both_precisions!(
+    thin_chord_of_a_long_box,
+    thin_chord_of_a_long_box_f32,
+    thin_chord_of_a_long_box_f64
+);
 
 /// Rays from inside an optical fibre (a tube of radius 0.1825 mm and length 1 m, f32
 /// tolerance 1e-3 mm) at up to 400 mm from its middle, isotropic: the exit through the
@@ -339,15 +333,11 @@ fn inside_a_long_thin_tube(p: Precision) {
     check("fibre", &rows, &got, &want, |_, t| 1e-5 + 2e-6 * t);
 }
 
-#[test]
-fn inside_a_long_thin_tube_f32() {
-    inside_a_long_thin_tube(Precision::F32);
-}
-
-#[test]
-fn inside_a_long_thin_tube_f64() {
-    inside_a_long_thin_tube(Precision::F64);
-}
+both_precisions!(
+    inside_a_long_thin_tube,
+    inside_a_long_thin_tube_f32,
+    inside_a_long_thin_tube_f64
+);
 
 /// A field-shaper tube of DUNE's vertical drift detector: a 9 m aluminium pipe (radii 5
 /// and 22.85 mm) with a horn torus corner (22.85 mm about a 23 mm circle) at its end,
@@ -415,12 +405,8 @@ fn horn_torus_from_afar(p: Precision) {
     check("field shaper corner", &rows, &got, &want, relative);
 }
 
-#[test]
-fn horn_torus_from_afar_f32() {
-    horn_torus_from_afar(Precision::F32);
-}
-
-#[test]
-fn horn_torus_from_afar_f64() {
-    horn_torus_from_afar(Precision::F64);
-}
+both_precisions!(
+    horn_torus_from_afar,
+    horn_torus_from_afar_f32,
+    horn_torus_from_afar_f64
+);
