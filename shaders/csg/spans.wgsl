@@ -153,8 +153,8 @@ fn step_complemented(s: Step) -> Step {
     return Step(s.t, -s.normal, !s.inside_before);
 }
 
-// The first span end after tmin + tol among `spans` shifted by `shift`, skipping spans
-// shorter than tol (tangent touches). Normals face against the ray at entries, along it at
+// The first span end after tmin + tol among `spans` shifted by `shift`, skipping spans no
+// longer than `touch` (tangent touches). Normals face against the ray at entries, along it at
 // exits.
 fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, tol: f32, touch: f32) -> Step {
     let after = tmin + tol;

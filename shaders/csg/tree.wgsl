@@ -71,12 +71,15 @@ fn csg_origin_shift(code: u32, p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> 
         if beside && o.z >= p[4] && o.z <= p[5] {
             return 0.0;
         }
+        // Along the axis (d2 = 0) the CPU's quotient is NaN and fails the comparison.
         let across = x * d.x + y * d.y;
         let d2 = d.x * d.x + d.y * d.y;
-        let s = -across / d2;
-        let c = o - csg_leaf_centre(code, p);
-        if s * s * tree_dot(d, d) <= tree_dot(c, c) {
-            return s;
+        if d2 != 0.0 {
+            let s = -across / d2;
+            let c = o - csg_leaf_centre(code, p);
+            if s * s * tree_dot(d, d) <= tree_dot(c, c) {
+                return s;
+            }
         }
     }
     let len2 = tree_dot(d, d);

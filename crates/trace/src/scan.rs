@@ -368,14 +368,15 @@ fn redo_uncertain_in_f64(
         .par_iter()
         .zip(answers.par_iter())
         .enumerate()
-        .filter_map(|(i, (r, a))| {
+        .map_init(Vec::new, |candidates, (i, (r, a))| {
             let (ray, tmin, _) = query_of::<f32>(r);
-            if grazes(r, a) || scene.starts_near_surface(&ray, tmin) {
+            if grazes(r, a) || scene.starts_near_surface(&ray, tmin, candidates) {
                 Some((i, true))
             } else {
                 on_torus(a).then_some((i, false))
             }
         })
+        .flatten()
         .partition_map(|(i, uncertain)| match uncertain {
             true => rayon::iter::Either::Left(i),
             false => rayon::iter::Either::Right(i),

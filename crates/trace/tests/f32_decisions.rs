@@ -11,10 +11,11 @@
 
 mod common;
 
-use common::{unit, Rng};
+use common::{f32_ray, gpu_answers, unit, Rng};
+use hytrace_csg::Ray;
 use hytrace_csg::{box3, sphere, to_tree, torus, tube, Shape};
 use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
-use hytrace_trace::gpu::GpuContext;
+use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::scan::{scan, scan_with, Backend, Precision, RayRow, ScanResult};
 
 /// Tests `$case` in f32 and in f64, as `$f32` and `$f64`.
@@ -60,34 +61,49 @@ fn isotropic(rng: &mut Rng) -> [f64; 3] {
     [r * phi.cos(), r * phi.sin(), z]
 }
 
-/// The scan of `rows` in precision `p`; in f32 it must have traced some rays again in
-/// f64, and a GPU (where one is found) must give the same answers bit for bit.
-fn scanned(f: &Foundry, rows: &[RayRow], p: Precision) -> ScanResult {
+/// The scan of `rows` in precision `p`. In f32 it must have traced some rays again in f64
+/// when `must_redo`, and where a GPU is found the GPU scan kernel must give the CPU's f32
+/// trace bit for bit on every ray (the twins compared before any ray is traced again), and
+/// the GPU scan the CPU's f32 scan.
+fn scanned(f: &Foundry, rows: &[RayRow], p: Precision, must_redo: bool) -> ScanResult {
     let (result, times) = scan(f, rows, p).unwrap();
-    if p == Precision::F32 {
-        assert!(times.redone_in_f64 > 0, "no ray was traced again in f64");
-        eprintln!(
-            "{} of {} rays traced again in f64",
-            times.redone_in_f64,
-            rows.len()
+    if p == Precision::F64 {
+        return result;
+    }
+    eprintln!(
+        "{} of {} rays traced again in f64",
+        times.redone_in_f64,
+        rows.len()
+    );
+    assert!(
+        !must_redo || times.redone_in_f64 > 0,
+        "no ray was traced again in f64"
+    );
+    let Some(kernel) = gpu_answers(f, rows) else {
+        return result;
+    };
+    let cpu = CpuScene::<f32>::new(f).unwrap();
+    for (i, (r, g)) in rows.iter().zip(&kernel).enumerate() {
+        let (_, tmin, tmax) = f32_ray(r);
+        let c = cpu.trace(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+        let c = c.map(|h| (h.t.to_bits(), h.normal.to_f64(), h.instance));
+        let g = g.map(|h| (h.t.to_bits(), h.normal.to_f64(), h.instance));
+        assert_eq!(c, g, "GPU kernel, ray {i} {r:?}");
+    }
+    let (gpu, _) = scan_with(f, rows, p, Backend::Gpu).unwrap();
+    for (i, r) in rows.iter().enumerate() {
+        let same = result.hits[i]
+            .iter()
+            .zip(&gpu.hits[i])
+            .all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(
+            same && result.ids[i] == gpu.ids[i],
+            "GPU scan, ray {i} {r:?}: {:?} {:?}, CPU {:?} {:?}",
+            gpu.hits[i],
+            gpu.ids[i],
+            result.hits[i],
+            result.ids[i]
         );
-        if GpuContext::for_tests().is_some() {
-            let (gpu, _) = scan_with(f, rows, p, Backend::Gpu).unwrap();
-            for (i, r) in rows.iter().enumerate() {
-                let same = result.hits[i]
-                    .iter()
-                    .zip(&gpu.hits[i])
-                    .all(|(a, b)| a.to_bits() == b.to_bits());
-                assert!(
-                    same && result.ids[i] == gpu.ids[i],
-                    "GPU, ray {i} {r:?}: {:?} {:?}, CPU {:?} {:?}",
-                    gpu.hits[i],
-                    gpu.ids[i],
-                    result.hits[i],
-                    result.ids[i]
-                );
-            }
-        }
     }
     result
 }
@@ -174,7 +190,7 @@ fn box_cases(
             rows.push(row([0, 1, 2].map(|k| at[k] + local[k]), d));
             want.push(box_distance(BOX, local, d));
         }
-        let got = scanned(&f, &rows, p);
+        let got = scanned(&f, &rows, p, true);
         check(
             &format!("{name} at {distance} mm"),
             &rows,
@@ -251,7 +267,7 @@ fn grazing_sphere(p: Precision) {
         rows.push(row(origin, d));
         want.push(1500.0 - (radius * radius - pass * pass).sqrt());
     }
-    let got = scanned(&f, &rows, p);
+    let got = scanned(&f, &rows, p, true);
     check("grazing sphere", &rows, &got, &want, relative);
 }
 
@@ -279,14 +295,8 @@ fn thin_chord_of_a_long_box(p: Precision) {
         rows.push(row(origin, d));
         want.push(box_distance(h, origin, d));
     }
-    let got = scanned_allowing_none(&f, &rows, p);
+    let got = scanned(&f, &rows, p, false);
     check("thin chords", &rows, &got, &want, relative);
-}
-
-/// [`scanned`] without requiring f32 rays to be traced again (thin chords need none).
-fn scanned_allowing_none(f: &Foundry, rows: &[RayRow], p: Precision) -> ScanResult {
-    let (result, _) = scan(f, rows, p).unwrap();
-    result
 }
 
 both_precisions!(
@@ -329,7 +339,7 @@ fn inside_a_long_thin_tube(p: Precision) {
         rows.push(row(o, d));
         want.push(wall.min(cap));
     }
-    let got = scanned(&f, &rows, p);
+    let got = scanned(&f, &rows, p, true);
     check("fibre", &rows, &got, &want, |_, t| 1e-5 + 2e-6 * t);
 }
 
@@ -398,7 +408,7 @@ fn horn_torus_from_afar(p: Precision) {
     assert!(hits > 1000, "{hits} hits");
     let want: Vec<f64> = exact.hits.iter().map(|h| h[3]).collect();
     let got = if p == Precision::F32 {
-        scanned_allowing_none(&f, &rows, p)
+        scanned(&f, &rows, p, true)
     } else {
         exact
     };

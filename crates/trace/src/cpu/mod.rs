@@ -693,11 +693,12 @@ impl<T: Real> CpuScene<T> {
     /// start lies within a band of eight tolerances (of their size and `tmin`) of a CSG
     /// surface by the signed distance (which catches rays along a surface they start on);
     /// solids with meshes, or in frames that scale distances, are also searched, as the
-    /// trace searches them, for a crossing within that band about `tmin`.
-    pub fn starts_near_surface(&self, ray: &Ray<f64>, tmin: T) -> bool {
+    /// trace searches them, for a crossing within that band about `tmin`. `candidates` is
+    /// working space, kept by the caller across rays.
+    pub fn starts_near_surface(&self, ray: &Ray<f64>, tmin: T, candidates: &mut Vec<u32>) -> bool {
         let world = WorldRay::new(ray);
         let start = WorldPoint::<T>::new(ray.origin.at(ray.direction, tmin.to_f64())).hi;
-        let mut candidates = Vec::new();
+        candidates.clear();
         let group = match &self.layout {
             Layout::Tree(h) => {
                 let current = self.locate_deepest(h, &world.origin);
@@ -710,7 +711,7 @@ impl<T: Real> CpuScene<T> {
             &self.placements,
             start,
             band(group.largest, tmin),
-            &mut candidates,
+            candidates,
         );
         candidates.iter().any(|&i| {
             let p = &self.placements[i as usize];
