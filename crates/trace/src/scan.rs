@@ -185,7 +185,7 @@ fn answers<T: Real>(
 
 /// Every ray's answer from the CPU tracer, handed rays in batches
 /// ([`CpuScene::trace_batch`]: the same answers as its `trace`, sooner).
-fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
+pub(crate) fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
     let mut answers = vec![answer_of::<T>(None); rays.len()];
     answers
         .par_chunks_mut(BATCH)
@@ -354,7 +354,7 @@ fn grazes(ray: &RayRow, answer: &Answer) -> bool {
 /// of the quartic can stray further than its tolerance). Every other ray keeps its f32
 /// answer. `scene` is the scan's f32 scene; the f64 scene is built only when some ray
 /// needs it. Returns how many rays were traced again.
-fn redo_uncertain_in_f64(
+pub(crate) fn redo_uncertain_in_f64(
     f: &Foundry,
     scene: &CpuScene<f32>,
     rays: &[RayRow],
@@ -444,7 +444,7 @@ fn gpu_scan(
 }
 
 /// A ray's answer: `nx ny nz t` and the instance crossed (-1 on a miss).
-type Answer = ([f64; 4], i32);
+pub(crate) type Answer = ([f64; 4], i32);
 
 /// Every ray through the GPU scan kernel: `(nx ny nz t, instance)` per ray (`t = inf`,
 /// instance -1 on a miss) and the kernel's times. A placement tree deeper than the

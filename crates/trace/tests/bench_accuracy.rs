@@ -96,6 +96,21 @@ fn quick_run_fills_every_row_and_ranks_worse_variants_worse() {
     assert!(err(km, "f32, strategy off") > 100.0 * err(km, "f32, strategy on"));
     assert!(err(km, "f32, strategy on") > err(km, "f64, strategy on"));
     assert!(err("csg sphere, rays from 20 m", "f32, strategy on") < 0.01);
+    // Whole scans beside solids far out: world-rounded origins are wrong on more rays
+    // the farther out; two-part origins are not, but f32 still misjudges starts on a
+    // surface and grazing rays; the f64 fallback gives the exact answers, as f64 does.
+    for far in ["20 m", "100 m", "1 km"] {
+        let c = format!("csg scan, solids {far} out");
+        let rounded = err(&c, "f32, origins rounded");
+        let rebased = err(&c, "f32, two-part origins");
+        assert!(rounded > rebased, "{c}: {rounded} vs {rebased}");
+        assert!(
+            rebased > 0.01,
+            "{c}: the hard rays are no longer hard ({rebased})"
+        );
+        assert_eq!(err(&c, "f32, rebased, f64 fallback"), 0.0, "{c}");
+        assert_eq!(err(&c, "f64"), 0.0, "{c}");
+    }
     // Lists and binary trees have the same surfaces.
     let tree = "csg tree form";
     assert_eq!(

@@ -19,9 +19,9 @@ use super::dd::{self, Dd, DdVec};
 use super::{Row, Settings, Timer};
 
 /// Sphere radius and torus swept radius (mm).
-const RADIUS: f64 = 100.0;
+pub(super) const RADIUS: f64 = 100.0;
 /// Torus tube radius (mm).
-const TUBE: f64 = 20.0;
+pub(super) const TUBE: f64 = 20.0;
 /// How far the rays start from the solid (mm).
 const DISTANCES: [f64; 3] = [1e3, 2e4, 1e6];
 /// Error counted for a ray whose hit or miss disagrees with the reference (mm).
@@ -31,9 +31,9 @@ const METRIC: &str = "max |t - t_ref| (mm); a wrong hit or miss counts 200";
 
 /// A ray whose coordinates are f32 values, so both precisions see the same ray.
 #[derive(Clone, Copy, Debug)]
-struct Case {
-    origin: [f64; 3],
-    dir: [f64; 3],
+pub(super) struct Case {
+    pub(super) origin: [f64; 3],
+    pub(super) dir: [f64; 3],
 }
 
 impl Case {
@@ -47,7 +47,7 @@ fn round32(v: [f64; 3]) -> [f64; 3] {
 }
 
 /// A uniform point of the ball of radius `r`.
-fn in_ball(rng: &mut Rng, r: f64) -> [f64; 3] {
+pub(super) fn in_ball(rng: &mut Rng, r: f64) -> [f64; 3] {
     loop {
         let p: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.next_f64() - 1.0);
         if p.iter().map(|c| c * c).sum::<f64>() <= 1.0 {
@@ -119,7 +119,7 @@ fn dd_sphere(case: &Case, centre: [f64; 3], radius: f64) -> Option<(Dd, Dd)> {
 }
 
 /// The first sphere crossing after 0, in double-double.
-fn sphere_reference(case: &Case, centre: [f64; 3], radius: f64) -> Option<f64> {
+pub(super) fn sphere_reference(case: &Case, centre: [f64; 3], radius: f64) -> Option<f64> {
     let (t0, t1) = dd_sphere(case, centre, radius)?;
     [t0, t1].into_iter().map(Dd::to_f64).find(|t| *t > 0.0)
 }
@@ -135,12 +135,18 @@ fn torus_function(oc: DdVec, d: DdVec, t: f64) -> Dd {
 }
 
 /// The first torus crossing after 0: the torus function sampled finely across the
-/// bounding sphere, its first sign change bisected down to adjacent f64 values.
-fn torus_reference(case: &Case, centre: [f64; 3]) -> Option<f64> {
+/// bounding sphere, its first change of sign (from the sign where the ray starts, so rays
+/// starting inside the tube find their exit) bisected down to adjacent f64 values.
+pub(super) fn torus_reference(case: &Case, centre: [f64; 3]) -> Option<f64> {
     let (enter, exit) = dd_sphere(case, centre, RADIUS + TUBE)?;
     let (enter, exit) = (enter.to_f64().max(0.0), exit.to_f64());
+    if exit <= enter {
+        return None;
+    }
     let oc = dd::sub(dd::vec(case.origin), dd::vec(centre));
     let d = dd::vec(case.dir);
+    let inside = |t: f64| torus_function(oc, d, t).is_negative();
+    let start = inside(enter);
     const SAMPLES: usize = 4000;
     let step = (exit - enter) / SAMPLES as f64;
     let mut lo = enter;
@@ -150,17 +156,17 @@ fn torus_reference(case: &Case, centre: [f64; 3]) -> Option<f64> {
         } else {
             enter + step * i as f64
         };
-        if torus_function(oc, d, hi).is_negative() {
+        if inside(hi) != start {
             let mut hi = hi;
             loop {
                 let mid = 0.5 * (lo + hi);
                 if mid <= lo || mid >= hi {
                     return Some(hi);
                 }
-                if torus_function(oc, d, mid).is_negative() {
-                    hi = mid;
-                } else {
+                if inside(mid) == start {
                     lo = mid;
+                } else {
+                    hi = mid;
                 }
             }
         }

@@ -6,6 +6,7 @@
 
 mod csg;
 mod dd;
+mod far_scan;
 mod gpu;
 mod report;
 mod timing;
@@ -57,8 +58,9 @@ impl Settings {
 /// Measures every component's rows, in a fixed order.
 pub fn measure(settings: Settings) -> Result<Vec<Row>, String> {
     type Measure = fn(Settings) -> Result<Vec<Row>, String>;
-    let components: [(&str, Measure); 4] = [
+    let components: [(&str, Measure); 5] = [
         ("CSG", csg::rows),
+        ("CSG scans far from the origin", far_scan::rows),
         ("triangles", triangles::rows),
         ("volumes", volume::rows),
         ("GPU", gpu::rows),
