@@ -9,6 +9,7 @@
 //! - [`geant4`] maps Geant4 solids onto these primitives.
 
 mod bounds;
+pub mod bvh_build;
 pub mod expr;
 pub mod geant4;
 pub mod gpu_layout;
@@ -29,8 +30,8 @@ pub mod wide_tree;
 mod test_common;
 
 pub use bounds::{polyhedron_vertices, transform_bounds, Aabb, EMPTY_AABB, UNBOUNDED};
+pub use bvh_build::bvh2_depth;
 pub use expr::{parse_shape, ExprError};
-pub use mesh::bvh2_depth;
 pub use mesh::{CrossingScratch, MeshPrim, MeshQuery};
 pub use prepared::PreparedPrim;
 pub use prim_tree::{

@@ -32,14 +32,13 @@
 //! to the last bit, left one of 743 600 decoded boxes 3e-8 smaller than its triangles.
 
 use std::ops::Range;
-use std::time::Duration;
 
 use glam::Vec3A;
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
-use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle as BvhTriangle;
 use obvhs::BvhBuildParams;
 
+use crate::bvh_build::shallow_bvh2_from_tris;
 use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
@@ -140,23 +139,6 @@ fn depth_first_layout<T: Real>(nodes: &[MeshNode<T>]) -> Vec<MeshNode<T>> {
     out
 }
 
-/// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree): the
-/// traversal stack a tree needs.
-pub fn bvh2_depth(nodes: &[obvhs::bvh2::node::Bvh2Node]) -> usize {
-    let mut deepest = 0;
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((index, depth)) = stack.pop() {
-        let Some(n) = nodes.get(index) else { continue };
-        deepest = deepest.max(depth);
-        if n.prim_count == 0 {
-            let first = n.first_index as usize;
-            stack.push((first, depth + 1));
-            stack.push((first + 1, depth + 1));
-        }
-    }
-    deepest
-}
-
 /// The per-ray part of the watertight test: axes permuted so `z` is the direction's
 /// largest component, and the shear mapping the direction to +z.
 struct Shear<T> {
@@ -246,20 +228,10 @@ impl<T: Real> MeshPrim<T> {
                 BvhTriangle { v0, v1, v2 }
             })
             .collect();
-        let bvh = build_bvh2_from_tris(&bvh_input, build, &mut Duration::default());
+        let bvh = shallow_bvh2_from_tris(&bvh_input, build);
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
         let padded =
             |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
-        let depth = bvh2_depth(&bvh.nodes);
-        if depth > MAX_BVH_DEPTH {
-            return Err(CsgError {
-                primitive: "mesh",
-                problem: format!(
-                    "BVH over {} triangles is {depth} levels deep, more than {MAX_BVH_DEPTH}",
-                    triangles.len()
-                ),
-            });
-        }
         let mut nodes: Vec<MeshNode<T>> = bvh
             .nodes
             .iter()

@@ -19,13 +19,11 @@
 //! took the closest-hit query from 0.80x (coherent) and 0.94x (incoherent) of Embree's
 //! speed to 1.01x and 1.06-1.18x.
 
-use std::time::Duration;
-
 use glam::Vec3A;
+use hytrace_csg::bvh_build::shallow_bvh2;
 use hytrace_csg::wide_tree::{ray_f32, WideSlabs, WideTree};
-use hytrace_csg::{bvh2_depth, Bounds, Ray, Real, SlabRay, V3};
+use hytrace_csg::{Bounds, Ray, Real, SlabRay, V3};
 use obvhs::aabb::Aabb;
-use obvhs::bvh2::builder::build_bvh2;
 use obvhs::BvhBuildParams;
 
 use crate::gpu::records::BoxNode;
@@ -72,9 +70,9 @@ impl<T: Real> RaySlabs<T> {
     }
 }
 
-/// Deepest BVH the traversals' fixed stacks accept (obvhs' trees over 10^7 boxes
-/// stay far below it); a deeper one is an error when the scene is prepared.
-pub(crate) const MAX_DEPTH: usize = 64;
+/// Deepest BVH the traversals' fixed stacks accept ([`shallow_bvh2`] never builds a
+/// deeper one).
+pub(crate) const MAX_DEPTH: usize = hytrace_csg::wide_tree::MAX_DEPTH;
 
 /// The largest f32 not above `v`.
 pub(super) fn f32_down(v: f64) -> f32 {
@@ -134,8 +132,9 @@ pub(super) fn holds_within<T: Real>(bounds: &Bounds<T>, x: V3<T>, margin: T) -> 
 }
 
 impl<T: Real> BoxBvh<T> {
-    /// A BVH over items given as `(id, bounds)`; an error when the tree is deeper than the
-    /// traversal stacks hold.
+    /// A BVH over items given as `(id, bounds)`, within the traversal stacks however the
+    /// boxes lie ([`shallow_bvh2`]); an error only where the f32 wide tree cannot be formed
+    /// from it.
     pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Result<Self, String> {
         let finite =
             |b: &Bounds<T>| (0..3).all(|k| b[0].get(k).is_finite() && b[1].get(k).is_finite());
@@ -159,21 +158,13 @@ impl<T: Real> BoxBvh<T> {
                 wide: None,
             });
         }
-        let bvh = build_bvh2(
+        let bvh = shallow_bvh2(
             &boxes,
             BvhBuildParams {
                 max_prims_per_leaf: 1,
                 ..BvhBuildParams::medium_build()
             },
-            &mut Duration::default(),
         );
-        let depth = bvh2_depth(&bvh.nodes);
-        if depth > MAX_DEPTH {
-            return Err(format!(
-                "the BVH over {} boxes is {depth} levels deep, more than {MAX_DEPTH}",
-                boxes.len()
-            ));
-        }
         let corner = |v: Vec3A| V3::from_f64([v.x, v.y, v.z].map(f64::from));
         let wide = (T::NAME == "f32")
             .then(|| WideTree::from_bvh2(&bvh))

@@ -1,0 +1,222 @@
+//! Binary BVH builds that stay within the traversal stacks on any input: obvhs' PLOC build
+//! where it works, a top-down median-split build where it does not.
+//!
+//! PLOC merges mutual nearest neighbours in Morton order. Where many boxes coincide (a
+//! volume placed many times at one position) or nest around one point (the fan of
+//! triangles an OBJ polygon becomes), few pairs are mutual, so each pass merges one pair:
+//! the tree becomes a chain as deep as the input is long, and the build takes quadratic
+//! time. The median-split build halves every range on the longest axis of its box
+//! centres (equal centres ordered by index), so it is `ceil(log2(n / leaf))` levels deep
+//! whatever the boxes, in `O(n log n)` time.
+
+use std::time::Duration;
+
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::builder::{build_bvh2, build_bvh2_from_tris};
+use obvhs::bvh2::node::Bvh2Node;
+use obvhs::bvh2::Bvh2;
+use obvhs::triangle::Triangle;
+use obvhs::{Boundable, BvhBuildParams};
+
+use crate::wide_tree::MAX_DEPTH as MAX_BVH_DEPTH;
+
+/// Boxes that coincide exactly beyond this many make PLOC chain them; such inputs go
+/// straight to the median split.
+const MAX_COINCIDENT: usize = 16;
+
+/// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree): the
+/// traversal stack a tree needs.
+pub fn bvh2_depth(nodes: &[Bvh2Node]) -> usize {
+    let mut deepest = 0;
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((index, depth)) = stack.pop() {
+        let Some(n) = nodes.get(index) else { continue };
+        deepest = deepest.max(depth);
+        if n.prim_count == 0 {
+            let first = n.first_index as usize;
+            stack.push((first, depth + 1));
+            stack.push((first + 1, depth + 1));
+        }
+    }
+    deepest
+}
+
+/// A BVH over `boxes` at most [`crate::wide_tree::MAX_DEPTH`] deep (what the traversals'
+/// fixed stacks, CPU and GPU, accept): obvhs' build with `params`, or the
+/// median split where many boxes coincide or the PLOC tree is too deep.
+pub fn shallow_bvh2(boxes: &[Aabb], params: BvhBuildParams) -> Bvh2 {
+    shallow(boxes, params, || {
+        build_bvh2(boxes, params, &mut Duration::default())
+    })
+}
+
+/// [`shallow_bvh2`] over triangles (obvhs' triangle build, with its splits of large
+/// triangles where `params` asks for them; the median split bounds whole triangles).
+pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) -> Bvh2 {
+    let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
+    shallow(&boxes, params, || {
+        build_bvh2_from_tris(triangles, params, &mut Duration::default())
+    })
+}
+
+fn shallow(boxes: &[Aabb], params: BvhBuildParams, ploc: impl FnOnce() -> Bvh2) -> Bvh2 {
+    let leaf = params.max_prims_per_leaf.max(1) as usize;
+    if most_coincident(boxes) > MAX_COINCIDENT {
+        return median_split_bvh2(boxes, leaf);
+    }
+    let bvh = ploc();
+    if bvh2_depth(&bvh.nodes) > MAX_BVH_DEPTH {
+        return median_split_bvh2(boxes, leaf);
+    }
+    bvh
+}
+
+/// The largest number of boxes with exactly the same corners.
+fn most_coincident(boxes: &[Aabb]) -> usize {
+    let key = |b: &Aabb| {
+        let (lo, hi) = (b.min.to_array(), b.max.to_array());
+        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]].map(f32::to_bits)
+    };
+    let mut keys: Vec<[u32; 6]> = boxes.iter().map(key).collect();
+    keys.sort_unstable();
+    keys.chunk_by(|a, b| a == b)
+        .map(<[_]>::len)
+        .max()
+        .unwrap_or(0)
+}
+
+/// A BVH whose every inner node splits its boxes in two halves by their centres along the
+/// longest axis of the centres' box (ties by index), with leaves of at most `leaf` boxes.
+pub fn median_split_bvh2(boxes: &[Aabb], leaf: usize) -> Bvh2 {
+    let leaf = leaf.max(1);
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    let centre = |i: u32| boxes[i as usize].center();
+    let mut nodes = vec![Bvh2Node::new(Aabb::empty(), 0, 0)];
+    // (node, range of `order`) still to be filled in.
+    let mut pending = vec![(0usize, 0usize, boxes.len())];
+    let mut deepest = 0;
+    let mut depth_of = vec![0usize];
+    while let Some((node, lo, hi)) = pending.pop() {
+        let range = &mut order[lo..hi];
+        let bounds = range
+            .iter()
+            .fold(Aabb::empty(), |b, &i| b.union(&boxes[i as usize]));
+        deepest = deepest.max(depth_of[node]);
+        if range.len() <= leaf {
+            nodes[node] = Bvh2Node::new(bounds, range.len() as u32, lo as u32);
+            continue;
+        }
+        let centres = range
+            .iter()
+            .fold(Aabb::empty(), |b, &i| b.union(&Aabb::from_point(centre(i))));
+        let axis = centres.largest_axis();
+        let half = range.len() / 2;
+        range.select_nth_unstable_by(half, |&a, &b| {
+            centre(a)[axis].total_cmp(&centre(b)[axis]).then(a.cmp(&b))
+        });
+        let first = nodes.len();
+        nodes[node] = Bvh2Node::new(bounds, 0, first as u32);
+        nodes.extend([Bvh2Node::new(Aabb::empty(), 0, 0); 2]);
+        depth_of.extend([depth_of[node] + 1; 2]);
+        pending.push((first + 1, lo + half, hi));
+        pending.push((first, lo, lo + half));
+    }
+    Bvh2 {
+        nodes,
+        primitive_indices: order,
+        children_are_ordered_after_parents: true,
+        max_depth: deepest.max(obvhs::bvh2::DEFAULT_MAX_STACK_DEPTH),
+        ..Bvh2::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3A;
+
+    use super::*;
+
+    fn unit_box(at: [f32; 3]) -> Aabb {
+        let p = Vec3A::from_array(at);
+        Aabb::new(p, p + Vec3A::ONE)
+    }
+
+    /// Every box sits in exactly one leaf, under nodes whose boxes hold it.
+    fn check_tree(bvh: &Bvh2, boxes: &[Aabb]) {
+        let mut seen = vec![0usize; boxes.len()];
+        let mut stack = vec![(0usize, Vec::<Aabb>::new())];
+        while let Some((i, above)) = stack.pop() {
+            let n = &bvh.nodes[i];
+            let mut above = above;
+            above.push(n.aabb);
+            if n.prim_count == 0 {
+                let f = n.first_index as usize;
+                stack.push((f, above.clone()));
+                stack.push((f + 1, above));
+                continue;
+            }
+            let f = n.first_index as usize;
+            for &p in &bvh.primitive_indices[f..f + n.prim_count as usize] {
+                seen[p as usize] += 1;
+                let b = boxes[p as usize];
+                for a in &above {
+                    assert!(a.min.cmple(b.min).all() && a.max.cmpge(b.max).all());
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s == 1), "{seen:?}");
+    }
+
+    #[test]
+    fn coincident_boxes_build_a_balanced_tree() {
+        // PLOC chains these: 70 boxes went 69 levels deep.
+        for n in [2, 70, 5000] {
+            let boxes = vec![unit_box([5.0, -3.0, 2.0]); n];
+            let bvh = shallow_bvh2(&boxes, BvhBuildParams::medium_build());
+            let depth = bvh2_depth(&bvh.nodes);
+            assert!(depth <= (n as f64).log2().ceil() as usize, "{n}: {depth}");
+            check_tree(&bvh, &boxes);
+        }
+    }
+
+    #[test]
+    fn a_triangle_fan_builds_within_the_stack() {
+        // One OBJ polygon of 20 000 vertices becomes a fan around its first vertex: PLOC
+        // went 5090 levels deep on it.
+        let n = 20_000;
+        let rim = |i: usize| {
+            let a = std::f32::consts::TAU * i as f32 / n as f32;
+            Vec3A::new(a.cos(), a.sin(), 0.0)
+        };
+        let triangles: Vec<Triangle> = (1..n - 1)
+            .map(|i| Triangle {
+                v0: rim(0),
+                v1: rim(i),
+                v2: rim(i + 1),
+            })
+            .collect();
+        let bvh = shallow_bvh2_from_tris(&triangles, BvhBuildParams::fast_build());
+        assert!(bvh2_depth(&bvh.nodes) <= MAX_BVH_DEPTH);
+        let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
+        check_tree(&bvh, &boxes);
+    }
+
+    #[test]
+    fn ordinary_boxes_keep_the_ploc_tree() {
+        let boxes: Vec<Aabb> = (0..1000)
+            .map(|i| {
+                unit_box([
+                    (i % 10) as f32 * 2.0,
+                    (i / 10 % 10) as f32 * 2.0,
+                    (i / 100) as f32 * 2.0,
+                ])
+            })
+            .collect();
+        let params = BvhBuildParams::medium_build();
+        let ploc = build_bvh2(&boxes, params, &mut Duration::default());
+        let ours = shallow_bvh2(&boxes, params);
+        assert_eq!(ours.primitive_indices, ploc.primitive_indices);
+        assert_eq!(ours.nodes.len(), ploc.nodes.len());
+        check_tree(&ours, &boxes);
+    }
+}

@@ -1,0 +1,98 @@
+//! Scenes whose boxes a PLOC build chains into trees deeper than the traversal stacks
+//! (obvhs went one level per box): many placements of one solid at one position, and the
+//! triangle fan one large OBJ polygon becomes. They used to be refused ("the BVH over 70
+//! boxes is 69 levels deep"); they now build and trace, in f32 and f64, with the answers
+//! the geometry gives, and the GPU's walk of the same trees gives the CPU's f32 answers.
+
+mod common;
+
+use std::path::Path;
+
+use hytrace_foundry::Foundry;
+
+use hytrace_trace::scan::{scan, Precision, RayRow};
+use hytrace_trace::scene::{obj_to_foundry, scene_from_toml};
+
+/// In f32 the GPU scan kernel (where an adapter opens) answers every ray as the CPU's
+/// f32 scan did.
+fn gpu_agrees(f: &Foundry, rays: &[RayRow], cpu: &[[f64; 4]]) {
+    let Some(gpu) = common::gpu_answers(f, rays) else {
+        return;
+    };
+    for ((r, g), c) in rays.iter().zip(&gpu).zip(cpu) {
+        let t = g.map_or(f64::INFINITY, |h| f64::from(h.t));
+        assert_eq!(t, c[3], "GPU against CPU, ray {r:?}");
+    }
+}
+
+/// Rays along +z from below, on a grid over `[-half, half]^2`.
+fn rays_up(count: usize, half: f64) -> Vec<RayRow> {
+    (0..count * count)
+        .map(|i| {
+            let (a, b) = ((i % count) as f64, (i / count) as f64);
+            let at = |u: f64| -half + 2.0 * half * (u + 0.5) / count as f64;
+            RayRow {
+                origin: [at(a), at(b), -100.0],
+                direction: [0.0, 0.0, 1.0],
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn coincident_placements_build_and_trace_in_f32_and_f64() {
+    let mut text = String::from("[solids.b]\nshape = \"box(10, 10, 10)\"\n");
+    for _ in 0..300 {
+        text.push_str("\n[[place]]\nsolid = \"b\"\n");
+    }
+    let f = scene_from_toml(&text, "coincident.toml", Path::new(".")).unwrap();
+    let rays = rays_up(12, 8.0);
+    for precision in [Precision::F32, Precision::F64] {
+        let (result, _) = scan(&f, &rays, precision).unwrap();
+        for (r, h) in rays.iter().zip(&result.hits) {
+            let inside = r.origin[0].abs() < 5.0 && r.origin[1].abs() < 5.0;
+            let want = if inside { 95.0 } else { f64::INFINITY };
+            assert_eq!(h[3], want, "{precision:?} ray from {:?}", r.origin);
+        }
+        if precision == Precision::F32 {
+            gpu_agrees(&f, &rays, &result.hits);
+        }
+    }
+}
+
+#[test]
+fn a_large_polygon_fan_builds_and_traces_in_f32_and_f64() {
+    // One face of 1000 vertices on the unit circle at z = 1: a fan of 998 triangles
+    // (PLOC chained such fans hundreds of levels deep).
+    let n = 1000;
+    let mut obj = String::new();
+    for i in 0..n {
+        let a = std::f64::consts::TAU * i as f64 / n as f64;
+        obj.push_str(&format!("v {} {} 1\n", a.cos(), a.sin()));
+    }
+    obj.push('f');
+    for i in 1..=n {
+        obj.push_str(&format!(" {i}"));
+    }
+    obj.push('\n');
+    let f = obj_to_foundry(obj.as_bytes()).unwrap();
+    let rays = rays_up(40, 1.2);
+    // The polygon's inscribed radius: every chord stays outside it.
+    let inner = (std::f64::consts::PI / n as f64).cos();
+    for precision in [Precision::F32, Precision::F64] {
+        let (result, _) = scan(&f, &rays, precision).unwrap();
+        for (r, h) in rays.iter().zip(&result.hits) {
+            let radius = r.origin[0].hypot(r.origin[1]);
+            if radius < inner - 1e-6 {
+                assert!((h[3] - 101.0).abs() < 1e-9, "{precision:?} {r:?}: {}", h[3]);
+            } else if radius > 1.0 + 1e-6 {
+                assert_eq!(h[3], f64::INFINITY, "{precision:?} {r:?}");
+            }
+        }
+        if precision == Precision::F32 {
+            gpu_agrees(&f, &rays, &result.hits);
+        }
+    }
+}
