@@ -17,6 +17,8 @@
 //! - Numbers: decimal literals, `pi`, unary minus, and `*` `/` between them
 //!   (`-2*pi/3`).
 
+use hytrace_foundry::{Transform64, TypeCode};
+
 use crate::shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Shape,
@@ -30,6 +32,149 @@ pub struct ExprError {
     pub offset: usize,
     /// What is wrong.
     pub message: String,
+}
+
+/// An operator waiting on the parser's stack, with the precedence it binds by.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Pending {
+    /// `(`: a barrier only its `)` removes.
+    Group,
+    /// `+`, `-` or `*`.
+    Binary(TypeCode),
+    /// Prefix `!`.
+    Complement,
+}
+
+impl Pending {
+    fn precedence(self) -> u8 {
+        match self {
+            Pending::Group => 0,
+            Pending::Binary(TypeCode::Intersection) => 2,
+            Pending::Binary(_) => 1,
+            Pending::Complement => 3,
+        }
+    }
+}
+
+/// Deepest shape (levels of operators, placements and complements) an expression may
+/// build after its chains are joined: what the tree builder, whose trees are at most
+/// [`hytrace_foundry::MAX_TREE_HEIGHT`] deep after regrouping, walks recursively.
+pub const MAX_EXPRESSION_DEPTH: u32 = 1000;
+
+/// A shape and its depth (levels on its longest path; a primitive is 1).
+struct Deep {
+    shape: Shape,
+    depth: u32,
+}
+
+/// An operand on the parser's stack: a shape, or a chain of one operator not built yet.
+/// Unions and intersections gather operands from both sides (`a + (b + c)` is one chain
+/// of three), a difference chain its subtracted operands (`a - b - c` is `a - (b + c)`),
+/// and a chain becomes a balanced tree when it is used, so long chains written either way
+/// never make deep shapes.
+enum Operand {
+    Shape(Deep),
+    Chain(TypeCode, Vec<Deep>),
+}
+
+impl Operand {
+    /// The operand as a shape; a chain as a balanced tree of its operator.
+    fn build(self) -> Deep {
+        match self {
+            Operand::Shape(s) => s,
+            Operand::Chain(TypeCode::Difference, mut items) => {
+                let minuend = items.remove(0);
+                let subtracted = balanced(TypeCode::Union, items);
+                Deep {
+                    depth: 1 + minuend.depth.max(subtracted.depth),
+                    shape: minuend.shape - subtracted.shape,
+                }
+            }
+            Operand::Chain(code, items) => balanced(code, items),
+        }
+    }
+
+    /// The operands of a chain of `code` this operand adds to it (itself when it is no such
+    /// chain).
+    fn into_chain(self, code: TypeCode) -> Vec<Deep> {
+        match self {
+            Operand::Chain(c, items) if c == code => items,
+            other => vec![other.build()],
+        }
+    }
+}
+
+/// A balanced tree of `code` over `items` (at least one).
+fn balanced(code: TypeCode, mut items: Vec<Deep>) -> Deep {
+    while items.len() > 1 {
+        let mut paired = Vec::with_capacity(items.len().div_ceil(2));
+        let mut it = items.into_iter();
+        while let Some(a) = it.next() {
+            paired.push(match it.next() {
+                Some(b) => Deep {
+                    depth: 1 + a.depth.max(b.depth),
+                    shape: Shape::Op(code, Box::new(a.shape), Box::new(b.shape)),
+                },
+                None => a,
+            });
+        }
+        items = paired;
+    }
+    items.pop().expect("at least one operand")
+}
+
+/// An error at byte `at` when `depth` exceeds [`MAX_EXPRESSION_DEPTH`].
+fn check_depth(depth: u32, at: usize) -> Result<(), ExprError> {
+    if depth > MAX_EXPRESSION_DEPTH {
+        return Err(ExprError {
+            offset: at,
+            message: format!(
+                "the expression nests more than {MAX_EXPRESSION_DEPTH} levels of operators, \
+                 placements and complements (after joining chains of one operator), far \
+                 more than a CSG tree can hold ({} levels)",
+                hytrace_foundry::MAX_TREE_HEIGHT
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Applies `op` (found at byte `at`) to the operands on top of the stack.
+fn apply(operands: &mut Vec<Operand>, op: Pending, at: usize) -> Result<(), ExprError> {
+    let missing = || ExprError {
+        offset: at,
+        message: "an operator lacks an operand".into(),
+    };
+    let result = match op {
+        Pending::Complement => {
+            // A complement of a complement is the shape itself.
+            let Deep { shape, depth } = operands.pop().ok_or_else(missing)?.build();
+            let (shape, depth) = match shape {
+                Shape::Complement(inner) => (*inner, depth - 1),
+                s => (!s, depth + 1),
+            };
+            check_depth(depth, at)?;
+            Operand::Shape(Deep { shape, depth })
+        }
+        Pending::Binary(code) => {
+            let b = operands.pop().ok_or_else(missing)?;
+            let a = operands.pop().ok_or_else(missing)?;
+            let mut items = a.into_chain(code);
+            if code == TypeCode::Difference {
+                items.push(b.build());
+            } else {
+                items.extend(b.into_chain(code));
+            }
+            // The chain's tree: its deepest operand plus the levels pairing adds.
+            let deepest = items.iter().map(|d| d.depth).max().unwrap_or(0);
+            let pairing = usize::BITS - (items.len() - 1).leading_zeros();
+            check_depth(deepest + pairing + 1, at)?;
+            Operand::Chain(code, items)
+        }
+        Pending::Group => return Err(missing()),
+    };
+    operands.push(result);
+    Ok(())
 }
 
 /// Parses a CSG expression (see the module docs).
@@ -104,89 +249,143 @@ impl Parser<'_> {
         Some(&self.text[start..start + len])
     }
 
+    /// The whole expression, by operator precedence over explicit stacks (no recursion, so
+    /// any nesting the memory holds parses): operands and pending operators are pushed, and
+    /// an operator is applied when one of lower or equal precedence, a `)` or the end
+    /// follows it.
     fn expression(&mut self) -> Result<Shape, ExprError> {
-        let mut left = self.term()?;
+        let mut operands: Vec<Operand> = Vec::new();
+        let mut operators: Vec<(Pending, usize)> = Vec::new();
         loop {
-            if self.eat('+') {
-                left = left + self.term()?;
-            } else if self.eat('-') {
-                left = left - self.term()?;
-            } else {
-                return Ok(left);
-            }
-        }
-    }
-
-    fn term(&mut self) -> Result<Shape, ExprError> {
-        let mut left = self.unary()?;
-        while self.eat('*') {
-            left = left * self.unary()?;
-        }
-        Ok(left)
-    }
-
-    fn unary(&mut self) -> Result<Shape, ExprError> {
-        if self.eat('!') {
-            return Ok(!self.unary()?);
-        }
-        let mut shape = if self.eat('(') {
-            let s = self.expression()?;
-            self.expect(')')?;
-            s
-        } else {
-            self.primitive()?
-        };
-        while self.eat('.') {
-            let at = self.pos;
-            let Some(name) = self.identifier().map(str::to_string) else {
-                return Err(self.error("expected a method name after `.`".into()));
-            };
-            let args = self.arguments()?;
-            let want = |n: usize| -> Result<(), ExprError> {
-                if args.len() == n {
-                    Ok(())
+            // An operand: prefix `!` and `(`, then a primitive or a group's end.
+            loop {
+                let at = self.pos;
+                if self.eat('!') {
+                    operators.push((Pending::Complement, at));
+                } else if self.eat('(') {
+                    operators.push((Pending::Group, at));
                 } else {
-                    Err(ExprError {
-                        offset: at,
-                        message: format!("`{name}` takes {n} numbers, got {}", args.len()),
-                    })
+                    break;
                 }
-            };
-            shape = match name.as_str() {
-                "translate" => {
-                    want(3)?;
-                    shape.translate(args[0], args[1], args[2])
-                }
-                "rotate" => {
-                    want(4)?;
-                    let axis = [args[0], args[1], args[2]];
-                    if !axis.iter().any(|v| *v != 0.0) {
-                        return Err(ExprError {
-                            offset: at,
-                            message: "rotate needs a non-zero axis".into(),
-                        });
+            }
+            operands.push(Operand::Shape(Deep {
+                shape: self.primitive()?,
+                depth: 1,
+            }));
+            // Then methods, `)` and binary operators until the next operand.
+            loop {
+                let at = self.pos;
+                if self.eat('.') {
+                    // Errors of a method name its name's column.
+                    self.skip_space();
+                    let at = self.pos;
+                    let top = operands.pop().expect("an operand precedes a method");
+                    operands.push(Operand::Shape(self.method(top.build(), at)?));
+                } else if self.eat(')') {
+                    loop {
+                        match operators.pop() {
+                            Some((Pending::Group, _)) => break,
+                            Some((op, at)) => apply(&mut operands, op, at)?,
+                            None => return Err(self.error_at(at, "unmatched `)`".into())),
+                        }
                     }
-                    shape.rotate(axis, args[3].to_radians())
+                } else {
+                    break;
                 }
-                "scale" => {
-                    want(3)?;
-                    if !args.iter().all(|v| *v != 0.0) {
-                        return Err(ExprError {
-                            offset: at,
-                            message: "scale factors must be non-zero".into(),
-                        });
-                    }
-                    shape.scale(args[0], args[1], args[2])
-                }
-                other => {
-                    return Err(ExprError {
-                        offset: at,
-                        message: format!("unknown method `{other}` (translate, rotate, scale)"),
-                    })
-                }
+            }
+            let next = match self.peek() {
+                Some('+') => Pending::Binary(TypeCode::Union),
+                Some('-') => Pending::Binary(TypeCode::Difference),
+                Some('*') => Pending::Binary(TypeCode::Intersection),
+                _ => break,
             };
+            let at = self.pos;
+            self.pos += 1;
+            while let Some(&(top, top_at)) = operators.last() {
+                if top.precedence() < next.precedence() {
+                    break;
+                }
+                operators.pop();
+                apply(&mut operands, top, top_at)?;
+            }
+            operators.push((next, at));
         }
-        Ok(shape)
+        while let Some((op, at)) = operators.pop() {
+            if op == Pending::Group {
+                return Err(self.error(format!(
+                    "expected `)` for the `(` at column {}, found `{}`",
+                    at + 1,
+                    self.rest_preview()
+                )));
+            }
+            apply(&mut operands, op, at)?;
+        }
+        let shape = operands.pop().expect("one operand left").build();
+        debug_assert!(operands.is_empty());
+        Ok(shape.shape)
+    }
+
+    fn error_at(&self, offset: usize, message: String) -> ExprError {
+        ExprError { offset, message }
+    }
+
+    /// The method after a `.` (at byte `at`) applied to `shape`; a placement of a placed
+    /// shape composes the two transforms, so chains of methods stay one level deep.
+    fn method(&mut self, operand: Deep, at: usize) -> Result<Deep, ExprError> {
+        let Some(name) = self.identifier().map(str::to_string) else {
+            return Err(self.error("expected a method name after `.`".into()));
+        };
+        let args = self.arguments()?;
+        let want = |n: usize| -> Result<(), ExprError> {
+            if args.len() == n {
+                Ok(())
+            } else {
+                Err(ExprError {
+                    offset: at,
+                    message: format!("`{name}` takes {n} numbers, got {}", args.len()),
+                })
+            }
+        };
+        let transform = match name.as_str() {
+            "translate" => {
+                want(3)?;
+                Transform64::translation([args[0], args[1], args[2]])
+            }
+            "rotate" => {
+                want(4)?;
+                let axis = [args[0], args[1], args[2]];
+                if !axis.iter().any(|v| *v != 0.0) {
+                    return Err(self.error_at(at, "rotate needs a non-zero axis".into()));
+                }
+                Transform64::rotation(axis, args[3].to_radians())
+            }
+            "scale" => {
+                want(3)?;
+                if !args.iter().all(|v| *v != 0.0) {
+                    return Err(self.error_at(at, "scale factors must be non-zero".into()));
+                }
+                Transform64::scaling([args[0], args[1], args[2]])
+            }
+            other => {
+                return Err(self.error_at(
+                    at,
+                    format!("unknown method `{other}` (translate, rotate, scale)"),
+                ))
+            }
+        };
+        Ok(match operand.shape {
+            Shape::Placed(inner, s) => Deep {
+                shape: Shape::Placed(transform.compose(&inner), s),
+                depth: operand.depth,
+            },
+            s => {
+                check_depth(operand.depth + 1, at)?;
+                Deep {
+                    shape: s.placed(transform),
+                    depth: operand.depth + 1,
+                }
+            }
+        })
     }
 
     fn primitive(&mut self) -> Result<Shape, ExprError> {
@@ -283,9 +482,16 @@ impl Parser<'_> {
     }
 
     fn factor(&mut self) -> Result<f64, ExprError> {
-        if self.eat('-') {
-            return Ok(-self.factor()?);
+        // Any run of unary minuses, counted rather than recursed into.
+        let mut negative = false;
+        while self.eat('-') {
+            negative = !negative;
         }
+        let value = self.unsigned()?;
+        Ok(if negative { -value } else { value })
+    }
+
+    fn unsigned(&mut self) -> Result<f64, ExprError> {
         self.skip_space();
         if self.text[self.pos..].starts_with("pi") {
             self.pos += 2;
@@ -332,10 +538,16 @@ mod tests {
             - (sphere(30.0).unwrap().translate(0.0, 0.0, 50.0) * !box3(20.0, 20.0, 200.0).unwrap());
         assert_eq!(parsed, built);
         let rotated = parse_shape("box(1,2,3).rotate(0, 0, 1, 90).scale(1, 1, 2)").unwrap();
-        let expected = box3(1.0, 2.0, 3.0)
-            .unwrap()
-            .rotate([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_2)
-            .scale(1.0, 1.0, 2.0);
+        // Successive placements compose into one.
+        let expected =
+            box3(1.0, 2.0, 3.0)
+                .unwrap()
+                .placed(
+                    Transform64::scaling([1.0, 1.0, 2.0]).compose(&Transform64::rotation(
+                        [0.0, 0.0, 1.0],
+                        std::f64::consts::FRAC_PI_2,
+                    )),
+                );
         assert_eq!(rotated, expected);
         assert_eq!(
             parse_shape("phicut(-2*pi/pi, 1e-1*10)").unwrap(),
@@ -361,6 +573,87 @@ mod tests {
             assert!(e.to_string().contains(needle), "{text}: {e}");
             assert_eq!(e.offset + 1, column, "{text}: {e}");
         }
+    }
+
+    /// Levels on the longest path of `shape` (a primitive is 1), counted without recursion.
+    fn depth(shape: &Shape) -> u32 {
+        let mut deepest = 0;
+        let mut stack = vec![(shape, 1)];
+        while let Some((s, d)) = stack.pop() {
+            deepest = deepest.max(d);
+            match s {
+                Shape::Leaf(_) => {}
+                Shape::Op(_, a, b) => stack.extend([(&**a, d + 1), (&**b, d + 1)]),
+                Shape::Placed(_, c) | Shape::Complement(c) => stack.push((&**c, d + 1)),
+            }
+        }
+        deepest
+    }
+
+    #[test]
+    fn deep_nesting_parses_without_recursion() {
+        let n = 100_000;
+        // Parentheses, complements and unary minuses nested 10^5 deep.
+        let text = format!("{}sphere(1){}", "(".repeat(n), ")".repeat(n));
+        assert_eq!(parse_shape(&text).unwrap(), sphere(1.0).unwrap());
+        let text = format!("{}sphere(1)", "!".repeat(n + 1));
+        assert_eq!(parse_shape(&text).unwrap(), !sphere(1.0).unwrap());
+        let text = format!("sphere({}2)", "-".repeat(n));
+        assert_eq!(parse_shape(&text).unwrap(), sphere(2.0).unwrap());
+        // 10^5 placements compose into one.
+        let text = format!("sphere(1){}", ".translate(1, 0, 0)".repeat(n));
+        match parse_shape(&text).unwrap() {
+            Shape::Placed(t, _) => assert_eq!(t.rows[0][3], n as f64),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn long_chains_written_either_way_become_shallow_trees() {
+        // 5000 unions nested to the right, to the left and flat: one balanced tree each,
+        // 14 levels deep (a primitive is 1), which the tree builder turns into a list.
+        let parts = 5000;
+        let part = |i: usize| format!("sphere(1).translate({i}, 0, 0)");
+        let mut right = part(parts - 1);
+        for i in (0..parts - 1).rev() {
+            right = format!("{} + ({right})", part(i));
+        }
+        let mut left = part(0);
+        for i in 1..parts {
+            left = format!("({left}) + {}", part(i));
+        }
+        let flat = (0..parts).map(part).collect::<Vec<_>>().join(" + ");
+        for text in [right, left, flat] {
+            let shape = parse_shape(&text).unwrap();
+            assert_eq!(depth(&shape), 15, "{}", &text[..40]);
+            let tree = crate::to_tree(&shape).unwrap();
+            assert_eq!(tree.members.len(), parts);
+        }
+        // `a - b - c - ...` subtracts one union.
+        let text = format!(
+            "box(100, 100, 100) - {}",
+            (0..parts).map(part).collect::<Vec<_>>().join(" - ")
+        );
+        assert_eq!(depth(&parse_shape(&text).unwrap()), 16);
+    }
+
+    #[test]
+    fn nesting_no_tree_can_hold_is_a_clear_error() {
+        // Differences nested to the right do not join: 5000 levels are refused by name.
+        let mut text = String::from("sphere(1)");
+        for _ in 0..5000 {
+            text = format!("sphere(2) - ({text})");
+        }
+        let e = parse_shape(&text).unwrap_err();
+        assert!(e.to_string().contains("more than 1000 levels"), "{e}");
+        // Alternating complements and placements nest too.
+        let text = format!(
+            "{}sphere(1){}",
+            "!(".repeat(3000),
+            ").translate(1, 0, 0)".repeat(3000)
+        );
+        let e = parse_shape(&text).unwrap_err();
+        assert!(e.to_string().contains("more than 1000 levels"), "{e}");
     }
 
     #[test]

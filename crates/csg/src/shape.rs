@@ -485,11 +485,7 @@ impl Shape {
 
     /// This shape scaled by `(x, y, z)` (an ellipsoid is a scaled sphere).
     pub fn scale(self, x: f64, y: f64, z: f64) -> Shape {
-        let mut t = Transform64::IDENTITY;
-        t.rows[0][0] = x;
-        t.rows[1][1] = y;
-        t.rows[2][2] = z;
-        self.placed(t)
+        self.placed(Transform64::scaling([x, y, z]))
     }
 
     fn op(code: TypeCode, a: Shape, b: Shape) -> Shape {

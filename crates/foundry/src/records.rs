@@ -215,6 +215,15 @@ impl Transform64 {
         m
     }
 
+    /// A scaling by `s` along the axes.
+    pub fn scaling(s: [f64; 3]) -> Transform64 {
+        let mut m = Self::IDENTITY;
+        for (k, sk) in s.into_iter().enumerate() {
+            m.rows[k][k] = sk;
+        }
+        m
+    }
+
     /// A right-handed rotation by `angle` radians about `axis` (any non-zero length;
     /// Rodrigues' formula).
     pub fn rotation(axis: [f64; 3], angle: f64) -> Transform64 {

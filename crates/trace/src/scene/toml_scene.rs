@@ -164,6 +164,17 @@ fn placement_transform(p: &Placement) -> anyhow::Result<Transform64> {
     Ok(t)
 }
 
+/// `text` cut to its first and last 30 characters when longer than 80, for messages.
+fn abridged(text: &str) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    if chars.len() <= 80 {
+        return text.to_string();
+    }
+    let head: String = chars[..30].iter().collect();
+    let tail: String = chars[chars.len() - 30..].iter().collect();
+    format!("{head} ... {tail}")
+}
+
 /// Builds a Foundry from the text of a scene file; `source` names it in errors and `dir` is
 /// where relative mesh and grid paths start.
 pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> anyhow::Result<Foundry> {
@@ -246,8 +257,12 @@ pub fn render_scene_from_toml(
     };
     for (name, entry) in &file.solids {
         let identity = f.solid.len() as u32;
-        let shape = parse_shape(&entry.shape)
-            .with_context(|| format!("{source}: solid `{name}`: shape `{}`", entry.shape))?;
+        let shape = parse_shape(&entry.shape).with_context(|| {
+            format!(
+                "{source}: solid `{name}`: shape `{}`",
+                abridged(&entry.shape)
+            )
+        })?;
         let tree = to_tree(&shape).with_context(|| format!("{source}: solid `{name}`"))?;
         let mut s = f.begin_solid(name);
         s.add_csg(tree, identity, UNSET)?;

@@ -1,8 +1,13 @@
-//! Scenes whose boxes a PLOC build chains into trees deeper than the traversal stacks
-//! (obvhs went one level per box): many placements of one solid at one position, and the
-//! triangle fan one large OBJ polygon becomes. They used to be refused ("the BVH over 70
-//! boxes is 69 levels deep"); they now build and trace, in f32 and f64, with the answers
-//! the geometry gives, and the GPU's walk of the same trees gives the CPU's f32 answers.
+//! Inputs far outside ordinary scenes end in a correct result or a clear error, in bounded
+//! time and memory:
+//! - scenes whose boxes a PLOC build chains into trees deeper than the traversal stacks
+//!   (obvhs went one level per box): many placements of one solid at one position, and the
+//!   triangle fan one large OBJ polygon becomes. They used to be refused ("the BVH over 70
+//!   boxes is 69 levels deep"); they now build and trace, in f32 and f64, with the answers
+//!   the geometry gives, and the GPU's walk of the same trees gives the CPU's f32 answers;
+//! - CSG expressions in scene files nested thousands of levels deep (they used to overflow
+//!   the stack): chains of one operator become shallow trees, other nesting is refused by
+//!   name.
 
 mod common;
 
@@ -95,4 +100,42 @@ fn a_large_polygon_fan_builds_and_traces_in_f32_and_f64() {
             gpu_agrees(&f, &rays, &result.hits);
         }
     }
+}
+
+#[test]
+fn deep_expressions_in_scene_files_build_or_fail_clearly() {
+    let scene =
+        |shape: &str| format!("[solids.s]\nshape = \"{shape}\"\n\n[[place]]\nsolid = \"s\"\n");
+    // 2000 unions nested to the right: one list of spheres along x.
+    let parts = 2000;
+    let mut shape = format!("sphere(1).translate({}, 0, 0)", 3 * (parts - 1));
+    for i in (0..parts - 1).rev() {
+        shape = format!("sphere(1).translate({}, 0, 0) + ({shape})", 3 * i);
+    }
+    let f = scene_from_toml(&scene(&shape), "right.toml", Path::new(".")).unwrap();
+    let rays: Vec<RayRow> = (0..parts)
+        .map(|i| RayRow {
+            origin: [3.0 * i as f64, 0.0, -10.0],
+            direction: [0.0, 0.0, 1.0],
+            tmin: 0.0,
+            tmax: f64::INFINITY,
+        })
+        .collect();
+    let (result, _) = scan(&f, &rays, Precision::F64).unwrap();
+    assert!(result.hits.iter().all(|h| h[3] == 9.0));
+    // Differences nested to the right 5000 deep: an error naming the file, the solid and
+    // the depth, with the shape abridged.
+    let mut shape = String::from("sphere(1)");
+    for _ in 0..5000 {
+        shape = format!("sphere(2) - ({shape})");
+    }
+    let e = format!(
+        "{:#}",
+        scene_from_toml(&scene(&shape), "diff.toml", Path::new(".")).unwrap_err()
+    );
+    assert!(
+        e.contains("diff.toml: solid `s`") && e.contains("more than 1000 levels"),
+        "{e}"
+    );
+    assert!(e.len() < 600, "{} bytes", e.len());
 }
