@@ -7,7 +7,9 @@
 //!   the geometry gives, and the GPU's walk of the same trees gives the CPU's f32 answers;
 //! - CSG expressions in scene files nested thousands of levels deep (they used to overflow
 //!   the stack): chains of one operator become shallow trees, other nesting is refused by
-//!   name.
+//!   name;
+//! - a GDML hierarchy tens of thousands of volumes deep (reading it used to take quadratic
+//!   time: every volume's line number was found by scanning the file from its start).
 
 mod common;
 
@@ -15,8 +17,9 @@ use std::path::Path;
 
 use hytrace_foundry::Foundry;
 
+use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::scan::{scan, Precision, RayRow};
-use hytrace_trace::scene::{obj_to_foundry, scene_from_toml};
+use hytrace_trace::scene::{load_scene, obj_to_foundry, scene_from_toml};
 
 /// In f32 the GPU scan kernel (where an adapter opens) answers every ray as the CPU's
 /// f32 scan did.
@@ -138,4 +141,54 @@ fn deep_expressions_in_scene_files_build_or_fail_clearly() {
         "{e}"
     );
     assert!(e.len() < 600, "{} bytes", e.len());
+}
+
+/// GDML text of `depth` boxes each placed in the next larger (sides `2 (depth - i) + 2`).
+fn nested_boxes_gdml(depth: usize) -> String {
+    let mut out = String::from(
+        "<?xml version=\"1.0\"?>\n<gdml>\n<define/>\n<materials><material name=\"M\" Z=\"1\">\
+         <D value=\"1\"/><atom value=\"1\"/></material></materials>\n<solids>\n",
+    );
+    for i in 0..depth {
+        let side = 2 * (depth - i) + 2;
+        out.push_str(&format!(
+            "<box name=\"b{i}\" x=\"{side}\" y=\"{side}\" z=\"{side}\" lunit=\"mm\"/>\n"
+        ));
+    }
+    out.push_str("</solids>\n<structure>\n");
+    for i in (0..depth).rev() {
+        out.push_str(&format!(
+            "<volume name=\"v{i}\"><materialref ref=\"M\"/><solidref ref=\"b{i}\"/>"
+        ));
+        if i + 1 < depth {
+            out.push_str(&format!(
+                "<physvol><volumeref ref=\"v{}\"/></physvol>",
+                i + 1
+            ));
+        }
+        out.push_str("</volume>\n");
+    }
+    out.push_str("</structure>\n<setup name=\"Default\" version=\"1.0\"><world ref=\"v0\"/></setup>\n</gdml>\n");
+    out
+}
+
+#[test]
+fn a_gdml_hierarchy_thousands_of_volumes_deep_reads_and_traces() {
+    let depth = 20_000;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("deep.gdml");
+    std::fs::write(&file, nested_boxes_gdml(depth)).unwrap();
+    let f = load_scene(Some(&file), &GdmlOptions::default()).unwrap();
+    assert_eq!(f.inst.len(), depth);
+    // From the centre along +x: the innermost box's face at x = 2 (sides 4).
+    let ray = RayRow {
+        origin: [0.0; 3],
+        direction: [1.0, 0.0, 0.0],
+        tmin: 0.0,
+        tmax: f64::INFINITY,
+    };
+    for precision in [Precision::F32, Precision::F64] {
+        let (result, _) = scan(&f, &[ray], precision).unwrap();
+        assert_eq!(result.hits[0][3], 2.0, "{precision:?}");
+    }
 }

@@ -66,7 +66,8 @@ impl Scope for Defines {
 pub(crate) struct Reader<'a, 'input> {
     pub file: String,
     pub dir: PathBuf,
-    pub doc: &'a Document<'input>,
+    /// The document whose nodes the reader is handed.
+    document: std::marker::PhantomData<&'a Document<'input>>,
     pub options: &'a GdmlOptions,
     pub defines: Defines,
     pub out: Gdml,
@@ -79,6 +80,10 @@ pub(crate) struct Reader<'a, 'input> {
     pub include_depth: usize,
     loop_depth: usize,
     loop_iterations: usize,
+    /// Byte offset of the start of every line of the text after the first: a node's line
+    /// by binary search (roxmltree's own lookup scans the text from its start, which made
+    /// reading a file with a message origin per volume quadratic).
+    line_starts: Vec<usize>,
 }
 
 /// Reads a file, `depth` includes deep.
@@ -127,7 +132,7 @@ pub(crate) fn read_text(
     let mut reader = Reader {
         file: file.to_string(),
         dir: dir.to_path_buf(),
-        doc: &doc,
+        document: std::marker::PhantomData,
         options,
         defines: Defines::default(),
         out: Gdml::default(),
@@ -140,6 +145,12 @@ pub(crate) fn read_text(
         include_depth: depth,
         loop_depth: 0,
         loop_iterations: 0,
+        line_starts: text
+            .bytes()
+            .enumerate()
+            .filter(|(_, b)| *b == b'\n')
+            .map(|(i, _)| i + 1)
+            .collect(),
     };
     reader.read_root(doc.root_element())?;
     Ok(reader.out)
@@ -159,7 +170,6 @@ pub(crate) enum Section {
 impl<'a, 'input> Reader<'a, 'input> {
     /// An error at `node`.
     pub fn error(&self, node: Node, message: impl Into<String>) -> GdmlError {
-        let pos = self.doc.text_pos_at(node.range().start);
         let mut parts: Vec<String> = node
             .ancestors()
             .filter(|n| n.is_element())
@@ -171,19 +181,21 @@ impl<'a, 'input> Reader<'a, 'input> {
         parts.reverse();
         GdmlError {
             file: self.file.clone(),
-            line: pos.row,
+            line: self.line(node),
             element: parts.join("/"),
             message: message.into(),
         }
     }
 
+    /// The line (from 1) where `node` starts.
+    fn line(&self, node: Node) -> u32 {
+        let at = node.range().start;
+        (self.line_starts.partition_point(|&start| start <= at) + 1) as u32
+    }
+
     /// `file:line` of a node.
     pub fn origin(&self, node: Node) -> String {
-        format!(
-            "{}:{}",
-            self.file,
-            self.doc.text_pos_at(node.range().start).row
-        )
+        format!("{}:{}", self.file, self.line(node))
     }
 
     /// Fails on an unsupported element, or skips it with a warning when lenient.
