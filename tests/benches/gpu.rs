@@ -309,7 +309,7 @@ fn main() {
         let (m, timestamps) = measure(
             &ctx,
             &built.tracer,
-            &generate(Sweep::Axis, &bounds, origins),
+            &generate(Sweep::Axis, &bounds, origins).unwrap(),
         );
         report.timestamps &= timestamps;
         per_file.push(format!("| {name} | {} | {} |", built.cell(), m.cells()));

@@ -9,6 +9,8 @@ pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod gpu;
+pub mod memory;
+pub mod outputs;
 pub mod render;
 pub mod report;
 pub mod scan;

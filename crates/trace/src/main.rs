@@ -1,6 +1,6 @@
 //! The `hytrace` command-line tool.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -10,7 +10,7 @@ use hytrace_trace::gpu::{GpuContext, TexelStore};
 use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::volume::{self, FilterArg, Repr, Space};
-use hytrace_trace::{accuracy, report, scene};
+use hytrace_trace::{accuracy, outputs, report, scene};
 use hytrace_volume::TexelFormat;
 
 /// Hybrid ray tracing of analytic CSG solids, triangle meshes and sparse volumes.
@@ -319,18 +319,26 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             transmittance,
             estimate,
         } => {
+            // Every output is checked before the work and written together after it.
+            let generated_rays = rays.as_deref().filter(|_| sweep_kind.is_some());
+            let destinations: Vec<(&str, &Path)> = [
+                ("--out", Some(out.as_path())),
+                ("--ids", ids.as_deref()),
+                ("--transmittance", transmittance.as_deref()),
+                ("--rays", generated_rays),
+            ]
+            .into_iter()
+            .filter_map(|(option, path)| Some((option, path?)))
+            .collect();
+            outputs::check_destinations(&destinations)?;
             let t0 = std::time::Instant::now();
             let f = scene::load_scene(scene.as_deref(), &options)?;
             let ray_rows = match (sweep_kind, &rays) {
                 (Some(kind), _) => {
                     let bounds =
                         sweep::scene_bounds(&f).context("the scene has no solids to sweep")?;
-                    let generated = sweep::generate(kind, &bounds, count);
-                    if let Some(p) = &rays {
-                        scan::write_rays(p, &generated)
-                            .with_context(|| format!("writing {}", p.display()))?;
-                    }
-                    generated
+                    sweep::generate(kind, &bounds, count)
+                        .with_context(|| format!("--count {count}"))?
                 }
                 (None, Some(p)) => scan::read_rays(p)?,
                 (None, None) => anyhow::bail!("give --rays RAYS.npy or --sweep KIND"),
@@ -353,12 +361,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 )?),
                 None => None,
             };
-            scan::write_hits(&result, precision, &out, ids.as_deref())
-                .with_context(|| format!("writing {}", out.display()))?;
-            if let (Some(path), Some(run)) = (&transmittance, &media) {
-                volume::write_f64(path, &run.values)
-                    .with_context(|| format!("writing {}", path.display()))?;
+            let mut written = outputs::OutputSet::new();
+            written.stage(&out, |p| scan::write_hits(&result, precision, p))?;
+            if let Some(path) = &ids {
+                written.stage(path, |p| scan::write_ids(&result, p))?;
             }
+            if let (Some(path), Some(run)) = (&transmittance, &media) {
+                written.stage(path, |p| volume::write_f64(p, &run.values))?;
+            }
+            if let Some(path) = generated_rays {
+                written.stage(path, |p| scan::write_rays(p, &ray_rows))?;
+            }
+            written.commit()?;
             let hits = result.ids.iter().filter(|i| i[0] >= 0).count();
             if stats {
                 let mut line = scan::stats_json(backend, ray_rows.len(), load_s, &times, hits);

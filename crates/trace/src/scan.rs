@@ -786,33 +786,30 @@ fn embree_transmittance(
     bail!(NO_EMBREE)
 }
 
-/// Writes hits (and ids) atomically: float32 or float64 per the precision.
-pub fn write_hits(
-    result: &ScanResult,
-    precision: Precision,
-    hits_path: &Path,
-    ids_path: Option<&Path>,
-) -> anyhow::Result<()> {
+/// Writes the hits, `(N, 4)` float32 or float64 per the precision, atomically.
+pub fn write_hits(result: &ScanResult, precision: Precision, path: &Path) -> anyhow::Result<()> {
     let shape = [result.hits.len() as u64, 4];
     match precision {
         Precision::F32 => {
             let flat: Vec<f32> = result.hits.iter().flatten().map(|&v| v as f32).collect();
-            write_array(hits_path, Scalar::F32, &shape, bytemuck::cast_slice(&flat))?;
+            write_array(path, Scalar::F32, &shape, bytemuck::cast_slice(&flat))?;
         }
         Precision::F64 => {
             let flat: Vec<f64> = result.hits.iter().flatten().copied().collect();
-            write_array(hits_path, Scalar::F64, &shape, bytemuck::cast_slice(&flat))?;
+            write_array(path, Scalar::F64, &shape, bytemuck::cast_slice(&flat))?;
         }
     }
-    if let Some(p) = ids_path {
-        write_array(
-            p,
-            Scalar::I32,
-            &[result.ids.len() as u64, ID_COLUMNS as u64],
-            bytemuck::cast_slice(&result.ids),
-        )
-        .with_context(|| format!("writing {}", p.display()))?;
-    }
+    Ok(())
+}
+
+/// Writes the identities of the crossings, `(N, 3)` int32, atomically.
+pub fn write_ids(result: &ScanResult, path: &Path) -> anyhow::Result<()> {
+    write_array(
+        path,
+        Scalar::I32,
+        &[result.ids.len() as u64, ID_COLUMNS as u64],
+        bytemuck::cast_slice(&result.ids),
+    )?;
     Ok(())
 }
 

@@ -30,7 +30,7 @@ fn a_lost_device_fails_scans_and_transmittances_clearly() {
     let f = default_scene().unwrap();
     let scene = CpuScene::<f32>::new(&f).unwrap();
     let tracer = GpuTracer::new(&ctx, &scene).unwrap();
-    let rays = generate(Sweep::Circle, &scene_bounds(&f).unwrap(), 16);
+    let rays = generate(Sweep::Circle, &scene_bounds(&f).unwrap(), 16).unwrap();
     let records: Vec<_> = rays.iter().map(ray_record).collect();
     assert!(tracer.trace(&ctx, &records).is_ok());
     let grid = BrickedGrid::convert(&fog_sphere(6.0, 2.0).unwrap(), TexelFormat::F32).unwrap();

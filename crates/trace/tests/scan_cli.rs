@@ -330,6 +330,72 @@ fn bad_rays_and_scenes_fail_clearly_without_output() {
 }
 
 #[test]
+fn failed_scans_leave_no_output_and_sizes_are_checked_first() {
+    let (tmp, scene) = setup();
+    let path = |name: &str| tmp.path().join(name);
+    let listing = || {
+        let mut names: Vec<String> = std::fs::read_dir(tmp.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        names
+    };
+    let before = listing();
+    std::fs::create_dir(path("taken")).unwrap();
+    let run = |args: &[&str]| {
+        let mut all = vec![
+            "scan",
+            scene.to_str().unwrap(),
+            "--sweep",
+            "rect",
+            "--count",
+            "8",
+        ];
+        all.extend(args);
+        hytrace(&all)
+    };
+    let hits = path("out/hits.npy");
+    let (hits, taken, rays) = (hits.to_str().unwrap(), path("taken"), path("rays.npy"));
+    let taken = taken.to_str().unwrap();
+    // An output that is a directory, whichever option names it: refused before the scan,
+    // nothing written (the hits' directory is not even created).
+    for (args, option) in [
+        (vec!["--out", hits, "--ids", taken], "--ids"),
+        (
+            vec!["--out", taken, "--rays", rays.to_str().unwrap()],
+            "--out",
+        ),
+        (
+            vec!["--out", hits, "--transmittance", taken],
+            "--transmittance",
+        ),
+        (
+            vec!["--out", hits, "--ids", hits],
+            "--ids and --out both name",
+        ),
+    ] {
+        let o = run(&args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stderr(&o).contains(option), "{args:?}: {}", stderr(&o));
+        let mut now = listing();
+        now.retain(|n| n != "taken");
+        assert_eq!(now, before, "{args:?} left files");
+    }
+    // Sweeps too large for the machine are refused by option before any allocation.
+    for count in ["1000000000", "1000000000000"] {
+        let o = hytrace(&[
+            "scan", "default", "--sweep", "axis", "--count", count, "--out", hits,
+        ]);
+        let e = stderr(&o);
+        assert!(!o.status.success());
+        assert!(e.contains(&format!("--count {count}:")), "{e}");
+        assert!(e.contains("memory"), "{e}");
+        assert!(!e.contains("panicked"), "{e}");
+    }
+}
+
+#[test]
 fn every_scene_file_in_scenes_loads_and_scans() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
     let tmp = tempfile::tempdir().unwrap();

@@ -76,7 +76,8 @@ fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, S
     let err = |e: &dyn std::fmt::Display| format!("{COMPONENT}: {e}");
     let foundry = default_scene().map_err(|e| err(&e))?;
     let bounds = scene_bounds(&foundry).ok_or_else(|| err(&"the default scene is empty"))?;
-    let rays = generate(Sweep::Circle, &bounds, settings.size(20_000, 1000));
+    let rays =
+        generate(Sweep::Circle, &bounds, settings.size(20_000, 1000)).map_err(|e| err(&e))?;
     let f64_scene = CpuScene::<f64>::new(&foundry).map_err(|e| err(&e))?;
     let f32_scene = CpuScene::<f32>::new(&foundry).map_err(|e| err(&e))?;
     let want = cpu_answers(&f64_scene, &rays);

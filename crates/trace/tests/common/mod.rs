@@ -142,7 +142,7 @@ pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
     let b = scene_bounds(f).expect("scene has solids");
     let mut rays: Vec<RayRow> = [Sweep::Axis, Sweep::Rect, Sweep::Circle]
         .into_iter()
-        .flat_map(|s| generate(s, &b, count))
+        .flat_map(|s| generate(s, &b, count).unwrap())
         .collect();
     let mut rng = Rng(0x5eed_0000 + f.inst.len() as u64);
     for i in 0..random {
@@ -428,11 +428,11 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
     };
     let mut rays: Vec<RayRow> = [Sweep::Axis, Sweep::Rect, Sweep::Circle]
         .into_iter()
-        .flat_map(|s| generate(s, &near, 100))
+        .flat_map(|s| generate(s, &near, 100).unwrap())
         .collect();
     let far = [1e5, 0.0, 0.0, 1e5 + 30.0, 30.0, 30.0];
-    rays.extend(generate(Sweep::Rect, &far, 60));
-    rays.extend(generate(Sweep::Circle, &far, 2000));
+    rays.extend(generate(Sweep::Rect, &far, 60).unwrap());
+    rays.extend(generate(Sweep::Circle, &far, 2000).unwrap());
     let mut rng = Rng(7);
     for _ in 0..20_000 {
         let origin: [f64; 3] =

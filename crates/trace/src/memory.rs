@@ -1,0 +1,55 @@
+//! The memory a run may use, for checking sizes that come from input before they are
+//! allocated: a clear error naming the request instead of an abort in the allocator.
+
+/// Bytes of memory available to new allocations: `MemAvailable` of `/proc/meminfo` on Linux,
+/// `None` where the system does not say.
+pub fn available_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// An error when `bytes` (what `what` needs) exceed the available memory.
+pub fn check_fits(what: &str, bytes: u64) -> Result<(), String> {
+    match available_bytes() {
+        Some(free) if bytes > free => Err(format!(
+            "{what} needs about {} of memory, more than the {} available",
+            human(bytes),
+            human(free)
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// A byte count with a binary unit.
+fn human(bytes: u64) -> String {
+    const UNITS: [&str; 7] = ["bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_beyond_the_machine_are_refused_by_name() {
+        assert!(check_fits("a small scan", 1024).is_ok());
+        if available_bytes().is_some() {
+            let e = check_fits("--count 10^9", u64::MAX).unwrap_err();
+            assert!(e.starts_with("--count 10^9 needs about 16.0 EiB"), "{e}");
+        }
+        assert_eq!(human(3 * 1024 * 1024 * 1024), "3.0 GiB");
+        assert_eq!(human(12), "12 bytes");
+    }
+}

@@ -1,0 +1,112 @@
+//! The files one command writes, committed together: each is written to a temporary file
+//! beside its destination, and all are renamed into place only after every one of them was
+//! written. A command that fails part way (or is interrupted) leaves none of its outputs;
+//! the temporary files are removed when the set is dropped uncommitted.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use tempfile::TempPath;
+
+/// Outputs written but not yet in place.
+#[derive(Default)]
+pub struct OutputSet {
+    staged: Vec<(TempPath, PathBuf)>,
+}
+
+/// Checks before any work that every output can be written where asked: no path is an
+/// existing directory and no two outputs share a path. `outputs` pairs each path with the
+/// option that named it, for the message.
+pub fn check_destinations(outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+    for (i, (option, path)) in outputs.iter().enumerate() {
+        if path.is_dir() {
+            bail!("{option} {}: is a directory, not a file", path.display());
+        }
+        if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| p == path) {
+            bail!("{option} and {other} both name {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+impl OutputSet {
+    /// An empty set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Writes one output: `write` is handed a temporary path in `dest`'s directory (created
+    /// when missing) and writes the whole file there.
+    pub fn stage(
+        &mut self,
+        dest: &Path,
+        write: impl FnOnce(&Path) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let context = || format!("writing {}", dest.display());
+        let dir = dest
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        std::fs::create_dir_all(dir).with_context(context)?;
+        let tmp = tempfile::Builder::new()
+            .prefix(".hytrace-")
+            .tempfile_in(dir)
+            .with_context(context)?
+            .into_temp_path();
+        write(&tmp).with_context(context)?;
+        self.staged.push((tmp, dest.to_path_buf()));
+        Ok(())
+    }
+
+    /// Moves every staged output into place.
+    pub fn commit(self) -> anyhow::Result<()> {
+        for (tmp, dest) in self.staged {
+            tmp.persist(&dest)
+                .map_err(|e| e.error)
+                .with_context(|| format!("writing {}", dest.display()))?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nothing_lands_until_commit_and_a_failure_leaves_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.txt"), dir.path().join("sub/b.txt"));
+        let mut set = OutputSet::new();
+        set.stage(&a, |p| Ok(std::fs::write(p, "a")?)).unwrap();
+        set.stage(&b, |p| Ok(std::fs::write(p, "b")?)).unwrap();
+        assert!(!a.exists() && !b.exists());
+        set.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&b).unwrap(), "b");
+        // A second output failing: the first is not left behind, nor any temporary file.
+        let c = dir.path().join("c.txt");
+        let mut set = OutputSet::new();
+        set.stage(&c, |p| Ok(std::fs::write(p, "c")?)).unwrap();
+        let failed = set.stage(&dir.path().join("d.txt"), |_| bail!("no"));
+        assert!(failed.is_err());
+        drop(set);
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        let mut names = names;
+        names.sort();
+        assert_eq!(names, ["a.txt", "sub"]);
+    }
+
+    #[test]
+    fn directories_and_shared_paths_are_refused_by_option() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("hits.npy");
+        let e = check_destinations(&[("--out", &file), ("--ids", dir.path())]).unwrap_err();
+        assert!(e.to_string().starts_with("--ids ") && e.to_string().contains("directory"));
+        let e = check_destinations(&[("--out", &file), ("--ids", &file)]).unwrap_err();
+        assert!(e.to_string().contains("--ids and --out both name"), "{e}");
+        check_destinations(&[("--out", &file)]).unwrap();
+    }
+}
