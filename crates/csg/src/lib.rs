@@ -40,7 +40,7 @@ pub use prim_tree::{
 pub use real::{Ray, Real, V3};
 pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
-    theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape,
+    theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape, MAX_POLYHEDRON_PLANES,
 };
 pub use solid_store::add_geometry;
 pub use tree::{to_tree, to_tree_with, TreeOptions, LIST_MIN_MEMBERS};

@@ -303,11 +303,21 @@ pub fn paraboloid(rlo: f64, rhi: f64, dz: f64) -> Result<Shape, CsgError> {
     leaf(Primitive::Paraboloid { rlo, rhi, dz })
 }
 
+/// Most planes a [`polyhedron`] may have.
+pub const MAX_POLYHEDRON_PLANES: usize = 4096;
+
 /// A convex polyhedron bounded by planes `[nx, ny, nz, d]` (`dot(n, x) <= d` inside;
 /// normals are normalized here). Needs at least four planes enclosing a bounded region.
 pub fn polyhedron(planes: &[[f64; 4]]) -> Result<Shape, CsgError> {
     check("polyhedron", planes.len() >= 4, || {
         format!("needs at least 4 planes, got {}", planes.len())
+    })?;
+    check("polyhedron", planes.len() <= MAX_POLYHEDRON_PLANES, || {
+        format!(
+            "{} planes, more than {MAX_POLYHEDRON_PLANES} (every ray tests every plane: a finer \
+             convex solid is a mesh's job)",
+            planes.len()
+        )
     })?;
     let mut unit_planes = Vec::with_capacity(planes.len());
     for p in planes {

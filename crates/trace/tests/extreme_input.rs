@@ -8,6 +8,8 @@
 //! - CSG expressions in scene files nested thousands of levels deep (they used to overflow
 //!   the stack): chains of one operator become shallow trees, other nesting is refused by
 //!   name;
+//! - convex polyhedra of thousands of planes: bounded in quadratic time (the meets of every
+//!   three planes took quartic time), more than the limit refused by name;
 //! - a GDML hierarchy tens of thousands of volumes deep (reading it used to take quadratic
 //!   time: every volume's line number was found by scanning the file from its start).
 
@@ -191,4 +193,47 @@ fn a_gdml_hierarchy_thousands_of_volumes_deep_reads_and_traces() {
         let (result, _) = scan(&f, &[ray], precision).unwrap();
         assert_eq!(result.hits[0][3], 2.0, "{precision:?}");
     }
+}
+
+/// A polyhedron of `n` planes tangent to a sphere of radius 10 (Fibonacci normals), as
+/// the text of a scene file.
+fn tangent_polyhedron_scene(n: usize) -> String {
+    let planes: Vec<String> = (0..n)
+        .map(|i| {
+            let z = 1.0 - (2 * i + 1) as f64 / n as f64;
+            let phi = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+            let r = (1.0 - z * z).sqrt();
+            format!("{}, {}, {z}, 10", r * phi.cos(), r * phi.sin())
+        })
+        .collect();
+    format!(
+        "[solids.p]\nshape = \"polyhedron({})\"\n\n[[place]]\nsolid = \"p\"\n",
+        planes.join(", ")
+    )
+}
+
+#[test]
+fn polyhedra_of_thousands_of_planes_build_or_fail_clearly() {
+    // 2000 planes tangent to a ball of radius 10.
+    let f = scene_from_toml(&tangent_polyhedron_scene(2000), "p.toml", Path::new(".")).unwrap();
+    let rays = rays_up(6, 5.0);
+    let (result, _) = scan(&f, &rays, Precision::F64).unwrap();
+    for (r, h) in rays.iter().zip(&result.hits) {
+        let sphere = 100.0 - (100.0 - r.origin[0].hypot(r.origin[1]).powi(2)).sqrt();
+        // The polyhedron holds the ball and lies within 1% of its radius of it.
+        assert!(
+            h[3] <= sphere + 1e-9 && h[3] > sphere - 0.1,
+            "{r:?}: {}",
+            h[3]
+        );
+    }
+    let e = format!(
+        "{:#}",
+        scene_from_toml(&tangent_polyhedron_scene(5000), "many.toml", Path::new(".")).unwrap_err()
+    );
+    assert!(
+        e.contains("many.toml") && e.contains("5000 planes, more than 4096"),
+        "{}",
+        &e[e.len().saturating_sub(300)..]
+    );
 }
