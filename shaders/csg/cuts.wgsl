@@ -217,6 +217,39 @@ fn in_wedge(p: array<f32, 6>, x: f32, y: f32) -> bool {
     return angle_from(p[0], p[1], x, y) <= wedge_width(p);
 }
 
+// Angle within which a direction runs along a cut's surface (see the CPU twin): 4 eps.
+const CUT_ANGLE_TOLERANCE: f32 = 4.0 * 1.1920929e-7;
+
+// Whether the direction (x, y) points strictly between the wedge's half-planes.
+fn strictly_in_wedge(p: array<f32, 6>, x: f32, y: f32) -> bool {
+    let a = angle_from(p[0], p[1], x, y);
+    return a > CUT_ANGLE_TOLERANCE && a < wedge_width(p) - CUT_ANGLE_TOLERANCE;
+}
+
+// Whether the line through o along d passes through the origin within rounding:
+// |o x d|^2 <= (8 eps)^2 |o|^2 |d|^2 (see the CPU twin).
+fn through_origin(o: vec3<f32>, d: vec3<f32>) -> bool {
+    let c = vec3<f32>(o.y * d.z - o.z * d.y, o.z * d.x - o.x * d.z, o.x * d.y - o.y * d.x);
+    let eps = 8.0 * 1.1920929e-7;
+    return vdot(c, c) <= eps * eps * vdot(o, o) * vdot(d, d);
+}
+
+// Spans of a ray whose line passes through the edge of a cut (the wedge's axis, the cone's
+// apex) at t: from the side `before` to the side `after`, one crossing or none.
+fn through_edge(before: bool, after: bool, t: f32, normal: vec3<f32>) -> Spans {
+    if before == after {
+        if before {
+            return spans_one(span_everywhere());
+        }
+        return spans_empty();
+    }
+    var c: Crossings;
+    c.count = 1u;
+    c.t[0] = t;
+    c.n[0] = normal;
+    return spans_from_toggles(before, c);
+}
+
 // Phi wedge [cos phi0, sin phi0, cos phi1, sin phi1]: azimuths from phi0 counter-clockwise
 // to phi1.
 fn phicut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
@@ -225,6 +258,17 @@ fn phicut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
             return spans_one(span_everywhere());
         }
         return spans_empty();
+    }
+    // A ray whose line passes through the axis goes from the azimuth of -d to that of d
+    // there (see the CPU twin).
+    if through_origin(vec3<f32>(o.x, o.y, 0.0), vec3<f32>(d.x, d.y, 0.0)) {
+        let t = -(o.x * d.x + o.y * d.y) / (d.x * d.x + d.y * d.y);
+        return through_edge(
+            strictly_in_wedge(p, -d.x, -d.y),
+            strictly_in_wedge(p, d.x, d.y),
+            t,
+            -d,
+        );
     }
     // Outward normals of the two bounding half-planes, and the unit direction of each.
     var normals = array<vec3<f32>, 2>(vec3<f32>(p[1], -p[0], 0.0), vec3<f32>(-p[3], p[2], 0.0));
@@ -297,6 +341,16 @@ fn theta_crossing(c: ptr<function, Crossings>, o: vec3<f32>, d: vec3<f32>, t: f3
 // Theta cone shell [theta0, theta1]: polar angles from +z between theta0 and theta1
 // (theta0 = 0 or theta1 = pi leave that side open).
 fn thetacut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+    // A ray through the apex goes from the polar angle of -d to that of d there (see the
+    // CPU twin).
+    if through_origin(o, d) {
+        let back = polar(-d);
+        let ahead = polar(d);
+        let tol = CUT_ANGLE_TOLERANCE;
+        let before = (p[0] <= 0.0 || back > p[0] + tol) && (p[1] >= CUT_PI || back < p[1] - tol);
+        let after = (p[0] <= 0.0 || ahead > p[0] + tol) && (p[1] >= CUT_PI || ahead < p[1] - tol);
+        return through_edge(before, after, -vdot(o, d) / vdot(d, d), -d);
+    }
     var c: Crossings;
     c.count = 0u;
     for (var k = 0u; k < 2u; k += 1u) {

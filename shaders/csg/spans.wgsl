@@ -84,7 +84,8 @@ fn spans_subtract(s: Spans, hole: Spans) -> Spans {
         var has_rest = true;
         for (var j = 0u; j < hole.len && has_rest; j += 1u) {
             let h = hole.items[j];
-            if h.t1 <= r.t0 || h.t0 >= r.t1 {
+            // A zero-length hole (a tangent ray) removes nothing (see the CPU twin).
+            if h.t1 <= h.t0 || h.t1 <= r.t0 || h.t0 >= r.t1 {
                 continue;
             }
             if h.t0 > r.t0 {

@@ -15,6 +15,7 @@ Command line::
     geant4_oracle.py --out DIR --seed S --solids-per-kind K --rays-per-solid M
                      [--kinds k1,k2,...] [--bench] [--march N]
                      [--self-check] [--describe-twisted]
+    geant4_oracle.py --out DIR --cases FILE
     geant4_oracle.py --describe-twisted
 
 Run it with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
@@ -284,6 +285,41 @@ box); solids with less than 2% of their bounding box inside are redrawn.
 stdout gets exactly one JSON line on success:
 ``{"solids": n, "rays": n, "seconds": total_wall_time}``.
 
+Geant4's own unit-test cases (``--out DIR --cases FILE``)
+-------------------------------------------------------
+Instead of random solids, answers the rays of a case file
+(``tests/data/geant4_unit_cases.json``: ``{"format":
+"hytrace-geant4-unit-cases", "families": [{"family", "source", "solids":
+[SPEC...], "rays": [[solid, ox, oy, oz, dx, dy, dz], ...]}]}``, the start
+points and directions of Geant4's testG4*.cc solid tests) with Geant4's
+navigator, as a run would meet them: each solid is placed alone (identity)
+in a world box far larger than it, a fresh ``LocateGlobalPointAndSetup``
+with the ray's direction locates the origin (a surface origin goes into the
+solid when the ray enters it) and ``ComputeStep`` gives the distance to the
+next boundary; after a zero step (the navigator does not always take the
+direction into account) it relocates across the boundary and steps again, as
+G4Transportation does.  A step that ends on the world box is kInfinity.
+Each step is then checked against the solid's own ``Inside()`` along the ray
+(``Interior``: membership of the interior, kSurface counting as outside, so
+a ray that runs along a face it starts on never enters, and the origin's
+side is the first side the ray reaches); where the step contradicts it, the
+first membership change found by sampling ``Inside()`` and bisecting is the
+second judge's reference.  Writes
+
+``unit_expected.npy``  float64 (N, 4), rays in file order: the navigator's
+                   step (inf: none), where the navigator located the origin
+                   (0 world, 2 solid), ``Inside()`` at the origin (0, 1, 2),
+                   and the second judge's distance (NaN where the step
+                   agrees with ``Inside()``; see ``unit_flags.npy``).
+``unit_flags.npy`` int32 (N,): FLAG_INCONSISTENT where it does not;
+                   FLAG_TOLERANCE where the origin is within Geant4's
+                   angular tolerance of a phi plane but outside it by an
+                   exact computation (``phi_plane_entry``), the navigator
+                   taking it for the surface: the exact entry is the
+                   reference there.
+
+stdout: ``{"families": n, "rays": n}``.
+
 Twisted solids: exact geometry
 ------------------------------
 Established numerically with Geant4 11.4 (``--describe-twisted``, see
@@ -515,6 +551,9 @@ FLAG_MISSED = 4         # sampling Inside() along the ray found a crossing
                         # before Geant4's distance (kinds in MARCH_SAMPLES)
 FLAG_FORMULA = 8        # twisted kinds: the exact cross-section formula
                         # finds a crossing before Geant4's distance
+FLAG_TOLERANCE = 16     # --cases: an origin Geant4 calls kSurface is outside
+                        # a phi plane by an exact computation, and the ray
+                        # enters through it (phi_plane_entry)
 # Samples per ray of the FLAG_FORMULA check (vectorised, plus zooming in on
 # the sample closest to the other side); G4VTwistedFaceted (11.4) misses the
 # lateral faces for some rays exactly parallel to z, and 16 Inside() samples
@@ -2754,6 +2793,235 @@ def self_check(g4, builder):
 
 
 # ---------------------------------------------------------------------------
+# Geant4's solid unit-test cases (--cases)
+# ---------------------------------------------------------------------------
+
+CASES_FORMAT = "hytrace-geant4-unit-cases"
+# Inside() samples along a ray (clipped to the solid's bounding box) that check
+# the navigator's step, and those of the second judge, which gives the
+# reference where the step contradicts Geant4's own Inside().
+CHECK_SAMPLES = 64
+JUDGE_SAMPLES = 4096
+
+
+def place_in_world(g4, builder, solid):
+    """A world box holding `solid` unplaced (identity) and the solid's
+    placement; the world's half size W is far beyond the solid."""
+    lo, hi = bounding_box(g4, solid)
+    half = 10.0 * float(np.max(np.abs(np.concatenate([lo, hi])))) + 1e3
+    name = builder._name("world")
+    mat = g4.G4Material(name + "_vacuum", 1.0, 1.008 * g4.g / g4.mole,
+                        1e-20 * g4.g / g4.cm3)
+    world_lv = g4.G4LogicalVolume(g4.G4Box(name, half, half, half), mat,
+                                  name + "_lv")
+    world_pv = g4.G4PVPlacement(None, g4.G4ThreeVector(), world_lv,
+                                name + "_pv", None, False, 0)
+    lv = g4.G4LogicalVolume(solid, mat, name + "_solid_lv")
+    pv = g4.G4PVPlacement(None, g4.G4ThreeVector(), lv, name + "_solid_pv",
+                          world_lv, False, 0)
+    builder.keep += [mat, world_lv, world_pv, lv, pv]
+    return world_pv, pv, half
+
+
+def navigate(g4, world_pv, pv, half, origins, dirs):
+    """G4Navigator's answers for rays from `origins`: (codes, dists) with
+    code 2 where the origin is located in the solid's volume (a surface
+    origin as the navigator decides) and 0 in the world, dist ComputeStep's
+    step after LocateGlobalPointAndSetup (a fresh, non-relative locate per
+    ray, with the ray's direction), kInfinity where the step ends on the
+    world box.  After a zero step (from a surface) the navigator relocates
+    across the boundary and steps again, as G4Transportation makes it."""
+    nav = g4.G4Navigator()
+    nav.SetWorldVolume(world_pv)
+    V = g4.G4ThreeVector
+    codes, dists = [], []
+    for o, d in zip(origins.tolist(), dirs.tolist()):
+        P, D = V(*o), V(*d)
+        located = nav.LocateGlobalPointAndSetup(P, D, False, False)
+        step = nav.ComputeStep(P, D, 1e30, 0.0)
+        for _ in range(2):
+            if step > 0.0:
+                break
+            nav.SetGeometricallyLimitedStep()
+            located = nav.LocateGlobalPointAndSetup(P, D, True, False)
+            step = nav.ComputeStep(P, D, 1e30, 0.0)
+        into = located is not None and located.GetName() == pv.GetName()
+        if not into:
+            exit_t = min(((half if d[a] > 0 else -half) - o[a]) / d[a]
+                         for a in range(3) if d[a] != 0.0)
+            if step >= exit_t - 1e-9 * half:
+                step = K_INFINITY
+        codes.append(2 if into else 0)
+        dists.append(step)
+    return codes, dists
+
+
+class Interior:
+    """Geant4's Inside() along one ray, as membership of the solid's interior
+    (kInside; kSurface counts as not inside): the origin's side is that of the
+    first point along the ray that Inside() does not call kSurface (tried at
+    1e-9, 1e-8, ... 1e-5 mm, then at the samples up to the bounding box), so
+    that a ray starting on a surface has the side it moves into, also where it
+    leaves a curved surface tangentially, and a ray that runs along a face it
+    starts on and then leaves is outside; a boundary is where the membership
+    changes after that point."""
+
+    def __init__(self, g4, solid, o, v):
+        self.g4, self.solid, self.o, self.v = g4, solid, o, v
+        lo, hi = bounding_box(g4, solid)
+        self.size = float(np.max(hi - lo))
+        pad = 1e-3 * (1.0 + self.size)
+        lo, hi = lo - pad, hi + pad
+        t1 = math.inf
+        for a in range(3):  # where the ray leaves the bounding box
+            if v[a] != 0.0:
+                t1 = min(t1, max((lo[a] - o[a]) / v[a], (hi[a] - o[a]) / v[a]))
+            elif not lo[a] <= o[a] <= hi[a]:
+                t1 = 0.0
+        self.end = max(t1, 1e-5)
+        k_surf = g4.EInside.kSurface
+        ladder = [1e-9, 1e-8, 1e-7, 1e-6, 1e-5]
+        samples = np.linspace(0.0, self.end, JUDGE_SAMPLES + 1)[1:]
+        self.start, self.inside = self.end, False
+        for t in ladder + [t for t in samples.tolist() if t > ladder[-1]]:
+            c = self.code(t)
+            if c != k_surf:
+                self.start, self.inside = t, c == g4.EInside.kInside
+                break
+
+    def code(self, t):
+        p = self.o + t * self.v
+        return self.solid.Inside(self.g4.G4ThreeVector(*p.tolist()))
+
+    def member(self, t):
+        return self.code(t) == self.g4.EInside.kInside
+
+    def agrees(self, dist):
+        """Whether a step of `dist` (inf: none) ends where the membership
+        first changes: CHECK_SAMPLES samples before it on the origin's side,
+        the other side just after it (at the first point Inside() does not
+        call kSurface)."""
+        stop = min(dist, self.end)
+        if stop > self.start:
+            for t in np.linspace(self.start, stop, CHECK_SAMPLES + 1)[:-1]:
+                if self.member(t) != self.inside:
+                    return False
+        if not math.isfinite(dist):
+            return not self.inside
+        if dist < 0.5 * self.start:
+            return False
+        # The first point past the step that Inside() does not call kSurface
+        # (1e-9 .. 1e-3 of the size and distance on: a ray that enters
+        # tangentially stays in the tolerance band for a while).
+        for k in range(9, 2, -1):
+            c = self.code(dist + 10.0 ** -k * (1.0 + self.size + dist))
+            if c != self.g4.EInside.kSurface:
+                return (c == self.g4.EInside.kInside) != self.inside
+        return False
+
+    def first_change(self):
+        """The first membership change after the origin's side is known
+        (JUDGE_SAMPLES samples up to the bounding box, then bisection to
+        1e-12 of the size); inf if none."""
+        prev = self.start
+        for t in np.linspace(self.start, self.end, JUDGE_SAMPLES + 1)[1:]:
+            if self.member(t) != self.inside:
+                a, b = prev, t
+                while b - a > 1e-12 * (1.0 + self.size):
+                    mid = 0.5 * (a + b)
+                    a, b = (mid, b) if self.member(mid) == self.inside \
+                        else (a, mid)
+                return b
+            prev = t
+        return math.inf
+
+
+def phi_plane_entry(g4, solid, spec, o, v):
+    """Where a ray from an origin that Geant4's Inside() calls kSurface, but
+    that an exact computation puts outside a phi half-plane of the solid
+    (by 1e-9 to 1e-6 mm: within Geant4's angular tolerance of 1e-9 rad times
+    the radius, beyond twice its surface tolerance of 5e-10 mm), enters
+    through that plane; None where that is not so.  The signed distance to
+    the plane through the z axis at angle a (outward normal n) is n . o in
+    f64, exact to 1e-16 of |o|; the entry must lead into the solid (Inside()
+    kInside just past it)."""
+    dphi = spec.get("dphi")
+    if dphi is None or dphi >= TWO_PI:
+        return None
+    sphi = spec["sphi"]
+    for a, sign in ((sphi, 1.0), (sphi + dphi, -1.0)):
+        c, s_ = math.cos(a), math.sin(a)
+        n = (sign * s_, -sign * c)
+        dist = n[0] * o[0] + n[1] * o[1]
+        if not (1e-9 < dist < 1e-6) or c * o[0] + s_ * o[1] <= 0.0:
+            continue
+        nv = n[0] * v[0] + n[1] * v[1]
+        if nv >= 0.0:
+            continue
+        t = dist / -nv
+        past = o + (t + 1e-6 / -nv) * v
+        if solid.Inside(g4.G4ThreeVector(*past.tolist())) == \
+                g4.EInside.kInside:
+            return t
+    return None
+
+
+def run_cases(g4, args, tmpdir):
+    """--cases: Geant4's navigator's answers for the rays of a case file
+    (see the module doc), family by family."""
+    with open(args.cases) as fh:
+        doc = json.load(fh)
+    if doc.get("format") != CASES_FORMAT:
+        raise ValueError("%s: not a %s file" % (args.cases, CASES_FORMAT))
+    builder = Builder(g4, tmpdir)
+    manager = g4.G4GeometryManager.GetInstance()
+    rows, ray_flags = [], []
+    for fam in doc["families"]:
+        solids = [builder.build(spec) for spec in fam["solids"]]
+        worlds = [place_in_world(g4, builder, s) for s in solids]
+        rays = np.array(fam["rays"], dtype=np.float64).reshape(-1, 7)
+        manager.CloseGeometry(True, False)
+        for k, solid in enumerate(solids):
+            sel = np.nonzero(rays[:, 0] == k)[0]
+            origins, dirs = rays[sel, 1:4], rays[sel, 4:7]
+            codes, dists = navigate(g4, *worlds[k], origins, dirs)
+            V = g4.G4ThreeVector
+            for j, i in enumerate(sel):
+                o, v = origins[j], dirs[j]
+                dist = math.inf if dists[j] >= K_INFINITY else dists[j]
+                at = solid.Inside(V(*o.tolist()))
+                code = {g4.EInside.kOutside: 0, g4.EInside.kSurface: 1,
+                        g4.EInside.kInside: 2}[at]
+                interior = Interior(g4, solid, o, v)
+                judge, flag = math.nan, 0
+                entry = None
+                if code == 1:
+                    entry = phi_plane_entry(g4, solid, fam["solids"][k], o, v)
+                if entry is not None:
+                    judge, flag = entry, FLAG_TOLERANCE
+                elif not interior.agrees(dist):
+                    judge, flag = interior.first_change(), FLAG_INCONSISTENT
+                rows.append((int(i), [dist, codes[j], code, judge]))
+                ray_flags.append((int(i), flag))
+        manager.OpenGeometry()
+    # rows in case-file order: families in order, rays in order
+    expected, flags_out, base = [], [], 0
+    for fam in doc["families"]:
+        n = len(fam["rays"])
+        part = sorted(rows[:n])
+        fpart = sorted(ray_flags[:n])
+        rows, ray_flags = rows[n:], ray_flags[n:]
+        expected += [r for _, r in part]
+        flags_out += [f for _, f in fpart]
+        base += n
+    np.save(os.path.join(args.out, "unit_expected.npy"),
+            np.array(expected, dtype=np.float64).reshape(-1, 4))
+    np.save(os.path.join(args.out, "unit_flags.npy"),
+            np.array(flags_out, dtype=np.int32))
+    return {"families": len(doc["families"]), "rays": base}
+
+
+# ---------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------
 
@@ -2767,6 +3035,10 @@ def parse_args(argv):
     ap.add_argument("--rays-per-solid", type=int, default=500)
     ap.add_argument("--kinds", default=",".join(KINDS),
                     help="comma separated subset of: " + ",".join(KINDS))
+    ap.add_argument("--cases", metavar="FILE",
+                    help="instead of random solids, answer the rays of a "
+                         "case file (tests/data/geant4_unit_cases.json) with "
+                         "Geant4's navigator")
     ap.add_argument("--bench", action="store_true",
                     help="also measure the pure binding overhead")
     ap.add_argument("--march", type=int, default=0, metavar="N",
@@ -2829,6 +3101,14 @@ def main(argv=None):
         if describe_only:
             report = run_describe_twisted(g4, Builder(g4, tmp.name),
                                           real_err)
+        elif args.cases:
+            result = run_cases(g4, args, tmp.name)
+            sys.stdout, sys.stderr = real_out, real_err
+            log.close()
+            tmp.cleanup()
+            real_out.write(json.dumps(result) + "\n")
+            real_out.flush()
+            os._exit(0)
         else:
             result = run(g4, args, tmp.name, real_err, counter)
     except Exception:

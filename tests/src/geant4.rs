@@ -11,6 +11,7 @@ use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_foundry::{Foundry, Transform64, UNSET};
 use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::scan::{rays_from_rows, scan, Precision};
 use serde::Deserialize;
 
 use crate::f64_array;
@@ -159,6 +160,9 @@ pub fn tolerance(r: &[f64; 8], t: f64) -> f64 {
     (2e-6 * (o + t)).max(1e-4)
 }
 
+/// Disagreements described per kind by the random-solid comparisons.
+const MAX_EXAMPLES: usize = 5;
+
 /// Agreement counts of one kind of solid.
 #[derive(Clone, Debug, Default)]
 pub struct KindStats {
@@ -173,7 +177,7 @@ pub struct KindStats {
     pub distance_ok: usize,
     /// Rays whose inside test agrees with Geant4's `Inside`.
     pub inside_ok: usize,
-    /// Up to five disagreements, described.
+    /// Disagreements, described (up to a number the comparison sets).
     pub examples: Vec<String>,
 }
 
@@ -182,9 +186,13 @@ pub fn compare<T: Real>(data: &OracleData) -> BTreeMap<String, KindStats> {
     let trees = prepare::<T>(&data.solids);
     compare_rays(
         data,
-        &|solid, r| Some(answer(&trees[solid], r)),
+        &|_, solid, r| {
+            let (t, cos, inside) = answer(&trees[solid], r);
+            Some((t, cos, Some(inside)))
+        },
         &tolerance,
         "",
+        MAX_EXAMPLES,
     )
 }
 
@@ -214,7 +222,7 @@ pub fn compare_placed<T: Real>(
             CpuScene::new(&f).unwrap_or_else(|e| panic!("solid {i}: {e:#}"))
         })
         .collect();
-    let trace = |solid: usize, r: &[f64; 8]| {
+    let trace = |_: usize, solid: usize, r: &[f64; 8]| {
         let origin = [0, 1, 2].map(|k| r[k] + offset[k]);
         let ray = Ray::from_f64(origin, [r[4], r[5], r[6]]);
         let hit = scenes[solid].trace(&ray, T::from_f64(r[3]), T::INFINITY);
@@ -224,9 +232,9 @@ pub fn compare_placed<T: Real>(
             (n[0] * r[4] + n[1] * r[5] + n[2] * r[6]).abs()
         });
         let inside = scenes[solid].locate_point(origin).is_some();
-        Some((t, cos, inside))
+        Some((t, cos, Some(inside)))
     };
-    compare_rays(data, &trace, &|_, _| allowed, "")
+    compare_rays(data, &trace, &|_, _| allowed, "", MAX_EXAMPLES)
 }
 
 /// Like [`compare`] for the solids of `kinds` only, each built from its exact CSG
@@ -260,22 +268,32 @@ pub fn compare_csg<T: Real>(data: &OracleData, kinds: &[&str]) -> BTreeMap<Strin
             })
         })
         .collect();
-    let answer = |solid: usize, r: &[f64; 8]| trees[solid].as_ref().map(|p| answer(p, r));
-    compare_rays(data, &answer, &tolerance, " (csg)")
+    let answer = |_: usize, solid: usize, r: &[f64; 8]| {
+        trees[solid].as_ref().map(|p| {
+            let (t, cos, inside) = answer(p, r);
+            (t, cos, Some(inside))
+        })
+    };
+    compare_rays(data, &answer, &tolerance, " (csg)", MAX_EXAMPLES)
 }
 
 /// hytrace's answer for one oracle ray: the first crossing distance (inf: none), the cosine
-/// of incidence there, and whether the origin is inside.
-type Answer = (f64, f64, bool);
+/// of incidence there, and whether the origin is inside (`None`: not compared).
+type Answer = (f64, f64, Option<bool>);
 
-/// Compares the rays of the solids that `answer` answers (`None`: skipped; else distance,
-/// cosine of incidence and whether the origin is inside), per kind (the kind's name
-/// followed by `suffix`), within `tolerance(ray, geant4's distance)` for exact solids.
+/// hytrace's answer for ray `i` (of solid `solid`), or `None` to skip it.
+type AnswerFn<'a> = dyn Fn(usize, usize, &[f64; 8]) -> Option<Answer> + 'a;
+
+/// Compares the rays of the solids that `answer(ray index, solid, ray)` answers (`None`:
+/// skipped; else distance, cosine of incidence and whether the origin is inside), per kind
+/// (the kind's name followed by `suffix`), within `tolerance(ray, geant4's distance)` for
+/// exact solids, describing up to `max_examples` disagreements per kind.
 fn compare_rays(
     data: &OracleData,
-    answer: &dyn Fn(usize, &[f64; 8]) -> Option<Answer>,
+    answer: &AnswerFn,
     tolerance: &dyn Fn(&[f64; 8], f64) -> f64,
     suffix: &str,
+    max_examples: usize,
 ) -> BTreeMap<String, KindStats> {
     let mut stats: BTreeMap<String, KindStats> = BTreeMap::new();
     for (i, r) in data.rays.iter().enumerate() {
@@ -284,7 +302,7 @@ fn compare_rays(
             continue;
         }
         let solid = data.ray_solid[i] as usize;
-        let Some((got, cos, inside)) = answer(solid, r) else {
+        let Some((got, cos, inside)) = answer(i, solid, r) else {
             continue;
         };
         let s = stats
@@ -294,7 +312,7 @@ fn compare_rays(
             s.flagged += 1;
             continue;
         }
-        let approximated = APPROXIMATED_KINDS.contains(&data.kinds[solid].as_str());
+        let approximated = APPROXIMATED_KINDS.contains(&data.solids[solid].kind());
         if approximated && data.origin_distance[i] <= 4.0 * TESSELLATION_TOLERANCE {
             s.in_band += 1;
             continue;
@@ -311,8 +329,8 @@ fn compare_rays(
             (got - want).abs() <= allowed
         };
         s.distance_ok += ok as usize;
-        s.inside_ok += (inside == (code == 2.0)) as usize;
-        if !ok && s.examples.len() < 5 {
+        s.inside_ok += inside.is_none_or(|inside| inside == (code == 2.0)) as usize;
+        if !ok && s.examples.len() < max_examples {
             s.examples.push(format!(
                 "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {got} \
                  (cosine of incidence {cos:.2e}); ray {r:?}",
@@ -322,4 +340,173 @@ fn compare_rays(
         }
     }
     stats
+}
+
+/// The case file of Geant4's own solid unit tests (see its `about`).
+pub fn unit_cases_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/geant4_unit_cases.json")
+}
+
+#[derive(Deserialize)]
+struct UnitCaseFile {
+    families: Vec<UnitFamily>,
+}
+
+/// One family of the unit-test case file: the solids and rays of one Geant4 test source.
+#[derive(Deserialize)]
+pub struct UnitFamily {
+    /// The Geant4 test it came from (`testG4Tubs`).
+    pub family: String,
+    /// Its path and commit in Geant4's repository.
+    pub source: String,
+    /// The solids, in the oracle's JSON form.
+    pub solids: Vec<G4Solid>,
+    /// `[solid, ox, oy, oz, dx, dy, dz]`.
+    pub rays: Vec<[f64; 7]>,
+}
+
+/// Why the navigator's step is not the reference of a unit-test ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Contradiction {
+    /// The step contradicts Geant4's own `Inside()` along the ray; the reference is the
+    /// boundary `Inside()` shows.
+    Inside,
+    /// Geant4's `Inside()` calls the origin surface, but an exact computation puts it
+    /// outside a phi plane by more than 1e-9 mm (within Geant4's angular tolerance), and
+    /// the ray enters there; the reference is that entry.
+    PhiTolerance,
+}
+
+/// Geant4's answers for the unit-test cases.
+pub struct UnitOracle {
+    /// The cases as oracle data: one kind per family, ray flags 0, and as expected the
+    /// navigator's step, or where Geant4 contradicts itself the second judge's.
+    pub data: OracleData,
+    /// The rays where the navigator's step is not the reference: `(ray, navigator's step,
+    /// the reference, why)`.
+    pub contradicted: Vec<(usize, f64, f64, Contradiction)>,
+    /// The families in file order with their ray ranges.
+    pub families: Vec<(String, std::ops::Range<usize>)>,
+}
+
+/// The oracle's flag where the navigator's step contradicts `Inside()`.
+const FLAG_INCONSISTENT: i32 = 2;
+/// The oracle's flag where the origin is within Geant4's angular tolerance of a phi plane.
+const FLAG_TOLERANCE: i32 = 16;
+
+/// Runs the oracle's `--cases` mode on the unit-test case file into `dir`: Geant4's
+/// navigator (a fresh locate at the origin with the ray's direction, so that a surface
+/// origin is in the solid when the ray enters it; after a zero step, the relocation across
+/// the boundary G4Transportation makes and the next step), checked against the solid's
+/// `Inside()` along the ray; where they contradict each other, the boundary `Inside()`
+/// finds (bisected) is the reference, and where the origin is within Geant4's angular
+/// tolerance of a phi plane but outside it exactly, the exact entry is.
+pub fn run_unit_oracle(python: &Path, dir: &Path) -> UnitOracle {
+    let cases = unit_cases_path();
+    let out = Command::new(python)
+        .arg(oracle_script())
+        .arg("--out")
+        .arg(dir)
+        .arg("--cases")
+        .arg(&cases)
+        .env("GEANT4_DATA_DIR", crate::geant4_data_dir())
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "geant4 oracle --cases failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let file: UnitCaseFile = serde_json::from_str(&std::fs::read_to_string(&cases).unwrap())
+        .unwrap_or_else(|e| panic!("{}: {e}", cases.display()));
+    let (shape, expected) = f64_array(&dir.join("unit_expected.npy"));
+    assert_eq!(shape[1], 4);
+    let flags = i32_array(&dir.join("unit_flags.npy"));
+    let mut data = OracleData {
+        kinds: Vec::new(),
+        solids: Vec::new(),
+        rays: Vec::new(),
+        ray_solid: Vec::new(),
+        ray_family: Vec::new(),
+        ray_flags: Vec::new(),
+        expected: Vec::new(),
+        origin_distance: Vec::new(),
+        timing: serde_json::Value::Null,
+    };
+    let (mut contradicted, mut families) = (Vec::new(), Vec::new());
+    for fam in file.families {
+        let first_solid = data.solids.len();
+        let first_ray = data.rays.len();
+        for s in fam.solids {
+            data.kinds.push(fam.family.clone());
+            data.solids.push(s);
+        }
+        for r in &fam.rays {
+            let i = data.rays.len();
+            let [step, code, _inside, judge] = std::array::from_fn(|k| expected[4 * i + k]);
+            let why = match flags[i] {
+                0 => None,
+                FLAG_INCONSISTENT => Some(Contradiction::Inside),
+                FLAG_TOLERANCE => Some(Contradiction::PhiTolerance),
+                f => panic!("ray {i}: unknown oracle flag {f}"),
+            };
+            let want = match why {
+                Some(why) => {
+                    contradicted.push((i, step, judge, why));
+                    judge
+                }
+                None => step,
+            };
+            data.rays
+                .push([r[1], r[2], r[3], 0.0, r[4], r[5], r[6], f64::INFINITY]);
+            data.ray_solid.push((first_solid + r[0] as usize) as i32);
+            data.ray_family.push(0);
+            data.ray_flags.push(0);
+            data.expected.push([want, code]);
+            data.origin_distance.push(f64::NAN);
+        }
+        families.push((fam.family, first_ray..data.rays.len()));
+    }
+    assert_eq!(data.rays.len(), shape[0] as usize, "rays against answers");
+    UnitOracle {
+        data,
+        contradicted,
+        families,
+    }
+}
+
+/// Compares hytrace's scans (each solid alone at the origin of its own scene, `scan` in
+/// `precision`: in f32 with its f64 fallback, as `hytrace scan` runs) with the oracle's
+/// distances, per kind, within [`tolerance`] (meshes of approximated kinds as
+/// [`compare`]); the origin's side is not compared (the oracle's code is the navigator's
+/// side for the ray, which for a surface origin depends on the direction).
+pub fn compare_scanned(data: &OracleData, precision: Precision) -> BTreeMap<String, KindStats> {
+    let mut answers: Vec<Option<Answer>> = vec![None; data.rays.len()];
+    for (i, s) in data.solids.iter().enumerate() {
+        let geometry = s
+            .to_geometry(TESSELLATION_TOLERANCE)
+            .unwrap_or_else(|e| panic!("solid {i} {s:?}: {e}"));
+        let mut f = Foundry::new();
+        let solid =
+            add_geometry(&mut f, "unit", &geometry, 0).unwrap_or_else(|e| panic!("solid {i}: {e}"));
+        f.add_instance(solid, Transform64::IDENTITY, 0, 0).unwrap();
+        f.validate().unwrap();
+        let rays: Vec<usize> = (0..data.rays.len())
+            .filter(|&k| data.ray_solid[k] as usize == i)
+            .collect();
+        let rows: Vec<[f64; 8]> = rays.iter().map(|&k| data.rays[k]).collect();
+        let rows = rays_from_rows(&rows, "unit cases").unwrap();
+        let (result, _) = scan(&f, &rows, precision).unwrap_or_else(|e| panic!("{e:#}"));
+        for (j, &k) in rays.iter().enumerate() {
+            let [nx, ny, nz, t] = result.hits[j];
+            let r = &data.rays[k];
+            let cos = if t.is_finite() {
+                (nx * r[4] + ny * r[5] + nz * r[6]).abs()
+            } else {
+                1.0
+            };
+            answers[k] = Some((t, cos, None));
+        }
+    }
+    compare_rays(data, &|i, _, _| answers[i], &tolerance, "", usize::MAX)
 }

@@ -1124,6 +1124,13 @@ impl G4Mapping for G4Solid {
                         format!("semi-axes must be > 0, got {ax} {by}"),
                     ));
                 }
+                // G4Ellipsoid's constructor: both cuts zero means no cut; cuts beyond the
+                // ellipsoid are clamped to it.
+                let (zbottom, ztop) = if zbottom == 0.0 && ztop == 0.0 {
+                    (-cz, cz)
+                } else {
+                    (zbottom.max(-cz), ztop.min(cz))
+                };
                 Ok(zsphere(cz, zbottom, ztop)?.scale(ax / cz, by / cz, 1.0))
             }
             &G4Solid::Eltube { dx, dy, dz } => {
@@ -1886,5 +1893,22 @@ mod tests {
             }
         }
         assert!(inside_count.iter().all(|&c| c > 1000), "{inside_count:?}");
+    }
+
+    /// G4Ellipsoid's constructor reads zero cuts at both ends as no cut (testG4Ellipsoid
+    /// builds one so), and clamps cuts beyond the ellipsoid to it.
+    #[test]
+    fn ellipsoid_cuts_read_as_geant4_reads_them() {
+        let ellipsoid = |zbottom, ztop| G4Solid::Ellipsoid {
+            ax: 11.0,
+            by: 8.0,
+            cz: 10.0,
+            zbottom,
+            ztop,
+        };
+        let whole = ellipsoid(-10.0, 10.0).to_shape().unwrap();
+        assert_eq!(ellipsoid(0.0, 0.0).to_shape().unwrap(), whole);
+        assert_eq!(ellipsoid(-20.0, 30.0).to_shape().unwrap(), whole);
+        assert_ne!(ellipsoid(0.0, 5.0).to_shape().unwrap(), whole);
     }
 }

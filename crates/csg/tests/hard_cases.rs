@@ -721,3 +721,89 @@ fn points_of_faces_members_share_are_inside_f32() {
 fn points_of_faces_members_share_are_inside_f64() {
     shared_face_case::<f64>();
 }
+
+/// Rays whose line passes through the edge of a cut, from Geant4's solid unit tests
+/// (testG4Tubs, testG4Torus, testG4Sphere, testG4Cons): from the axis of a phi segment of
+/// exactly pi (its two half-planes one plane) or less, through the axis from outside, and
+/// from the apex of a theta cone. The ray goes from the side of -d to the side of d there;
+/// a ray along a cut's surface runs on it, outside, as Geant4 has it. References from the
+/// geometry: the walls at r = 90, 45 and 50.
+fn through_cut_edges_case<T: Real>() {
+    let pi = std::f64::consts::PI;
+    let half_tube =
+        prepared::<T>(&(tube(90.0, 110.0, -105.0, 105.0).unwrap() * phi_cut(0.0, pi).unwrap()));
+    let shell = prepared::<T>(
+        &((sphere(50.0).unwrap() - sphere(45.0).unwrap()) * phi_cut(-pi / 4.0, pi / 2.0).unwrap()),
+    );
+    let cone45 = prepared::<T>(&(sphere(50.0).unwrap() * theta_cut(0.0, pi / 4.0).unwrap()));
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let cases = [
+        // From the axis into the half-plane's side, and out of it.
+        (&half_tube, [0.0; 3], [0.0, 1.0, 0.0], 90.0),
+        (&half_tube, [0.0; 3], [0.0, -1.0, 0.0], f64::INFINITY),
+        // Along the cut plane from the axis: on the surface, never inside.
+        (&half_tube, [0.0; 3], [1.0, 0.0, 0.0], f64::INFINITY),
+        // Through the axis from the outside half.
+        (&half_tube, [0.0, -10.0, 3.0], [0.0, 1.0, 0.0], 100.0),
+        (&half_tube, [0.0, 1.0, 0.0], [0.0, 1.0, 0.0], 89.0),
+        // From the centre of a sphere's phi segment of 90 degrees.
+        (&shell, [0.0; 3], [1.0, 0.0, 0.0], 45.0),
+        (&shell, [0.0; 3], [-1.0, 0.0, 0.0], f64::INFINITY),
+        (&shell, [0.0; 3], [h, h, 0.0], f64::INFINITY),
+        // From the apex of a theta cone: in along its axis, out of it backwards.
+        (&cone45, [0.0; 3], [0.0, 0.0, 1.0], 50.0),
+        (&cone45, [0.0; 3], [0.0, 0.0, -1.0], f64::INFINITY),
+    ];
+    for (tree, o, d, want) in cases {
+        let (t, ..) = cross(tree, o, d, 0.0);
+        let ok = if want.is_finite() {
+            (t - want).abs() < 1e-4
+        } else {
+            t.is_infinite()
+        };
+        assert!(ok, "{}: {o:?} {d:?}: {t}, want {want}", T::NAME);
+    }
+    // Along a theta cone's side from the apex: on the surface.
+    let s = 45f64.to_radians().sin();
+    let (t, ..) = cross(&cone45, [0.0; 3], [s, 0.0, s], 0.0);
+    assert!(t.is_infinite(), "{}: along the cone {t}", T::NAME);
+}
+
+#[test]
+fn rays_through_the_edges_of_cuts_f32() {
+    through_cut_edges_case::<f32>();
+}
+
+#[test]
+fn rays_through_the_edges_of_cuts_f64() {
+    through_cut_edges_case::<f64>();
+}
+
+/// Rays tangent to the inner wall of a tube (testG4UnionSolid, testG4Tubs): the touch
+/// neither ends the tube's span (a union of the tube and the cylinder filling its hole
+/// stopped there, at the faces the two share) nor hides the entry through a phi plane at
+/// the same point. References from the geometry: 15 + sqrt(50^2 - 45^2), and the phi
+/// plane y = 0 met at the tangent point (50, 0).
+fn tangent_to_inner_wall_case<T: Real>() {
+    let pi = std::f64::consts::PI;
+    let filled = prepared::<T>(
+        &(tube(45.0, 50.0, -50.0, 50.0).unwrap() + cylinder(45.0, -50.0, 50.0).unwrap()),
+    );
+    let (t, ..) = cross(&filled, [-15.0, -45.0, 0.0], [1.0, 0.0, 0.0], 0.0);
+    let want = 15.0 + (50.0f64 * 50.0 - 45.0 * 45.0).sqrt();
+    assert!((t - want).abs() < 1e-4, "{}: {t}, want {want}", T::NAME);
+    let sector =
+        prepared::<T>(&(tube(50.0, 100.0, -50.0, 50.0).unwrap() * phi_cut(0.0, 1.5 * pi).unwrap()));
+    let (t, ..) = cross(&sector, [50.0, -20.0, 0.0], [0.0, 1.0, 0.0], 0.0);
+    assert!((t - 20.0).abs() < 1e-4, "{}: {t}", T::NAME);
+}
+
+#[test]
+fn rays_tangent_to_a_tubes_inner_wall_f32() {
+    tangent_to_inner_wall_case::<f32>();
+}
+
+#[test]
+fn rays_tangent_to_a_tubes_inner_wall_f64() {
+    tangent_to_inner_wall_case::<f64>();
+}

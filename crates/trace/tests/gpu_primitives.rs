@@ -93,6 +93,7 @@ fn cs(deg: f64) -> (f32, f32) {
 fn phicut(name: &'static str, phi0: f64, phi1: f64) -> Case {
     let (c0, s0) = cs(phi0);
     let (c1, s1) = cs(phi1);
+    let (cm, sm) = cs(0.5 * (phi0 + phi1));
     // Rays in the bounding half-planes, through the axis, and along it.
     let special = vec![
         ([-20.0 * c0, -20.0 * s0, 1.0], [c0, s0, 0.0]),
@@ -105,6 +106,14 @@ fn phicut(name: &'static str, phi0: f64, phi1: f64) -> Case {
         ([-5.0, -5.0, 0.0], [1.0, 1.0, 0.0]),
         ([-1.0e5, 0.0, 0.0], [1.0, 0.0, 0.0]),
         ([0.0, 1.0e5, 4.0], [0.0, -1.0, 0.0]),
+        // From the axis (and through it) into the wedge, out of it and along its planes:
+        // the line meets both half-planes at one point.
+        ([0.0, 0.0, 2.0], [cm, sm, 0.0]),
+        ([0.0, 0.0, 2.0], [-cm, -sm, 0.3]),
+        ([0.0, 0.0, -1.0], [c0, s0, 0.0]),
+        ([0.0, 0.0, -1.0], [c1, s1, 0.5]),
+        ([-7.0 * cm, -7.0 * sm, 1.0], [cm, sm, 0.0]),
+        ([3.0 * cm, 3.0 * sm, 1.0], [-cm, -sm, 0.0]),
     ];
     case(
         name,
@@ -118,6 +127,8 @@ fn phicut(name: &'static str, phi0: f64, phi1: f64) -> Case {
 fn thetacut(name: &'static str, theta0: f32, theta1: f32) -> Case {
     let (c0, s0) = (theta0.cos(), theta0.sin());
     let (c1, s1) = (theta1.cos(), theta1.sin());
+    let mid = 0.5 * (theta0 + theta1);
+    let (cm, sm) = (mid.cos(), mid.sin());
     let special = vec![
         // Along the cone surfaces through the apex, and from the apex.
         ([-10.0 * s0, 0.0, -10.0 * c0], [s0, 0.0, c0]),
@@ -133,6 +144,12 @@ fn thetacut(name: &'static str, theta0: f32, theta1: f32) -> Case {
         ([3.0, 4.0, 0.0], [0.0, 0.0, 1.0]),
         ([0.0, 0.0, 1.0e5], [0.0, 0.0, -1.0]),
         ([1.0e5, 0.0, 3.0], [-1.0, 0.0, 0.0]),
+        // From the apex and through it into the shell and out of it: the line meets the
+        // cones at one point.
+        ([0.0, 0.0, 0.0], [sm, 0.0, cm]),
+        ([0.0, 0.0, 0.0], [-sm, 0.0, -cm]),
+        ([-6.0 * sm, 0.0, -6.0 * cm], [sm, 0.0, cm]),
+        ([0.0, 4.0 * sm, 4.0 * cm], [0.0, -sm, -cm]),
     ];
     case(
         name,

@@ -28,6 +28,41 @@ fn in_wedge<T: Real>(p: &[T; 6], x: T, y: T) -> bool {
     angle_from(p[0], p[1], x, y) <= wedge_width(p)
 }
 
+/// Angle within which a direction runs along a cut's surface: the rounding of its angles
+/// (an f32 wedge of 90 degrees is wider by 4e-8 rad).
+fn angle_tolerance<T: Real>() -> T {
+    T::from_f64(4.0) * T::EPSILON
+}
+
+/// Whether the direction `(x, y)` points strictly between the wedge's half-planes (not
+/// along one, within [`angle_tolerance`]).
+fn strictly_in_wedge<T: Real>(p: &[T; 6], x: T, y: T) -> bool {
+    let a = angle_from(p[0], p[1], x, y);
+    a > angle_tolerance() && a < wedge_width(p) - angle_tolerance()
+}
+
+/// Whether the line through `o` along `d` passes through the origin (of the plane when
+/// `z` is zero) within rounding: `|o x d|^2 <= (8 eps)^2 |o|^2 |d|^2`.
+fn through_origin<T: Real>(o: V3<T>, d: V3<T>) -> bool {
+    let c = o.cross(d);
+    let eps = T::from_f64(8.0) * T::EPSILON;
+    c.length_squared() <= eps * eps * o.length_squared() * d.length_squared()
+}
+
+/// Spans of a ray whose line passes through the edge of a cut (the wedge's axis, the
+/// cone's apex) at `t`: the ray goes from the side `before` to the side `after` there,
+/// one crossing (with `normal`, oriented by the caller) or none.
+fn through_edge<T: Real>(before: bool, after: bool, t: T, normal: V3<T>) -> Spans<T> {
+    if before == after {
+        return if before {
+            Spans::one(super::spans::Span::everywhere())
+        } else {
+            Spans::empty()
+        };
+    }
+    Spans::from_toggles(before, &[(t, normal)])
+}
+
 /// Outward normals of the two bounding half-planes of a wedge.
 fn wedge_normals<T: Real>(p: &[T; 6]) -> [V3<T>; 2] {
     [V3::new(p[1], -p[0], T::ZERO), V3::new(-p[3], p[2], T::ZERO)]
@@ -42,6 +77,19 @@ pub fn phicut_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
         } else {
             Spans::empty()
         };
+    }
+    // A ray whose line passes through the axis meets both half-planes there: it goes from
+    // the azimuth of -d to that of d, where a direction along a half-plane runs on the
+    // surface, outside (as Geant4 has it). Two crossings at one point would toggle twice.
+    let flat = |v: V3<T>| V3::new(v.x, v.y, T::ZERO);
+    if through_origin(flat(o), flat(d)) {
+        let t = -(o.x * d.x + o.y * d.y) / (d.x * d.x + d.y * d.y);
+        return through_edge(
+            strictly_in_wedge(p, -d.x, -d.y),
+            strictly_in_wedge(p, d.x, d.y),
+            t,
+            -d,
+        );
     }
     let mut crossings = [(T::ZERO, V3::zero()); 2];
     let mut count = 0;
@@ -91,6 +139,16 @@ fn polar<T: Real>(v: V3<T>) -> T {
 /// Theta cone shell `[theta0, theta1]`: points whose polar angle from +z lies between
 /// `theta0` and `theta1` (`theta0 = 0` or `theta1 = pi` leave that side open).
 pub fn thetacut_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+    // A ray through the apex meets the cones there: it goes from the polar angle of -d to
+    // that of d, where a direction along a cone runs on the surface, outside.
+    if through_origin(o, d) {
+        let strictly_in = |v: V3<T>| {
+            let (theta, tol) = (polar(v), angle_tolerance());
+            (p[0] <= T::ZERO || theta > p[0] + tol) && (p[1] >= T::PI || theta < p[1] - tol)
+        };
+        let t = -o.dot(d) / d.length_squared();
+        return through_edge(strictly_in(-d), strictly_in(d), t, -d);
+    }
     let mut crossings = [(T::ZERO, V3::zero()); 4];
     let mut count = 0;
     let mut add = |t: T| {

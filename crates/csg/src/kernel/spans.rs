@@ -113,14 +113,17 @@ impl<T: Real> Spans<T> {
     }
 
     /// The parts of `self` outside every span of `hole` (the hole's surfaces face the other
-    /// way as boundaries of the result; orientation is left to the caller).
+    /// way as boundaries of the result; orientation is left to the caller). A hole span of
+    /// zero length (a ray tangent to the hole's surface) removes nothing: it would split a
+    /// span into two that meet, whose shared end a tree would take for an exit (a ray
+    /// touching the inner wall of a tube where it stops at the faces of a union).
     pub fn subtract(&self, hole: &Spans<T>) -> Self {
         let mut out = Self::default();
         for s in self.as_slice() {
             let mut rest = Some(*s);
             for h in hole.as_slice() {
                 let Some(r) = rest else { break };
-                if h.t1 <= r.t0 || h.t0 >= r.t1 {
+                if h.t1 <= h.t0 || h.t1 <= r.t0 || h.t0 >= r.t1 {
                     continue;
                 }
                 if h.t0 > r.t0 {
