@@ -179,6 +179,8 @@ pub struct KindStats {
     pub inside_ok: usize,
     /// Disagreements, described (up to a number the comparison sets).
     pub examples: Vec<String>,
+    /// The indices of every ray whose distance disagrees.
+    pub disagreeing: Vec<usize>,
 }
 
 /// Compares hytrace in precision `T` with the oracle's answers, per kind.
@@ -330,6 +332,9 @@ fn compare_rays(
         };
         s.distance_ok += ok as usize;
         s.inside_ok += inside.is_none_or(|inside| inside == (code == 2.0)) as usize;
+        if !ok {
+            s.disagreeing.push(i);
+        }
         if !ok && s.examples.len() < max_examples {
             s.examples.push(format!(
                 "ray {i} (family {}) solid {solid}: geant4 {want} ({}), hytrace {got} \
