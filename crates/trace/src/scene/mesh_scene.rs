@@ -15,8 +15,8 @@
 //! Each solid's vertices are stored relative to (about) the centre of its bounds, the
 //! centre going into the instance's (f64) transform, so meshes far from the origin keep
 //! their f32 precision. The centre is chosen so that vertices given in f32 (every glTF
-//! file's, and OBJ text written from f32) are stored exactly ([`storage_centre`]). Meshes need not be closed: an open mesh gives first hits only (see
-//! [`hytrace_csg::MeshPrim`]).
+//! file's, and OBJ text written from f32) are stored exactly ([`storage_centre`]). Meshes
+//! need not be closed: an open mesh gives first hits only (see [`hytrace_csg::MeshPrim`]).
 
 use std::collections::hash_map::{Entry, HashMap};
 use std::path::Path;
