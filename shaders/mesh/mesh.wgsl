@@ -307,7 +307,8 @@ fn mesh_slab_entry(r: SlabRay, n: MeshNode, after: f32, limit: f32) -> MaybeT {
     return MaybeT(a <= b, a);
 }
 
-// The ray moved to its closest approach to the mesh's centre (MeshPrim::recentred).
+// The ray moved to its closest approach to the mesh's centre (MeshPrim::recentred), unless
+// it starts within twice the mesh's size of the centre.
 struct MeshRay {
     o: vec3<f32>,
     shift: f32,
@@ -315,10 +316,12 @@ struct MeshRay {
 
 fn mesh_recentred(m: MeshRecord, o: vec3<f32>, d: vec3<f32>) -> MeshRay {
     let centre = (mesh_lo(m) + mesh_hi(m)) * 0.5;
+    let offset = o - centre;
+    let far = max(max(abs(offset.x), abs(offset.y)), abs(offset.z));
     let l2 = mesh_dot(d, d);
     var shift = 0.0;
-    if l2 != 0.0 {
-        shift = -mesh_dot(o - centre, d) / l2;
+    if l2 != 0.0 && far > 4.0 * m.scale {
+        shift = -mesh_dot(offset, d) / l2;
         if !is_finite_t(shift) {
             shift = 0.0;
         }

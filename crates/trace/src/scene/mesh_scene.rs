@@ -12,10 +12,11 @@
 //! several times. Buffers are the GLB's binary chunk, base64 `data:` URIs or files beside
 //! the `.gltf`.
 //!
-//! Each solid's vertices are stored relative to the centre of its bounds, the centre going
-//! into the instance's (f64) transform, so meshes far from the origin keep their f32
-//! precision. Meshes need not be closed: an open mesh gives first hits only (see
-//! [`hytrace_csg::MeshPrim`]).
+//! Each solid's vertices are stored relative to (about) the centre of its bounds, the
+//! centre going into the instance's (f64) transform, so meshes far from the origin keep
+//! their f32 precision. The centre is chosen so that vertices given in f32 (every glTF
+//! file's, and OBJ text written from f32) are stored exactly ([`storage_centre`]). Meshes
+//! need not be closed: an open mesh gives first hits only (see [`hytrace_csg::MeshPrim`]).
 
 use std::collections::hash_map::{Entry, HashMap};
 use std::path::Path;
@@ -50,8 +51,42 @@ type IndexedTriangles = (Vec<[f64; 3]>, Vec<[usize; 3]>);
 /// A Foundry solid and the centre its vertices are stored relative to.
 type CentredSolid = (u32, [f64; 3]);
 
+/// The point, near the centre of the bounds `lo..hi` of `positions`, that a mesh's vertices
+/// are stored relative to (in f32): on each axis the centre rounded to a multiple of the
+/// f32 spacing at the coordinate nearest zero, where every f32 coordinate minus it is an
+/// f32 (the mesh lies far from the origin for its size); else zero (an f32 coordinate is
+/// its own f32). So a vertex given in f32 is stored exactly, the mesh Embree or any f32
+/// tracer sees: subtracting the plain centre rounded such vertices by up to half an ulp,
+/// which moved grazing crossings by that over the sine of the angle (1e-5 on a sphere of
+/// radius 10 at 1 degree).
+fn storage_centre(lo: [f64; 3], hi: [f64; 3], positions: &[[f64; 3]]) -> [f64; 3] {
+    std::array::from_fn(|k| {
+        let nearest = if lo[k] > 0.0 {
+            lo[k]
+        } else if hi[k] < 0.0 {
+            -hi[k]
+        } else {
+            return 0.0;
+        };
+        // The spacing of f32 values at `nearest`, and below it at most half that.
+        let spacing = f64::from(f32::from_bits((nearest as f32).to_bits() & 0x7f80_0000))
+            * f64::from(f32::EPSILON);
+        let centre = (0.5 * (lo[k] + hi[k]) / spacing).round() * spacing;
+        let exact = positions.iter().all(|p| {
+            let v = p[k];
+            v != f64::from(v as f32) || f64::from((v - centre) as f32) == v - centre
+        });
+        if exact {
+            centre
+        } else {
+            0.0
+        }
+    })
+}
+
 /// Appends one solid of the triangles `indices` over `positions`, vertices stored relative
-/// to the centre of their bounds; returns the solid and that centre.
+/// to (about) the centre of their bounds ([`storage_centre`]); returns the solid and that
+/// centre.
 fn add_mesh_solid(
     f: &mut Foundry,
     name: &str,
@@ -79,7 +114,7 @@ fn add_mesh_solid(
             }
         }
     }
-    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let centre = storage_centre(lo, hi, positions);
     let relative = |i: usize| {
         let p = positions[i];
         [
