@@ -9,6 +9,7 @@ pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod gpu;
+pub mod photons;
 pub mod render;
 pub mod report;
 pub mod scan;
