@@ -3,6 +3,8 @@
 //! read by Geant4, the same source): the frequencies of the photons' step histories
 //! compared by Opticks' chi2 (histories seen at least 30 times in the two runs together),
 //! the detected counts within 3 sigma and the mean hit times within 4 standard errors.
+//! Files: the raindrop and 8x8 SiPM files of ../shared/gdml/eic-opticks and our scene with
+//! every process of the propagator (tests/data/photons/every_process.gdml).
 //! The two programs draw different random numbers, so the comparison is statistical; the
 //! seeds are fixed, so the test is deterministic.
 
@@ -68,7 +70,10 @@ fn mean_and_error(x: &[f64]) -> (f64, f64) {
 
 /// Runs both programs on one file and source; returns a failure description, if any.
 fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
-    let gdml = gdml_dir().join(file);
+    let gdml = match file.strip_prefix("data/") {
+        Some(own) => Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(own),
+        None => gdml_dir().join(file),
+    };
     let g4 = geant4(python, &gdml, source);
     assert_eq!(g4.photons, PHOTONS);
     let (f, surfaces) = load_photon_scene(&gdml, &GdmlOptions::default()).unwrap();
@@ -146,6 +151,12 @@ fn photon_histories_and_detections_agree_with_geant4() {
             "eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml",
             "point:0.1,0.1,4",
         ),
+        // Our scene with every process (tests/data/photons): absorption and Rayleigh
+        // scattering with tables varying in energy, a glass ball, a sensor
+        // (dielectric_metal skin, REFLECTIVITY 0.3, EFFICIENCY 0.8), a mirror border
+        // surface (dielectric_metal, REFLECTIVITY 0.9) and a block without RINDEX.
+        ("data/photons/every_process.gdml", "point:0,0,0"),
+        ("data/photons/every_process.gdml", "beam:-90,0,5:1,0,0:20"),
     ];
     let failures: Vec<String> = cases
         .iter()

@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn brewster_angle_transmits_all_p_light() {
-        let (n1, n2) = (1.0, 1.5);
+        let (n1, n2) = (1.0f64, 1.5);
         let theta = (n2 / n1).atan();
         let dir = arriving(theta);
         let p_pol = dir.cross(v(0.0, 1.0, 0.0)).normalized();
@@ -217,7 +217,7 @@ mod tests {
 
     #[test]
     fn total_internal_reflection_above_the_critical_angle_only() {
-        let (n1, n2) = (1.5, 1.0);
+        let (n1, n2) = (1.5f64, 1.0);
         let critical = (n2 / n1).asin();
         let normal = v(0.0, 0.0, 1.0);
         let pol = v(0.0, 1.0, 0.0);
@@ -246,7 +246,7 @@ mod tests {
         for k in 0..200 {
             let theta = (k as f64 * 0.44).to_radians();
             let dir = arriving(theta);
-            let phi = 6.283 * rng.next_f64();
+            let phi = std::f64::consts::TAU * rng.next_f64();
             let s = v(0.0, 1.0, 0.0);
             let p = dir.cross(s).normalized();
             let pol = s * phi.cos() + p * phi.sin();

@@ -48,7 +48,7 @@ impl Property {
                 table.columns
             )));
         }
-        if table.values.is_empty() || table.values.len() % 2 != 0 {
+        if table.values.is_empty() || !table.values.len().is_multiple_of(2) {
             return Err(bad(format!(
                 "has {} numbers, expected a positive even count",
                 table.values.len()
