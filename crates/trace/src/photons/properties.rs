@@ -117,7 +117,8 @@ pub struct MaterialOptics {
     pub abslength: Option<Property>,
     /// Rayleigh scattering length (mm); none: no Rayleigh scattering.
     pub rayleigh: Option<Property>,
-    /// Group velocity (mm/ns); none: computed from RINDEX (see [`Self::velocity`]).
+    /// Group velocity (mm/ns): Geant4's, from RINDEX ([`group_velocity`]) unless the
+    /// material gives GROUPVEL after RINDEX; none without either.
     pub groupvel: Option<Property>,
 }
 
@@ -137,26 +138,61 @@ impl MaterialOptics {
     /// The optical properties of a material of the scene.
     pub fn new(m: &Material) -> Result<Self, PhotonError> {
         let owner = format!("material `{}`", m.name);
+        let rindex = property(&m.properties, "RINDEX", &owner)?;
+        // Geant4 computes GROUPVEL whenever RINDEX is added (replacing a GROUPVEL given
+        // before it); a GROUPVEL given after RINDEX replaces the computed one.
+        let position = |name: &str| m.properties.iter().position(|(n, _)| n == name);
+        let groupvel = match (position("GROUPVEL"), position("RINDEX"), &rindex) {
+            (Some(g), Some(r), _) if g > r => property(&m.properties, "GROUPVEL", &owner)?,
+            (Some(_), None, _) => property(&m.properties, "GROUPVEL", &owner)?,
+            (_, _, Some(n)) => Some(group_velocity(n)),
+            _ => None,
+        };
         Ok(MaterialOptics {
             name: m.name.clone(),
-            rindex: property(&m.properties, "RINDEX", &owner)?,
+            rindex,
             abslength: property(&m.properties, "ABSLENGTH", &owner)?,
             rayleigh: property(&m.properties, "RAYLEIGH", &owner)?,
-            groupvel: property(&m.properties, "GROUPVEL", &owner)?,
+            groupvel,
         })
     }
 
-    /// Speed of a photon of energy `e` (mm/ns): the GROUPVEL table when the material has
-    /// one, else `c / n` with RINDEX, else `c`.
+    /// Speed of a photon of energy `e` (mm/ns): the group velocity, `c` in a material
+    /// without RINDEX (as Geant4's optical photons).
     pub fn velocity(&self, e: f64) -> f64 {
-        if let Some(g) = &self.groupvel {
-            return g.value(e);
-        }
-        match &self.rindex {
-            Some(n) if n.value(e) > 0.0 => C_LIGHT_MM_PER_NS / n.value(e),
-            _ => C_LIGHT_MM_PER_NS,
-        }
+        self.groupvel
+            .as_ref()
+            .map_or(C_LIGHT_MM_PER_NS, |g| g.value(e))
     }
+}
+
+/// The group velocity Geant4 derives from a RINDEX table
+/// (G4MaterialPropertiesTable::CalculateGROUPVEL): `c / (n + dn / d ln E)` by finite
+/// differences, at the first and last energies and at the midpoints between the rows in
+/// between, and `c / n` wherever that formula gives a negative or faster-than-`c / n`
+/// speed (anomalous dispersion).
+pub fn group_velocity(rindex: &Property) -> Property {
+    let (es, ns) = (&rindex.energies, &rindex.values);
+    let c = C_LIGHT_MM_PER_NS;
+    if es.len() < 2 {
+        return Property {
+            energies: es.clone(),
+            values: vec![c / ns[0]],
+        };
+    }
+    let bounded = |vg: f64, n: f64| if vg < 0.0 || vg > c / n { c / n } else { vg };
+    let slope = |i: usize| (ns[i + 1] - ns[i]) / (es[i + 1] / es[i]).ln();
+    let mut energies = vec![es[0]];
+    let mut values = vec![bounded(c / (ns[0] + slope(0)), ns[0])];
+    for i in 0..es.len() - 2 {
+        let n = 0.5 * (ns[i] + ns[i + 1]);
+        energies.push(0.5 * (es[i] + es[i + 1]));
+        values.push(bounded(c / (n + slope(i)), n));
+    }
+    let last = es.len() - 1;
+    energies.push(es[last]);
+    values.push(bounded(c / (ns[last] + slope(last - 1)), ns[last]));
+    Property { energies, values }
 }
 
 /// Geant4's surface types this propagator models.
@@ -326,6 +362,34 @@ mod tests {
             values: vec![1.0; 3],
         };
         assert!(Property::new(&three, "x").is_err());
+    }
+
+    #[test]
+    fn group_velocity_follows_dispersion() {
+        // n = a + b ln E: dn/dlnE = b, so v = c / (n + b) at every point.
+        let (a, b) = (1.3, 0.05);
+        let es = [1e-6, 2e-6, 3e-6, 4e-6];
+        let values: Vec<f64> = es
+            .iter()
+            .flat_map(|&e: &f64| [e, a + b * (e * 1e6).ln()])
+            .collect();
+        let g = group_velocity(&Property::new(&table(&values), "n").unwrap());
+        for (e, v) in g.energies.iter().zip(&g.values) {
+            // The midpoints' n is the mean of the neighbours'.
+            let n = if es.contains(e) {
+                a + b * (e * 1e6).ln()
+            } else {
+                let i = es.iter().position(|x| x > e).unwrap();
+                0.5 * (a + b * (es[i - 1] * 1e6).ln() + a + b * (es[i] * 1e6).ln())
+            };
+            assert!((v - C_LIGHT_MM_PER_NS / (n + b)).abs() < 1e-9, "{e}: {v}");
+        }
+        // First and last energies and the midpoints of all but the last interval.
+        assert_eq!(g.energies.len(), 4);
+        // Anomalous dispersion (n falling with E) gives c / n.
+        let falling = Property::new(&table(&[1e-6, 1.5, 2e-6, 1.4]), "n").unwrap();
+        let g = group_velocity(&falling);
+        assert!((g.values[0] - C_LIGHT_MM_PER_NS / 1.5).abs() < 1e-12);
     }
 
     #[test]
