@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use super::bulk::{rayleigh_scatter, sample_distance};
 use super::output::{sorted_counts, History, HitRow, Label};
-use super::properties::{energy_of_wavelength, OpticsTables};
+use super::properties::{energy_of_wavelength, OpticsTables, Property, C_LIGHT_MM_PER_NS};
 use super::sources::Source;
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
 use super::{PhotonError, V};
@@ -152,7 +152,7 @@ impl PhotonScene {
         for steps in 1..=run.max_steps {
             let m = self.material[current as usize];
             let mat = self.tables.material(m);
-            let draw = |p: Option<&super::properties::Property>, rng: &mut Rng| {
+            let draw = |p: Option<&Property>, rng: &mut Rng| {
                 p.map_or(f64::INFINITY, |p| {
                     sample_distance(p.value(energy), rng.next_f64())
                 })
@@ -167,7 +167,7 @@ impl PhotonScene {
                 return (history, None);
             }
             pos = pos + dir * step;
-            time += step / mat.map_or(super::properties::C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
+            time += step / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
             if d_abs == step && d_abs < t_b {
                 history.push(Label::Ab);
                 return (history, None);

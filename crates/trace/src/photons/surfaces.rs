@@ -18,7 +18,7 @@ use hytrace_foundry::UNSET;
 use hytrace_volume::Rng;
 
 use super::boundary::{dielectric_dielectric, mirror, Fresnel};
-use super::properties::{OpticsTables, SurfaceKind};
+use super::properties::{OpticsTables, Property, SurfaceKind};
 use super::V;
 use crate::scene::VolumeSurfaces;
 
@@ -112,8 +112,7 @@ pub fn cross(
         return Crossing::Absorbed;
     };
     let s = tables.surface(surface);
-    let value =
-        |p: Option<&super::properties::Property>, default: f64| p.map_or(default, |p| p.value(e));
+    let value = |p: Option<&Property>, default: f64| p.map_or(default, |p| p.value(e));
     let (kind, r, t, eff) = match s {
         Some(s) => (
             s.kind,
