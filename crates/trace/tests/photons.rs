@@ -122,6 +122,46 @@ fn only_the_sensor_detects() {
     }
 }
 
+/// Geant4's lookup: the border surface of the ordered pair of physical volumes, else the
+/// skin of the volume entered (when it is a daughter of the one left) or left, then the
+/// other's.
+#[test]
+fn surfaces_are_found_as_geant4_finds_them() {
+    let (f, surfaces) = load_photon_scene(&scene_path(), &GdmlOptions::default()).unwrap();
+    let v = surfaces.unwrap();
+    let instance = |name: &str| {
+        f.inst
+            .iter()
+            .position(|i| f.optics.volumes[i.identity as usize] == name)
+            .unwrap_or_else(|| panic!("no {name}")) as u32
+    };
+    let surface = |name: &str| {
+        f.optics
+            .surfaces
+            .iter()
+            .position(|s| s.name == name)
+            .unwrap() as u32
+    };
+    let (tank, shell, sensor, ball) = (
+        instance("tank_pv"),
+        instance("shell_pv"),
+        instance("sensor_pv"),
+        instance("ball_pv"),
+    );
+    let (mirror, skin) = (surface("MirrorSurface"), surface("SensorSurface"));
+    // The border surface is ordered: tank to shell only.
+    assert_eq!(v.between(tank, shell), mirror);
+    assert_eq!(v.between(shell, tank), hytrace_foundry::UNSET);
+    // The sensor's skin both ways; nothing between the tank and the ball.
+    assert_eq!(v.between(tank, sensor), skin);
+    assert_eq!(v.between(sensor, tank), skin);
+    assert_eq!(v.between(tank, ball), hytrace_foundry::UNSET);
+    assert_eq!(v.between(ball, tank), hytrace_foundry::UNSET);
+    // Between siblings: the skin of the one left, else of the one entered.
+    assert_eq!(v.between(ball, sensor), skin);
+    assert_eq!(v.between(sensor, ball), skin);
+}
+
 fn hytrace(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hytrace"))
         .args(args)
@@ -144,8 +184,7 @@ fn the_command_writes_hits_histories_and_stats() {
         "2000",
         "-o",
         hits.to_str().unwrap(),
-        "--history",
-        hist.to_str().unwrap(),
+        &format!("--history={}", hist.display()),
         "--stats",
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);

@@ -40,9 +40,9 @@ pub struct PhotonsArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u32,
     /// Print the table of the most frequent step histories (Opticks labels: TO BT BR SR
-    /// SC AB SD SA MI TR), and with a PATH also write every photon's packed history there,
-    /// uint64 (N,), 4 bits a label, first label lowest.
-    #[arg(long, num_args = 0..=1, value_name = "PATH")]
+    /// SC AB SD SA MI TR), and with `--history=PATH` also write every photon's packed
+    /// history there, uint64 (N,), 4 bits a label, first label lowest.
+    #[arg(long, num_args = 0..=1, require_equals = true, value_name = "PATH")]
     pub history: Option<Option<PathBuf>>,
     /// Rows of the history table.
     #[arg(long, default_value_t = 20)]
