@@ -11,6 +11,7 @@ pub mod embree;
 pub mod gpu;
 pub mod memory;
 pub mod outputs;
+pub mod photons;
 pub mod render;
 pub mod report;
 pub mod scan;

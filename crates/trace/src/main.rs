@@ -84,6 +84,11 @@ enum Command {
     /// Render a scene (the embedded default scene when SCENE is omitted) to a PNG or NumPy
     /// image, simulating only the effects the scene calls for.
     Render(hytrace_trace::render::run::RenderArgs),
+    /// Propagate optical photons from a source through a scene with Geant4's optical
+    /// physics (Fresnel, total internal reflection, absorption, Rayleigh scattering,
+    /// polished dielectric_metal and dielectric_dielectric surfaces) on the CPU; write the
+    /// detected photons.
+    Photons(hytrace_trace::photons::run::PhotonsArgs),
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,
     /// Sparse volumes: NanoVDB (.nvdb), OpenVDB (.vdb) or procedural grids
@@ -391,6 +396,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Volume(command) => run_volume(command)?,
         Command::Render(args) => hytrace_trace::render::run::run(args, &options)?,
+        Command::Photons(args) => hytrace_trace::photons::run::run(args, &options)?,
         Command::Bench(BenchCommand::Accuracy { out, quick }) => {
             let settings = accuracy::Settings { quick };
             eprintln!("measuring on {}", accuracy::machine_line(settings));

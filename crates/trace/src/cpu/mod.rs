@@ -632,6 +632,31 @@ impl<T: Real> CpuScene<T> {
         self.trace_with(&WorldRay::new(ray), tmin, tmax, &mut Direct)
     }
 
+    /// Geant4's navigator step from a volume the caller already knows, as a tracking
+    /// navigator keeps it between steps: in a hierarchical scene, the nearer of leaving
+    /// instance `current` (the roots' surfaces when `None`: outside the world) and entering
+    /// one of its daughters, the origin not located again (so a photon on a surface it has
+    /// just crossed stays on the side it was put). In a flat scene, [`Self::trace`].
+    pub fn trace_in(
+        &self,
+        ray: &Ray<f64>,
+        current: Option<u32>,
+        tmin: T,
+        tmax: T,
+    ) -> Option<Hit<T>> {
+        let world = WorldRay::new(ray);
+        let best = match &self.layout {
+            Layout::Tree(h) => {
+                let group = current.map_or(&h.roots, |c| &h.daughters[c as usize]);
+                let exit =
+                    current.and_then(|c| self.exit(c as usize, &world, tmin, tmax, &mut Direct));
+                self.enter(group, &world, tmin, tmax, exit, &mut Direct)
+            }
+            Layout::Flat(all) => self.enter(all, &world, tmin, tmax, None, &mut Direct),
+        };
+        best.map(|h| self.in_world(h))
+    }
+
     /// [`Self::trace`], prims' first crossings coming from `crossings`; meaningless when
     /// `crossings` abandons the trace.
     // Inlined so that the hit is built where the caller keeps it: returned through memory,

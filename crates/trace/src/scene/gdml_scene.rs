@@ -75,15 +75,24 @@ pub(crate) fn world_solids(f: &Foundry) -> Vec<String> {
 
 /// Reads a GDML file into a Foundry.
 pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
+    Ok(load_gdml_scene_with_surfaces(path, options)?.0)
+}
+
+/// Reads a GDML file into a Foundry, with what finds the optical surface of every crossing
+/// ([`VolumeSurfaces`]).
+pub fn load_gdml_scene_with_surfaces(
+    path: &Path,
+    options: &GdmlOptions,
+) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
     let gdml = read_gdml(path, options)?;
     for w in &gdml.warnings {
         eprintln!("warning: skipped {w}");
     }
-    gdml_to_foundry(&gdml).with_context(|| format!("{}: building the scene", path.display()))
+    gdml_to_foundry_with_surfaces(&gdml)
+        .with_context(|| format!("{}: building the scene", path.display()))
 }
 
-/// The optical surface indices for crossings out of and into the placement `pv` of
-/// logical volume `lv` inside the placement `mother_pv` of `mother_lv`.
+/// The border and skin surfaces of a GDML file, by physical volume name and logical volume.
 struct SurfaceRules {
     border: HashMap<(String, String), u32>,
     skin: HashMap<usize, u32>,
@@ -105,20 +114,66 @@ impl SurfaceRules {
         SurfaceRules { border, skin }
     }
 
-    /// G4OpBoundaryProcess's lookup: the border surface of (leaving, entering), else the
-    /// skin of the daughter, else the skin of the mother.
-    fn find(&self, leaving: &str, entering: &str, lv: usize, mother_lv: Option<usize>) -> u32 {
-        if let Some(&s) = self
-            .border
-            .get(&(leaving.to_string(), entering.to_string()))
-        {
+    /// G4OpBoundaryProcess's lookup for a crossing from the placement `pre_pv` of logical
+    /// volume `pre_lv` into `post_pv` of `post_lv`: the border surface of the ordered pair,
+    /// else the skin of the volume entered when it is a daughter of the one left
+    /// (`entered_daughter`) and then the other's, else the skin of the volume left and then
+    /// of the one entered.
+    fn between(
+        &self,
+        (pre_pv, pre_lv): (&str, usize),
+        (post_pv, post_lv): (&str, usize),
+        entered_daughter: bool,
+    ) -> u32 {
+        if let Some(&s) = self.border.get(&(pre_pv.to_string(), post_pv.to_string())) {
             return s;
         }
+        let (first, second) = if entered_daughter {
+            (post_lv, pre_lv)
+        } else {
+            (pre_lv, post_lv)
+        };
         self.skin
-            .get(&lv)
-            .or_else(|| mother_lv.and_then(|m| self.skin.get(&m)))
+            .get(&first)
+            .or_else(|| self.skin.get(&second))
             .copied()
             .unwrap_or(UNSET)
+    }
+}
+
+/// What Geant4's boundary process needs to find the optical surface of any crossing of a
+/// GDML scene, siblings included (the boundary table holds only the crossings between an
+/// instance and its mother): every instance's physical volume and logical volume, and the
+/// file's border and skin surfaces.
+pub struct VolumeSurfaces {
+    rules: SurfaceRules,
+    /// Per instance: the physical volume's name (as border surfaces name it) and the
+    /// logical volume's index.
+    placed: Vec<(String, usize)>,
+    /// Per instance: its mother instance, [`UNSET`] for the world.
+    mother: Vec<u32>,
+}
+
+impl VolumeSurfaces {
+    /// The optical surface (index into the Foundry's surfaces, [`UNSET`] for none) that
+    /// applies when a photon crosses from instance `pre` into instance `post`, as
+    /// G4OpBoundaryProcess finds it.
+    pub fn between(&self, pre: u32, post: u32) -> u32 {
+        let at = |i: u32| {
+            let (pv, lv) = &self.placed[i as usize];
+            (pv.as_str(), *lv)
+        };
+        let entered_daughter = self.mother[post as usize] == pre;
+        self.rules.between(at(pre), at(post), entered_daughter)
+    }
+
+    /// Whether a border or skin surface of the file uses surface `s`.
+    pub fn uses(&self, s: u32) -> bool {
+        self.rules
+            .border
+            .values()
+            .chain(self.rules.skin.values())
+            .any(|&x| x == s)
     }
 }
 
@@ -155,6 +210,11 @@ fn material_index(m: Option<usize>) -> u32 {
 
 /// Builds the Foundry of a read GDML file.
 pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
+    Ok(gdml_to_foundry_with_surfaces(g)?.0)
+}
+
+/// Builds the Foundry of a read GDML file and its [`VolumeSurfaces`].
+pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
     let total = subtree_sizes(g)[g.world];
     if total > MAX_INSTANCES {
         bail!("the hierarchy expands into {total} placements, more than {MAX_INSTANCES}");
@@ -193,6 +253,7 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
     let identity = tables.name(&world_name);
     let world_instance = f.add_instance(solid, Transform64::IDENTITY, identity, 0)?;
     f.inst[world_instance].boundary = boundary;
+    let mut placed = vec![(world_name.clone(), g.world)];
 
     // Depth-first walk: (logical volume, its placement name, world transform, instance).
     let mut stack: Vec<(usize, String, Transform64, usize)> =
@@ -204,8 +265,8 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
             let solid = foundry_solid(&mut f, lv.solid)?;
             let boundary = tables.boundary(Boundary {
                 outer_material: material_index(g.volumes[mother].material),
-                outer_surface: rules.find(&d.name, &mother_pv, d.volume, Some(mother)),
-                inner_surface: rules.find(&mother_pv, &d.name, d.volume, Some(mother)),
+                outer_surface: rules.between((&d.name, d.volume), (&mother_pv, mother), false),
+                inner_surface: rules.between((&mother_pv, mother), (&d.name, d.volume), true),
                 inner_material: material_index(lv.material),
             });
             let identity = tables.name(strip_name(&d.name));
@@ -214,6 +275,7 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
                 .with_context(|| format!("placing `{}` in `{}`", d.name, g.volumes[mother].name))?;
             f.inst[i].boundary = boundary;
             f.inst_mother[i].index = mother_instance as u32;
+            placed.push((d.name.clone(), d.volume));
             if !lv.daughters.is_empty() {
                 stack.push((d.volume, d.name.clone(), transform, i));
             }
@@ -221,5 +283,11 @@ pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
     }
     f.optics = tables.optics;
     f.validate().context("built an invalid Foundry")?;
-    Ok(f)
+    let mother = f.inst_mother.iter().map(|m| m.index).collect();
+    let surfaces = VolumeSurfaces {
+        rules,
+        placed,
+        mother,
+    };
+    Ok((f, surfaces))
 }

@@ -15,7 +15,10 @@ use hytrace_foundry::Foundry;
 use crate::render::spec::RenderSpec;
 
 pub use default::{default_render_spec, default_scene};
-pub use gdml_scene::{gdml_to_foundry, load_gdml_scene, GDML_MESH_TOLERANCE};
+pub use gdml_scene::{
+    gdml_to_foundry, gdml_to_foundry_with_surfaces, load_gdml_scene, load_gdml_scene_with_surfaces,
+    VolumeSurfaces, GDML_MESH_TOLERANCE,
+};
 pub use media::{add_medium_solid, grid_map_transform, open_medium, MediumSpec};
 pub use mesh_scene::{add_mesh_file_solid, gltf_to_foundry, load_mesh_scene, obj_to_foundry};
 pub use toml_scene::{

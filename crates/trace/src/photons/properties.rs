@@ -1,0 +1,401 @@
+//! Optical property tables of materials and surfaces, looked up as Geant4 looks them up.
+//!
+//! A GDML `<matrix coldim="2">` holds `(photon energy, value)` rows in Geant4's internal
+//! units (energies in MeV, lengths in mm, velocities in mm/ns). A photon of wavelength
+//! `lambda` has energy `E = h c / lambda` (`h c = 1239.84198 eV nm`); a table is
+//! interpolated linearly in energy between its rows and clamped to its first and last
+//! values outside them (G4PhysicsVector::Value).
+
+use hytrace_foundry::optics::{Material, OpticalSurface, Table};
+use hytrace_foundry::UNSET;
+
+use super::PhotonError;
+
+/// `h c` in eV nm: photon energy (eV) times wavelength (nm).
+pub const HC_EV_NM: f64 = 1239.84198;
+
+/// Speed of light in vacuum, mm/ns (CLHEP's `c_light`).
+pub const C_LIGHT_MM_PER_NS: f64 = 299.792458;
+
+/// Photon energy in MeV (Geant4's energy unit) of a wavelength in nm.
+pub fn energy_of_wavelength(nm: f64) -> f64 {
+    HC_EV_NM / nm * 1e-6
+}
+
+/// Wavelength in nm of a photon energy in MeV.
+pub fn wavelength_of_energy(mev: f64) -> f64 {
+    HC_EV_NM / (mev * 1e6)
+}
+
+/// A property of photon energy: `(energy, value)` rows, energies not decreasing.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Property {
+    energies: Vec<f64>,
+    values: Vec<f64>,
+}
+
+impl Property {
+    /// Checks a two-column table: at least one row, finite numbers, energies positive and
+    /// not decreasing, values not negative. `what` names the table in errors.
+    pub fn new(table: &Table, what: &str) -> Result<Property, PhotonError> {
+        let bad = |problem: String| PhotonError::Table {
+            table: what.to_string(),
+            problem,
+        };
+        if table.columns != 2 {
+            return Err(bad(format!(
+                "has {} columns, expected 2 (photon energy, value)",
+                table.columns
+            )));
+        }
+        if table.values.is_empty() || !table.values.len().is_multiple_of(2) {
+            return Err(bad(format!(
+                "has {} numbers, expected a positive even count",
+                table.values.len()
+            )));
+        }
+        let (mut energies, mut values) = (Vec::new(), Vec::new());
+        for (row, pair) in table.values.chunks_exact(2).enumerate() {
+            let (e, v) = (pair[0], pair[1]);
+            if !(e.is_finite() && e > 0.0) {
+                return Err(bad(format!("row {row}: photon energy {e} is not positive")));
+            }
+            if !v.is_finite() || v < 0.0 {
+                return Err(bad(format!(
+                    "row {row}: value {v} is negative or not finite"
+                )));
+            }
+            if let Some(&last) = energies.last() {
+                // Repeated energies are allowed (Geant4 reads such tables: a step in the
+                // values); decreasing ones are not.
+                if e < last {
+                    return Err(bad(format!(
+                        "row {row}: photon energy {e:e} MeV decreases (previous row {last:e} MeV)"
+                    )));
+                }
+            }
+            energies.push(e);
+            values.push(v);
+        }
+        Ok(Property { energies, values })
+    }
+
+    /// A constant property (tests, defaults).
+    pub fn constant(value: f64) -> Property {
+        Property {
+            energies: vec![1e-6],
+            values: vec![value],
+        }
+    }
+
+    /// The value at photon energy `e` (MeV): linear between rows, the first or last value
+    /// outside them.
+    pub fn value(&self, e: f64) -> f64 {
+        let (es, vs) = (&self.energies, &self.values);
+        let last = es.len() - 1;
+        if e <= es[0] {
+            return vs[0];
+        }
+        if e >= es[last] {
+            return vs[last];
+        }
+        // First row above e: e lies in [es[i - 1], es[i]).
+        let i = es.partition_point(|&x| x <= e);
+        let (e0, e1, v0, v1) = (es[i - 1], es[i], vs[i - 1], vs[i]);
+        v0 + (v1 - v0) * (e - e0) / (e1 - e0)
+    }
+}
+
+/// The looked-up optical properties of a material.
+#[derive(Clone, Debug, Default)]
+pub struct MaterialOptics {
+    /// Name (for messages).
+    pub name: String,
+    /// Refractive index; without it photons die at the material's boundaries.
+    pub rindex: Option<Property>,
+    /// Absorption length (mm); none: no absorption.
+    pub abslength: Option<Property>,
+    /// Rayleigh scattering length (mm); none: no Rayleigh scattering.
+    pub rayleigh: Option<Property>,
+    /// Group velocity (mm/ns): Geant4's, from RINDEX ([`group_velocity`]) unless the
+    /// material gives GROUPVEL after RINDEX; none without either.
+    pub groupvel: Option<Property>,
+}
+
+/// Looks up a named two-column property of a list, checked.
+fn property(
+    list: &[(String, Table)],
+    name: &str,
+    owner: &str,
+) -> Result<Option<Property>, PhotonError> {
+    list.iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, t)| Property::new(t, &format!("{owner}: property {name}")))
+        .transpose()
+}
+
+impl MaterialOptics {
+    /// The optical properties of a material of the scene.
+    pub fn new(m: &Material) -> Result<Self, PhotonError> {
+        let owner = format!("material `{}`", m.name);
+        let rindex = property(&m.properties, "RINDEX", &owner)?;
+        // Geant4 computes GROUPVEL whenever RINDEX is added (replacing a GROUPVEL given
+        // before it); a GROUPVEL given after RINDEX replaces the computed one.
+        let position = |name: &str| m.properties.iter().position(|(n, _)| n == name);
+        let groupvel = match (position("GROUPVEL"), position("RINDEX"), &rindex) {
+            (Some(g), Some(r), _) if g > r => property(&m.properties, "GROUPVEL", &owner)?,
+            (Some(_), None, _) => property(&m.properties, "GROUPVEL", &owner)?,
+            (_, _, Some(n)) => Some(group_velocity(n)),
+            _ => None,
+        };
+        Ok(MaterialOptics {
+            name: m.name.clone(),
+            rindex,
+            abslength: property(&m.properties, "ABSLENGTH", &owner)?,
+            rayleigh: property(&m.properties, "RAYLEIGH", &owner)?,
+            groupvel,
+        })
+    }
+
+    /// Speed of a photon of energy `e` (mm/ns): the group velocity, `c` in a material
+    /// without RINDEX (as Geant4's optical photons).
+    pub fn velocity(&self, e: f64) -> f64 {
+        self.groupvel
+            .as_ref()
+            .map_or(C_LIGHT_MM_PER_NS, |g| g.value(e))
+    }
+}
+
+/// The group velocity Geant4 derives from a RINDEX table
+/// (G4MaterialPropertiesTable::CalculateGROUPVEL): `c / (n + dn / d ln E)` by finite
+/// differences, at the first and last energies and at the midpoints between the rows in
+/// between, and `c / n` wherever that formula gives a negative or faster-than-`c / n`
+/// speed (anomalous dispersion).
+pub fn group_velocity(rindex: &Property) -> Property {
+    let (es, ns) = (&rindex.energies, &rindex.values);
+    let c = C_LIGHT_MM_PER_NS;
+    if es.len() < 2 {
+        return Property {
+            energies: es.clone(),
+            values: vec![c / ns[0]],
+        };
+    }
+    let bounded = |vg: f64, n: f64| if vg < 0.0 || vg > c / n { c / n } else { vg };
+    let slope = |i: usize| (ns[i + 1] - ns[i]) / (es[i + 1] / es[i]).ln();
+    let mut energies = vec![es[0]];
+    let mut values = vec![bounded(c / (ns[0] + slope(0)), ns[0])];
+    for i in 0..es.len() - 2 {
+        let n = 0.5 * (ns[i] + ns[i + 1]);
+        energies.push(0.5 * (es[i] + es[i + 1]));
+        values.push(bounded(c / (n + slope(i)), n));
+    }
+    let last = es.len() - 1;
+    energies.push(es[last]);
+    values.push(bounded(c / (ns[last] + slope(last - 1)), ns[last]));
+    Property { energies, values }
+}
+
+/// Geant4's surface types this propagator models.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SurfaceKind {
+    /// `dielectric_metal`: reflect with REFLECTIVITY, else absorb (detect with EFFICIENCY).
+    DielectricMetal,
+    /// `dielectric_dielectric`: absorb with 1 - REFLECTIVITY - TRANSMITTANCE, pass with
+    /// TRANSMITTANCE, else Fresnel.
+    DielectricDielectric,
+}
+
+/// The looked-up properties of an optical surface.
+#[derive(Clone, Debug)]
+pub struct SurfaceOptics {
+    /// Name (for messages).
+    pub name: String,
+    /// Type.
+    pub kind: SurfaceKind,
+    /// REFLECTIVITY (Geant4's default without the table: 1).
+    pub reflectivity: Option<Property>,
+    /// EFFICIENCY (default 0).
+    pub efficiency: Option<Property>,
+    /// TRANSMITTANCE (default 0).
+    pub transmittance: Option<Property>,
+}
+
+/// A GDML enumeration attribute: a name or Geant4's enumerator value.
+fn enumerated<'a>(text: &str, names: &[&'a str]) -> Option<&'a str> {
+    let t = text.trim();
+    names
+        .iter()
+        .enumerate()
+        .find(|(i, n)| t == **n || t.parse::<usize>() == Ok(*i))
+        .map(|(_, n)| *n)
+}
+
+impl SurfaceOptics {
+    /// The properties of a surface, which must be a polished `dielectric_metal` or
+    /// `dielectric_dielectric` surface (the surface models of this propagator).
+    pub fn new(s: &OpticalSurface) -> Result<Self, PhotonError> {
+        let owner = format!("optical surface `{}`", s.name);
+        let unsupported = |what: &str, value: &str| PhotonError::Unsupported {
+            what: format!("{owner}: {what} `{value}`"),
+        };
+        // G4SurfaceType and G4OpticalSurfaceFinish, in enumerator order.
+        let kind = match enumerated(
+            &s.kind,
+            &[
+                "dielectric_metal",
+                "dielectric_dielectric",
+                "dielectric_LUT",
+            ],
+        ) {
+            Some("dielectric_metal") => SurfaceKind::DielectricMetal,
+            Some("dielectric_dielectric") => SurfaceKind::DielectricDielectric,
+            _ => return Err(unsupported("type", &s.kind)),
+        };
+        let finishes = [
+            "polished",
+            "polishedfrontpainted",
+            "polishedbackpainted",
+            "ground",
+        ];
+        if s.finish.trim().is_empty() || enumerated(&s.finish, &finishes) == Some("polished") {
+            // Geant4's default finish is polished.
+        } else {
+            return Err(unsupported("finish (only polished is modelled)", &s.finish));
+        }
+        // The glisur model reads `value` as polish: below 1 it smears the normal.
+        let glisur = s.model.trim().is_empty()
+            || enumerated(&s.model, &["glisur", "unified"]) == Some("glisur");
+        if glisur && s.value < 1.0 {
+            return Err(unsupported(
+                "glisur polish below 1 (smeared normals are not modelled)",
+                &s.value.to_string(),
+            ));
+        }
+        Ok(SurfaceOptics {
+            name: s.name.clone(),
+            kind,
+            reflectivity: property(&s.properties, "REFLECTIVITY", &owner)?,
+            efficiency: property(&s.properties, "EFFICIENCY", &owner)?,
+            transmittance: property(&s.properties, "TRANSMITTANCE", &owner)?,
+        })
+    }
+}
+
+/// The optical properties of every material and surface of a scene (index as the Foundry's
+/// optics); surfaces that no crossing uses are not checked.
+pub struct OpticsTables {
+    /// Materials.
+    pub materials: Vec<MaterialOptics>,
+    /// Surfaces: `None` for those no crossing of this propagator can meet.
+    pub surfaces: Vec<Option<SurfaceOptics>>,
+}
+
+impl OpticsTables {
+    /// Builds the tables; `used(s)` says whether surface `s` can be met.
+    pub fn new(
+        optics: &hytrace_foundry::optics::Optics,
+        used: impl Fn(u32) -> bool,
+    ) -> Result<Self, PhotonError> {
+        let materials = optics
+            .materials
+            .iter()
+            .map(MaterialOptics::new)
+            .collect::<Result<_, _>>()?;
+        let surfaces = optics
+            .surfaces
+            .iter()
+            .enumerate()
+            .map(|(i, s)| used(i as u32).then(|| SurfaceOptics::new(s)).transpose())
+            .collect::<Result<_, _>>()?;
+        Ok(OpticsTables {
+            materials,
+            surfaces,
+        })
+    }
+
+    /// Material `m`, `None` for [`UNSET`].
+    pub fn material(&self, m: u32) -> Option<&MaterialOptics> {
+        (m != UNSET).then(|| &self.materials[m as usize])
+    }
+
+    /// Surface `s`, `None` for [`UNSET`].
+    pub fn surface(&self, s: u32) -> Option<&SurfaceOptics> {
+        if s == UNSET {
+            return None;
+        }
+        self.surfaces[s as usize].as_ref()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(values: &[f64]) -> Table {
+        Table {
+            columns: 2,
+            values: values.to_vec(),
+        }
+    }
+
+    #[test]
+    fn values_interpolate_linearly_and_clamp_outside() {
+        let p = Property::new(&table(&[1e-6, 1.0, 3e-6, 2.0, 4e-6, 4.0]), "t").unwrap();
+        assert_eq!(p.value(0.5e-6), 1.0);
+        assert_eq!(p.value(1e-6), 1.0);
+        assert!((p.value(2e-6) - 1.5).abs() < 1e-12);
+        assert!((p.value(3.5e-6) - 3.0).abs() < 1e-12);
+        assert_eq!(p.value(4e-6), 4.0);
+        assert_eq!(p.value(9e-6), 4.0);
+    }
+
+    #[test]
+    fn bad_tables_are_errors_naming_the_row() {
+        let unsorted = Property::new(&table(&[2e-6, 1.0, 1e-6, 2.0]), "m: RINDEX");
+        let msg = unsorted.unwrap_err().to_string();
+        assert!(msg.contains("m: RINDEX") && msg.contains("row 1"), "{msg}");
+        let negative = Property::new(&table(&[1e-6, -1.0]), "m: ABSLENGTH");
+        assert!(negative.unwrap_err().to_string().contains("row 0"));
+        assert!(Property::new(&table(&[]), "x").is_err());
+        let three = Table {
+            columns: 3,
+            values: vec![1.0; 3],
+        };
+        assert!(Property::new(&three, "x").is_err());
+    }
+
+    #[test]
+    fn group_velocity_follows_dispersion() {
+        // n = a + b ln E: dn/dlnE = b, so v = c / (n + b) at every point.
+        let (a, b) = (1.3, 0.05);
+        let es = [1e-6, 2e-6, 3e-6, 4e-6];
+        let values: Vec<f64> = es
+            .iter()
+            .flat_map(|&e: &f64| [e, a + b * (e * 1e6).ln()])
+            .collect();
+        let g = group_velocity(&Property::new(&table(&values), "n").unwrap());
+        for (e, v) in g.energies.iter().zip(&g.values) {
+            // The midpoints' n is the mean of the neighbours'.
+            let n = if es.contains(e) {
+                a + b * (e * 1e6).ln()
+            } else {
+                let i = es.iter().position(|x| x > e).unwrap();
+                0.5 * (a + b * (es[i - 1] * 1e6).ln() + a + b * (es[i] * 1e6).ln())
+            };
+            assert!((v - C_LIGHT_MM_PER_NS / (n + b)).abs() < 1e-9, "{e}: {v}");
+        }
+        // First and last energies and the midpoints of all but the last interval.
+        assert_eq!(g.energies.len(), 4);
+        // Anomalous dispersion (n falling with E) gives c / n.
+        let falling = Property::new(&table(&[1e-6, 1.5, 2e-6, 1.4]), "n").unwrap();
+        let g = group_velocity(&falling);
+        assert!((g.values[0] - C_LIGHT_MM_PER_NS / 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn energy_and_wavelength_convert_with_hc() {
+        // 1239.84198 eV nm: 420 nm is 2.952 eV.
+        assert!((energy_of_wavelength(420.0) - 2.95200471e-6).abs() < 1e-13);
+        assert!((wavelength_of_energy(energy_of_wavelength(420.0)) - 420.0).abs() < 1e-9);
+    }
+}

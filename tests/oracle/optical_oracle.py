@@ -1,0 +1,294 @@
+#!/usr/bin/env python3
+"""Geant4 optical-photon oracle for ``hytrace photons``.
+
+Purpose
+-------
+Reads a GDML file with Geant4 (``geant4_pybind``), shoots optical photons from
+the same kind of source as ``hytrace photons --source`` and records, for every
+photon, its step history as Opticks-style labels and whether it was detected.
+The Rust tests compare the label frequencies and the detected counts with a
+``hytrace photons`` run of the same source (statistically: the two programs
+draw different random numbers).
+
+Command line::
+
+    optical_oracle.py GDML --source SPEC --wavelength NM -n N [--seed S]
+
+``SPEC`` is ``point:X,Y,Z`` (isotropic) or ``beam:X,Y,Z:DX,DY,DZ:R`` (a
+parallel beam over a disk of radius R perpendicular to D), mm, as in
+``hytrace photons``. Every photon starts at time 0 with a random linear
+polarization perpendicular to its direction and energy h c / lambda
+(h c = 1239.84198 eV nm). stdout carries one JSON document::
+
+    {"geant4": VERSION, "photons": N, "detected": D,
+     "histories": {"TO BT SD": count, ...},
+     "hit_times": [...], "seconds": s}
+
+Geant4's own output goes to stderr.
+
+Physics
+-------
+A modular physics list with G4OpticalPhysics only (Geant4 adds
+transportation); of its processes only OpAbsorption, OpRayleigh and
+OpBoundary are active (Cerenkov, Scintillation, OpWLS, OpWLS2 and OpMieHG are
+switched off with /process/optical/processActivation). No Geant4 data set is
+needed: run with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
+directory (the script makes a temporary one when it is unset). The run
+manager's initialization reads Geant4's nuclide table (the G4ENSDFSTATE data
+set, ``G4ENSDFSTATEDATA``) and aborts without it; optical physics uses none of
+it, so when ``G4ENSDFSTATEDATA`` is unset the script points it to a temporary
+directory holding an empty ``ENSDFSTATE.dat``.
+
+Labels
+------
+Every step of a photon gives one label, in order after ``TO`` (the start):
+
+* ``AB``: the step ended in OpAbsorption; ``SC``: in OpRayleigh;
+* ``MI``: the photon left the world (step status fWorldBoundary);
+* a step to a geometry boundary no longer than Geant4's surface tolerance
+  (1e-9 mm) gets no label: G4OpBoundaryProcess does nothing there
+  (StepTooSmall); Geant4 takes such a step back across the surface after
+  every reflection;
+* at a geometry boundary (fGeomBoundary), where G4OpBoundaryProcess acted:
+  the photon killed there is ``SD`` when energy was deposited (Detection)
+  unless that was Geant4's NoRINDEX kill (material 1 without RINDEX, or a
+  polished/ground dielectric_dielectric crossing -- no surface counts as one
+  -- into a material without RINDEX), else ``SA``; a photon alive after the
+  boundary was reflected when its direction before and after lie on opposite
+  sides of the surface (the navigator's exit normal): ``SR`` when the
+  crossing's optical surface is dielectric_metal, else ``BR``; otherwise it
+  went on: ``BT``.
+
+Histories keep their first 16 labels (Opticks' seqhis), as hytrace does.
+"""
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HC_EV_NM = 1239.84198
+MAX_LABELS = 16
+PHOTONS_PER_EVENT = 500
+# Geant4's surface tolerance (mm): boundary steps no longer are StepTooSmall.
+STEP_TOO_SMALL = 1e-9
+
+
+def parse_source(spec):
+    parts = spec.split(":")
+    nums = lambda s: [float(v) for v in s.split(",")]
+    if parts[0] == "point" and len(parts) == 2:
+        return ("point", np.array(nums(parts[1])))
+    if parts[0] == "beam" and len(parts) == 4:
+        d = np.array(nums(parts[2]))
+        return ("beam", np.array(nums(parts[1])), d / np.linalg.norm(d),
+                float(parts[3]))
+    raise SystemExit("unknown source %r" % spec)
+
+
+def orthonormal(d):
+    """Two unit vectors completing d to an orthonormal basis."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(d, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(d, e1)
+
+
+def sample(source, rng):
+    """Position, direction, polarization of one photon."""
+    if source[0] == "point":
+        c = 1.0 - 2.0 * rng.random()
+        s = np.sqrt(max(0.0, 1.0 - c * c))
+        phi = 2.0 * np.pi * rng.random()
+        pos, d = source[1], np.array([s * np.cos(phi), s * np.sin(phi), c])
+    else:
+        _, centre, d, radius = source
+        e1, e2 = orthonormal(d)
+        r = radius * np.sqrt(rng.random())
+        phi = 2.0 * np.pi * rng.random()
+        pos = centre + r * (np.cos(phi) * e1 + np.sin(phi) * e2)
+    e1, e2 = orthonormal(d)
+    a = 2.0 * np.pi * rng.random()
+    return pos, d, np.cos(a) * e1 + np.sin(a) * e2
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("gdml")
+    ap.add_argument("--source", required=True)
+    ap.add_argument("--wavelength", type=float, default=420.0)
+    ap.add_argument("-n", type=int, required=True)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    source = parse_source(args.source)
+
+    real_out = sys.stdout
+    sys.stdout = sys.stderr
+    if not os.environ.get("GEANT4_DATA_DIR"):
+        os.environ["GEANT4_DATA_DIR"] = tempfile.mkdtemp(prefix="hytrace_g4data_")
+    if not os.environ.get("G4ENSDFSTATEDATA"):
+        # The run manager builds Geant4's nuclide table from the G4ENSDFSTATE data set
+        # when it initializes (optical physics uses none of it): an empty table does.
+        ensdf = tempfile.mkdtemp(prefix="hytrace_ensdf_")
+        open(os.path.join(ensdf, "ENSDFSTATE.dat"), "w").close()
+        os.environ["G4ENSDFSTATEDATA"] = ensdf
+    import geant4_pybind as g4
+
+    t0 = time.time()
+    parser = g4.G4GDMLParser()
+    parser.Read(args.gdml, False)
+    world = parser.GetWorldVolume()
+
+    class Detector(g4.G4VUserDetectorConstruction):
+        def Construct(self):
+            return world
+
+    class Physics(g4.G4VModularPhysicsList):
+        def __init__(self):
+            super().__init__()
+            self.RegisterPhysics(g4.G4OpticalPhysics())
+
+    rng = np.random.default_rng(args.seed)
+    energy = HC_EV_NM / args.wavelength * g4.eV
+
+    class Gun(g4.G4VUserPrimaryGeneratorAction):
+        def __init__(self):
+            super().__init__()
+            self.gun = g4.G4ParticleGun(1)
+            self.gun.SetParticleDefinition(g4.G4OpticalPhoton.Definition())
+            self.gun.SetParticleEnergy(energy)
+            self.gun.SetParticleTime(0.0)
+            self.left = args.n
+
+        def GeneratePrimaries(self, event):
+            for _ in range(min(PHOTONS_PER_EVENT, self.left)):
+                pos, d, pol = sample(source, rng)
+                self.gun.SetParticlePosition(g4.G4ThreeVector(*pos))
+                self.gun.SetParticleMomentumDirection(g4.G4ThreeVector(*d))
+                self.gun.SetParticlePolarization(g4.G4ThreeVector(*pol))
+                self.gun.GeneratePrimaryVertex(event)
+                self.left -= 1
+
+    histories = {}
+    hit_times = []
+    state = {"labels": None}
+    navigator = [None]
+
+    def volume(point):
+        return point.GetTouchable().GetVolume()
+
+    def has_rindex(material):
+        mpt = material.GetMaterialPropertiesTable()
+        return mpt is not None and mpt.GetProperty("RINDEX") is not None
+
+    def surface_of(pre_pv, post_pv):
+        """The optical surface of a crossing, found as G4OpBoundaryProcess does."""
+        s = g4.G4LogicalBorderSurface.GetSurface(pre_pv, post_pv)
+        if s is None:
+            pre_lv, post_lv = pre_pv.GetLogicalVolume(), post_pv.GetLogicalVolume()
+            order = ((post_lv, pre_lv) if post_pv.GetMotherLogical() == pre_lv
+                     else (pre_lv, post_lv))
+            for lv in order:
+                s = g4.G4LogicalSkinSurface.GetSurface(lv)
+                if s is not None:
+                    break
+        return None if s is None else s.GetSurfaceProperty()
+
+    def no_rindex_kill(pre, post):
+        if not has_rindex(pre.GetMaterial()):
+            return True
+        surface = surface_of(volume(pre), volume(post))
+        polished_dd = surface is None or (
+            surface.GetType() == g4.G4SurfaceType.dielectric_dielectric
+            and str(surface.GetFinish()).split(".")[-1] in ("polished", "ground"))
+        return polished_dd and pre.GetMaterial() != post.GetMaterial() \
+            and not has_rindex(post.GetMaterial())
+
+    class Tracking(g4.G4UserTrackingAction):
+        def PreUserTrackingAction(self, track):
+            state["labels"] = ["TO"]
+
+        def PostUserTrackingAction(self, track):
+            key = " ".join(state["labels"][:MAX_LABELS])
+            histories[key] = histories.get(key, 0) + 1
+
+    class Stepping(g4.G4UserSteppingAction):
+        def UserSteppingAction(self, step):
+            labels = state["labels"]
+            pre, post = step.GetPreStepPoint(), step.GetPostStepPoint()
+            status = post.GetStepStatus()
+            proc = post.GetProcessDefinedStep()
+            name = proc.GetProcessName() if proc is not None else ""
+            if status == g4.G4StepStatus.fWorldBoundary:
+                labels.append("MI")
+            elif name == "OpAbsorption":
+                labels.append("AB")
+            elif name == "OpRayleigh":
+                labels.append("SC")
+            elif status == g4.G4StepStatus.fGeomBoundary:
+                if step.GetStepLength() <= STEP_TOO_SMALL:
+                    # G4OpBoundaryProcess's StepTooSmall: no boundary action. Geant4
+                    # takes such a step back across the surface after a reflection.
+                    return
+                track = step.GetTrack()
+                if track.GetTrackStatus() == g4.G4TrackStatus.fStopAndKill:
+                    if step.GetTotalEnergyDeposit() > 0 and not no_rindex_kill(pre, post):
+                        labels.append("SD")
+                        hit_times.append(post.GetGlobalTime() / g4.ns)
+                    else:
+                        labels.append("SA")
+                    return
+                if navigator[0] is None:
+                    navigator[0] = g4.G4TransportationManager.GetTransportationManager() \
+                        .GetNavigatorForTracking()
+                n = navigator[0].GetGlobalExitNormal(post.GetPosition(), True)
+                before = pre.GetMomentumDirection().dot(n)
+                after = post.GetMomentumDirection().dot(n)
+                if (before > 0) != (after > 0):
+                    surface = surface_of(volume(pre), volume(post))
+                    metal = surface is not None and \
+                        surface.GetType() == g4.G4SurfaceType.dielectric_metal
+                    labels.append("SR" if metal else "BR")
+                else:
+                    labels.append("BT")
+            else:
+                labels.append("??" + name)
+
+    g4.HepRandom.setTheSeed(args.seed)
+    rm = g4.G4RunManagerFactory.CreateRunManager(g4.G4RunManagerType.Serial)
+    detector, physics = Detector(), Physics()
+    ui = g4.G4UImanager.GetUIpointer()
+    for process in ("Cerenkov", "Scintillation", "OpWLS", "OpWLS2", "OpMieHG"):
+        ui.ApplyCommand("/process/optical/processActivation %s false" % process)
+    rm.SetUserInitialization(detector)
+    rm.SetUserInitialization(physics)
+    gun, tracking, stepping = Gun(), Tracking(), Stepping()
+    rm.SetUserAction(gun)
+    rm.SetUserAction(tracking)
+    rm.SetUserAction(stepping)
+    rm.Initialize()
+    events = (args.n + PHOTONS_PER_EVENT - 1) // PHOTONS_PER_EVENT
+    rm.BeamOn(events)
+
+    # Counted from the hits, not the histories: a history keeps its first 16 labels.
+    detected = len(hit_times)
+    out = {
+        "geant4": str(getattr(g4, "G4Version", "")).strip("$ ").replace("Name: ", ""),
+        "photons": sum(histories.values()),
+        "detected": detected,
+        "histories": histories,
+        "hit_times": hit_times,
+        "seconds": time.time() - t0,
+    }
+    real_out.write(json.dumps(out) + "\n")
+    real_out.flush()
+    # Geant4's static destructors can crash at exit under pybind; the answer is out.
+    os._exit(0)
+
+
+if __name__ == "__main__":
+    main()

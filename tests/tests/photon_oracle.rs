@@ -1,0 +1,166 @@
+//! `hytrace photons` against Geant4's optical physics (`tests/oracle/optical_oracle.py`:
+//! G4OpticalPhysics with absorption, Rayleigh and the boundary process, the same GDML file
+//! read by Geant4, the same source): the frequencies of the photons' step histories
+//! compared by Opticks' chi2 (histories seen at least 30 times in the two runs together),
+//! the detected counts within 3 sigma and the mean hit times within 4 standard errors.
+//! Files: the raindrop and 8x8 SiPM files of ../shared/gdml/eic-opticks and our scene with
+//! every process of the propagator (tests/data/photons/every_process.gdml).
+//! The two programs draw different random numbers, so the comparison is statistical; the
+//! seeds are fixed, so the test is deterministic.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_tests::gdml::gdml_dir;
+use hytrace_tests::{geant4_data_dir, oracle_python};
+use hytrace_trace::photons::output::compare_histories;
+use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::{load_photon_scene, propagate, PhotonScene, RunOptions};
+use serde::Deserialize;
+
+/// Photons per run of each program.
+const PHOTONS: u64 = 4000;
+const WAVELENGTH_NM: f64 = 420.0;
+/// Opticks' cut: histories counted at least this often in the two runs together.
+const MIN_COUNT: u64 = 30;
+/// Smallest acceptable p-value of the history chi2.
+const MIN_P_VALUE: f64 = 1e-3;
+
+#[derive(Deserialize)]
+struct Geant4Run {
+    geant4: String,
+    photons: u64,
+    detected: u64,
+    histories: HashMap<String, u64>,
+    hit_times: Vec<f64>,
+}
+
+fn geant4(python: &Path, gdml: &Path, source: &str) -> Geant4Run {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/optical_oracle.py");
+    let out = Command::new(python)
+        .arg(&script)
+        .arg(gdml)
+        .args([
+            "--source",
+            source,
+            "--wavelength",
+            &WAVELENGTH_NM.to_string(),
+        ])
+        .args(["-n", &PHOTONS.to_string(), "--seed", "5"])
+        .env("GEANT4_DATA_DIR", geant4_data_dir())
+        .output()
+        .expect("the optical oracle runs");
+    assert!(
+        out.status.success(),
+        "optical oracle failed on {}:\n{}",
+        gdml.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("the oracle's JSON")
+}
+
+fn mean_and_error(x: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+/// Runs both programs on one file and source; returns a failure description, if any.
+fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
+    let gdml = match file.strip_prefix("data/") {
+        Some(own) => Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(own),
+        None => gdml_dir().join(file),
+    };
+    let g4 = geant4(python, &gdml, source);
+    assert_eq!(g4.photons, PHOTONS);
+    let (f, surfaces) = load_photon_scene(&gdml, &GdmlOptions::default()).unwrap();
+    let scene = PhotonScene::new(&f, surfaces).unwrap();
+    let run = propagate(
+        &scene,
+        &RunOptions {
+            source: Source::parse(source).unwrap(),
+            wavelength_nm: WAVELENGTH_NM,
+            photons: PHOTONS,
+            seed: 1,
+            max_steps: 100_000,
+            keep_histories: false,
+        },
+    )
+    .unwrap();
+    let theirs: Vec<(String, u64)> = g4.histories.into_iter().collect();
+    let c = compare_histories(&run.counts, &theirs, MIN_COUNT);
+    let (a, b) = (run.hits.len() as f64, g4.detected as f64);
+    let sigma = (a + b).sqrt();
+    let times: Vec<f64> = run.hits.iter().map(|h| h.0[3]).collect();
+    let ((ta, ea), (tb, eb)) = (mean_and_error(&times), mean_and_error(&g4.hit_times));
+    let time_sigmas = (ta - tb).abs() / (ea * ea + eb * eb).sqrt();
+    eprintln!(
+        "{file} {source} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors)",
+        g4.geant4,
+        c.chi2,
+        c.ndf,
+        c.chi2 / c.ndf.max(1) as f64,
+        c.p_value,
+        a,
+        b,
+        (a - b).abs() / sigma
+    );
+    for (h, x, y) in c.rows.iter().take(5) {
+        eprintln!("    {x:>6} {y:>6}  {h}");
+    }
+    let mut problems = Vec::new();
+    if c.ndf < 2 {
+        problems.push(format!("only {} histories to compare", c.ndf));
+    }
+    if c.p_value < MIN_P_VALUE {
+        problems.push(format!("history chi2 p-value {:.2e}", c.p_value));
+    }
+    if (a - b).abs() > 3.0 * sigma {
+        problems.push(format!("detected {a} vs {b}"));
+    }
+    if time_sigmas > 4.0 {
+        problems.push(format!("mean hit time {ta} vs {tb} ns"));
+    }
+    (!problems.is_empty()).then(|| format!("{file} {source}: {}", problems.join("; ")))
+}
+
+#[test]
+fn photon_histories_and_detections_agree_with_geant4() {
+    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
+        return;
+    };
+    let cases = [
+        // From the air around the drop: Fresnel and total internal reflection at the air
+        // (n 1.1) and lead (n from 1.0 to 1.1 across the table) boundaries, the vacuum
+        // world left behind, the drop's border surface (dielectric_metal, REFLECTIVITY 0,
+        // EFFICIENCY 1) detecting what leaves the water.
+        ("eic-opticks/opticks_raindrop.gdml", "point:0,0,70"),
+        // A beam into the drop at an angle: refraction into water, then detection.
+        (
+            "eic-opticks/opticks_raindrop.gdml",
+            "beam:-90,0,60:1,0,-0.4:30",
+        ),
+        // Inside one CsI pixel: total internal reflection, the pixels' skin surface
+        // (dielectric_dielectric, REFLECTIVITY 0.98: 2% absorbed per hit), absorption
+        // (400 mm), grease and window, SiPMs detecting (skin, REFLECTIVITY 0, EFFICIENCY
+        // 1) and dead areas absorbing 70%.
+        (
+            "eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml",
+            "point:0.1,0.1,4",
+        ),
+        // Our scene with every process (tests/data/photons): absorption and Rayleigh
+        // scattering with tables varying in energy, a glass ball, a sensor
+        // (dielectric_metal skin, REFLECTIVITY 0.3, EFFICIENCY 0.8), a mirror border
+        // surface (dielectric_metal, REFLECTIVITY 0.9) and a block without RINDEX.
+        ("data/photons/every_process.gdml", "point:0,0,0"),
+        ("data/photons/every_process.gdml", "beam:-90,0,5:1,0,0:20"),
+    ];
+    let failures: Vec<String> = cases
+        .iter()
+        .filter_map(|(file, source)| compare(&python, file, source))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
