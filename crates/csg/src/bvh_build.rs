@@ -7,7 +7,9 @@
 //! the tree becomes a chain as deep as the input is long, and the build takes quadratic
 //! time. The median-split build halves every range on the longest axis of its box
 //! centres (equal centres ordered by index), so it is `ceil(log2(n / leaf))` levels deep
-//! whatever the boxes, in `O(n log n)` time.
+//! whatever the boxes, in `O(n log n)` time. Inputs known to chain (many coincident boxes,
+//! a vertex shared by very many triangles) skip PLOC; other inputs fall back to the median
+//! split only when the PLOC tree comes out too deep.
 
 use std::time::Duration;
 
@@ -54,9 +56,31 @@ pub fn shallow_bvh2(boxes: &[Aabb], params: BvhBuildParams) -> Bvh2 {
 /// triangles where `params` asks for them; the median split bounds whole triangles).
 pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) -> Bvh2 {
     let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
+    if largest_fan(triangles) > MAX_FAN {
+        return median_split_bvh2(&boxes, params.max_prims_per_leaf.max(1) as usize);
+    }
     shallow(&boxes, params, || {
         build_bvh2_from_tris(triangles, params, &mut Duration::default())
     })
+}
+
+/// Triangles sharing one vertex beyond this many make a fan PLOC builds in quadratic time
+/// (a fan of 10^5 triangles took 15 s): such meshes go straight to the median split.
+const MAX_FAN: usize = 1024;
+
+/// The most triangles that share one vertex (by exact position).
+fn largest_fan(triangles: &[Triangle]) -> usize {
+    let mut corners: Vec<[u32; 3]> = triangles
+        .iter()
+        .flat_map(|t| [t.v0, t.v1, t.v2])
+        .map(|v| v.to_array().map(f32::to_bits))
+        .collect();
+    corners.sort_unstable();
+    corners
+        .chunk_by(|a, b| a == b)
+        .map(<[_]>::len)
+        .max()
+        .unwrap_or(0)
 }
 
 fn shallow(boxes: &[Aabb], params: BvhBuildParams, ploc: impl FnOnce() -> Bvh2) -> Bvh2 {
