@@ -10,6 +10,8 @@
 //!   name;
 //! - convex polyhedra of thousands of planes: bounded in quadratic time (the meets of every
 //!   three planes took quartic time), more than the limit refused by name;
+//! - media so dense that tracking estimators would look the density up astronomically often
+//!   per sample: refused by name (the run did not end), while the exact estimator answers;
 //! - a GDML hierarchy tens of thousands of volumes deep (reading it used to take quadratic
 //!   time: every volume's line number was found by scanning the file from its start).
 
@@ -20,8 +22,9 @@ use std::path::Path;
 use hytrace_foundry::Foundry;
 
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_trace::scan::{scan, Precision, RayRow};
+use hytrace_trace::scan::{scan, scan_transmittance, Precision, RayRow};
 use hytrace_trace::scene::{load_scene, obj_to_foundry, scene_from_toml};
+use hytrace_volume::{Estimator, TransmittanceParams};
 
 /// In f32 the GPU scan kernel (where an adapter opens) answers every ray as the CPU's
 /// f32 scan did.
@@ -236,4 +239,37 @@ fn polyhedra_of_thousands_of_planes_build_or_fail_clearly() {
         "{}",
         &e[e.len().saturating_sub(300)..]
     );
+}
+
+#[test]
+fn tracking_through_an_astronomically_dense_medium_is_refused_by_name() {
+    let text = "[volumes.fog]\nsource = \"box:50,50,50,10,2\"\ndensity_scale = 1e300\n\n\
+                [[place]]\nsolid = \"fog\"\n";
+    let f = scene_from_toml(text, "fog.toml", Path::new(".")).unwrap();
+    let rays = rays_up(3, 20.0);
+    for estimator in [Estimator::Delta, Estimator::Ratio, Estimator::Residual] {
+        let e = format!(
+            "{:#}",
+            scan_transmittance(
+                &f,
+                &rays,
+                Precision::F64,
+                &TransmittanceParams::new(estimator)
+            )
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("optical depth") && e.contains("exact estimator"),
+            "{e}"
+        );
+    }
+    // The exact estimator integrates it: nothing gets through the fog's core.
+    let run = scan_transmittance(
+        &f,
+        &rays,
+        Precision::F64,
+        &TransmittanceParams::new(Estimator::Exact),
+    )
+    .unwrap();
+    assert_eq!(run.values[4], 0.0, "{:?}", run.values);
 }

@@ -136,6 +136,10 @@ impl TransmittanceParams {
     }
 }
 
+/// Most density lookups one tracked sample may expect (the majorant's optical depth along
+/// the ray): beyond it a run would not finish in any useful time.
+pub const MAX_TRACKED_LOOKUPS: f64 = 1e7;
+
 /// One ray's transmittance estimate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Estimate {
@@ -442,6 +446,21 @@ impl<'a, G: VoxelGrid + ?Sized> Context<'a, G> {
     /// densities >= 0.
     fn check_trackable(&self, segments: &[Segment], ray_index: u32) -> Result<(), VolumeError> {
         let scale = self.params.density_scale;
+        // The expected density lookups of one sample: the majorant's optical depth over the
+        // segments whose density is not known.
+        let lookups: f64 = segments
+            .iter()
+            .filter(|s| s.range.min != s.range.max)
+            .map(|s| s.range.max as f64 * scale * (s.t1 - s.t0))
+            .sum();
+        if lookups > MAX_TRACKED_LOOKUPS {
+            return Err(VolumeError(format!(
+                "transmittance: the majorant's optical depth along ray {ray_index} is {lookups:.3e} \
+                 (density scale {scale:e}): tracking would look the density up that many times \
+                 per sample, more than {MAX_TRACKED_LOOKUPS:e}; use the exact estimator or a \
+                 smaller density scale"
+            )));
+        }
         for s in segments {
             let low = s.range.min as f64 * scale;
             if low < 0.0 || s.range.min.is_nan() || s.range.max.is_nan() {
