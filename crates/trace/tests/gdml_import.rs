@@ -308,6 +308,37 @@ fn bad_files_give_errors_with_file_line_and_element() {
         "<gdml><solids/><structure/></gdml>",
         &["no <setup> with a <world"],
     );
+    // A border surface naming a physical volume the file does not have: an error (a
+    // warning with --lenient, the surface left out), as Geant4's reader refuses it.
+    let surface = r#"<opticalsurface name="S" model="glisur" finish="polished" type="dielectric_metal" value="1"/>"#;
+    let border = gdml(
+        "",
+        surface,
+        &format!(
+            r#"<volume name="G"><materialref ref="Glass"/><solidref ref="WorldBox"/></volume>{}
+<bordersurface name="B" surfaceproperty="S"><physvolref ref="pv_g"/><physvolref ref="nope"/></bordersurface>"#,
+            world(
+                r#"<physvol name="pv_g"><volumeref ref="G"/><position name="p" x="0" y="0" z="0"/><scale name="s" x="0.1" y="0.1" z="0.1"/></physvol>"#
+            )
+        ),
+    );
+    expect_error(
+        &border,
+        &[
+            "unknown physical volume `nope`",
+            "bordersurface[name=B]/physvolref",
+        ],
+    );
+    let lenient = GdmlOptions {
+        lenient: true,
+        ..GdmlOptions::default()
+    };
+    let g = parse_gdml(&border, "test.gdml", &lenient).unwrap();
+    assert!(g.logical_surfaces.is_empty());
+    assert!(g
+        .warnings
+        .iter()
+        .any(|w| w.contains("unknown physical volume `nope`")));
     expect_error(
         &gdml(
             r#"<variable name="i" value="0"/>"#,

@@ -64,8 +64,21 @@ impl<'a, 'input> Reader<'a, 'input> {
                         self.error(node, format!("needs 2 <physvolref>, got {}", refs.len()))
                     );
                 }
-                let link = SurfaceLink::Border(self.reference(refs[0])?, self.reference(refs[1])?);
-                self.logical_surface(node, link)
+                let (a, b) = (self.reference(refs[0])?, self.reference(refs[1])?);
+                // Geant4's reader resolves the names among the physical volumes read so far.
+                for (r, name) in [(refs[0], &a), (refs[1], &b)] {
+                    if !self.physical_volume_exists(name) {
+                        let e = self.error(r, format!("unknown physical volume `{name}`"));
+                        if !self.options.lenient {
+                            return Err(e);
+                        }
+                        self.out
+                            .warnings
+                            .push(format!("{e} (the border surface is left out)"));
+                        return Ok(());
+                    }
+                }
+                self.logical_surface(node, SurfaceLink::Border(a, b))
             }
             "skinsurface" => {
                 let v = node
@@ -81,6 +94,14 @@ impl<'a, 'input> Reader<'a, 'input> {
             }
             _ => self.unsupported(node, "structure element"),
         }
+    }
+
+    /// Whether a physical volume (a placement in a volume or an assembly) named `name` has
+    /// been read.
+    fn physical_volume_exists(&self, name: &str) -> bool {
+        let volumes = self.out.volumes.iter().flat_map(|v| &v.daughters);
+        let assemblies = self.assemblies.iter().flatten();
+        volumes.chain(assemblies).any(|p| p.name == name)
     }
 
     fn logical_surface(&mut self, node: Node, link: SurfaceLink) -> Result<(), GdmlError> {
