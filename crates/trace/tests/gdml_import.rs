@@ -329,10 +329,7 @@ fn bad_files_give_errors_with_file_line_and_element() {
             "bordersurface[name=B]/physvolref",
         ],
     );
-    let lenient = GdmlOptions {
-        lenient: true,
-        ..GdmlOptions::default()
-    };
+    let lenient = GdmlOptions { lenient: true };
     let g = parse_gdml(&border, "test.gdml", &lenient).unwrap();
     assert!(g.logical_surfaces.is_empty());
     assert!(g
