@@ -175,7 +175,24 @@ fn bad_mesh_files_are_errors_naming_the_file() {
     load_error(
         "range.obj",
         b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n",
-        "out of bounds",
+        "line 4: face vertex index out of bounds: `f 1 2 7`",
+    );
+    // Errors name the line, counted as the reader does (comments, blank lines, and
+    // negative indices back from the vertices read so far).
+    load_error(
+        "late.obj",
+        b"# a comment\n\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -3\nf 1 2 -4\n",
+        "line 7: face vertex index out of bounds",
+    );
+    load_error(
+        "word.obj",
+        b"v 0 0 0\nv 1 zero 0\nv 0 1 0\nf 1 2 3\n",
+        "line 2: position parse error: `v 1 zero 0`",
+    );
+    load_error(
+        "normal.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n",
+        "line 5: face normal index out of bounds",
     );
     load_error(
         "nan.obj",

@@ -166,6 +166,62 @@ pub fn add_mesh_file_solid(
     add_mesh_solid(f, name, &positions, &indices).with_context(|| path.display().to_string())
 }
 
+/// The line (from 1, and its text, abridged) that `error` of the OBJ reader is about, found
+/// again by reading the lines as it does; `None` for errors not tied to one line.
+fn obj_error_line(bytes: &[u8], error: &tobj::LoadError) -> Option<(usize, String)> {
+    use tobj::LoadError as E;
+    let text = String::from_utf8_lossy(bytes);
+    let floats = |fields: &[&str], counts: &[usize]| {
+        counts.contains(&fields.len()) && fields.iter().all(|f| f.parse::<f32>().is_ok())
+    };
+    let (mut positions, mut texcoords, mut normals) = (0i64, 0i64, 0i64);
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let Some(key) = words.next() else { continue };
+        let fields: Vec<&str> = words.collect();
+        let bad = match key {
+            "v" => {
+                positions += 1;
+                matches!(error, E::PositionParseError) && !floats(&fields, &[3, 4, 6, 7])
+            }
+            "vt" => {
+                texcoords += 1;
+                matches!(error, E::TexcoordParseError) && !floats(&fields, &[1, 2, 3])
+            }
+            "vn" => {
+                normals += 1;
+                matches!(error, E::NormalParseError) && !floats(&fields, &[3])
+            }
+            "f" => fields.iter().any(|corner| {
+                let parts: Vec<&str> = corner.split('/').collect();
+                // An index counts from 1, or back from the last one read when negative.
+                let resolves = |k: usize, count: i64| match parts.get(k) {
+                    None | Some(&"") => true,
+                    Some(p) => p
+                        .parse::<i64>()
+                        .is_ok_and(|i| (1..=count).contains(&i) || (1..=count).contains(&-i)),
+                };
+                let parses = parts
+                    .iter()
+                    .all(|p| p.is_empty() || p.parse::<i64>().is_ok());
+                match error {
+                    E::FaceParseError => !parses || parts[0].is_empty(),
+                    E::FaceVertexOutOfBounds => !resolves(0, positions),
+                    E::FaceTexCoordOutOfBounds => !resolves(1, texcoords),
+                    E::FaceNormalOutOfBounds => !resolves(2, normals),
+                    _ => false,
+                }
+            }),
+            _ => false,
+        };
+        if bad {
+            let shown: String = line.chars().take(60).collect();
+            return Some((n + 1, shown));
+        }
+    }
+    None
+}
+
 /// Builds a Foundry from the bytes of an OBJ file: one solid per object or group with
 /// faces, each placed once. Material libraries are not read.
 pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
@@ -178,7 +234,10 @@ pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
     let (models, _) = tobj::load_obj_buf(&mut &bytes[..], &options, |_| {
         Ok((Vec::new(), Default::default()))
     })
-    .map_err(|e| anyhow::anyhow!("not a valid OBJ file: {e}"))?;
+    .map_err(|e| match obj_error_line(bytes, &e) {
+        Some((n, line)) => anyhow::anyhow!("not a valid OBJ file: line {n}: {e}: `{line}`"),
+        None => anyhow::anyhow!("not a valid OBJ file: {e}"),
+    })?;
     let mut f = Foundry::new();
     for (k, model) in models.iter().enumerate() {
         let m = &model.mesh;
