@@ -353,6 +353,12 @@ impl SolidBuilder<'_> {
             )));
         }
         let summary = crate::validate::summarize_prims(prims);
+        if !summary.aabb.iter().all(|v| v.is_finite()) {
+            return Err(FoundryError::Build(format!(
+                "solid `{}`: its bounds {:?} are not finite (a size beyond f32's range?)",
+                self.name, summary.aabb
+            )));
+        }
         f.solid.push(Solid {
             label: pack_label(&self.name),
             num_prim: prims.len() as u32,

@@ -308,6 +308,18 @@ fn bad_files_give_errors_with_file_line_and_element() {
         "<gdml><solids/><structure/></gdml>",
         &["no <setup> with a <world"],
     );
+    // A size beyond f32's range: the solid named, with its line.
+    expect_error(
+        &gdml(
+            "",
+            r#"<box name="huge" x="1" y="1e308" z="1"/>"#,
+            &format!(
+                r#"<volume name="H"><materialref ref="Air"/><solidref ref="huge"/></volume>{}"#,
+                world(r#"<physvol><volumeref ref="H"/></physvol>"#)
+            ),
+        ),
+        &["bad.gdml:12", "solid `huge`", "not finite"],
+    );
     // A border surface naming a physical volume the file does not have: an error (a
     // warning with --lenient, the surface left out), as Geant4's reader refuses it.
     let surface = r#"<opticalsurface name="S" model="glisur" finish="polished" type="dielectric_metal" value="1"/>"#;
