@@ -422,6 +422,23 @@ fn media_must_match_the_volume_prims() {
     );
     let message = edit(&|j| j["media"][0]["density_scale"] = (-1.0).into());
     assert!(message.contains("density scale -1"), "{message}");
+    // A boundary naming a material the table lacks: the file, the boundary, the field and
+    // the table's size.
+    let message = edit(&|j| {
+        let none = u32::MAX;
+        j["boundaries"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({
+                "outer_material": 99, "outer_surface": none,
+                "inner_surface": none, "inner_material": none,
+            }));
+    });
+    assert!(
+        message.contains("optics.json")
+            && message.contains("boundary 0: outer_material is 99, but the table has"),
+        "{message}"
+    );
     // Unchanged, the store loads and keeps its medium.
     assert_eq!(Foundry::load(&dir).unwrap().optics.media, f.optics.media);
 }

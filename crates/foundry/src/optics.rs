@@ -109,7 +109,10 @@ impl Optics {
                 if v != UNSET && v as usize >= n {
                     Err(FoundryError::File {
                         path: "optics.json".into(),
-                        problem: format!("boundary {i}: {field} {v} of {n}"),
+                        problem: format!(
+                            "boundary {i}: {field} is {v}, but the table has {n} (indices \
+                             0..{n}, or {UNSET} for none)"
+                        ),
                     })
                 } else {
                     Ok(())

@@ -614,7 +614,10 @@ impl Foundry {
                     "inst",
                     i,
                     "boundary",
-                    format!("boundary {} of {boundaries} in optics.json", inst.boundary),
+                    format!(
+                        "boundary {}, but optics.json has {boundaries} boundaries",
+                        inst.boundary
+                    ),
                 ));
             }
         }
