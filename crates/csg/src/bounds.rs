@@ -148,15 +148,17 @@ fn clip(face: &[Corner], index: usize, plane: &[f64; 4], tol: f64) -> Vec<Corner
     out
 }
 
+/// The cross product `a x b`.
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 /// The point where three planes meet (Cramer's rule), if they are independent.
 fn meet(a: &[f64; 4], b: &[f64; 4], c: &[f64; 4]) -> Option<[f64; 3]> {
-    let cross = |u: [f64; 3], v: [f64; 3]| {
-        [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ]
-    };
     let (na, nb, nc) = ([a[0], a[1], a[2]], [b[0], b[1], b[2]], [c[0], c[1], c[2]]);
     let bc = cross(nb, nc);
     let det = na[0] * bc[0] + na[1] * bc[1] + na[2] * bc[2];
@@ -175,13 +177,6 @@ fn is_flat(points: &[[f64; 3]], tol: f64) -> bool {
     let o = points[0];
     let d = |x: &[f64; 3]| [x[0] - o[0], x[1] - o[1], x[2] - o[2]];
     let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
-    let cross = |x: [f64; 3], y: [f64; 3]| {
-        [
-            x[1] * y[2] - x[2] * y[1],
-            x[2] * y[0] - x[0] * y[2],
-            x[0] * y[1] - x[1] * y[0],
-        ]
-    };
     let farthest = |key: &dyn Fn(&[f64; 3]) -> f64| {
         points
             .iter()
@@ -205,13 +200,6 @@ fn tangents(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
         [1.0, 0.0, 0.0]
     } else {
         [0.0, 1.0, 0.0]
-    };
-    let cross = |x: [f64; 3], y: [f64; 3]| {
-        [
-            x[1] * y[2] - x[2] * y[1],
-            x[2] * y[0] - x[0] * y[2],
-            x[0] * y[1] - x[1] * y[0],
-        ]
     };
     let u = cross(n, a);
     let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();

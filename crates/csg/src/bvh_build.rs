@@ -29,13 +29,24 @@ const MAX_COINCIDENT: usize = 16;
 /// Levels below the root of an obvhs BVH2 (0 for a single leaf or an empty tree): the
 /// traversal stack a tree needs.
 pub fn bvh2_depth(nodes: &[Bvh2Node]) -> usize {
+    binary_tree_depth(|i| {
+        let n = nodes.get(i)?;
+        Some((n.prim_count == 0).then_some(n.first_index as usize))
+    })
+}
+
+/// Levels below the root of a binary tree in an array whose inner nodes have their children
+/// at `first, first + 1`: `node(i)` is `None` where there is no node `i`, `Some(None)` for
+/// a leaf and `Some(Some(first))` for an inner node.
+pub(crate) fn binary_tree_depth(node: impl Fn(usize) -> Option<Option<usize>>) -> usize {
     let mut deepest = 0;
     let mut stack = vec![(0usize, 0usize)];
     while let Some((index, depth)) = stack.pop() {
-        let Some(n) = nodes.get(index) else { continue };
+        let Some(children) = node(index) else {
+            continue;
+        };
         deepest = deepest.max(depth);
-        if n.prim_count == 0 {
-            let first = n.first_index as usize;
+        if let Some(first) = children {
             stack.push((first, depth + 1));
             stack.push((first + 1, depth + 1));
         }

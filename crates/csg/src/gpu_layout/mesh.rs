@@ -74,20 +74,10 @@ pub struct MeshArrays {
 /// Levels below the root of a laid-out mesh BVH (the traversal's stack needs one slot per
 /// level).
 fn depth(mesh: &MeshPrim<f32>) -> usize {
-    let mut deepest = 0;
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((index, level)) = stack.pop() {
-        let Some(n) = mesh.nodes.get(index) else {
-            continue;
-        };
-        deepest = deepest.max(level);
-        if n.count == 0 {
-            let first = n.first as usize;
-            stack.push((first, level + 1));
-            stack.push((first + 1, level + 1));
-        }
-    }
-    deepest
+    crate::bvh_build::binary_tree_depth(|i| {
+        let n = mesh.nodes.get(i)?;
+        Some((n.count == 0).then_some(n.first as usize))
+    })
 }
 
 impl MeshArrays {
