@@ -2,7 +2,7 @@
 //! photons`): torch sources ([`sources`]), material and surface property tables
 //! ([`properties`]), Fresnel reflection and refraction ([`boundary`]), bulk absorption and
 //! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]), the propagation loop
-//! through the scene's navigator ([`propagate`]) and the outputs ([`output`]).
+//! through the scene's navigator ([`propagate()`]) and the outputs ([`output`]).
 //!
 //! Photon `i` draws every random number from the counter-based stream `(seed, i)`
 //! ([`hytrace_volume::Rng`]), so a run's results do not depend on threads or batches.
