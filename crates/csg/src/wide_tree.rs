@@ -18,7 +18,7 @@
 //! answers an exhaustive search gives.
 //!
 //! A walk is either run to its end in one loop ([`WideTree::walk`]) or advanced one node
-//! visit or leaf at a time ([`Walker`]), so that one thread can interleave the walks of
+//! visit or leaf at a time (`Walker`), so that one thread can interleave the walks of
 //! several rays, each prefetching what it reads next while the others work: the mesh
 //! kernel's `MeshPrim::first_crossings`. Both share the node visit and the stack.
 //!

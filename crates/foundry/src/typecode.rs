@@ -52,7 +52,7 @@ code_enum! {
     /// - `Hyperboloid`: r0 (waist radius at z = 0), tan(stereo) (`r^2 = r0^2 + (tan z)^2`), z1, z2.
     /// - `Torus`: rmin, rmax (tube radii), rtor (swept radius).
     /// - `Box3`: full side lengths x, y, z; centred on the origin.
-    /// - `ConvexPolyhedron`: first plane index (bits of param[0] as u32), plane count (bits of param[1]).
+    /// - `ConvexPolyhedron`: first plane index (bits of `param[0]` as u32), plane count (bits of `param[1]`).
     /// - `Paraboloid`: r at z = -dz, r at z = +dz, dz.
     /// - `HalfSpace`: outward normal x, y, z, distance (inside where dot(n, p) < d).
     /// - `Slab`: normal x, y, z; `param_ext`: a, b (inside where a < dot(n, p) < b).

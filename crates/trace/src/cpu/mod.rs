@@ -13,9 +13,9 @@
 //! their bounds in the solid's frame, then the prims themselves (see
 //! [`hytrace_csg::PreparedPrim`]). Groups of more than [`BVH_MIN_MEMBERS`] instances searched
 //! together (a flat scene's instances, a hierarchy's roots, one mother's daughters) sit in a
-//! bounding volume hierarchy ([`bvh`]); it returns exactly what the linear loop over the
+//! bounding volume hierarchy (module `bvh`); it returns exactly what the linear loop over the
 //! group did, ties included. So do a solid's leaves when they are many: its surface prims
-//! and the clusters of its volume bricks ([`solid`]), two levels in all (instances, then
+//! and the clusters of its volume bricks (module `solid`), two levels in all (instances, then
 //! each solid's leaves), so repeated solids cost one structure.
 //!
 //! Rays come in f64 and stay exact until they are taken into an instance's frame: in f32
@@ -30,7 +30,7 @@
 //! over instance boxes use the rounded origin; those boxes are padded (`widened_bounds`).
 //!
 //! [`CpuScene::trace_batch`] answers many rays as [`CpuScene::trace`] does, bit for bit, with
-//! the searches of large meshes interleaved across the rays ([`batch`]); `hytrace scan`
+//! the searches of large meshes interleaved across the rays (module `batch`); `hytrace scan`
 //! traces through it.
 //!
 //! Volume prims are media, not surfaces: [`CpuScene::trace`] and [`CpuScene::occluded`] go

@@ -4,7 +4,7 @@
 //! A [`RenderSpec`] (camera, materials, lights, media optics, settings) comes with the
 //! scene ([`crate::scene::load_render_scene`]); [`Effects::of`] decides from it and the
 //! Foundry which effects the scene needs, and [`Renderer::render`] runs the CPU path
-//! compiled for exactly that set (see [`integrator`]). Pixel `(i, j)`'s sample `s` draws
+//! compiled for exactly that set (see the module `integrator`). Pixel `(i, j)`'s sample `s` draws
 //! the random stream `(seed, j * width + i, s)` of [`hytrace_volume::Rng`]; with one
 //! sample per pixel the ray goes through the pixel centre.
 
