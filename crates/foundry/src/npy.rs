@@ -63,6 +63,46 @@ pub fn record_dtype<R: Record>() -> (DType, Vec<u64>) {
     }
 }
 
+/// The temporary files and directories being written now: an interrupt handler removes them
+/// with [`remove_temporaries`], since an interrupted process runs no destructors.
+static TEMPORARIES: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// A temporary file or directory being written, listed for [`remove_temporaries`] while this
+/// value lives (drop it once the temporary is gone or in place).
+#[derive(Debug)]
+pub struct TrackedTemporary(std::path::PathBuf);
+
+impl TrackedTemporary {
+    /// Lists `path`.
+    pub fn new(path: &Path) -> Self {
+        let mut list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+        list.push(path.to_path_buf());
+        TrackedTemporary(path.to_path_buf())
+    }
+}
+
+impl Drop for TrackedTemporary {
+    fn drop(&mut self) {
+        let mut list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(at) = list.iter().position(|p| *p == self.0) {
+            list.swap_remove(at);
+        }
+    }
+}
+
+/// Removes every temporary file and directory being written (for an interrupt handler: the
+/// command then leaves no partial output behind).
+pub fn remove_temporaries() {
+    let list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    for p in list.iter() {
+        let _ = if p.is_dir() {
+            std::fs::remove_dir_all(p)
+        } else {
+            std::fs::remove_file(p)
+        };
+    }
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
 /// `path` never holds a partial file. Missing parent directories are created.
 pub fn write_atomically(
@@ -83,6 +123,7 @@ pub fn write_atomically(
         .prefix(".hytrace-")
         .tempfile_in(dir)
         .map_err(io_err)?;
+    let _tracked = TrackedTemporary::new(tmp.path());
     {
         let mut w = BufWriter::new(tmp.as_file_mut());
         write(&mut w).map_err(io_err)?;
@@ -259,6 +300,28 @@ pub fn read_records<R: Record>(path: &Path) -> Result<Vec<R>> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn an_interrupt_removes_the_temporaries_being_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let (file, sub) = (dir.path().join(".hytrace-a"), dir.path().join(".hytrace-b"));
+        std::fs::write(&file, "partial").unwrap();
+        std::fs::create_dir(&sub).unwrap();
+        std::fs::write(sub.join("x.npy"), "partial").unwrap();
+        let kept = dir.path().join("done.npy");
+        std::fs::write(&kept, "whole").unwrap();
+        let tracked = [
+            super::TrackedTemporary::new(&file),
+            super::TrackedTemporary::new(&sub),
+        ];
+        super::remove_temporaries();
+        assert!(!file.exists() && !sub.exists() && kept.exists());
+        drop(tracked);
+        // Once dropped, a path is no longer removed.
+        std::fs::write(&file, "written").unwrap();
+        super::remove_temporaries();
+        assert!(file.exists());
+    }
+
     use super::*;
     use crate::records::{Node, Transform64};
 

@@ -90,6 +90,7 @@ impl Foundry {
             .prefix(".hytrace-foundry-")
             .tempdir_in(&parent)
             .map_err(io(&parent))?;
+        let _tracked = crate::npy::TrackedTemporary::new(staging.path());
         macro_rules! save {
             ($f:expr, $array:ident) => {
                 write_records(

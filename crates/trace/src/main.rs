@@ -420,6 +420,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    // An interrupted command leaves no partial output: the temporary files it was writing
+    // are removed before it exits (with 130, as shells report an interrupt).
+    if let Err(e) = ctrlc::set_handler(|| {
+        hytrace_foundry::npy::remove_temporaries();
+        std::process::exit(130);
+    }) {
+        eprintln!(
+            "hytrace: warning: no interrupt handler ({e}): an interrupt may leave temporary files"
+        );
+    }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -1,17 +1,21 @@
 //! The files one command writes, committed together: each is written to a temporary file
 //! beside its destination, and all are renamed into place only after every one of them was
 //! written. A command that fails part way (or is interrupted) leaves none of its outputs;
-//! the temporary files are removed when the set is dropped uncommitted.
+//! the temporary files are removed when the set is dropped uncommitted, and by
+//! [`hytrace_foundry::npy::remove_temporaries`] when the command is interrupted.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use hytrace_foundry::npy::TrackedTemporary;
 use tempfile::TempPath;
 
 /// Outputs written but not yet in place.
 #[derive(Default)]
 pub struct OutputSet {
-    staged: Vec<(TempPath, PathBuf)>,
+    /// Each output's temporary file, its destination, and its listing for an interrupt
+    /// handler ([`hytrace_foundry::npy::remove_temporaries`]).
+    staged: Vec<(TempPath, PathBuf, TrackedTemporary)>,
 }
 
 /// Checks before any work that every output can be written where asked: no path is an
@@ -53,14 +57,15 @@ impl OutputSet {
             .tempfile_in(dir)
             .with_context(context)?
             .into_temp_path();
+        let tracked = TrackedTemporary::new(&tmp);
         write(&tmp).with_context(context)?;
-        self.staged.push((tmp, dest.to_path_buf()));
+        self.staged.push((tmp, dest.to_path_buf(), tracked));
         Ok(())
     }
 
     /// Moves every staged output into place.
     pub fn commit(self) -> anyhow::Result<()> {
-        for (tmp, dest) in self.staged {
+        for (tmp, dest, _tracked) in self.staged {
             tmp.persist(&dest)
                 .map_err(|e| e.error)
                 .with_context(|| format!("writing {}", dest.display()))?;

@@ -427,3 +427,27 @@ fn every_scene_file_in_scenes_loads_and_scans() {
     }
     assert!(seen > 0);
 }
+
+#[test]
+fn an_interrupted_scan_exits_130_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hits.npy");
+    // 1.6x10^7 rays, about 4 s of work here, interrupted half a second in.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hytrace"))
+        .args([
+            "scan", "default", "--sweep", "rect", "--count", "3200", "--out",
+        ])
+        .arg(&out)
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{status:?}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "{left:?}");
+}
