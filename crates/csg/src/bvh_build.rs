@@ -13,6 +13,7 @@
 
 use std::time::Duration;
 
+use glam::Vec3A;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::{build_bvh2, build_bvh2_from_tris};
 use obvhs::bvh2::node::Bvh2Node;
@@ -79,12 +80,16 @@ pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) ->
 /// (a fan of 10^5 triangles took 15 s): such meshes go straight to the median split.
 const MAX_FAN: usize = 1024;
 
-/// The most triangles that share one vertex (by exact position).
+/// The most triangles that share one vertex (by exact position; positions are compared
+/// by a 64-bit hash, whose rare collisions can only overstate the count).
 fn largest_fan(triangles: &[Triangle]) -> usize {
-    let mut corners: Vec<[u32; 3]> = triangles
+    let key = |v: Vec3A| {
+        let [x, y, z] = v.to_array().map(|c| u64::from(c.to_bits()));
+        (x | y << 32) ^ z.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    };
+    let mut corners: Vec<u64> = triangles
         .iter()
-        .flat_map(|t| [t.v0, t.v1, t.v2])
-        .map(|v| v.to_array().map(f32::to_bits))
+        .flat_map(|t| [key(t.v0), key(t.v1), key(t.v2)])
         .collect();
     corners.sort_unstable();
     corners

@@ -103,6 +103,19 @@ pub fn remove_temporaries() {
     }
 }
 
+/// A new temporary file (named `.hytrace-*`) in `path`'s directory, to be renamed onto
+/// `path` once written; missing parent directories are created, as for `hytrace foundry -o`.
+pub fn temporary_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    tempfile::Builder::new()
+        .prefix(".hytrace-")
+        .tempfile_in(dir)
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
 /// `path` never holds a partial file. Missing parent directories are created.
 pub fn write_atomically(
@@ -113,16 +126,7 @@ pub fn write_atomically(
         path: path.to_path_buf(),
         source,
     };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    // Missing parent directories are created, as for `hytrace foundry -o`.
-    std::fs::create_dir_all(dir).map_err(io_err)?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".hytrace-")
-        .tempfile_in(dir)
-        .map_err(io_err)?;
+    let mut tmp = temporary_beside(path).map_err(io_err)?;
     let _tracked = TrackedTemporary::new(tmp.path());
     {
         let mut w = BufWriter::new(tmp.as_file_mut());

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use hytrace_foundry::npy::TrackedTemporary;
+use hytrace_foundry::npy::{temporary_beside, TrackedTemporary};
 use tempfile::TempPath;
 
 /// Outputs written but not yet in place.
@@ -47,14 +47,7 @@ impl OutputSet {
         write: impl FnOnce(&Path) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
         let context = || format!("writing {}", dest.display());
-        let dir = dest
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        std::fs::create_dir_all(dir).with_context(context)?;
-        let tmp = tempfile::Builder::new()
-            .prefix(".hytrace-")
-            .tempfile_in(dir)
+        let tmp = temporary_beside(dest)
             .with_context(context)?
             .into_temp_path();
         let tracked = TrackedTemporary::new(&tmp);

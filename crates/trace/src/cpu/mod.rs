@@ -566,6 +566,20 @@ impl<T: Real> CpuScene<T> {
         crossings: &mut impl Crossings<'a, T>,
     ) -> Option<Hit<T>> {
         let current = crossings.located(|| self.locate_deepest(h, &ray.origin));
+        self.step_from(h, current, ray, tmin, tmax, crossings)
+    }
+
+    /// The navigator's step from instance `current` (`None`: outside the world): the nearer
+    /// of leaving it and entering one of its daughters.
+    fn step_from<'a>(
+        &'a self,
+        h: &Hierarchy<T>,
+        current: Option<u32>,
+        ray: &WorldRay<T>,
+        tmin: T,
+        tmax: T,
+        crossings: &mut impl Crossings<'a, T>,
+    ) -> Option<Hit<T>> {
         let group = current.map_or(&h.roots, |c| &h.daughters[c as usize]);
         let exit = current.and_then(|c| self.exit(c as usize, ray, tmin, tmax, crossings));
         if crossings.abandoned() {
@@ -646,12 +660,7 @@ impl<T: Real> CpuScene<T> {
     ) -> Option<Hit<T>> {
         let world = WorldRay::new(ray);
         let best = match &self.layout {
-            Layout::Tree(h) => {
-                let group = current.map_or(&h.roots, |c| &h.daughters[c as usize]);
-                let exit =
-                    current.and_then(|c| self.exit(c as usize, &world, tmin, tmax, &mut Direct));
-                self.enter(group, &world, tmin, tmax, exit, &mut Direct)
-            }
+            Layout::Tree(h) => self.step_from(h, current, &world, tmin, tmax, &mut Direct),
             Layout::Flat(all) => self.enter(all, &world, tmin, tmax, None, &mut Direct),
         };
         best.map(|h| self.in_world(h))
