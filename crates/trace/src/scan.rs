@@ -77,10 +77,20 @@ pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<Ray
             if !d.iter().all(|v| v.is_finite()) {
                 bail!("{source}: ray {i}: direction {d:?} is not finite");
             }
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if len == 0.0 || !len.is_finite() {
+            let largest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if largest == 0.0 {
                 bail!("{source}: ray {i}: direction {d:?} has zero length");
             }
+            let mut len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            // Squares of components like 1e200 or 1e-200 overflow or vanish: scaled by the
+            // largest component first, any finite non-zero direction normalizes.
+            let d = if len == 0.0 || !len.is_finite() {
+                let d = d.map(|v| v / largest);
+                len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                d
+            } else {
+                d
+            };
             if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
                 bail!("{source}: ray {i}: needs finite tmin < tmax, got {tmin} {tmax}");
             }

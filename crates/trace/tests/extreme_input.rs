@@ -13,6 +13,8 @@
 //! - media so dense that tracking estimators would look the density up astronomically often
 //!   per sample: refused by name (the run did not end), while the exact estimator answers;
 //! - 10^5 mutated scene files: each builds or is refused with an error naming the file;
+//! - ray rows of every special value (NaN, infinities, zero, subnormal, huge): accepted
+//!   exactly when every component is usable, normalized, or refused naming the row;
 //! - a GDML hierarchy tens of thousands of volumes deep (reading it used to take quadratic
 //!   time: every volume's line number was found by scanning the file from its start).
 
@@ -23,7 +25,7 @@ use std::path::Path;
 use hytrace_foundry::Foundry;
 
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_trace::scan::{scan, scan_transmittance, Precision, RayRow};
+use hytrace_trace::scan::{rays_from_rows, scan, scan_transmittance, Precision, RayRow};
 use hytrace_trace::scene::{load_scene, obj_to_foundry, scene_from_toml};
 use hytrace_volume::{Estimator, TransmittanceParams};
 
@@ -310,5 +312,76 @@ fn mutated_scene_files_give_errors_never_panics() {
     assert!(
         built > 1000 && refused > 1000,
         "{built} built, {refused} refused"
+    );
+}
+
+#[test]
+fn ray_rows_of_special_values_are_accepted_exactly_when_usable() {
+    let specials = [
+        0.0,
+        -0.0,
+        1.0,
+        -2.5,
+        f64::MIN_POSITIVE,
+        5e-324,
+        1e-300,
+        1e300,
+        f64::MAX,
+        -f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ];
+    let mut rng = common::Rng(0x5eed_0f_0a_5);
+    let cases = common::fuzz_cases(100_000);
+    let (mut accepted, mut refused) = (0, 0);
+    for case in 0..cases {
+        // One to three rows; the last one is the mutated one.
+        let rows: Vec<[f64; 8]> = (0..1 + rng.next() % 3)
+            .map(|_| {
+                std::array::from_fn(|c| match rng.next() % 4 {
+                    0 => specials[(rng.next() % specials.len() as u64) as usize],
+                    _ if c == 7 => 1e3 + rng.unit(),
+                    _ => rng.unit() * 2.0 - 1.0,
+                })
+            })
+            .collect();
+        // The reference: what a ray needs, written out independently of the reader.
+        let usable = |r: &[f64; 8]| {
+            let d = [r[4], r[5], r[6]];
+            r[..3].iter().all(|v| v.is_finite())
+                && d.iter().all(|v| v.is_finite())
+                && d.iter().any(|&v| v != 0.0)
+                && r[3].is_finite()
+                && !r[7].is_nan()
+                && r[3] < r[7]
+        };
+        let first_bad = rows.iter().position(|r| !usable(r));
+        match (rays_from_rows(&rows, "case.npy"), first_bad) {
+            (Ok(rays), None) => {
+                for (ray, row) in rays.iter().zip(&rows) {
+                    let n = ray.direction.iter().map(|v| v * v).sum::<f64>();
+                    assert!((n - 1.0).abs() < 1e-12, "case {case}: {row:?}");
+                    assert_eq!(ray.origin, [row[0], row[1], row[2]]);
+                    assert_eq!((ray.tmin, ray.tmax), (row[3], row[7]));
+                }
+                accepted += 1;
+            }
+            (Err(e), Some(i)) => {
+                let msg = e.to_string();
+                assert!(
+                    msg.starts_with(&format!("case.npy: ray {i}:")),
+                    "case {case}: {msg}"
+                );
+                refused += 1;
+            }
+            (got, want) => {
+                panic!("case {case}: {rows:?}: got {got:?}, the first unusable row is {want:?}")
+            }
+        }
+    }
+    assert!(
+        accepted > cases / 20 && refused > cases / 4,
+        "{accepted} accepted, {refused} refused"
     );
 }

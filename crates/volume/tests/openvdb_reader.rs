@@ -389,6 +389,17 @@ fn truncated_files_error_at_every_length() {
     }
 }
 
+/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
+/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
+fn fuzz_cases(default: usize) -> usize {
+    match std::env::var("HYTRACE_FUZZ_CASES") {
+        Ok(v) => v
+            .parse()
+            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
+        Err(_) => default,
+    }
+}
+
 #[test]
 fn corrupt_bytes_never_panic() {
     let mut state = 0x9e37_79b9_7f4a_7c15_u64;
@@ -405,7 +416,7 @@ fn corrupt_bytes_never_panic() {
         "double.vdb",
     ] {
         let bytes = std::fs::read(data(file)).unwrap();
-        for _ in 0..400 {
+        for _ in 0..fuzz_cases(1600) / 4 {
             let mut b = bytes.clone();
             for _ in 0..1 + next() % 4 {
                 let at = (next() % b.len() as u64) as usize;

@@ -35,6 +35,17 @@ impl Rng {
     }
 }
 
+/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
+/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
+pub fn fuzz_cases(default: usize) -> usize {
+    match std::env::var("HYTRACE_FUZZ_CASES") {
+        Ok(v) => v
+            .parse()
+            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
+        Err(_) => default,
+    }
+}
+
 /// The NanoVDB fixture `name` of `tests/data/nanovdb`, parsed.
 pub fn nanovdb_fixture(name: &str) -> NanoFile {
     let path = repo("tests/data/nanovdb").join(name);

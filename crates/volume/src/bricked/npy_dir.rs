@@ -124,6 +124,8 @@ impl BrickedGrid {
             .prefix(".hytrace-bricked-")
             .tempdir_in(parent)
             .map_err(io)?;
+        // Listed for the interrupt handler, which runs no destructors.
+        let _tracked = hytrace_foundry::npy::TrackedTemporary::new(staging.path());
         self.write_files(staging.path())?;
         std::fs::rename(staging.path(), dir).map_err(io)?;
         // The directory now lives under its final name; nothing is left to clean up.
