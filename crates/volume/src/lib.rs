@@ -10,6 +10,7 @@
 //! its [`BrickedGrid::foundry_bricks`] are Foundry bricks whose value ranges include a
 //! one-voxel halo, so a brick's `value_max` bounds every lookup inside its bounds.
 
+mod brick_store;
 mod bricked;
 mod bricks;
 mod codec;
@@ -25,6 +26,11 @@ mod rng;
 mod source;
 mod transmittance;
 
+pub use brick_store::{
+    convert_raw, is_brick_store, planned_memory, BrickStore, CacheStats, ConvertOptions,
+    ConvertReport, Endian, Quantization, RawSpec, RawType, StoreError, StoreMeta, BRICK_BYTES,
+    LOD_VALUES, SUPERCHUNK_BRICKS,
+};
 pub use bricked::{BrickEntry, BrickedGrid, MemoryBreakdown, TexelFormat, NO_BRICK, NO_SLOT};
 pub use dda::{
     global_range, CellPiece, CellWalk, IndexRay, Ray, Segment, SegmentWalk, LEVEL_GLOBAL,

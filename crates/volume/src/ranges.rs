@@ -174,6 +174,20 @@ impl RangeMips {
                 },
             )
             .collect();
+        RangeMips::from_finest(background, level0)
+    }
+
+    /// The mips over a finest level of halo-inclusive 8^3 block ranges computed elsewhere
+    /// (e.g. by a brick store's converter); the coarser levels are their unions.
+    pub fn from_finest(background: f32, level0: RangeLevel) -> Result<RangeMips, VolumeError> {
+        let count = level0.dims.iter().map(|d| *d as usize).product::<usize>();
+        if level0.side != BLOCK_SIDE as u32 || level0.ranges.len() != count {
+            return Err(VolumeError(format!(
+                "range mips: the finest level needs {count} ranges of {BLOCK_SIDE}^3 blocks, got {} of {}^3",
+                level0.ranges.len(),
+                level0.side
+            )));
+        }
         let mut levels = vec![level0];
         for l in 1..RANGE_LEVELS {
             let fine = &levels[l - 1];

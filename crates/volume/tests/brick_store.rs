@@ -1,0 +1,456 @@
+//! The out-of-core brick store against the in-core path: raw volumes generated here are
+//! converted, opened with budgets far smaller than the volume, and every voxel, the range
+//! mips and the transmittance of every estimator must equal those of a dense in-memory
+//! grid holding the values the store promises (each raw value quantized to 16 bits, bricks
+//! within the threshold of the background dropped), computed here independently.
+//! Bad input: raw files of the wrong size, non-finite voxels, budgets below one
+//! superchunk, truncated and corrupted stores, an existing output.
+
+use std::path::{Path, PathBuf};
+
+use hytrace_volume::{
+    convert_raw, planned_memory, transmittance_batch, BrickStore, ConvertOptions, DenseGrid,
+    Endian, Estimator, Filter, GridMap, Majorant, RangeMips, RawSpec, RawType, Ray, Rng,
+    TransmittanceParams, VoxelGrid, SUPERCHUNK_BRICKS,
+};
+
+/// A coral-like field: thin shells around a few random centres, mostly empty space, with
+/// values in [0, 3); x fastest.
+fn coral_field(dims: [u32; 3], seed: u32, shells: usize) -> Vec<f32> {
+    let mut rng = Rng::new(seed, 0, 0);
+    let centres: Vec<([f64; 3], f64)> = (0..shells)
+        .map(|_| {
+            let c = std::array::from_fn(|k| rng.next_f64() * dims[k] as f64);
+            (c, 4.0 + rng.next_f64() * dims[0] as f64 * 0.3)
+        })
+        .collect();
+    let [nx, ny, nz] = dims.map(|d| d as usize);
+    let mut out = vec![0f32; nx * ny * nz];
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let p = [x as f64, y as f64, z as f64];
+                let mut v = 0.0f64;
+                for (c, r) in &centres {
+                    if (0..3).any(|k| (p[k] - c[k]).abs() > r + 3.0) {
+                        continue;
+                    }
+                    let d = (0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>().sqrt();
+                    let shell = 1.0 - (d - r).abs() / 2.5;
+                    if shell > 0.0 {
+                        v += shell * (1.0 + 0.5 * (0.3 * p[0] + 0.2 * p[1]).sin());
+                    }
+                }
+                out[(z * ny + y) * nx + x] = v.min(2.999) as f32;
+            }
+        }
+    }
+    out
+}
+
+fn write_raw(path: &Path, values: &[f32], dtype: RawType, endian: Endian) {
+    let bytes: Vec<u8> = values
+        .iter()
+        .flat_map(|&v| match (dtype, endian) {
+            (RawType::F32, Endian::Little) => v.to_le_bytes().to_vec(),
+            (RawType::F32, Endian::Big) => v.to_be_bytes().to_vec(),
+            (RawType::U16, Endian::Little) => ((v * 1000.0) as u16).to_le_bytes().to_vec(),
+            (RawType::U16, Endian::Big) => ((v * 1000.0) as u16).to_be_bytes().to_vec(),
+            (RawType::U8, _) => vec![(v * 80.0) as u8],
+        })
+        .collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// The voxel values as the file holds them (what the converter reads).
+fn file_values(values: &[f32], dtype: RawType) -> Vec<f32> {
+    values
+        .iter()
+        .map(|&v| match dtype {
+            RawType::F32 => v,
+            RawType::U16 => f32::from((v * 1000.0) as u16),
+            RawType::U8 => f32::from((v * 80.0) as u8),
+        })
+        .collect()
+}
+
+fn spec(dims: [u32; 3], dtype: RawType, endian: Endian) -> RawSpec {
+    RawSpec {
+        dims,
+        dtype,
+        endian,
+        spacing: [0.5, 0.5, 0.75],
+        origin: [-3.0, 1.0, 2.0],
+    }
+}
+
+fn options(background: f32, threshold: f32) -> ConvertOptions {
+    ConvertOptions {
+        background,
+        threshold,
+        range: None,
+        memory: 1 << 32,
+    }
+}
+
+/// The store's promise, computed without the converter: each voxel quantized with the
+/// store's codes (nearest code of `(v - lo) / step`, decoded `lo + code * step` in f32),
+/// bricks whose decoded voxels all lie within the threshold of the background dropped.
+fn expected_grid(values: &[f32], dims: [u32; 3], store: &BrickStore) -> (DenseGrid, u64) {
+    let meta = store.meta();
+    let q = meta.quantization;
+    let code = |v: f32| -> f32 {
+        let c = if q.step == 0.0 {
+            0.0
+        } else {
+            ((f64::from(v) - f64::from(q.lo)) / f64::from(q.step))
+                .round()
+                .clamp(0.0, 65535.0)
+        };
+        q.lo + (c as u16) as f32 * q.step
+    };
+    let mut g = DenseGrid::new([0; 3], dims, meta.background).unwrap();
+    let [nx, ny, nz] = dims.map(|d| d as usize);
+    let mut kept = 0;
+    for bz in 0..nz.div_ceil(8) {
+        for by in 0..ny.div_ceil(8) {
+            for bx in 0..nx.div_ceil(8) {
+                let voxels: Vec<(usize, f32)> = (bz * 8..(bz * 8 + 8).min(nz))
+                    .flat_map(|z| (by * 8..(by * 8 + 8).min(ny)).map(move |y| (z, y)))
+                    .flat_map(|(z, y)| (bx * 8..(bx * 8 + 8).min(nx)).map(move |x| (z, y, x)))
+                    .map(|(z, y, x)| {
+                        let i = (z * ny + y) * nx + x;
+                        (i, code(values[i]))
+                    })
+                    .collect();
+                let keep = voxels
+                    .iter()
+                    .any(|(_, v)| (v - meta.background).abs() > meta.threshold);
+                if keep {
+                    kept += 1;
+                    for (i, v) in voxels {
+                        g.values[i] = v;
+                    }
+                }
+            }
+        }
+    }
+    let map = GridMap::new(
+        [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.75]],
+        [-3.0, 1.0, 2.0],
+    )
+    .unwrap();
+    (g.with_map(map), kept)
+}
+
+/// Rays through the volume's world box from all sides, some starting inside.
+fn rays(dims: [u32; 3], count: usize) -> Vec<Ray> {
+    let mut rng = Rng::new(7, 1, 0);
+    let size = [
+        dims[0] as f64 * 0.5,
+        dims[1] as f64 * 0.5,
+        dims[2] as f64 * 0.75,
+    ];
+    let lo = [-3.0, 1.0, 2.0];
+    (0..count)
+        .map(|_| {
+            let o: [f64; 3] =
+                std::array::from_fn(|k| lo[k] - 0.2 * size[k] + rng.next_f64() * 1.4 * size[k]);
+            let target: [f64; 3] = std::array::from_fn(|k| lo[k] + rng.next_f64() * size[k]);
+            let d: [f64; 3] = std::array::from_fn(|k| target[k] - o[k]);
+            let n = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+            Ray::new(o, d.map(|v| v / n), 0.0, 1e9)
+        })
+        .collect()
+}
+
+fn every_estimator() -> Vec<TransmittanceParams> {
+    let mut out = Vec::new();
+    for estimator in [
+        Estimator::Exact,
+        Estimator::March { step: 0.3 },
+        Estimator::Delta,
+        Estimator::Ratio,
+        Estimator::Residual,
+    ] {
+        for filter in [Filter::Trilinear, Filter::Nearest, Filter::Stochastic] {
+            let mut p = TransmittanceParams::new(estimator);
+            p.filter = filter;
+            p.spp = 4;
+            p.seed = 11;
+            p.density_scale = 0.7;
+            out.push(p);
+        }
+    }
+    let mut global = TransmittanceParams::new(Estimator::Ratio);
+    global.majorant = Majorant::Global;
+    out.push(global);
+    out
+}
+
+fn convert(
+    dir: &Path,
+    name: &str,
+    values: &[f32],
+    spec: &RawSpec,
+    options: &ConvertOptions,
+) -> PathBuf {
+    let raw = dir.join(format!("{name}.raw"));
+    write_raw(&raw, values, spec.dtype, spec.endian);
+    let out = dir.join(format!("{name}.bricks"));
+    convert_raw(&raw, spec, options, &out).unwrap();
+    out
+}
+
+#[test]
+fn a_store_read_through_a_small_cache_equals_the_in_core_grid_voxel_by_voxel() {
+    let dir = tempfile::tempdir().unwrap();
+    // Dimensions that are not multiples of 8 or 16: partial bricks and superchunks.
+    let dims = [75, 41, 139];
+    let values = coral_field(dims, 3, 6);
+    for (dtype, endian, background, threshold) in [
+        (RawType::F32, Endian::Little, 0.0, 0.0),
+        (RawType::F32, Endian::Big, 0.0, 0.05),
+        (RawType::U16, Endian::Big, 0.0, 0.0),
+        (RawType::U8, Endian::Little, 0.5, 10.0),
+    ] {
+        let spec = spec(dims, dtype, endian);
+        let name = format!("{dtype:?}-{endian:?}-{threshold}");
+        let path = convert(
+            dir.path(),
+            &name,
+            &values,
+            &spec,
+            &options(background, threshold),
+        );
+        let store = BrickStore::open(&path, 6 << 20).unwrap();
+        let held = file_values(&values, dtype);
+        let (expected, kept) = expected_grid(&held, dims, &store);
+        assert_eq!(store.meta().kept_bricks, kept, "{name}");
+        assert!(
+            store.meta().dropped_bricks > 0,
+            "{name}: the field is mostly empty"
+        );
+        // Quantization error at most half a code where bricks are kept.
+        let step = store.meta().quantization.step;
+        for (i, (&raw, &got)) in held.iter().zip(&expected.values).enumerate() {
+            if got != background {
+                assert!(
+                    (raw - got).abs() <= step * 0.5 + raw.abs() * 1e-6,
+                    "{name}: voxel {i}: {raw} -> {got}"
+                );
+            }
+        }
+        for z in -2..dims[2] as i32 + 2 {
+            for y in -2..dims[1] as i32 + 2 {
+                for x in -2..dims[0] as i32 + 2 {
+                    assert_eq!(
+                        store.voxel([x, y, z]).to_bits(),
+                        expected.voxel([x, y, z]).to_bits(),
+                        "{name}: voxel {:?}",
+                        [x, y, z]
+                    );
+                }
+            }
+        }
+        // The stored ranges are the in-core grid's range mips, exactly.
+        assert_eq!(
+            store.mips(),
+            &RangeMips::build(&expected).unwrap(),
+            "{name}"
+        );
+        store.check().unwrap();
+    }
+}
+
+#[test]
+fn transmittance_through_a_budget_far_below_the_volume_equals_the_in_core_answer_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    // 256 x 256 x 384 f32: 96 MiB of raw data, 24 M voxels; the cache gets a few MiB.
+    let dims = [256, 256, 384];
+    let values = coral_field(dims, 5, 30);
+    let spec = spec(dims, RawType::F32, Endian::Little);
+    let path = convert(dir.path(), "coral", &values, &spec, &options(0.0, 0.0));
+    let raw_bytes = values.len() as u64 * 4;
+    // The least budget the store accepts: its tables and one superchunk's bricks.
+    let budget = 6 << 20;
+    let store = BrickStore::open(&path, budget).unwrap();
+    assert!(budget < raw_bytes / 4);
+    let (expected, _) = expected_grid(&values, dims, &store);
+    let in_core_mips = RangeMips::build(&expected).unwrap();
+    assert_eq!(store.mips(), &in_core_mips);
+    let rays = rays(dims, 1000);
+    for params in every_estimator() {
+        let streamed = transmittance_batch(&store, store.mips(), &rays, &params).unwrap();
+        let in_core = transmittance_batch(&expected, &in_core_mips, &rays, &params).unwrap();
+        assert_eq!(streamed, in_core, "{params:?}");
+        assert!(
+            in_core.iter().any(|e| e.transmittance < 0.9),
+            "{params:?}: rays see the field"
+        );
+    }
+    store.check().unwrap();
+    let stats = store.stats();
+    assert!(
+        stats.bricks_read > stats.capacity_bricks,
+        "the cache evicted and read bricks again: {stats:?}"
+    );
+}
+
+#[test]
+fn converting_plans_bounded_memory_for_volumes_far_larger_than_it() {
+    // The coral scans of the seed (2144 x 2176 x 2176 f32, 37 GiB) and a 2048^3 16-bit volume.
+    let coral = planned_memory([2144, 2176, 2176], RawType::F32);
+    assert!(coral < 2 << 30, "{coral}");
+    let cube = planned_memory([2048, 2048, 2048], RawType::U16);
+    assert!(cube < 2 << 30, "{cube}");
+    // Far below the volume: three layers of planes, the tables and (at most) every
+    // brick's levels of detail.
+    assert!(cube < 2048u64.pow(3) * 2 / 8, "{cube}");
+}
+
+#[test]
+fn bad_raw_files_and_options_are_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [20, 20, 20];
+    let values = coral_field(dims, 1, 6);
+    let raw = dir.path().join("v.raw");
+    write_raw(&raw, &values, RawType::F32, Endian::Little);
+    let out = dir.path().join("v.bricks");
+    let refuse = |spec: &RawSpec, options: &ConvertOptions, want: &str| {
+        let e = convert_raw(&raw, spec, options, &out)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("v.raw") && e.contains(want), "{e}");
+        assert!(!out.exists());
+    };
+    let good = spec(dims, RawType::F32, Endian::Little);
+    refuse(
+        &spec([20, 20, 21], RawType::F32, Endian::Little),
+        &options(0.0, 0.0),
+        "need 33600",
+    );
+    refuse(
+        &spec(dims, RawType::U16, Endian::Little),
+        &options(0.0, 0.0),
+        "has 32000 bytes",
+    );
+    refuse(
+        &spec([0, 20, 20], RawType::F32, Endian::Little),
+        &options(0.0, 0.0),
+        "at least 1",
+    );
+    let mut bad_spacing = good.clone();
+    bad_spacing.spacing[1] = 0.0;
+    refuse(&bad_spacing, &options(0.0, 0.0), "--spacing");
+    refuse(&good, &options(f32::NAN, 0.0), "background");
+    refuse(&good, &options(0.0, -1.0), "threshold");
+    let mut small = options(0.0, 0.0);
+    small.memory = 1000;
+    refuse(&good, &small, "--memory 1000");
+    let mut range = options(0.0, 0.0);
+    range.range = Some([2.0, 1.0]);
+    refuse(&good, &range, "--range");
+    // A NaN voxel late in the file: refused by position, nothing left behind.
+    let mut nan = values.clone();
+    nan[19 + 20 * (5 + 20 * 17)] = f32::NAN;
+    write_raw(&raw, &nan, RawType::F32, Endian::Little);
+    refuse(&good, &options(0.0, 0.0), "voxel [19, 5, 17] is NaN");
+    let mut given_range = options(0.0, 0.0);
+    given_range.range = Some([0.0, 3.0]);
+    refuse(&good, &given_range, "voxel [19, 5, 17] is NaN");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n != "v.raw")
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // An existing output is not overwritten.
+    write_raw(&raw, &values, RawType::F32, Endian::Little);
+    std::fs::create_dir(&out).unwrap();
+    let e = convert_raw(&raw, &good, &options(0.0, 0.0), &out).unwrap_err();
+    assert!(e.to_string().contains("already exists"), "{e}");
+}
+
+#[test]
+fn truncated_corrupted_and_underbudgeted_stores_are_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [40, 40, 40];
+    let values = coral_field(dims, 2, 6);
+    let spec = spec(dims, RawType::F32, Endian::Little);
+    let path = convert(dir.path(), "s", &values, &spec, &options(0.0, 0.0));
+    // A budget below one superchunk's bricks.
+    let e = BrickStore::open(&path, SUPERCHUNK_BRICKS as u64 * 1024)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("s.bricks") && e.contains("too small"), "{e}");
+    let open_error = |file: &str, bytes: Vec<u8>| -> String {
+        let target = path.join(file);
+        let original = std::fs::read(&target).unwrap();
+        std::fs::write(&target, bytes).unwrap();
+        let e = BrickStore::open(&path, 64 << 20)
+            .err()
+            .map(|e| e.to_string());
+        std::fs::write(&target, original).unwrap();
+        e.unwrap_or_else(|| panic!("{file}: the damaged store opened"))
+    };
+    for file in [
+        "store.json",
+        "superchunks.npy",
+        "brick_lod.npy",
+        "ranges.npy",
+        "bricks.bin",
+    ] {
+        let bytes = std::fs::read(path.join(file)).unwrap();
+        // Every truncation (sampled) is refused with the file named.
+        for len in (0..bytes.len()).step_by(bytes.len() / 97 + 1) {
+            let e = open_error(file, bytes[..len].to_vec());
+            assert!(e.contains(file), "{file} cut to {len}: {e}");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        let e = open_error(file, longer);
+        assert!(e.contains(file), "{file} + 1 byte: {e}");
+    }
+    // A table entry pointing past the kept bricks.
+    let table = std::fs::read(path.join("superchunks.npy")).unwrap();
+    let mut bad = table.clone();
+    let n = bad.len();
+    bad[n - 4..].copy_from_slice(&7_000_000u32.to_le_bytes());
+    let e = open_error("superchunks.npy", bad);
+    assert!(e.contains("past the"), "{e}");
+    // Unordered ranges.
+    let ranges = std::fs::read(path.join("ranges.npy")).unwrap();
+    let mut bad = ranges.clone();
+    let n = bad.len();
+    bad[n - 8..n - 4].copy_from_slice(&5.0f32.to_le_bytes());
+    bad[n - 4..].copy_from_slice(&1.0f32.to_le_bytes());
+    let e = open_error("ranges.npy", bad);
+    assert!(e.contains("ordered pair"), "{e}");
+    // Another format version.
+    let json = std::fs::read_to_string(path.join("store.json")).unwrap();
+    let e = open_error(
+        "store.json",
+        json.replace("\"version\": 1", "\"version\": 9")
+            .into_bytes(),
+    );
+    assert!(e.contains("version 9"), "{e}");
+    assert!(BrickStore::open(&path, 64 << 20).is_ok());
+    // A store truncated after it was opened: lookups read the background and `check` says
+    // which file failed.
+    let store = BrickStore::open(&path, 64 << 20).unwrap();
+    let bin = path.join("bricks.bin");
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&bin)
+        .unwrap()
+        .set_len(0)
+        .unwrap();
+    let inside: Vec<[i32; 3]> = (0..40).map(|k| [k, k, k]).collect();
+    for p in inside {
+        let _ = store.voxel(p);
+    }
+    let e = store.check().unwrap_err().to_string();
+    assert!(e.contains("bricks.bin"), "{e}");
+}
