@@ -9,9 +9,9 @@
 use std::path::{Path, PathBuf};
 
 use hytrace_volume::{
-    convert_raw, planned_memory, transmittance_batch, BrickStore, ConvertOptions, DenseGrid,
-    Endian, Estimator, Filter, GridMap, Majorant, RangeMips, RawSpec, RawType, Ray, Rng,
-    TransmittanceParams, VoxelGrid, SUPERCHUNK_BRICKS,
+    convert_grid, convert_raw, fog_sphere, planned_memory, transmittance_batch, BrickStore,
+    ConvertOptions, DenseGrid, Endian, Estimator, Filter, GridMap, Majorant, RangeMips, RawSpec,
+    RawType, Ray, Rng, TransmittanceParams, VoxelGrid, SUPERCHUNK_BRICKS,
 };
 
 /// A coral-like field: thin shells around a few random centres, mostly empty space, with
@@ -95,8 +95,15 @@ fn options(background: f32, threshold: f32) -> ConvertOptions {
 
 /// The store's promise, computed without the converter: each voxel quantized with the
 /// store's codes (nearest code of `(v - lo) / step`, decoded `lo + code * step` in f32),
-/// bricks whose decoded voxels all lie within the threshold of the background dropped.
-fn expected_grid(values: &[f32], dims: [u32; 3], store: &BrickStore) -> (DenseGrid, u64) {
+/// bricks whose decoded voxels all lie within the threshold of the background dropped;
+/// `values` (x fastest) start at index `origin`, placed by `map`.
+fn expected_grid(
+    values: &[f32],
+    origin: [i32; 3],
+    dims: [u32; 3],
+    map: GridMap,
+    store: &BrickStore,
+) -> (DenseGrid, u64) {
     let meta = store.meta();
     let q = meta.quantization;
     let code = |v: f32| -> f32 {
@@ -109,7 +116,7 @@ fn expected_grid(values: &[f32], dims: [u32; 3], store: &BrickStore) -> (DenseGr
         };
         q.lo + (c as u16) as f32 * q.step
     };
-    let mut g = DenseGrid::new([0; 3], dims, meta.background).unwrap();
+    let mut g = DenseGrid::new(origin, dims, meta.background).unwrap();
     let [nx, ny, nz] = dims.map(|d| d as usize);
     let mut kept = 0;
     for bz in 0..nz.div_ceil(8) {
@@ -135,12 +142,16 @@ fn expected_grid(values: &[f32], dims: [u32; 3], store: &BrickStore) -> (DenseGr
             }
         }
     }
-    let map = GridMap::new(
+    (g.with_map(map), kept)
+}
+
+/// The map of the raw volumes' [`spec`].
+fn raw_map() -> GridMap {
+    GridMap::new(
         [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.75]],
         [-3.0, 1.0, 2.0],
     )
-    .unwrap();
-    (g.with_map(map), kept)
+    .unwrap()
 }
 
 /// Rays through the volume's world box from all sides, some starting inside.
@@ -225,7 +236,7 @@ fn a_store_read_through_a_small_cache_equals_the_in_core_grid_voxel_by_voxel() {
         );
         let store = BrickStore::open(&path, 6 << 20).unwrap();
         let held = file_values(&values, dtype);
-        let (expected, kept) = expected_grid(&held, dims, &store);
+        let (expected, kept) = expected_grid(&held, [0; 3], dims, raw_map(), &store);
         assert_eq!(store.meta().kept_bricks, kept, "{name}");
         assert!(
             store.meta().dropped_bricks > 0,
@@ -276,7 +287,7 @@ fn transmittance_through_a_budget_far_below_the_volume_equals_the_in_core_answer
     let budget = 6 << 20;
     let store = BrickStore::open(&path, budget).unwrap();
     assert!(budget < raw_bytes / 4);
-    let (expected, _) = expected_grid(&values, dims, &store);
+    let (expected, _) = expected_grid(&values, [0; 3], dims, raw_map(), &store);
     let in_core_mips = RangeMips::build(&expected).unwrap();
     assert_eq!(store.mips(), &in_core_mips);
     let rays = rays(dims, 1000);
@@ -295,6 +306,77 @@ fn transmittance_through_a_budget_far_below_the_volume_equals_the_in_core_answer
         stats.bricks_read > stats.capacity_bricks,
         "the cache evicted and read bricks again: {stats:?}"
     );
+}
+
+#[test]
+fn a_grid_converted_from_memory_keeps_its_index_space_and_map() {
+    let dir = tempfile::tempdir().unwrap();
+    // A fog sphere: a dense grid centred on index (0, 0, 0), so its blocks start at negative
+    // multiples of 8, with a non-trivial map.
+    let sphere = fog_sphere(13.0, 3.0).unwrap().with_map(
+        GridMap::new(
+            [[0.2, 0.1, 0.0], [0.0, 0.3, 0.0], [0.05, 0.0, 0.25]],
+            [4.0, -2.0, 7.0],
+        )
+        .unwrap(),
+    );
+    let out = dir.path().join("sphere.bricks");
+    let report = convert_grid(&sphere, "sphere:13", &options(0.0, 0.0), &out).unwrap();
+    let store = BrickStore::open(&out, 16 << 20).unwrap();
+    let meta = store.meta();
+    assert_eq!(meta, &report.meta);
+    assert!(
+        meta.index_origin.iter().all(|c| c % 8 == 0 && *c < 0),
+        "{:?}",
+        meta.index_origin
+    );
+    // Every voxel of the store's box, read from the source.
+    let o = meta.index_origin;
+    let d = meta.dims;
+    let mut values = Vec::new();
+    for z in 0..d[2] as i32 {
+        for y in 0..d[1] as i32 {
+            for x in 0..d[0] as i32 {
+                values.push(sphere.voxel([o[0] + x, o[1] + y, o[2] + z]));
+            }
+        }
+    }
+    let (expected, kept) = expected_grid(&values, o, d, sphere.map, &store);
+    assert_eq!(meta.kept_bricks, kept);
+    for z in o[2] - 9..o[2] + d[2] as i32 + 9 {
+        for y in o[1] - 9..o[1] + d[1] as i32 + 9 {
+            for x in o[0] - 9..o[0] + d[0] as i32 + 9 {
+                assert_eq!(
+                    store.voxel([x, y, z]).to_bits(),
+                    expected.voxel([x, y, z]).to_bits()
+                );
+            }
+        }
+    }
+    assert_eq!(store.mips(), &RangeMips::build(&expected).unwrap());
+    // World-space rays through the sheared map.
+    let rays: Vec<Ray> = (0..200)
+        .map(|k| {
+            let a = k as f64 * 0.37;
+            let d = [
+                a.cos() * (0.7 * a).sin(),
+                a.sin() * (0.7 * a).sin(),
+                (0.7 * a).cos(),
+            ];
+            Ray::new(
+                [4.0 - 20.0 * d[0], -2.0 - 20.0 * d[1], 7.0 - 20.0 * d[2]],
+                d,
+                0.0,
+                40.0,
+            )
+        })
+        .collect();
+    for params in every_estimator() {
+        let streamed = transmittance_batch(&store, store.mips(), &rays, &params).unwrap();
+        let in_core = transmittance_batch(&expected, store.mips(), &rays, &params).unwrap();
+        assert_eq!(streamed, in_core, "{params:?}");
+        assert!(in_core.iter().any(|e| e.transmittance < 0.5), "{params:?}");
+    }
 }
 
 #[test]

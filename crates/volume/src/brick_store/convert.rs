@@ -1,6 +1,6 @@
-//! Converting a raw volume file into a brick store in bounded memory.
+//! Converting a raw volume file, or any grid, into a brick store in bounded memory.
 //!
-//! Two sequential passes over the file: the first finds the data's range (the 16-bit codes
+//! Two sequential passes over the source: the first finds the data's range (the 16-bit codes
 //! span it), the second walks it one layer of bricks (8 z-planes) at a time. A window of
 //! three layers is resident: the layer being written and its two neighbours, whose voxels
 //! the one-voxel halos of its blocks' ranges read.
@@ -13,6 +13,8 @@ use std::time::Instant;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{write_array, write_atomically, TrackedTemporary};
 use rayon::prelude::*;
+
+use crate::grid::{Coord, VoxelGrid};
 
 use super::format::{Quantization, StoreMeta, BRICK_SIDE, BRICK_VOXELS, LOD_VALUES, NO_RECORD};
 use super::StoreError;
@@ -121,11 +123,81 @@ pub fn convert_raw(
     out: &Path,
 ) -> Result<ConvertReport, StoreError> {
     validate(input, spec, options, out)?;
+    let mut meta = StoreMeta::for_dims(spec.dims);
+    meta.matrix = [
+        [spec.spacing[0], 0.0, 0.0],
+        [0.0, spec.spacing[1], 0.0],
+        [0.0, 0.0, spec.spacing[2]],
+    ];
+    meta.translation = spec.origin;
+    meta.source = format!(
+        "{} ({:?}, {:?} endian)",
+        input
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+        spec.dtype,
+        spec.endian
+    );
+    let open = || RawReader::open(input, spec);
+    let planned = planned_memory(spec.dims, spec.dtype);
+    write_store(meta, options, planned, open, out)
+}
+
+/// Converts the index box of `grid` that holds its data (its blocks' bounding box) into a
+/// brick store directory `out` (which must not exist); `name` names the source in errors
+/// and in the store's metadata.
+pub fn convert_grid(
+    grid: &dyn VoxelGrid,
+    name: &str,
+    options: &ConvertOptions,
+    out: &Path,
+) -> Result<ConvertReport, StoreError> {
+    let fail = |why: String| StoreError::new(Path::new(name), why);
+    let blocks = grid.block_origins().map_err(|e| fail(e.0))?;
+    if blocks.is_empty() {
+        return Err(fail("the grid holds no data to convert".into()));
+    }
+    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for b in &blocks {
+        for k in 0..3 {
+            lo[k] = lo[k].min(i64::from(b[k]));
+            hi[k] = hi[k].max(i64::from(b[k]) + BRICK_SIDE as i64);
+        }
+    }
+    let dims = std::array::from_fn(|k| (hi[k] - lo[k]) as u32);
+    validate_options(Path::new(name), dims, options, RawType::F32, out)?;
+    let mut meta = StoreMeta::for_dims(dims);
+    meta.index_origin = lo.map(|c| c as i32);
+    meta.matrix = grid.map().matrix;
+    meta.translation = grid.map().translation;
+    meta.source = name.to_string();
+    let origin = meta.index_origin;
+    let open = || {
+        Ok(GridPlanes {
+            grid,
+            name,
+            origin,
+            dims,
+            read: 0,
+        })
+    };
+    write_store(meta, options, planned_memory(dims, RawType::F32), open, out)
+}
+
+/// Finds the range when it is not given, bricks the source into a staging directory and
+/// renames it to `out`.
+fn write_store<S: PlaneSource>(
+    mut meta: StoreMeta,
+    options: &ConvertOptions,
+    planned_memory: u64,
+    open: impl Fn() -> Result<S, StoreError>,
+    out: &Path,
+) -> Result<ConvertReport, StoreError> {
     let t0 = Instant::now();
     let quantization = match options.range {
         Some([lo, hi]) => Quantization::spanning(lo, hi),
         None => {
-            let [lo, hi] = data_range(input, spec)?;
+            let [lo, hi] = data_range(&mut open()?, meta.dims)?;
             Quantization::spanning(lo, hi)
         }
     };
@@ -146,21 +218,10 @@ pub fn convert_raw(
         .map_err(io_error(parent))?;
     // Listed for the interrupt handler, which runs no destructors.
     let _tracked = TrackedTemporary::new(staging.path());
-    let mut meta = StoreMeta::for_dims(spec.dims);
-    meta.spacing = spec.spacing;
-    meta.origin = spec.origin;
     meta.background = options.background;
     meta.threshold = options.threshold;
     meta.quantization = quantization;
-    meta.source = format!(
-        "{} ({:?}, {:?} endian)",
-        input
-            .file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
-        spec.dtype,
-        spec.endian
-    );
-    brick_pass(input, spec, &mut meta, staging.path())?;
+    brick_pass(&mut open()?, &mut meta, staging.path())?;
     let json = serde_json::to_vec_pretty(&meta).expect("the metadata serializes");
     write_atomically(&staging.path().join("store.json"), |w| w.write_all(&json))
         .map_err(|e| StoreError::new(out, e.to_string()))?;
@@ -175,7 +236,7 @@ pub fn convert_raw(
     Ok(ConvertReport {
         meta,
         bytes_written,
-        planned_memory: planned_memory(spec.dims, spec.dtype),
+        planned_memory,
         range_s,
         brick_s: t1.elapsed().as_secs_f64(),
     })
@@ -203,6 +264,27 @@ fn validate(
     if !spec.origin.iter().all(|s| s.is_finite()) {
         return fail(format!("--origin {:?} must be finite", spec.origin));
     }
+    let voxels = spec.dims.iter().map(|&d| d as u64).product::<u64>();
+    let expected = voxels * spec.dtype.size() as u64;
+    let len = std::fs::metadata(input).map_err(io_error(input))?.len();
+    if len != expected {
+        return fail(format!(
+            "the file has {len} bytes, but --dims {}x{}x{} of {:?} need {expected}",
+            spec.dims[0], spec.dims[1], spec.dims[2], spec.dtype
+        ));
+    }
+    validate_options(input, spec.dims, options, spec.dtype, out)
+}
+
+/// Checks the options of a conversion of `dims` voxels read as `dtype` from `input`.
+fn validate_options(
+    input: &Path,
+    dims: [u32; 3],
+    options: &ConvertOptions,
+    dtype: RawType,
+    out: &Path,
+) -> Result<(), StoreError> {
+    let fail = |why: String| Err(StoreError::new(input, why));
     if !options.background.is_finite() || options.threshold.is_nan() || options.threshold < 0.0 {
         return fail(format!(
             "the background ({}) must be finite and the threshold ({}) finite and >= 0",
@@ -214,16 +296,7 @@ fn validate(
             return fail(format!("--range {lo},{hi} must be finite with min <= max"));
         }
     }
-    let voxels = spec.dims.iter().map(|&d| d as u64).product::<u64>();
-    let expected = voxels * spec.dtype.size() as u64;
-    let len = std::fs::metadata(input).map_err(io_error(input))?.len();
-    if len != expected {
-        return fail(format!(
-            "the file has {len} bytes, but --dims {}x{}x{} of {:?} need {expected}",
-            spec.dims[0], spec.dims[1], spec.dims[2], spec.dtype
-        ));
-    }
-    let need = planned_memory(spec.dims, spec.dtype);
+    let need = planned_memory(dims, dtype);
     if need > options.memory {
         return fail(format!(
             "converting needs {need} bytes resident (three layers of 8 planes, the tables), more than --memory {}",
@@ -237,6 +310,48 @@ fn validate(
         ));
     }
     Ok(())
+}
+
+/// A source of voxels read in order (x fastest, then y, then z), as f32.
+trait PlaneSource {
+    /// Fills `out` with the next `out.len()` voxels; non-finite values are errors.
+    fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError>;
+}
+
+/// The index box `origin .. origin + dims` of a grid, read plane after plane.
+struct GridPlanes<'a> {
+    grid: &'a dyn VoxelGrid,
+    name: &'a str,
+    origin: Coord,
+    dims: [u32; 3],
+    /// Voxels read so far (whole planes).
+    read: u64,
+}
+
+impl PlaneSource for GridPlanes<'_> {
+    fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError> {
+        let plane = self.dims[0] as usize * self.dims[1] as usize;
+        let z = (self.read / plane as u64) as i32;
+        let planes = out.len() / plane;
+        let origin = [self.origin[0], self.origin[1], self.origin[2] + z];
+        out.par_chunks_mut(plane).enumerate().for_each(|(k, p)| {
+            let at = [origin[0], origin[1], origin[2] + k as i32];
+            self.grid.read_box(at, [self.dims[0], self.dims[1], 1], p);
+        });
+        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
+            let xyz = [
+                origin[0] + (i % self.dims[0] as usize) as i32,
+                origin[1] + (i / self.dims[0] as usize % self.dims[1] as usize) as i32,
+                origin[2] + (i / plane) as i32,
+            ];
+            return Err(StoreError::new(
+                Path::new(self.name),
+                format!("voxel {xyz:?} is {}, not a finite value", out[i]),
+            ));
+        }
+        self.read += (planes * plane) as u64;
+        Ok(())
+    }
 }
 
 /// Reads voxels of the raw file in order, as f32.
@@ -260,8 +375,9 @@ impl<'a> RawReader<'a> {
             read: 0,
         })
     }
+}
 
-    /// Fills `out` with the next `out.len()` voxels; non-finite values are errors.
+impl PlaneSource for RawReader<'_> {
     fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError> {
         let size = self.spec.dtype.size();
         self.bytes.resize(out.len() * size, 0);
@@ -297,15 +413,16 @@ impl<'a> RawReader<'a> {
 }
 
 /// The smallest and largest voxel value of the file (first pass).
-fn data_range(input: &Path, spec: &RawSpec) -> Result<[f32; 2], StoreError> {
-    let mut reader = RawReader::open(input, spec)?;
-    let total = spec.dims.iter().map(|&d| d as u64).product::<u64>();
-    let mut buffer = vec![0f32; 1 << 20];
+fn data_range(source: &mut impl PlaneSource, dims: [u32; 3]) -> Result<[f32; 2], StoreError> {
+    let total = dims.iter().map(|&d| d as u64).product::<u64>();
+    let plane = dims[0] as usize * dims[1] as usize;
+    // Whole planes, about a million voxels at a time.
+    let mut buffer = vec![0f32; plane * (1usize << 20).div_ceil(plane)];
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut left = total;
     while left > 0 {
         let n = left.min(buffer.len() as u64) as usize;
-        reader.next(&mut buffer[..n])?;
+        source.next(&mut buffer[..n])?;
         for &v in &buffer[..n] {
             lo = lo.min(v);
             hi = hi.max(v);
@@ -353,15 +470,13 @@ impl Window<'_> {
 /// The second pass: reads layer after layer, writes the kept bricks, their levels of detail,
 /// the superchunk table and the ranges into `dir`; sets the counts in `meta`.
 fn brick_pass(
-    input: &Path,
-    spec: &RawSpec,
+    source: &mut impl PlaneSource,
     meta: &mut StoreMeta,
     dir: &Path,
 ) -> Result<(), StoreError> {
     let bricks = meta.bricks();
-    let [nx, ny, nz] = spec.dims.map(|d| d as usize);
+    let [nx, ny, nz] = meta.dims.map(|d| d as usize);
     let plane = nx * ny;
-    let mut reader = RawReader::open(input, spec)?;
     let bin_path = dir.join("bricks.bin");
     let mut bin = BufWriter::with_capacity(
         1 << 20,
@@ -385,7 +500,7 @@ fn brick_pass(
         let next = j + 1;
         if next < layers {
             let planes = (nz - next as usize * BRICK_SIDE).min(BRICK_SIDE);
-            reader.next(&mut raw[..planes * plane])?;
+            source.next(&mut raw[..planes * plane])?;
             window.layers.push(read_layer(window.meta, &raw, planes));
         }
         while window.first < j - 1 && !window.layers.is_empty() {

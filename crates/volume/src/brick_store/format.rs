@@ -11,8 +11,9 @@
 //!   every lookup in each 8^3 block reads (the block's voxels and a one-voxel halo), over
 //!   the bricks grown by one block on each side; the finest level of the range mips.
 //!
-//! A voxel's value is the background outside the dimensions and in dropped bricks, and
-//! `lo + code * step` (in f32) in kept ones.
+//! Store voxel `v` is index-space voxel `index_origin + v` of the source (a multiple of 8,
+//! so bricks are the source's 8^3 blocks). A voxel's value is the background outside the
+//! dimensions and in dropped bricks, and `lo + code * step` (in f32) in kept ones.
 
 use serde::{Deserialize, Serialize};
 
@@ -76,12 +77,14 @@ pub struct StoreMeta {
     pub format: String,
     /// [`STORE_VERSION`].
     pub version: u32,
-    /// Voxels along x, y, z; voxel `(0, 0, 0)` is the first.
+    /// Voxels along x, y, z.
     pub dims: [u32; 3],
-    /// World size of a voxel along x, y, z (index `i` sits at `origin + i * spacing`).
-    pub spacing: [f64; 3],
-    /// World position of voxel `(0, 0, 0)`'s centre.
-    pub origin: [f64; 3],
+    /// Index-space coordinate of the store's first voxel; multiples of 8.
+    pub index_origin: [i32; 3],
+    /// Index-to-world map, linear part (row-major): `world = matrix * ijk + translation`.
+    pub matrix: [[f64; 3]; 3],
+    /// Index-to-world map, translation (the world position of index `(0, 0, 0)`).
+    pub translation: [f64; 3],
     /// Value outside the dimensions and in dropped bricks.
     pub background: f32,
     /// Bricks whose decoded values all lie within this of the background were dropped.
@@ -149,19 +152,7 @@ mod tests {
 
     #[test]
     fn table_slots_are_a_bijection() {
-        let meta = StoreMeta {
-            format: STORE_FORMAT.into(),
-            version: STORE_VERSION,
-            dims: [300, 9, 140],
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
-            background: 0.0,
-            threshold: 0.0,
-            quantization: Quantization::spanning(0.0, 1.0),
-            kept_bricks: 0,
-            dropped_bricks: 0,
-            source: String::new(),
-        };
+        let meta = StoreMeta::for_dims([300, 9, 140]);
         let b = meta.bricks();
         let mut seen = vec![false; meta.table_len()];
         for z in 0..b[2] {

@@ -12,8 +12,11 @@ mod streamed;
 
 use std::path::{Path, PathBuf};
 
+use crate::grid::GridMap;
+
 pub use convert::{
-    convert_raw, planned_memory, ConvertOptions, ConvertReport, Endian, RawSpec, RawType,
+    convert_grid, convert_raw, planned_memory, ConvertOptions, ConvertReport, Endian, RawSpec,
+    RawType,
 };
 pub use format::{
     Quantization, StoreMeta, BRICK_BYTES, LOD_VALUES, STORE_FORMAT, STORE_VERSION,
@@ -42,14 +45,16 @@ impl StoreError {
 }
 
 impl StoreMeta {
-    /// Metadata of an empty store of `dims` voxels (unit spacing, background 0).
+    /// Metadata of an empty store of `dims` voxels (index space is world space, background
+    /// 0).
     pub fn for_dims(dims: [u32; 3]) -> StoreMeta {
         StoreMeta {
             format: STORE_FORMAT.to_string(),
             version: STORE_VERSION,
             dims,
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
+            index_origin: [0; 3],
+            matrix: GridMap::IDENTITY.matrix,
+            translation: [0.0; 3],
             background: 0.0,
             threshold: 0.0,
             quantization: Quantization { lo: 0.0, step: 0.0 },

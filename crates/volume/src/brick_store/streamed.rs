@@ -145,15 +145,8 @@ impl BrickStore {
         let capacity_bricks = (budget - table_bytes) / CACHED_BRICK_BYTES;
         let per_shard = NonZeroUsize::new((capacity_bricks as usize / SHARDS).max(1))
             .expect("at least one brick a shard");
-        let map = GridMap::new(
-            [
-                [meta.spacing[0], 0.0, 0.0],
-                [0.0, meta.spacing[1], 0.0],
-                [0.0, 0.0, meta.spacing[2]],
-            ],
-            meta.origin,
-        )
-        .map_err(|e| file_error(&dir.join("store.json"), e.0))?;
+        let map = GridMap::new(meta.matrix, meta.translation)
+            .map_err(|e| file_error(&dir.join("store.json"), e.0))?;
         Ok(BrickStore {
             dir: dir.to_path_buf(),
             meta,
@@ -188,14 +181,14 @@ impl BrickStore {
         &self.lods[at..at + LOD_VALUES]
     }
 
-    /// The record of the brick holding voxel `ijk`, or `None` outside the volume and for a
-    /// dropped brick.
-    pub fn record_of(&self, ijk: Coord) -> Option<u32> {
-        let inside = (0..3).all(|k| ijk[k] >= 0 && (ijk[k] as u32) < self.meta.dims[k]);
+    /// The record of the brick holding store voxel `v` (index voxel `index_origin + v`), or
+    /// `None` outside the volume and for a dropped brick.
+    pub fn record_of(&self, v: [i64; 3]) -> Option<u32> {
+        let inside = (0..3).all(|k| v[k] >= 0 && v[k] < i64::from(self.meta.dims[k]));
         if !inside {
             return None;
         }
-        let b = ijk.map(|c| c as usize / BRICK_SIDE);
+        let b = v.map(|c| c as usize / BRICK_SIDE);
         let r = self.table[self.meta.table_slot(b)];
         (r != NO_RECORD).then_some(r)
     }
@@ -282,8 +275,8 @@ fn read_meta(dir: &Path) -> Result<StoreMeta, StoreError> {
     }
     let q = meta.quantization;
     let sane = !meta.dims.contains(&0)
-        && meta.spacing.iter().all(|s| s.is_finite() && *s > 0.0)
-        && meta.origin.iter().all(|s| s.is_finite())
+        && meta.index_origin.iter().all(|c| c % BRICK_SIDE as i32 == 0)
+        && (0..3).all(|k| meta.index_origin[k] as i64 + meta.dims[k] as i64 <= i32::MAX as i64)
         && meta.background.is_finite()
         && q.lo.is_finite()
         && q.step.is_finite()
@@ -292,7 +285,7 @@ fn read_meta(dir: &Path) -> Result<StoreMeta, StoreError> {
     if !sane || meta.kept_bricks + meta.dropped_bricks != total {
         return Err(file_error(
             &path,
-            "impossible dimensions, spacing, quantization or brick counts",
+            "impossible dimensions, index origin, quantization or brick counts",
         ));
     }
     Ok(meta)
@@ -325,7 +318,7 @@ fn read_mips(dir: &Path, meta: &StoreMeta) -> Result<RangeMips, StoreError> {
     }
     let level0 = RangeLevel {
         side: BRICK_SIDE as u32,
-        lo: [-1; 3],
+        lo: meta.index_origin.map(|c| c / BRICK_SIDE as i32 - 1),
         dims: d.map(|v| v as u32),
         ranges,
     };
@@ -338,13 +331,15 @@ impl VoxelGrid for BrickStore {
     }
 
     fn voxel(&self, ijk: Coord) -> f32 {
-        let Some(record) = self.record_of(ijk) else {
+        let v: [i64; 3] =
+            std::array::from_fn(|k| i64::from(ijk[k]) - i64::from(self.meta.index_origin[k]));
+        let Some(record) = self.record_of(v) else {
             return self.meta.background;
         };
         let Some(brick) = self.brick(record) else {
             return self.meta.background;
         };
-        let l = ijk.map(|c| c as usize % BRICK_SIDE);
+        let l = v.map(|c| c as usize % BRICK_SIDE);
         self.meta
             .quantization
             .decode(brick[(l[2] * BRICK_SIDE + l[1]) * BRICK_SIDE + l[0]])
@@ -357,7 +352,9 @@ impl VoxelGrid for BrickStore {
             for y in 0..b[1] {
                 for x in 0..b[0] {
                     if self.table[self.meta.table_slot([x, y, z])] != NO_RECORD {
-                        out.push([x, y, z].map(|c| (c * BRICK_SIDE) as i32));
+                        let b = [x, y, z];
+                        let o = self.meta.index_origin;
+                        out.push(std::array::from_fn(|k| (b[k] * BRICK_SIDE) as i32 + o[k]));
                     }
                 }
             }
