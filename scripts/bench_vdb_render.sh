@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Times `hytrace render` against OpenVDB's `vdb_render` on the same OpenVDB grid at the same
-# image size (BENCHMARKS.md, "Rendering on the CPU"). Needs Debian's python3-openvdb and
+# image size (docs/bench-log.md, "Rendering on the CPU"). Needs Debian's python3-openvdb and
 # libopenvdb-tools, and a release build (`cargo build --release --bin hytrace`).
 #
 # The grid: a 128^3 fog sphere (radius 60 voxels, blended over its outer 20, rippled),

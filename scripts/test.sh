@@ -51,7 +51,12 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
+# Includes crates/trace/tests/readme_quickstarts.rs: the README's quickstarts, run as written.
 cargo test --workspace
+# The API documentation builds without warnings (broken or private intra-doc links).
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+# Relative links and #anchors of README.md, BENCHMARKS.md and docs/.
+python3 scripts/check_doc_links.py
 # The Embree backend (`--backend embree`): its own build of the tracer crate.
 cargo clippy -p hytrace-trace --features embree --all-targets -- -D warnings
 cargo test -p hytrace-trace --features embree

@@ -1,6 +1,6 @@
 """Independent emission-absorption reference for `hytrace render` (NumPy only).
 
-Rebuilds the camera rays from the documented convention (README, "Rendering") and
+Rebuilds the camera rays from the documented convention (docs/rendering.md, "Camera convention") and
 integrates, per pixel centre, the emission-absorption model
 
     L = integral of T(t) * sigma(t) * v(t) * e dt + T(inf) * background,

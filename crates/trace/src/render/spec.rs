@@ -1,6 +1,6 @@
 //! What a render needs besides geometry: camera, materials, lights, the optical properties
-//! of media and the render settings, as a scene file writes them (see the README's
-//! "Rendering" section).
+//! of media and the render settings, as a scene file writes them (see `docs/rendering.md`
+//! and `docs/scene-files.md`).
 
 use std::collections::BTreeMap;
 
