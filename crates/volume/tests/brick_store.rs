@@ -209,7 +209,7 @@ fn convert(
     let raw = dir.join(format!("{name}.raw"));
     write_raw(&raw, values, spec.dtype, spec.endian);
     let out = dir.join(format!("{name}.bricks"));
-    convert_raw(&raw, spec, options, &out).unwrap();
+    convert_raw(&raw, spec, options, &out, &|_, _| ()).unwrap();
     out
 }
 
@@ -321,7 +321,21 @@ fn a_grid_converted_from_memory_keeps_its_index_space_and_map() {
         .unwrap(),
     );
     let out = dir.path().join("sphere.bricks");
-    let report = convert_grid(&sphere, "sphere:13", &options(0.0, 0.0), &out).unwrap();
+    let seen = std::cell::Cell::new((0, 0));
+    let report = convert_grid(
+        &sphere,
+        "sphere:13",
+        &options(0.0, 0.0),
+        &out,
+        &|done, total| {
+            assert!(done > seen.get().0 && done <= total);
+            seen.set((done, total));
+        },
+    )
+    .unwrap();
+    // Both passes read every voxel once.
+    let voxels = report.meta.dims.iter().map(|&d| d as u64).product::<u64>();
+    assert_eq!(seen.get(), (2 * voxels, 2 * voxels));
     let store = BrickStore::open(&out, 16 << 20).unwrap();
     let meta = store.meta();
     assert_eq!(meta, &report.meta);
@@ -400,7 +414,7 @@ fn bad_raw_files_and_options_are_refused_naming_the_file() {
     write_raw(&raw, &values, RawType::F32, Endian::Little);
     let out = dir.path().join("v.bricks");
     let refuse = |spec: &RawSpec, options: &ConvertOptions, want: &str| {
-        let e = convert_raw(&raw, spec, options, &out)
+        let e = convert_raw(&raw, spec, options, &out, &|_, _| ())
             .unwrap_err()
             .to_string();
         assert!(e.contains("v.raw") && e.contains(want), "{e}");
@@ -450,7 +464,7 @@ fn bad_raw_files_and_options_are_refused_naming_the_file() {
     // An existing output is not overwritten.
     write_raw(&raw, &values, RawType::F32, Endian::Little);
     std::fs::create_dir(&out).unwrap();
-    let e = convert_raw(&raw, &good, &options(0.0, 0.0), &out).unwrap_err();
+    let e = convert_raw(&raw, &good, &options(0.0, 0.0), &out, &|_, _| ()).unwrap_err();
     assert!(e.to_string().contains("already exists"), "{e}");
 }
 

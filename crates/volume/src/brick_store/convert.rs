@@ -115,12 +115,14 @@ fn io_error(path: &Path) -> impl Fn(std::io::Error) -> StoreError + '_ {
 }
 
 /// Converts the raw file `input` into a brick store directory `out` (which must not exist),
-/// written through a staging directory renamed into place.
+/// written through a staging directory renamed into place. `progress` is called with the
+/// voxels read so far and the voxels both passes read.
 pub fn convert_raw(
     input: &Path,
     spec: &RawSpec,
     options: &ConvertOptions,
     out: &Path,
+    progress: &dyn Fn(u64, u64),
 ) -> Result<ConvertReport, StoreError> {
     validate(input, spec, options, out)?;
     let mut meta = StoreMeta::for_dims(spec.dims);
@@ -140,17 +142,18 @@ pub fn convert_raw(
     );
     let open = || RawReader::open(input, spec);
     let planned = planned_memory(spec.dims, spec.dtype);
-    write_store(meta, options, planned, open, out)
+    write_store(meta, options, planned, open, out, progress)
 }
 
 /// Converts the index box of `grid` that holds its data (its blocks' bounding box) into a
 /// brick store directory `out` (which must not exist); `name` names the source in errors
-/// and in the store's metadata.
+/// and in the store's metadata; `progress` as for [`convert_raw`].
 pub fn convert_grid(
     grid: &dyn VoxelGrid,
     name: &str,
     options: &ConvertOptions,
     out: &Path,
+    progress: &dyn Fn(u64, u64),
 ) -> Result<ConvertReport, StoreError> {
     let fail = |why: String| StoreError::new(Path::new(name), why);
     let blocks = grid.block_origins().map_err(|e| fail(e.0))?;
@@ -181,7 +184,8 @@ pub fn convert_grid(
             read: 0,
         })
     };
-    write_store(meta, options, planned_memory(dims, RawType::F32), open, out)
+    let planned = planned_memory(dims, RawType::F32);
+    write_store(meta, options, planned, open, out, progress)
 }
 
 /// Finds the range when it is not given, bricks the source into a staging directory and
@@ -192,7 +196,19 @@ fn write_store<S: PlaneSource>(
     planned_memory: u64,
     open: impl Fn() -> Result<S, StoreError>,
     out: &Path,
+    progress: &dyn Fn(u64, u64),
 ) -> Result<ConvertReport, StoreError> {
+    let voxels = meta.dims.iter().map(|&d| d as u64).product::<u64>();
+    let passes = if options.range.is_some() { 1 } else { 2 };
+    let done = std::cell::Cell::new(0u64);
+    let open = || {
+        Ok(Counted {
+            inner: open()?,
+            done: &done,
+            total: voxels * passes,
+            progress,
+        })
+    };
     let t0 = Instant::now();
     let quantization = match options.range {
         Some([lo, hi]) => Quantization::spanning(lo, hi),
@@ -316,6 +332,23 @@ fn validate_options(
 trait PlaneSource {
     /// Fills `out` with the next `out.len()` voxels; non-finite values are errors.
     fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError>;
+}
+
+/// A source that reports the voxels read over every pass.
+struct Counted<'a, S> {
+    inner: S,
+    done: &'a std::cell::Cell<u64>,
+    total: u64,
+    progress: &'a dyn Fn(u64, u64),
+}
+
+impl<S: PlaneSource> PlaneSource for Counted<'_, S> {
+    fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError> {
+        self.inner.next(out)?;
+        self.done.set(self.done.get() + out.len() as u64);
+        (self.progress)(self.done.get(), self.total);
+        Ok(())
+    }
 }
 
 /// The index box `origin .. origin + dims` of a grid, read plane after plane.
