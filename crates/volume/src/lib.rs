@@ -50,7 +50,10 @@ pub use procedural::{fog_box, fog_sphere};
 pub use procedural_spec::{is_procedural, procedural_grid};
 pub use ranges::{RangeLevel, RangeMips, ValueRange, MAX_RANGE_BLOCKS, RANGE_LEVELS};
 pub use rng::{pcg4d, Rng};
-pub use source::{open_volume, select_grid, world_bbox, GridSummary, NamedVolume, Volume};
+pub use source::{
+    open_volume, open_volume_with, select_grid, world_bbox, GridSummary, NamedVolume, Volume,
+    DEFAULT_STORE_BUDGET,
+};
 pub use transmittance::{
     transmittance, transmittance_batch, Collision, Estimate, Estimator, IndexTransmittance,
     Majorant, TransmittanceParams,

@@ -1,7 +1,12 @@
-//! Opening a volume by name: a NanoVDB file (`.nvdb`), an OpenVDB file (`.vdb`) or a
-//! procedural grid (`sphere:...`, `box:...`), as a list of grids with a common summary.
+//! Opening a volume by name: a NanoVDB file (`.nvdb`), an OpenVDB file (`.vdb`), a brick
+//! store directory (read through a cache with a memory budget) or a procedural grid
+//! (`sphere:...`, `box:...`), as a list of grids with a common summary.
 
+use std::borrow::Cow;
 use std::path::Path;
+
+use crate::brick_store::{is_brick_store, BrickStore, StoreMeta};
+use crate::ranges::RangeMips;
 
 use crate::dense::{DenseGrid, VolumeError};
 use crate::grid::{Coord, GridMap, VoxelGrid};
@@ -17,6 +22,8 @@ pub enum Volume {
     Vdb(Box<VdbGrid>),
     /// A scalar grid of a NanoVDB file.
     Nano(Box<NanoGrid>),
+    /// A brick store, read through its cache.
+    Store(Box<BrickStore>),
 }
 
 impl Volume {
@@ -26,6 +33,16 @@ impl Volume {
             Volume::Dense(_) => "procedural",
             Volume::Vdb(_) => "openvdb",
             Volume::Nano(_) => "nanovdb",
+            Volume::Store(_) => "brick-store",
+        }
+    }
+
+    /// The range mips of the grid's lookups: a brick store's own (read with it), else built
+    /// from the voxels.
+    pub fn range_mips(&self) -> Result<Cow<'_, RangeMips>, VolumeError> {
+        match self {
+            Volume::Store(s) => Ok(Cow::Borrowed(s.mips())),
+            other => Ok(Cow::Owned(RangeMips::build(other)?)),
         }
     }
 
@@ -34,6 +51,7 @@ impl Volume {
             Volume::Dense(g) => g.as_ref(),
             Volume::Vdb(g) => g.as_ref(),
             Volume::Nano(g) => g.as_ref(),
+            Volume::Store(g) => g.as_ref(),
         }
     }
 }
@@ -73,11 +91,14 @@ pub struct GridSummary {
     pub world_bbox: Option<[[f64; 3]; 2]>,
     /// Active voxels (tiles counted voxel by voxel).
     pub active_voxels: u64,
-    /// What the grid was read from: `nanovdb`, `openvdb` or `procedural`.
+    /// What the grid was read from: `nanovdb`, `openvdb`, `brick-store` or `procedural`.
     pub source_kind: &'static str,
     /// Bytes of the representation as read (the NanoVDB grid buffer, the in-memory
-    /// OpenVDB blocks, the dense array).
+    /// OpenVDB blocks, the dense array, a brick store's files on disk).
     pub source_bytes: u64,
+    /// A brick store's metadata (dimensions, bricks kept and dropped, quantization).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub brick_store: Option<StoreMeta>,
 }
 
 /// One grid of an opened volume: its summary and, for scalar grids, the grid itself.
@@ -122,11 +143,25 @@ fn dense_summary(name: &str, g: &DenseGrid) -> GridSummary {
         active_voxels: active,
         source_kind: "procedural",
         source_bytes: (g.values.len() * 4) as u64,
+        brick_store: None,
     }
 }
 
-/// Opens `spec`: a procedural grid or a volume file (by extension).
+/// Memory budget of a brick store opened by [`open_volume`]: 1 GiB.
+pub const DEFAULT_STORE_BUDGET: u64 = 1 << 30;
+
+/// Opens `spec`: a procedural grid, a brick store directory (with
+/// [`DEFAULT_STORE_BUDGET`]) or a volume file (by extension).
 pub fn open_volume(spec: &str) -> Result<Vec<NamedVolume>, VolumeError> {
+    open_volume_with(spec, DEFAULT_STORE_BUDGET)
+}
+
+/// Opens `spec` as [`open_volume`] does, a brick store holding at most `store_budget` bytes
+/// resident.
+pub fn open_volume_with(spec: &str, store_budget: u64) -> Result<Vec<NamedVolume>, VolumeError> {
+    if is_brick_store(Path::new(spec)) {
+        return open_store(Path::new(spec), store_budget);
+    }
     if is_procedural(spec) {
         let g = procedural_grid(spec)?;
         let summary = dense_summary("density", &g);
@@ -145,9 +180,36 @@ pub fn open_volume(spec: &str) -> Result<Vec<NamedVolume>, VolumeError> {
         "vdb" => open_vdb(path),
         "nvdb" => open_nanovdb(path),
         _ => Err(VolumeError(format!(
-            "{spec}: unknown volume format `{extension}` (expected .nvdb, .vdb, sphere:... or box:...)"
+            "{spec}: unknown volume format `{extension}` (expected .nvdb, .vdb, a brick store directory, sphere:... or box:...)"
         ))),
     }
+}
+
+fn open_store(path: &Path, budget: u64) -> Result<Vec<NamedVolume>, VolumeError> {
+    let store = BrickStore::open(path, budget).map_err(|e| VolumeError(e.to_string()))?;
+    let meta = store.meta().clone();
+    let lo = meta.index_origin;
+    let bbox = [lo, std::array::from_fn(|k| lo[k] + meta.dims[k] as i32 - 1)];
+    let bytes = std::fs::read_dir(path)
+        .map(|d| {
+            d.filter_map(|e| e.ok()?.metadata().ok())
+                .map(|m| m.len())
+                .sum()
+        })
+        .unwrap_or(0);
+    Ok(vec![NamedVolume {
+        summary: GridSummary {
+            name: "density".to_string(),
+            value_type: "u16 codes".to_string(),
+            index_bbox: Some(bbox),
+            world_bbox: Some(world_bbox(store.map(), bbox)),
+            active_voxels: meta.kept_bricks * crate::brick_store::BRICK_VOXELS as u64,
+            source_kind: "brick-store",
+            source_bytes: bytes,
+            brick_store: Some(meta),
+        },
+        grid: Ok(Volume::Store(Box::new(store))),
+    }])
 }
 
 fn open_nanovdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
@@ -164,6 +226,7 @@ fn open_nanovdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
                 active_voxels: g.active_voxel_count(),
                 source_kind: "nanovdb",
                 source_bytes: g.buffer_bytes(),
+                brick_store: None,
             },
             grid: match g.check_sampleable() {
                 Ok(()) => Ok(Volume::Nano(Box::new(g))),
@@ -193,6 +256,7 @@ fn open_vdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
                     active_voxels: info.active_voxel_count.unwrap_or(0),
                     source_kind: "openvdb",
                     source_bytes: bytes as u64,
+                    brick_store: None,
                 },
                 grid: grid.map(|g| Volume::Vdb(Box::new(g))).map_err(|e| e.0),
             }

@@ -9,9 +9,10 @@
 use std::path::{Path, PathBuf};
 
 use hytrace_volume::{
-    convert_grid, convert_raw, fog_sphere, planned_memory, transmittance_batch, BrickStore,
-    ConvertOptions, DenseGrid, Endian, Estimator, Filter, GridMap, Majorant, RangeMips, RawSpec,
-    RawType, Ray, Rng, TransmittanceParams, VoxelGrid, SUPERCHUNK_BRICKS,
+    convert_grid, convert_raw, fog_sphere, open_volume_with, planned_memory, select_grid,
+    transmittance_batch, BrickStore, ConvertOptions, DenseGrid, Endian, Estimator, Filter, GridMap,
+    Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TransmittanceParams, VoxelGrid,
+    SUPERCHUNK_BRICKS,
 };
 
 /// A coral-like field: thin shells around a few random centres, mostly empty space, with
@@ -368,6 +369,17 @@ fn a_grid_converted_from_memory_keeps_its_index_space_and_map() {
         }
     }
     assert_eq!(store.mips(), &RangeMips::build(&expected).unwrap());
+    // Opened by name as every volume command opens volumes.
+    let spec = out.to_str().unwrap();
+    let (summary, volume) =
+        select_grid(spec, open_volume_with(spec, 16 << 20).unwrap(), None).unwrap();
+    assert_eq!(summary.source_kind, "brick-store");
+    assert_eq!(summary.brick_store.as_ref(), Some(meta));
+    assert_eq!(summary.index_bbox.unwrap()[0], meta.index_origin);
+    assert!(
+        matches!(volume.range_mips().unwrap(), std::borrow::Cow::Borrowed(m) if m == store.mips())
+    );
+    assert_eq!(volume.voxel([0, 0, 0]), expected.voxel([0, 0, 0]));
     // World-space rays through the sheared map.
     let rays: Vec<Ray> = (0..200)
         .map(|k| {

@@ -19,7 +19,7 @@ pub use convert::{
     RawType,
 };
 pub use format::{
-    Quantization, StoreMeta, BRICK_BYTES, LOD_VALUES, STORE_FORMAT, STORE_VERSION,
+    Quantization, StoreMeta, BRICK_BYTES, BRICK_VOXELS, LOD_VALUES, STORE_FORMAT, STORE_VERSION,
     SUPERCHUNK_BRICKS,
 };
 pub use streamed::{is_brick_store, BrickStore, CacheStats};
