@@ -13,8 +13,9 @@ use super::{Gdml, GdmlOptions};
 const MAX_INCLUDE_DEPTH: usize = 16;
 /// Nesting of `<loop>` elements accepted.
 const MAX_LOOP_DEPTH: usize = 8;
-/// Iterations of all loops of a file together.
-const MAX_LOOP_ITERATIONS: usize = 10_000_000;
+/// Iterations of all loops of a file together: a million (about a second of reading; real
+/// detector files loop thousands of times). Ten million took 20 s and 3 GB.
+const MAX_LOOP_ITERATIONS: usize = 1_000_000;
 
 /// A GDML file that cannot be read as Geant4 would.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
