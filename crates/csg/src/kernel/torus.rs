@@ -65,7 +65,7 @@
 //! algorithm ports directly to a shader. A ray aimed at the torus costs about a dozen
 //! evaluations of `g` and `g'` (one square root and one division each) on average.
 
-use crate::real::{Real, V3};
+use crate::real::{two_product, two_sum, Real, V3};
 
 /// The search runs over the chord of a sphere `1 + SPHERE_MARGIN` times the torus's bounding
 /// sphere, on whose surface `g >= 2 r (rtor + r) SPHERE_MARGIN`, comfortably outside.
@@ -75,32 +75,6 @@ const SPHERE_MARGIN: f64 = 1.0 / 64.0;
 /// quadratically, or linearly with ratio 1/2 next to a tangency, or halves its bracket at
 /// least every second step).
 const MAX_ITERATIONS: usize = 64;
-
-/// `a * b` as an unevaluated sum `hi + lo` (Dekker's product with Veltkamp's split: exact in
-/// round-to-nearest binary arithmetic barring overflow, and needs no fused multiply-add).
-fn two_product<T: Real>(a: T, b: T) -> (T, T) {
-    // 2^ceil(p/2) + 1 for the p-bit significand of T.
-    let splitter = if T::EPSILON < T::from_f64(1e-10) {
-        T::from_f64(134_217_729.0)
-    } else {
-        T::from_f64(4097.0)
-    };
-    let split = |x: T| {
-        let k = splitter * x;
-        let hi = k - (k - x);
-        (hi, x - hi)
-    };
-    let ((ah, al), (bh, bl)) = (split(a), split(b));
-    let p = a * b;
-    (p, ((ah * bh - p) + ah * bl + al * bh) + al * bl)
-}
-
-/// `a + b` as an unevaluated sum `hi + lo` (Knuth's two-sum, exact).
-fn two_sum<T: Real>(a: T, b: T) -> (T, T) {
-    let s = a + b;
-    let bb = s - a;
-    (s, (a - (s - bb)) + (b - bb))
-}
 
 /// `o + d * t` with the product and the sum compensated: correctly rounded up to a few ulps
 /// of the result, whatever the cancellation between `o` and `d * t`.
