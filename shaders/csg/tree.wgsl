@@ -4,7 +4,7 @@
 // list_step, sdf, contains with seam and inside_by_probes) and of Leaf::step / Leaf::sdf
 // (crates/csg/src/kernel/mod.rs), operation by operation. The CPU's recursive `seam` is the
 // same postorder walk as `sdf` here, done in one pass with it.
-// #import foundry
+// #import generated/foundry
 // #import real
 // #import csg/spans
 // #import csg/primitive

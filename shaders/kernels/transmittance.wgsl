@@ -3,7 +3,7 @@
 // crates/trace/tests/gpu_volume.rs. Rays come in the grid's index space, moved near the
 // grid by the host (crates/trace/src/gpu/volume.rs), so only lengths of t matter here.
 // Every estimator is one call of `estimate_sample` (volume/estimate) per sample.
-// #import trace_records
+// #import generated/trace_records
 // #import volume/bindings
 // #import volume/rng
 // #import volume/estimate

@@ -14,7 +14,7 @@
 // Note for llvmpipe: it ends every loop of an invocation after 65535 iterations in all,
 // shared by all loops and by the 8 lanes it runs together; the parity fallback (one BVH
 // walk per crossing) is what comes nearest to that here.
-// #import foundry
+// #import generated/foundry
 // #import real
 // #import csg/spans
 // #import trace/bvh

@@ -232,12 +232,12 @@ mod tests {
     #[test]
     fn imports_come_first_and_once() {
         let src = compose("kernels/foundry_probe").unwrap();
-        let foundry = src.find("// ---- module foundry ----").unwrap();
+        let foundry = src.find("// ---- module generated/foundry ----").unwrap();
         let kernel = src
             .find("// ---- module kernels/foundry_probe ----")
             .unwrap();
         assert!(foundry < kernel);
-        assert_eq!(src.matches("// ---- module foundry ----").count(), 1);
+        assert_eq!(src.matches("// ---- module generated/foundry ----").count(), 1);
         assert!(compose("no_such_module")
             .unwrap_err()
             .contains("unknown module"));
