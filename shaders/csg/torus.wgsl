@@ -1,4 +1,4 @@
-// The torus primitive [rmin, rmax, rtor] around z: twin of hytrace_csg::kernel::ring
+// The torus primitive [rmin, rmax, rtor] around z: twin of hytrace_csg::kernel::torus_prim
 // (torus_spans, torus_prim_sdf) and of the f32 instantiation of hytrace_csg::kernel::torus
 // (torus_crossings with its convexity-split Newton search, torus_normal, torus_sdf). See
 // torus.rs for the algorithm and why it is robust for grazing rays. This port follows it

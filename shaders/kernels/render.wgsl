@@ -2,13 +2,13 @@
 // (one sample of a pixel, the geometry views or the shaded view), compared pixel by pixel
 // in crates/trace/tests/gpu_render.rs. The rest is split by concern as the Rust modules are:
 // render/camera (camera.rs), render/views (views.rs), render/integrator (integrator.rs),
-// render/media (volumes.rs), render/optics (optics.rs), and render/bindings (the kernel's
+// render/media (media.rs), render/optics (optics.rs), and render/bindings (the kernel's
 // records and the state of a sample). Each dispatch takes one sample of every pixel of a
 // batch; a sample is one loop whose every iteration traces one ray, the path's or a shadow
 // ray's, and then meets the media along it, so the scene traversal and the volume walk are
 // each inlined once. Shading, shadow rays, specular and media code is composed in only when
 // the scene calls for it. Media: emission-absorption (twin of
-// render::volumes::Media::emission_absorption) or scattering (delta tracking to a real
+// render::media::Media::emission_absorption) or scattering (delta tracking to a real
 // collision, ratio tracking for shadow rays: twins of Media::collision and
 // Media::transmittance).
 // #import generated/trace_records

@@ -1,5 +1,5 @@
 // The media along a ray, as the renderer needs them: twin of
-// crates/trace/src/render/volumes.rs (Media::emission_absorption, Media::collision and
+// crates/trace/src/render/media.rs (Media::emission_absorption, Media::collision and
 // Media::transmittance), up to RENDER_MAX_MEDIA placements whose grids share the volume
 // group's arrays. Scattering goes through the same volume/estimate module as the
 // transmittance kernel.

@@ -1,5 +1,5 @@
 // The bricked grids and their range mips as the volume kernels read them (uploaded by
-// crates/trace/src/gpu/volume.rs): group 0, bindings 0 to 4 (5 to 7 and 9 to 17 for split
+// crates/trace/src/gpu/transmittance.rs): group 0, bindings 0 to 4 (5 to 7 and 9 to 17 for split
 // arrays, 8 for texels in a 3D texture). Several grids share the arrays (the renderer's
 // media); each has its parameters, with its first entries in them.
 // #import generated/trace_records

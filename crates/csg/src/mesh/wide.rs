@@ -1,5 +1,5 @@
 //! The f32 CPU kernel's form of a mesh BVH: the mesh's binary BVH (the one the GPU
-//! traverses) collapsed into eight-wide nodes ([`crate::wide_tree`]), with leaves holding
+//! traverses) collapsed into eight-wide nodes ([`crate::wide_bvh`]), with leaves holding
 //! triangles in blocks of 4 stored lane by lane, tested all at once with `wide`'s `f32x4`.
 //! A leaf's last block repeats its first triangle in the unused lanes, a duplicate that can
 //! never win (same distance, same number).
@@ -15,7 +15,7 @@ use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
-use crate::wide_tree::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
+use crate::wide_bvh::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
 
 /// Triangles per block.
 const LANES: usize = 4;
@@ -41,7 +41,7 @@ pub(crate) struct WideBvh {
 impl WideBvh {
     /// The wide form of a mesh's binary BVH (`nodes`, root first, children of an inner node
     /// at `first, first + 1`) over its reordered triangles; an error when the binary tree
-    /// is deeper than [`crate::wide_tree::MAX_DEPTH`].
+    /// is deeper than [`crate::wide_bvh::MAX_DEPTH`].
     pub(crate) fn new(nodes: &[BinaryNode], triangles: &[[V3<f32>; 3]]) -> Result<Self, String> {
         let mut blocks = Vec::with_capacity(triangles.len() / 2 + 1);
         let tree = WideTree::new(nodes, |first, count| {

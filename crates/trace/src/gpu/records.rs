@@ -1,7 +1,8 @@
 //! The records the tracing kernels share with the CPU beyond the Foundry's own: prepared
 //! CSG trees and meshes ([`hytrace_csg::gpu_layout`]) and the tracer's placements, search
-//! lists, BVH nodes, rays and hits. `shaders/generated/trace_records.wgsl` is generated from them; a
-//! test fails when it is stale or when naga lays a struct out differently from Rust.
+//! lists, BVH nodes, rays and hits. `shaders/generated/trace_records.wgsl` is generated
+//! from them; a test fails when it is stale or when naga lays a struct out differently from
+//! Rust.
 
 use hytrace_csg::gpu_layout::{self, entry, RecordEntry};
 use hytrace_foundry::record;
