@@ -23,6 +23,7 @@ use std::path::Path;
 use hytrace_foundry::Foundry;
 
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_testkit::{Random, XorShift64};
 use hytrace_trace::scan::{scan, scan_transmittance, Precision, RayRow};
 use hytrace_trace::scene::{load_scene, obj_to_foundry, scene_from_toml};
 use hytrace_volume::{Estimator, TransmittanceParams};
@@ -283,13 +284,8 @@ fn mutated_scene_files_give_errors_never_panics() {
                 [[place]]\nsolid = \"b\"\ntranslate = [5, 0, 0]\n";
     scene_from_toml(seed, "seed.toml", Path::new(".")).unwrap();
     let alphabet = b"()[]{}=\"+-*!.,0123456789e \nabpstx#";
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = move || rng.next_u64();
     let (mut built, mut refused) = (0, 0);
     // 10^5 mutations: each builds or is refused with an error naming the file.
     for _ in 0..100_000 {

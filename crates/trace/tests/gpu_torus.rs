@@ -14,6 +14,7 @@ use bytemuck::cast_slice;
 use hytrace_csg::kernel::{primitive_sdf, primitive_spans};
 use hytrace_csg::V3;
 use hytrace_foundry::TypeCode;
+use hytrace_testkit::vec3::{add, dot, scale as mul, sub};
 use hytrace_trace::gpu::oneshot::{run, Buffer};
 use hytrace_trace::gpu::GpuContext;
 
@@ -87,18 +88,6 @@ impl Rng {
 
 type P = [f64; 3];
 
-fn add(a: P, b: P) -> P {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: P, b: P) -> P {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn mul(a: P, k: f64) -> P {
-    a.map(|x| x * k)
-}
-fn dot(a: P, b: P) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 fn unit(a: P) -> P {
     mul(a, 1.0 / dot(a, a).sqrt())
 }

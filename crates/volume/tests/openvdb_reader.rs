@@ -4,6 +4,7 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
+use hytrace_testkit::{Random, XorShift64};
 use hytrace_volume::{read_vdb, Coord, VdbFile, VdbGrid, VoxelGrid, BLOCK_SIDE};
 use serde_json::Value;
 
@@ -268,13 +269,8 @@ fn block_origins_cover_every_value_other_than_the_background_once() {
 #[test]
 fn read_box_matches_voxel_lookups() {
     let g = load("grids.vdb", "density");
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
-    let mut next = |n: u64| {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state % n
-    };
+    let mut rng = XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = |n: u64| rng.next_u64() % n;
     let mut boxes: Vec<(Coord, [u32; 3])> = (0..200)
         .map(|_| {
             let o = [0; 3].map(|_| next(300) as i32 - 270);

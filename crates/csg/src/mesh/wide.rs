@@ -343,7 +343,7 @@ pub(crate) fn to_f32<T: Real>(
 mod tests {
     use super::*;
 
-    use crate::test_common::{grid, Rng};
+    use crate::test_common::{grid, Random, Rng};
 
     /// A grid with integer heights, shifted by `offset`: every vertex, edge and box face is
     /// exact in f32, so rays aimed at them meet edge functions of exactly 0.
@@ -385,7 +385,7 @@ mod tests {
             let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
             let size = rng.range(0.01, 2.0);
             soup.push([0; 3].map(|_| {
-                let e = rng.unit();
+                let e = rng.direction();
                 [0, 1, 2].map(|k| c[k] + size * e[k])
             }));
         }
@@ -393,7 +393,7 @@ mod tests {
         let mut hits = 0;
         for _ in 0..20_000 {
             let o = [0; 3].map(|_| rng.range(-15.0, 15.0));
-            hits += both_agree(&mesh, o, rng.unit()) as usize;
+            hits += both_agree(&mesh, o, rng.direction()) as usize;
         }
         assert!(hits > 5_000, "only {hits} of 20000 rays hit the soup");
     }
@@ -428,7 +428,7 @@ mod tests {
                 ];
                 let d = [rng.range(-1.0, 1.0), 0.0, rng.range(-0.2, 0.2)];
                 both_agree(&mesh, o, d);
-                both_agree(&mesh, o, rng.unit());
+                both_agree(&mesh, o, rng.direction());
             }
         }
     }

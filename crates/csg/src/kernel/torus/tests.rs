@@ -1,74 +1,21 @@
 //! Tests of `torus.rs`.
 
 use super::*;
+use hytrace_testkit::vec3::{add, cross, dot, length as norm, scale as mul, sub};
+use hytrace_testkit::{Random, SplitMix64 as Rng};
 
 type P = [f64; 3];
 
-fn add(a: P, b: P) -> P {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: P, b: P) -> P {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn mul(a: P, k: f64) -> P {
-    [a[0] * k, a[1] * k, a[2] * k]
-}
-fn dot(a: P, b: P) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: P, b: P) -> P {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: P) -> f64 {
-    dot(a, a).sqrt()
-}
 fn unit(a: P) -> P {
     mul(a, 1.0 / norm(a))
 }
 
-/// SplitMix64: a seeded, dependency-free generator.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.unit()
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    /// Uniform on the unit sphere.
-    fn direction(&mut self) -> P {
-        loop {
-            let v = [
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-            ];
-            let l2 = dot(v, v);
-            if l2 > 1e-4 && l2 <= 1.0 {
-                return mul(v, 1.0 / l2.sqrt());
-            }
-        }
-    }
+/// The torus tests' draws, on the shared generator.
+trait TorusDraws: Random {
     /// A torus of random size (1e-2 to 1e2) and tube ratio (0.01 to 0.95): `(r, rtor)`.
     fn torus(&mut self) -> (f64, f64) {
         let rtor = 10f64.powf(self.range(-2.0, 2.0));
-        let ratio = if self.unit() < 0.3 {
+        let ratio = if self.uniform() < 0.3 {
             10f64.powf(self.range(-2.0, -1.0))
         } else {
             self.range(0.1, 0.95)
@@ -85,6 +32,8 @@ impl Rng {
         ]
     }
 }
+
+impl TorusDraws for Rng {}
 
 /// The point of the core circle at azimuth `phi` plus `rad` along the tube direction
 /// `(theta, phi)`, and that unit direction.
@@ -441,7 +390,7 @@ fn random_rays_near_torus() {
         .map(|_| {
             let (r, rtor) = rng.torus();
             let o = rng.near(r, rtor, 3.0);
-            let d = if rng.unit() < 0.7 {
+            let d = if rng.uniform() < 0.7 {
                 unit(sub(rng.near(r, rtor, 1.0), o))
             } else {
                 rng.direction()
@@ -460,7 +409,7 @@ fn origin_inside_tube() {
             let (r, rtor) = rng.torus();
             let phi = rng.range(0.0, 2.0 * std::f64::consts::PI);
             let theta = rng.range(0.0, 2.0 * std::f64::consts::PI);
-            let (o, _) = tube_point(rtor, phi, theta, 0.999 * r * rng.unit().sqrt());
+            let (o, _) = tube_point(rtor, phi, theta, 0.999 * r * rng.uniform().sqrt());
             Case::new(o, rng.direction(), r, rtor)
         })
         .collect();
@@ -474,10 +423,10 @@ fn rays_through_hole() {
         .map(|_| {
             let (r, rtor) = rng.torus();
             let phi = rng.range(0.0, 2.0 * std::f64::consts::PI);
-            let rho = 0.95 * (rtor - r) * rng.unit().sqrt();
+            let rho = 0.95 * (rtor - r) * rng.uniform().sqrt();
             let h = [rho * phi.cos(), rho * phi.sin(), rng.range(-r, r)];
             let mut d = rng.direction();
-            if rng.unit() < 0.5 {
+            if rng.uniform() < 0.5 {
                 // Nearly in the equatorial plane: through both sides of the tube.
                 d[2] *= 0.05;
                 d = unit(d);
@@ -496,8 +445,8 @@ fn axis_aligned_and_zero_components() {
         .map(|i| {
             let (r, rtor) = rng.torus();
             let mut o = rng.near(r, rtor, 2.0);
-            let k = rng.below(3) as usize;
-            let sign = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
+            let k = rng.below(3);
+            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
             let mut d = [0.0; 3];
             match i % 5 {
                 // Along a coordinate axis.
@@ -516,7 +465,7 @@ fn axis_aligned_and_zero_components() {
                 // Parallel to the z axis, on it or through the tube.
                 3 => {
                     d[2] = sign;
-                    let rho = if rng.unit() < 0.2 {
+                    let rho = if rng.uniform() < 0.2 {
                         0.0
                     } else {
                         rng.range(0.0, 1.2 * (rtor + r))
@@ -615,7 +564,7 @@ fn horn_torus_rtor_equals_r() {
         .map(|_| {
             let (_, rtor) = rng.torus();
             let o = rng.near(rtor, rtor, 3.0);
-            let d = if rng.unit() < 0.5 {
+            let d = if rng.uniform() < 0.5 {
                 unit(sub(rng.near(rtor, rtor, 1e-3), o))
             } else {
                 rng.direction()

@@ -1,6 +1,7 @@
 //! Tests of `expr.rs`.
 
 use super::*;
+use hytrace_testkit::{Random, XorShift64};
 use std::collections::HashMap;
 
 #[derive(Default)]
@@ -638,26 +639,6 @@ fn deep_nesting_fits_a_small_stack() {
     }
 }
 
-/// xorshift64: small, deterministic, no dependency.
-struct XorShift(u64);
-
-impl XorShift {
-    fn next(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        self.0 = x;
-        x
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
-        items[self.below(items.len())]
-    }
-}
-
 /// Evaluates and checks the invariants of any outcome.
 fn check(text: &str, s: &dyn Scope) -> Result<f64, ExprError> {
     let result = evaluate(text, s);
@@ -687,7 +668,7 @@ const VALID: &[&str] = &[
 #[test]
 fn fuzz_never_panics() {
     let s = scope();
-    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    let mut rng = XorShift64(0x9E37_79B9_7F4A_7C15);
     for text in VALID {
         assert!(
             check(text, &s).is_ok(),
@@ -698,7 +679,7 @@ fn fuzz_never_panics() {
     // 10^5 random byte strings, made valid UTF-8.
     for _ in 0..100_000 {
         let len = rng.below(40);
-        let bytes: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        let bytes: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
         check(&String::from_utf8_lossy(&bytes), &s).ok();
     }
     // Random token soups.
@@ -747,7 +728,7 @@ fn fuzz_never_panics() {
 
 /// A random expression, fully parenthesised, with the value f64 arithmetic gives it
 /// (`None` where the evaluator must refuse: division by zero, non-finite values).
-fn random_expression(rng: &mut XorShift, depth: usize) -> (String, Option<f64>) {
+fn random_expression(rng: &mut XorShift64, depth: usize) -> (String, Option<f64>) {
     const LITERALS: &[&str] = &[
         "0", "1", "2", "3", "7", "10", "0.5", "2.25", "0.125", "1e3", "1.5e-2", "100",
     ];
@@ -784,7 +765,7 @@ fn random_expression(rng: &mut XorShift, depth: usize) -> (String, Option<f64>) 
 
 #[test]
 fn random_expressions_match_f64_arithmetic() {
-    let mut rng = XorShift(0x2545_F491_4F6C_DD1D);
+    let mut rng = XorShift64(0x2545_F491_4F6C_DD1D);
     let (mut ok, mut refused) = (0, 0);
     for _ in 0..5000 {
         let (text, expected) = random_expression(&mut rng, 5);
