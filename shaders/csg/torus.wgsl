@@ -311,7 +311,7 @@ fn torus_line_crossings(l: TorusLine, lo: f32, hi: f32) -> TorusRoots {
 fn torus_crossings(origin: vec3<f32>, direction: vec3<f32>, r: f32, rtor: f32) -> TorusRoots {
     var none: TorusRoots;
     none.count = 0u;
-    let big = max(max(abs(direction.x), abs(direction.y)), abs(direction.z));
+    let big = v3_max_abs(direction);
     let scale = rtor + r;
     if !(big > 0.0 && is_finite_t(big) && r > 0.0 && rtor >= 0.0 && is_finite_t(scale)) {
         return none;

@@ -310,7 +310,7 @@ struct MeshRay {
 fn mesh_recentred(m: MeshRecord, o: vec3<f32>, d: vec3<f32>) -> MeshRay {
     let centre = (mesh_lo(m) + mesh_hi(m)) * 0.5;
     let offset = o - centre;
-    let far = max(max(abs(offset.x), abs(offset.y)), abs(offset.z));
+    let far = v3_max_abs(offset);
     let l2 = v3_dot(d, d);
     var shift = 0.0;
     if l2 != 0.0 && far > 4.0 * m.scale {

@@ -332,7 +332,7 @@ impl<T: Real> MeshPrim<T> {
         let d = ray.direction;
         let centre = (self.bounds[0] + self.bounds[1]) * T::HALF;
         let offset = ray.origin - centre;
-        let far = offset.x.abs().max(offset.y.abs()).max(offset.z.abs());
+        let far = offset.max_abs();
         let shift = if far > T::from_f64(4.0) * self.scale {
             -offset.dot(d) / d.length_squared()
         } else {

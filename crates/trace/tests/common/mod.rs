@@ -21,6 +21,27 @@ use hytrace_volume::{parse_nanovdb, NanoFile};
 #[allow(unused_imports)] // not every test file draws
 pub use hytrace_testkit::{Random, SplitMix64 as Rng};
 
+/// The volume crate's PCG stream (what the kernels draw from) as a [`Random`] source, for
+/// the GPU twin tests: uniform draws are its `next_f64`, other bits its `next_u32`.
+pub struct PcgDraws(pub hytrace_volume::Rng);
+
+impl PcgDraws {
+    /// Stream 0, sample 0 of `seed`.
+    pub fn new(seed: u32) -> Self {
+        PcgDraws(hytrace_volume::Rng::new(seed, 0, 0))
+    }
+}
+
+impl Random for PcgDraws {
+    fn next_u64(&mut self) -> u64 {
+        u64::from(self.0.next_u32())
+    }
+
+    fn uniform(&mut self) -> f64 {
+        self.0.next_f64()
+    }
+}
+
 /// The NanoVDB fixture `name` of `tests/data/nanovdb`, parsed.
 pub fn nanovdb_fixture(name: &str) -> NanoFile {
     let path = repo("tests/data/nanovdb").join(name);
