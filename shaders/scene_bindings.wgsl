@@ -1,6 +1,6 @@
 // The Foundry's eight arrays, group 0 of every kernel (binding order of
 // hytrace_foundry::gpu_arrays()).
-// #import foundry
+// #import generated/foundry
 
 @group(0) @binding(0) var<storage, read> solid: array<Solid>;
 @group(0) @binding(1) var<storage, read> prim: array<Prim>;

@@ -1,5 +1,5 @@
 // Affine transforms stored as matrix rows (row-major, acting on column vectors).
-// #import foundry
+// #import generated/foundry
 
 fn rows_apply_point(r0: vec4<f32>, r1: vec4<f32>, r2: vec4<f32>, p: vec3<f32>) -> vec3<f32> {
     let h = vec4<f32>(p, 1.0);

@@ -6,52 +6,28 @@
 // f32 atan2 (bit-identical there); sin and cos are correctly rounded (double-single
 // arithmetic), as glibc's are for |x| <= pi but not everywhere beyond. Another libm (or a
 // compiler contracting a * b + c into an fma) can differ in the last bit.
+// #import real
 // #import csg/spans
 // #import csg/quadric
 
 const CUT_PI: f32 = 3.14159265358979323846;
 
 // Double-single arithmetic: a value hi + lo held in two f32 (x = hi, y = lo), enough to round
-// sin and cos correctly in all but rare cases. Shader compilers may simplify (a + b) - a to b
-// (Mesa's NIR does; WGSL cannot mark operations exact), so the error terms use s * one - a
-// with `one` a run-time 1.0 no constant folding can see (cut_opaque_one). Products are split
-// on the bits (Dekker), so a contraction into fma leaves them exact.
-fn cut_opaque_one(x: f32) -> f32 {
-    return select(1.0, 2.0, (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u);
-}
-
-fn ds_two_sum(a: f32, b: f32, one: f32) -> vec2<f32> {
-    let s = a + b;
-    let bb = s * one - a;
-    return vec2<f32>(s, (a - (s - bb)) + (b - bb));
-}
-
+// sin and cos correctly in all but rare cases, built on real.wgsl's error-free two_sum and
+// two_product (see there why they stay exact under Mesa's rewrites and fma contraction);
+// quick_sum's error term uses the same run-time 1.0 (opaque_one).
 fn ds_quick_sum(a: f32, b: f32, one: f32) -> vec2<f32> {
     let s = a + b;
     return vec2<f32>(s, b - (s * one - a));
 }
 
-// The top 12 significant bits of x, rounded (the rest, x - hi, is exact in f32).
-fn ds_split_hi(x: f32) -> f32 {
-    return bitcast<f32>((bitcast<u32>(x) + 0x800u) & 0xfffff000u);
-}
-
-fn ds_two_prod(a: f32, b: f32) -> vec2<f32> {
-    let ah = ds_split_hi(a);
-    let al = a - ah;
-    let bh = ds_split_hi(b);
-    let bl = b - bh;
-    let p = a * b;
-    return vec2<f32>(p, ((ah * bh - p) + ah * bl + al * bh) + al * bl);
-}
-
 fn ds_add(a: vec2<f32>, b: vec2<f32>, one: f32) -> vec2<f32> {
-    let s = ds_two_sum(a.x, b.x, one);
+    let s = two_sum(a.x, b.x, one);
     return ds_quick_sum(s.x, s.y + (a.y + b.y), one);
 }
 
 fn ds_mul(a: vec2<f32>, b: vec2<f32>, one: f32) -> vec2<f32> {
-    let p = ds_two_prod(a.x, b.x);
+    let p = two_product(a.x, b.x);
     return ds_quick_sum(p.x, p.y + (a.x * b.y + a.y * b.x), one);
 }
 
@@ -59,10 +35,10 @@ fn ds_mul(a: vec2<f32>, b: vec2<f32>, one: f32) -> vec2<f32> {
 // accurate for |x| up to about 1e4: x is reduced by the nearest multiple k of pi/2 (split in
 // four parts, k times the first two exact), then Taylor series in double-single.
 fn cut_sincos(x: f32) -> vec2<f32> {
-    let one = cut_opaque_one(x);
+    let one = opaque_one(x);
     let k = round(x * 0.636619772367581343076);
-    var r = ds_two_sum(x - k * 1.5703125, -(k * 4.837512969970703125e-4), one);
-    r = ds_add(r, -ds_two_prod(k, 7.549790126404332e-08), one);
+    var r = two_sum(x - k * 1.5703125, -(k * 4.837512969970703125e-4), one);
+    r = ds_add(r, -two_product(k, 7.549790126404332e-08), one);
     r = ds_add(r, vec2<f32>(k * 1.7151245100058819e-15, 0.0), one);
     let z = ds_mul(r, r, one);
     // sin r = r + r z S(z), cos r = 1 + z C(z): Taylor coefficients as hi + lo.
@@ -111,7 +87,7 @@ fn cut_sincos(x: f32) -> vec2<f32> {
 fn cut_atan(v: f32) -> f32 {
     // Products that feed a sum are multiplied by a run-time 1: a compiler that contracts
     // the sum into an fma then still rounds the product first, as the CPU does.
-    let one = cut_opaque_one(v);
+    let one = opaque_one(v);
     let negative = sign_bit(v);
     var x = abs(v);
     if x >= 33554432.0 {
@@ -231,7 +207,7 @@ fn strictly_in_wedge(p: array<f32, 6>, x: f32, y: f32) -> bool {
 fn through_origin(o: vec3<f32>, d: vec3<f32>) -> bool {
     let c = vec3<f32>(o.y * d.z - o.z * d.y, o.z * d.x - o.x * d.z, o.x * d.y - o.y * d.x);
     let eps = 8.0 * 1.1920929e-7;
-    return vdot(c, c) <= eps * eps * vdot(o, o) * vdot(d, d);
+    return v3_dot(c, c) <= eps * eps * v3_dot(o, o) * v3_dot(d, d);
 }
 
 // Spans of a ray whose line passes through the edge of a cut (the wedge's axis, the cone's
@@ -277,11 +253,11 @@ fn phicut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
     c.count = 0u;
     for (var k = 0u; k < 2u; k += 1u) {
         let n = normals[k];
-        let dn = vdot(n, d);
+        let dn = v3_dot(n, d);
         if dn == 0.0 {
             continue;
         }
-        let t = -vdot(n, o) / dn;
+        let t = -v3_dot(n, o) / dn;
         let q = ray_at(o, d, t);
         // Only the half-plane on the phi side of the axis bounds the wedge.
         let side = sides[k];
@@ -305,14 +281,14 @@ fn phicut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
     if c.count == 0u {
         inside_before = in_wedge(p, o.x, o.y);
     } else {
-        inside_before = vdot(c.n[0], d) > 0.0;
+        inside_before = v3_dot(c.n[0], d) > 0.0;
     }
     return spans_from_toggles(inside_before, c);
 }
 
 fn phicut_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    let a = vdot(vec3<f32>(p[1], -p[0], 0.0), x);
-    let b = vdot(vec3<f32>(-p[3], p[2], 0.0), x);
+    let a = v3_dot(vec3<f32>(p[1], -p[0], 0.0), x);
+    let b = v3_dot(vec3<f32>(-p[3], p[2], 0.0), x);
     if wedge_width(p) <= CUT_PI {
         return max(a, b);
     }
@@ -321,7 +297,7 @@ fn phicut_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 
 // Polar angle of a direction, in [0, pi].
 fn polar(v: vec3<f32>) -> f32 {
-    return cut_atan2(vlength(vec3<f32>(v.x, v.y, 0.0)), v.z);
+    return cut_atan2(v3_length(vec3<f32>(v.x, v.y, 0.0)), v.z);
 }
 
 // Adds the crossing of a theta cone at t, with the direction of increasing theta (times
@@ -349,7 +325,7 @@ fn thetacut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
         let tol = CUT_ANGLE_TOLERANCE;
         let before = (p[0] <= 0.0 || back > p[0] + tol) && (p[1] >= CUT_PI || back < p[1] - tol);
         let after = (p[0] <= 0.0 || ahead > p[0] + tol) && (p[1] >= CUT_PI || ahead < p[1] - tol);
-        return through_edge(before, after, -vdot(o, d) / vdot(d, d), -d);
+        return through_edge(before, after, -v3_dot(o, d) / v3_dot(d, d), -d);
     }
     var c: Crossings;
     c.count = 0u;
@@ -407,7 +383,7 @@ fn thetacut_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn thetacut_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    let r = vlength(x);
+    let r = v3_length(x);
     let theta = polar(x);
     let half_pi = 0.5 * CUT_PI;
     var sdf = -INF;

@@ -1,7 +1,7 @@
 // Affine frames as the CPU's `hytrace_csg::kernel::Frame` applies them: a parent point p
 // maps to inverse * (p - origin); row k of a FrameRecord is (inverse[k], origin[k]).
 // Subtracting the origin first keeps f32 exact for solids far from the world origin.
-// #import trace_records
+// #import generated/trace_records
 
 fn frame_origin(f: FrameRecord) -> vec3<f32> {
     return vec3<f32>(f.rows[0].w, f.rows[1].w, f.rows[2].w);

@@ -1,13 +1,14 @@
 // Primitives bounded by planes: box, convex polyhedron (planes from csg_planes), half-space
 // and slab. Twin of hytrace_csg::kernel::planar.
+// #import real
 // #import csg/spans
 // #import csg/quadric
 // #import csg/planes
 
 // The span of the ray on the inner side (dot(n, x) <= dist) of one plane.
 fn plane_span(o: vec3<f32>, d: vec3<f32>, n: vec3<f32>, dist: f32) -> MaybeSpan {
-    let on = vdot(n, o);
-    let dn = vdot(n, d);
+    let on = v3_dot(n, o);
+    let dn = v3_dot(n, d);
     if dn == 0.0 {
         return MaybeSpan(on <= dist, span_everywhere());
     }
@@ -47,7 +48,7 @@ fn box_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 
 fn box_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
     let q = vec3<f32>(abs(x.x) - 0.5 * p[0], abs(x.y) - 0.5 * p[1], abs(x.z) - 0.5 * p[2]);
-    let outside = vlength(max(q, vec3<f32>(0.0)));
+    let outside = v3_length(max(q, vec3<f32>(0.0)));
     return min(max(max(q.x, q.y), q.z), 0.0) + outside;
 }
 
@@ -75,7 +76,7 @@ fn polyhedron_sdf(first: u32, count: u32, x: vec3<f32>) -> f32 {
     var sdf = -INF;
     for (var i = first; i < first + count; i += 1u) {
         let pl = csg_plane(i);
-        sdf = max(sdf, vdot(pl.xyz, x) - pl.w);
+        sdf = max(sdf, v3_dot(pl.xyz, x) - pl.w);
     }
     return sdf;
 }
@@ -90,13 +91,13 @@ fn halfspace_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn halfspace_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    return vdot(vec3<f32>(p[0], p[1], p[2]), x) - p[3];
+    return v3_dot(vec3<f32>(p[0], p[1], p[2]), x) - p[3];
 }
 
 // Slab [nx, ny, nz, -], [a, b]: a <= dot(n, x) <= b.
 fn slab_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
     let n = vec3<f32>(p[0], p[1], p[2]);
-    let s = slab_span(vdot(n, o), vdot(n, d), p[4], p[5], n);
+    let s = slab_span(v3_dot(n, o), v3_dot(n, d), p[4], p[5], n);
     if !s.ok {
         return spans_empty();
     }
@@ -104,6 +105,6 @@ fn slab_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn slab_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    let s = vdot(vec3<f32>(p[0], p[1], p[2]), x);
+    let s = v3_dot(vec3<f32>(p[0], p[1], p[2]), x);
     return max(p[4] - s, s - p[5]);
 }

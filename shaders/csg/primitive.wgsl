@@ -4,7 +4,7 @@
 //
 // Each typecode's branch sits in a `#if FAMILY` block so that a composer can leave out the
 // primitives a scene does not use; unknown codes give no spans and an infinite distance.
-// #import foundry
+// #import generated/foundry
 // #import csg/spans
 // #import csg/quadric
 // #import csg/planar

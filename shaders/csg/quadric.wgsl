@@ -1,22 +1,13 @@
 // Primitives bounded by quadrics of revolution around z, capped by z planes: sphere, z-cut
 // sphere, cylinder, tube, cone frustum, hyperboloid, paraboloid. Twin of
 // hytrace_csg::kernel::quadric, with the quadric helpers of hytrace_csg::kernel::spans
-// (quadratic_roots, quadric_spans) and the vector arithmetic of hytrace_csg::real::V3.
+// (quadratic_roots, quadric_spans); vector arithmetic is real.wgsl's (hytrace_csg::real::V3).
 //
 // Quadrics are written a t^2 + 2 b t + c in the ray parameter. Every expression keeps the
 // CPU's operand order (f32 arithmetic is not associative), and dot products and lengths
 // are written out term by term as the CPU sums them.
+// #import real
 // #import csg/spans
-
-// The CPU's V3::dot: x, then y, then z terms summed left to right.
-fn vdot(a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-
-// The CPU's V3::length.
-fn vlength(a: vec3<f32>) -> f32 {
-    return sqrt(vdot(a, a));
-}
 
 // Whether the sign bit of x is set (Rust's copysign looks at it, so -0.0 counts).
 fn sign_bit(x: f32) -> bool {
@@ -111,7 +102,7 @@ fn z_slab(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> MaybeSpan {
 // inside the side wall) and the z range.
 fn capped(dr: f32, z: f32, z1: f32, z2: f32) -> f32 {
     let dz = max(z1 - z, z - z2);
-    let outside = vlength(vec3<f32>(max(dr, 0.0), max(dz, 0.0), 0.0));
+    let outside = v3_length(vec3<f32>(max(dr, 0.0), max(dz, 0.0), 0.0));
     return min(max(dr, dz), 0.0) + outside;
 }
 
@@ -139,8 +130,8 @@ fn cylinder_wall(o: vec3<f32>, d: vec3<f32>, cx: f32, cy: f32, radius: f32) -> S
 // Sphere [cx, cy, cz, r].
 fn sphere_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
     let oc = o - vec3<f32>(p[0], p[1], p[2]);
-    let c = vdot(oc, oc) - p[3] * p[3];
-    var s = quadric_spans(vdot(d, d), vdot(oc, d), c);
+    let c = v3_dot(oc, oc) - p[3] * p[3];
+    var s = quadric_spans(v3_dot(d, d), v3_dot(oc, d), c);
     for (var i = 0u; i < s.len; i += 1u) {
         let t0 = s.items[i].t0;
         let t1 = s.items[i].t1;
@@ -155,7 +146,7 @@ fn sphere_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn sphere_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    return vlength(x - vec3<f32>(p[0], p[1], p[2])) - p[3];
+    return v3_length(x - vec3<f32>(p[0], p[1], p[2])) - p[3];
 }
 
 // Z-cut sphere [cx, cy, cz, r], [z1, z2] relative to the centre.
@@ -175,7 +166,7 @@ fn cylinder_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn cylinder_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    let rho = vlength(vec3<f32>(x.x - p[0], x.y - p[1], 0.0));
+    let rho = v3_length(vec3<f32>(x.x - p[0], x.y - p[1], 0.0));
     return capped(rho - p[3], x.z, p[4], p[5]);
 }
 
@@ -189,7 +180,7 @@ fn tube_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 }
 
 fn tube_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
-    let rho = vlength(vec3<f32>(x.x - p[0], x.y - p[1], 0.0));
+    let rho = v3_length(vec3<f32>(x.x - p[0], x.y - p[1], 0.0));
     return capped(max(rho - p[3], p[2] - rho), x.z, p[4], p[5]);
 }
 
@@ -222,7 +213,7 @@ fn cone_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
 fn cone_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
     let r1 = p[0];
     let z1 = p[1];
-    let rho = vlength(vec3<f32>(x.x, x.y, 0.0));
+    let rho = v3_length(vec3<f32>(x.x, x.y, 0.0));
     let ez = p[3] - z1;
     let er = p[2] - r1;
     let side = ((rho - r1) * ez - (x.z - z1) * er) / sqrt(ez * ez + er * er);

@@ -1,4 +1,4 @@
-// The torus primitive [rmin, rmax, rtor] around z: twin of hytrace_csg::kernel::ring
+// The torus primitive [rmin, rmax, rtor] around z: twin of hytrace_csg::kernel::torus_prim
 // (torus_spans, torus_prim_sdf) and of the f32 instantiation of hytrace_csg::kernel::torus
 // (torus_crossings with its convexity-split Newton search, torus_normal, torus_sdf). See
 // torus.rs for the algorithm and why it is robust for grazing rays. This port follows it
@@ -6,71 +6,26 @@
 // (crates/trace/tests/gpu_torus.rs). What that rests on:
 // * the error-free transformations and the Newton steps are written so that neither fma
 //   contraction nor a compiler's inexact algebraic rewrites ((a + b) - a -> b, which Mesa
-//   applies, also across inlined functions) change their values: see torus_two_product,
-//   torus_two_sum and torus_newton_step;
+//   applies, also across inlined functions) change their values: see two_product and
+//   two_sum (real.wgsl) and torus_newton_step;
 // * elsewhere a compiler that contracts a*b+c into an fma (lavapipe does not) changes last
 //   bits, which near a tangency can move a crossing or flip a chord of rounding-noise depth;
 // * cbrt is our own correctly rounded one (libm's cbrtf, which the CPU calls, is too in
 //   practice);
 // * "non-finite" means |x| >= INF (1e38), and divisions by a possibly-zero value are
 //   guarded with the CPU's outcome (WGSL may assume no inf or NaN).
+// #import real
 // #import csg/spans
 
 const TORUS_SPHERE_MARGIN: f32 = 0.015625;
 const TORUS_MAX_ITERATIONS: u32 = 64u;
 const TORUS_EPSILON: f32 = 1.1920929e-7;
 
-// a * b as hi + lo, exactly (Dekker's product). The split is done on the bits (the
-// significand rounded to its top 12 bits, the rest exact in x - hi), so no algebraic
-// simplification of a float expression can undo it, and all four partial products are
-// exact: a compiler that contracts one of them with the following addition into an fma
-// gets the same values. The rounded product p is used twice, so it is not fused away.
-struct TorusPair {
-    hi: f32,
-    lo: f32,
-}
-
-fn torus_split_hi(x: f32) -> f32 {
-    // Round to nearest at bit 12 of the significand: the carry may move into the exponent,
-    // which is the correctly rounded value.
-    return bitcast<f32>((bitcast<u32>(x) + 0x800u) & 0xfffff000u);
-}
-
-fn torus_two_product(a: f32, b: f32) -> TorusPair {
-    let ah = torus_split_hi(a);
-    let al = a - ah;
-    let bh = torus_split_hi(b);
-    let bl = b - bh;
-    let p = a * b;
-    return TorusPair(p, ((ah * bh - p) + ah * bl + al * bh) + al * bl);
-}
-
-// a + b as hi + lo, exactly (Knuth's two-sum). Shader compilers may simplify
-// (a + b) - a to b (Mesa's NIR does, for operations not marked exact, which WGSL cannot
-// mark), which would make lo zero. `one` must be 1.0 computed from run-time data that the
-// compiler cannot prove to be 1 (see torus_opaque_one): s * one - a matches no such rule
-// and equals the rounded s - a, also when fused into fma(s, one, -a).
-fn torus_two_sum(a: f32, b: f32, one: f32) -> TorusPair {
-    let s = a + b;
-    let bb = s * one - a;
-    return TorusPair(s, (a - (s - bb)) + (b - bb));
-}
-
-// 1.0, unless x is a NaN (then 2.0; a NaN origin gives no crossings either way): a run-time
-// 1 for torus_two_sum that no constant folding can see.
-fn torus_opaque_one(x: f32) -> f32 {
-    return select(1.0, 2.0, (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u);
-}
-
 // o + d * t, compensated (one coordinate).
 fn torus_exact_at1(o: f32, d: f32, t: f32, one: f32) -> f32 {
-    let p = torus_two_product(d, t);
-    let s = torus_two_sum(o, p.hi, one);
-    return s.hi + (s.lo + p.lo);
-}
-
-fn torus_dot(a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return a.x * b.x + a.y * b.y + a.z * b.z;
+    let p = two_product(d, t);
+    let s = two_sum(o, p.x, one);
+    return s.x + (s.y + p.y);
 }
 
 // Cube root of x >= 0, correctly rounded (as the CPU's cbrtf is in practice): pow, one
@@ -82,11 +37,11 @@ fn torus_cbrt(x: f32) -> f32 {
     }
     let y0 = pow(x, 1.0 / 3.0);
     let y = y0 - (y0 * y0 * y0 - x) / (3.0 * y0 * y0);
-    let yy = torus_two_product(y, y);
-    let a = torus_two_product(yy.hi, y);
-    let b = torus_two_product(yy.lo, y);
-    // x - a.hi is exact (the two are within a factor 2); the rest is small.
-    let r = (((x - a.hi) - b.hi) - a.lo) - b.lo;
+    let yy = two_product(y, y);
+    let a = two_product(yy.x, y);
+    let b = two_product(yy.y, y);
+    // x - a.x is exact (the two are within a factor 2); the rest is small.
+    let r = (((x - a.x) - b.x) - a.y) - b.y;
     // The root's offset from y, to first order.
     let delta = r / (3.0 * y * y);
     let up = bitcast<f32>(bitcast<u32>(y) + 1u);
@@ -115,7 +70,7 @@ struct TorusLine {
     small2: f32,
     m2: f32,
     tol: f32,
-    // A run-time 1 (torus_opaque_one) that keeps Newton steps rounded as on the CPU.
+    // A run-time 1 (opaque_one) that keeps Newton steps rounded as on the CPU.
     one: f32,
 }
 
@@ -356,29 +311,29 @@ fn torus_line_crossings(l: TorusLine, lo: f32, hi: f32) -> TorusRoots {
 fn torus_crossings(origin: vec3<f32>, direction: vec3<f32>, r: f32, rtor: f32) -> TorusRoots {
     var none: TorusRoots;
     none.count = 0u;
-    let big = max(max(abs(direction.x), abs(direction.y)), abs(direction.z));
+    let big = v3_max_abs(direction);
     let scale = rtor + r;
     if !(big > 0.0 && is_finite_t(big) && r > 0.0 && rtor >= 0.0 && is_finite_t(scale)) {
         return none;
     }
     let dn = direction / big;
-    let ln = sqrt(torus_dot(dn, dn));
+    let ln = sqrt(v3_dot(dn, dn));
     let u = dn * (1.0 / ln);
     let len = big * ln;
     // Closest approach to the centre, compensated (see torus.rs), then one projection.
-    var t_c = -torus_dot(origin, u) / len;
-    let one = torus_opaque_one(origin.x);
+    var t_c = -v3_dot(origin, u) / len;
+    let one = opaque_one(origin.x);
     var c = vec3<f32>(
         torus_exact_at1(origin.x, direction.x, t_c, one),
         torus_exact_at1(origin.y, direction.y, t_c, one),
         torus_exact_at1(origin.z, direction.z, t_c, one),
     );
-    let along = torus_dot(c, u);
+    let along = v3_dot(c, u);
     c = c - u * along;
     t_c = t_c - along / len;
     let inv_scale = 1.0 / scale;
     c = c * inv_scale;
-    let c2 = torus_dot(c, c);
+    let c2 = v3_dot(c, c);
     if !(c2 < 1.0 && is_finite_t(t_c)) {
         return none;
     }

@@ -4,7 +4,8 @@
 // list_step, sdf, contains with seam and inside_by_probes) and of Leaf::step / Leaf::sdf
 // (crates/csg/src/kernel/mod.rs), operation by operation. The CPU's recursive `seam` is the
 // same postorder walk as `sdf` here, done in one pass with it.
-// #import foundry
+// #import generated/foundry
+// #import real
 // #import csg/spans
 // #import csg/primitive
 // #import csg/tree_bindings
@@ -14,15 +15,6 @@
 // Tolerance for crossings near ray parameter t in a tree of size `scale`.
 fn csg_tolerance(scale: f32, t: f32) -> f32 {
     return SURFACE_TOLERANCE * (scale + abs(t));
-}
-
-// Dot product summed in the CPU's order (x, then y, then z).
-fn tree_dot(a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-
-fn tree_max_abs(v: vec3<f32>) -> f32 {
-    return max(max(abs(v.x), abs(v.y)), abs(v.z));
 }
 
 fn csg_is_operator(code: u32) -> bool {
@@ -77,16 +69,16 @@ fn csg_origin_shift(code: u32, p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> 
         if d2 != 0.0 {
             let s = -across / d2;
             let c = o - csg_leaf_centre(code, p);
-            if s * s * tree_dot(d, d) <= tree_dot(c, c) {
+            if s * s * v3_dot(d, d) <= v3_dot(c, c) {
                 return s;
             }
         }
     }
-    let len2 = tree_dot(d, d);
+    let len2 = v3_dot(d, d);
     if len2 == 0.0 {
         return 0.0;
     }
-    let shift = -tree_dot(o - csg_leaf_centre(code, p), d) / len2;
+    let shift = -v3_dot(o - csg_leaf_centre(code, p), d) / len2;
     if !is_finite_t(shift) {
         return 0.0;
     }
@@ -217,7 +209,7 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
         all = n.count;
         let lo = vec3<f32>(n.bounds[0], n.bounds[1], n.bounds[2]);
         let hi = vec3<f32>(n.bounds[3], n.bounds[4], n.bounds[5]);
-        let reach = max(tree_max_abs(o - lo), tree_max_abs(o - hi));
+        let reach = max(v3_max_abs(o - lo), v3_max_abs(o - hi));
         let pad = vec3<f32>(csg_tolerance(scale, abs(tmin) + reach));
         w = CsgWidenedRay(o + pad, o - pad, d);
         if !csg_meets_widened(w, n.bounds, tmin, INF) {
@@ -534,7 +526,7 @@ fn csg_inside_by_probes(tree: u32, x: vec3<f32>, near: f32) -> bool {
 // its surface outside, points of faces its union members share inside.
 fn csg_tree_contains(tree: u32, x: vec3<f32>) -> bool {
     let tr = csg_tree(tree);
-    let near = csg_tolerance(tr.scale, tree_max_abs(x));
+    let near = csg_tolerance(tr.scale, v3_max_abs(x));
     let w = csg_tree_walk(tree, x, near);
     if w.value < 0.0 {
         return true;

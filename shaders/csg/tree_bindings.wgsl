@@ -1,7 +1,7 @@
 // The arrays of prepared CSG trees (hytrace_csg::gpu_layout::tree::CsgArrays): group 1 holds
 // the polyhedron planes (binding 0, csg/planes), the slots and list members of every tree
 // (binding 1), the leaves' frames (binding 2) and one record per tree (binding 3).
-// #import trace_records
+// #import generated/trace_records
 // #import csg/planes
 
 // Read through `csg_node`, `csg_frame` and `csg_tree`; above the device's binding limit each

@@ -1,7 +1,7 @@
 // The scan kernels (hytrace scan --backend gpu), twins of CpuScene::<f32>::trace, compared
 // ray by ray in crates/trace/tests/gpu_scan.rs. Hierarchical scenes run `locate_rays`
 // (the navigator's locate of every origin) and then `scan`; flat scenes `scan` alone.
-// #import trace_records
+// #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
 

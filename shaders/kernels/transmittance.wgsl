@@ -1,9 +1,9 @@
 // Transmittance along rays through a bricked grid (hytrace volume transmittance --backend
 // gpu), the twin of hytrace_volume::transmittance_batch in f32, compared ray by ray in
 // crates/trace/tests/gpu_volume.rs. Rays come in the grid's index space, moved near the
-// grid by the host (crates/trace/src/gpu/volume.rs), so only lengths of t matter here.
+// grid by the host (crates/trace/src/gpu/transmittance.rs), so only lengths of t matter here.
 // Every estimator is one call of `estimate_sample` (volume/estimate) per sample.
-// #import trace_records
+// #import generated/trace_records
 // #import volume/bindings
 // #import volume/rng
 // #import volume/estimate

@@ -14,21 +14,14 @@
 // Note for llvmpipe: it ends every loop of an invocation after 65535 iterations in all,
 // shared by all loops and by the 8 lanes it runs together; the parity fallback (one BVH
 // walk per crossing) is what comes nearest to that here.
-// #import foundry
+// #import generated/foundry
+// #import real
 // #import csg/spans
 // #import trace/bvh
 // #import mesh/bindings
 
 // One stack slot per BVH level below the root, plus one (the CPU's stack size).
 const MESH_STACK: u32 = MESH_MAX_BVH_DEPTH + 1u;
-
-fn mesh_dot(a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-
-fn mesh_cross(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
-    return vec3<f32>(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
-}
 
 fn mesh_lo(m: MeshRecord) -> vec3<f32> {
     return vec3<f32>(m.lo[0], m.lo[1], m.lo[2]);
@@ -317,11 +310,11 @@ struct MeshRay {
 fn mesh_recentred(m: MeshRecord, o: vec3<f32>, d: vec3<f32>) -> MeshRay {
     let centre = (mesh_lo(m) + mesh_hi(m)) * 0.5;
     let offset = o - centre;
-    let far = max(max(abs(offset.x), abs(offset.y)), abs(offset.z));
-    let l2 = mesh_dot(d, d);
+    let far = v3_max_abs(offset);
+    let l2 = v3_dot(d, d);
     var shift = 0.0;
     if l2 != 0.0 && far > 4.0 * m.scale {
-        shift = -mesh_dot(offset, d) / l2;
+        shift = -v3_dot(offset, d) / l2;
         if !is_finite_t(shift) {
             shift = 0.0;
         }
@@ -477,8 +470,8 @@ fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step
     }
     let tri = mesh_triangle(m.triangle_offset + w.best_index);
     let v0 = tri.v[0].xyz;
-    let normal = mesh_cross(tri.v[1].xyz - v0, tri.v[2].xyz - v0);
-    return Step(w.best_t + moved.shift, normal, mesh_dot(normal, d) > 0.0);
+    let normal = v3_cross(tri.v[1].xyz - v0, tri.v[2].xyz - v0);
+    return Step(w.best_t + moved.shift, normal, v3_dot(normal, d) > 0.0);
 }
 
 // Whether point x of the solid's frame is inside mesh `mesh` (parity of the distinct

@@ -1,7 +1,7 @@
 // The tracer's scene arrays, group 1 bindings 7-13 (bindings 0-3 hold the CSG trees,
 // shaders/csg/tree_bindings.wgsl, and 4-6 the meshes, shaders/mesh/bindings.wgsl). Filled
 // by hytrace_trace::cpu::gpu_export from the prepared f32 scene.
-// #import trace_records
+// #import generated/trace_records
 
 // Each array is read through its accessor; above the device's binding limit it is split over
 // its binding and three more (35 to 55, in the order below).

@@ -4,7 +4,7 @@
 // visit_ray calls a visitor on each item; WGSL has no closures, so the walk is an iterator:
 // `bvh_next` returns the next item the CPU would visit given the limit the visitor has set
 // so far (the nearest crossing found), and the caller tests the item and moves the limit.
-// #import foundry
+// #import generated/foundry
 // #import csg/spans
 // #import trace/bindings
 

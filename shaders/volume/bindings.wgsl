@@ -1,8 +1,8 @@
 // The bricked grids and their range mips as the volume kernels read them (uploaded by
-// crates/trace/src/gpu/volume.rs): group 0, bindings 0 to 4 (5 to 7 and 9 to 17 for split
+// crates/trace/src/gpu/transmittance.rs): group 0, bindings 0 to 4 (5 to 7 and 9 to 17 for split
 // arrays, 8 for texels in a 3D texture). Several grids share the arrays (the renderer's
 // media); each has its parameters, with its first entries in them.
-// #import trace_records
+// #import generated/trace_records
 
 @group(0) @binding(0) var<storage, read> volume_params: array<VolumeParams>;
 // The arrays below grow with the grids: each is read through its accessor and, above the

@@ -6,7 +6,7 @@
 // One loop over the segments of the walk and, inside each, one loop over lookups serves
 // every estimator, so the walk, the cell walk and the voxel fetch each have one call site
 // (drivers inline every call).
-// #import trace_records
+// #import generated/trace_records
 // #import volume/bindings
 // #import volume/rng
 // #import volume/grid

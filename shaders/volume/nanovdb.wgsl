@@ -8,6 +8,7 @@
 // (every node inside the buffer, no repeated root keys) of at most 2^32 bytes, so the low
 // word of each 64-bit offset is the offset modulo 2^32 and `node + low word` is the
 // child's byte position.
+// #import real
 // #import volume/bindings
 
 // Grid header: its size (the tree header follows) and the value type's offset.
@@ -126,9 +127,9 @@ fn nanovdb_leaf(leaf: u32, ijk: vec3<i32>, background: f32) -> f32 {
     let minimum = bitcast<f32>(nanovdb_word(leaf + NANOVDB_LEAF_MINIMUM));
     let quantum = bitcast<f32>(nanovdb_word(leaf + NANOVDB_LEAF_QUANTUM));
     // The product times a run-time 1 (2 only for a NaN quantum, whose result is NaN anyway)
-    // that no constant folding can see, as in csg/cuts.wgsl: a compiler that contracts the
-    // sum into an fma still rounds the product first, as the CPU does.
-    let one = select(1.0, 2.0, (bitcast<u32>(quantum) & 0x7fffffffu) > 0x7f800000u);
+    // that no constant folding can see (real.wgsl's opaque_one): a compiler that contracts
+    // the sum into an fma still rounds the product first, as the CPU does.
+    let one = opaque_one(quantum);
     return (f32(code) * quantum) * one + minimum;
 }
 

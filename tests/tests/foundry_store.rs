@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use hytrace_foundry::layout::Record;
 use hytrace_foundry::{file_names, Foundry, Node, Prim, Transform64};
+use hytrace_testkit::{Random, SplitMix64};
 use hytrace_tests::{oracle_python, run_python};
 use hytrace_trace::scene::default_scene;
 
@@ -325,26 +326,6 @@ fn double_precision_copies_must_round_to_the_gpu_values() {
     );
 }
 
-/// Deterministic pseudo-random numbers (SplitMix64).
-fn splitmix(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
-/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
-fn fuzz_cases(default: usize) -> usize {
-    match std::env::var("HYTRACE_FUZZ_CASES") {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
-        Err(_) => default,
-    }
-}
-
 #[test]
 fn random_corruption_never_panics() {
     let (_tmp, dir, f) = saved_default();
@@ -353,25 +334,25 @@ fn random_corruption_never_panics() {
         .iter()
         .map(|n| std::fs::read(dir.join(n)).unwrap())
         .collect();
-    let mut state = 42u64;
+    let mut rng = SplitMix64(42);
     let (mut rejected, mut accepted) = (0, 0);
-    let cases = fuzz_cases(600);
+    let cases = hytrace_testkit::fuzz_cases(600);
     for _ in 0..cases {
-        let k = (splitmix(&mut state) % files.len() as u64) as usize;
+        let k = (rng.next_u64() % files.len() as u64) as usize;
         let mut bytes = originals[k].clone();
-        match splitmix(&mut state) % 3 {
-            0 => bytes.truncate((splitmix(&mut state) % (bytes.len() as u64 + 1)) as usize),
+        match rng.next_u64() % 3 {
+            0 => bytes.truncate((rng.next_u64() % (bytes.len() as u64 + 1)) as usize),
             1 => {
-                for _ in 0..1 + splitmix(&mut state) % 4 {
-                    let at = (splitmix(&mut state) % bytes.len().max(1) as u64) as usize;
+                for _ in 0..1 + rng.next_u64() % 4 {
+                    let at = (rng.next_u64() % bytes.len().max(1) as u64) as usize;
                     if let Some(b) = bytes.get_mut(at) {
-                        *b ^= 1 << (splitmix(&mut state) % 8);
+                        *b ^= 1 << (rng.next_u64() % 8);
                     }
                 }
             }
             _ => {
-                let at = (splitmix(&mut state) % (bytes.len() as u64 + 1)) as usize;
-                bytes.insert(at, splitmix(&mut state) as u8);
+                let at = (rng.next_u64() % (bytes.len() as u64 + 1)) as usize;
+                bytes.insert(at, rng.next_u64() as u8);
             }
         }
         std::fs::write(dir.join(&files[k]), &bytes).unwrap();

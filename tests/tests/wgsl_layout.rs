@@ -1,7 +1,7 @@
-//! The generated WGSL files (`shaders/foundry.wgsl` from the Foundry's records,
-//! `shaders/trace_records.wgsl` from the tracers') are current, valid, and lay out every
-//! shared struct exactly as Rust does (naga computes WGSL's layout independently of our
-//! generators).
+//! The generated WGSL files (`shaders/generated/foundry.wgsl` from the Foundry's records,
+//! `shaders/generated/trace_records.wgsl` from the tracers') are current, valid, and lay
+//! out every shared struct exactly as Rust does (naga computes WGSL's layout independently
+//! of our generators).
 
 use std::path::PathBuf;
 

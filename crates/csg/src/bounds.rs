@@ -242,6 +242,7 @@ pub fn transform_bounds(b: &Aabb, t: &Transform64) -> Aabb {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hytrace_testkit::{Random, XorShift64};
 
     /// The reference: every point where three planes meet that lies inside all of them.
     fn triple_meets(planes: &[[f64; 4]], tol: f64) -> Vec<[f64; 3]> {
@@ -287,13 +288,8 @@ mod tests {
 
     #[test]
     fn face_clipping_finds_the_vertices_three_plane_meets_find() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = XorShift64(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.uniform();
         for trial in 0..20 {
             // Planes tangent to a sphere of radius 10 about (3, -2, 5), in a cube of side 24.
             let mut planes: Vec<[f64; 4]> = (0..6)

@@ -21,7 +21,7 @@ use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle;
 use obvhs::{Boundable, BvhBuildParams};
 
-use crate::wide_tree::MAX_DEPTH as MAX_BVH_DEPTH;
+use crate::wide_bvh::MAX_DEPTH as MAX_BVH_DEPTH;
 
 /// Boxes that coincide exactly beyond this many make PLOC chain them; such inputs go
 /// straight to the median split.
@@ -55,7 +55,7 @@ pub(crate) fn binary_tree_depth(node: impl Fn(usize) -> Option<Option<usize>>) -
     deepest
 }
 
-/// A BVH over `boxes` at most [`crate::wide_tree::MAX_DEPTH`] deep (what the traversals'
+/// A BVH over `boxes` at most [`crate::wide_bvh::MAX_DEPTH`] deep (what the traversals'
 /// fixed stacks, CPU and GPU, accept): obvhs' build with `params`, or the
 /// median split where many boxes coincide or the PLOC tree is too deep.
 pub fn shallow_bvh2(boxes: &[Aabb], params: BvhBuildParams) -> Bvh2 {

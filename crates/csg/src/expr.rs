@@ -527,6 +527,7 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hytrace_testkit::{Random, XorShift64};
 
     #[test]
     fn precedence_and_methods_build_the_same_shape_as_the_builder() {
@@ -666,7 +667,7 @@ mod tests {
             "torus(0,1,5) + phicut(0, 90)*thetacut(10,80)",
         ];
         let alphabet = b"()+-*!.,0123456789e pi";
-        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut rng = XorShift64(0x9e3779b97f4a7c15);
         for s in seeds {
             for end in 0..=s.len() {
                 let _ = parse_shape(&s[..end]);
@@ -674,9 +675,7 @@ mod tests {
             for _ in 0..33_400 {
                 let mut bytes = s.as_bytes().to_vec();
                 for _ in 0..3 {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
+                    let state = rng.next_u64();
                     let i = (state % bytes.len() as u64) as usize;
                     bytes[i] = alphabet[(state >> 32) as usize % alphabet.len()];
                 }

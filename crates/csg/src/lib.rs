@@ -18,11 +18,11 @@ pub mod mesh;
 mod prepared;
 mod prim_tree;
 mod real;
+mod serialize;
 mod shape;
 mod solid_store;
 pub mod tessellate;
-mod tree;
-pub mod wide_tree;
+pub mod wide_bvh;
 
 /// Random numbers and meshes shared by the unit tests and the integration tests.
 #[cfg(test)]
@@ -38,9 +38,9 @@ pub use prim_tree::{
     ray_bounds_entry, ray_bounds_span, ray_meets_bounds, Bounds, PrimTree, SlabRay,
 };
 pub use real::{Ray, Real, V3};
+pub use serialize::{to_tree, to_tree_with, TreeOptions, LIST_MIN_MEMBERS};
 pub use shape::{
     box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
     theta_cut, torus, tube, zsphere, CsgError, Primitive, Shape, MAX_POLYHEDRON_PLANES,
 };
 pub use solid_store::add_geometry;
-pub use tree::{to_tree, to_tree_with, TreeOptions, LIST_MIN_MEMBERS};

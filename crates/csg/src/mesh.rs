@@ -43,7 +43,7 @@ use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
-use crate::wide_tree::ray_f32;
+use crate::wide_bvh::ray_f32;
 
 mod wide;
 
@@ -111,7 +111,7 @@ pub(crate) struct MeshNode<T> {
 
 /// Deepest mesh BVH the traversal's fixed stack accepts (PLOC trees over a million
 /// triangles stay far below it).
-pub(crate) const MAX_BVH_DEPTH: usize = crate::wide_tree::MAX_DEPTH;
+pub(crate) const MAX_BVH_DEPTH: usize = crate::wide_bvh::MAX_DEPTH;
 
 /// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
 /// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
@@ -332,7 +332,7 @@ impl<T: Real> MeshPrim<T> {
         let d = ray.direction;
         let centre = (self.bounds[0] + self.bounds[1]) * T::HALF;
         let offset = ray.origin - centre;
-        let far = offset.x.abs().max(offset.y.abs()).max(offset.z.abs());
+        let far = offset.max_abs();
         let shift = if far > T::from_f64(4.0) * self.scale {
             -offset.dot(d) / d.length_squared()
         } else {

@@ -1,5 +1,6 @@
-//! The floating-point types the intersection kernels are generic over (f32 and f64), and a
-//! small 3-vector over them.
+//! The floating-point types the intersection kernels are generic over (f32 and f64), a
+//! small 3-vector over them, and error-free products and sums. The WGSL twin is
+//! `shaders/real.wgsl`.
 
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
@@ -133,6 +134,36 @@ macro_rules! impl_real {
 // far below Geant4's 1e-9 mm at metre scales.
 impl_real!(f32, 2.0e-6);
 impl_real!(f64, 1.0e-11);
+
+/// `a * b` as an unevaluated sum `hi + lo` (Dekker's product with Veltkamp's split: exact in
+/// round-to-nearest binary arithmetic barring overflow, and needs no fused multiply-add).
+pub fn two_product<T: Real>(a: T, b: T) -> (T, T) {
+    // 2^ceil(p/2) + 1 for the p-bit significand of T.
+    let splitter = if T::EPSILON < T::from_f64(1e-10) {
+        T::from_f64(134_217_729.0)
+    } else {
+        T::from_f64(4097.0)
+    };
+    let split = |x: T| {
+        let k = splitter * x;
+        let hi = k - (k - x);
+        (hi, x - hi)
+    };
+    let ((ah, al), (bh, bl)) = (split(a), split(b));
+    let p = a * b;
+    (p, ((ah * bh - p) + ah * bl + al * bh) + al * bl)
+}
+
+/// `a + b` as an unevaluated sum `hi + lo` (Knuth's two-sum, exact).
+///
+/// The WGSL twins (`shaders/real.wgsl`) split products on the bits and take a run-time 1
+/// that keeps shader compilers from simplifying the error terms away; their values are the
+/// same.
+pub fn two_sum<T: Real>(a: T, b: T) -> (T, T) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
 
 /// A 3-vector of [`Real`]s.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]

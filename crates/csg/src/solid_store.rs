@@ -4,8 +4,8 @@
 use hytrace_foundry::{Foundry, Triangle};
 
 use crate::geant4::G4Geometry;
+use crate::serialize::to_tree;
 use crate::shape::CsgError;
-use crate::tree::to_tree;
 
 /// Appends `geometry` as a new Foundry solid named `name`; returns its index. `identity`
 /// is stored in the prim and the solid (e.g. the source solid's index).

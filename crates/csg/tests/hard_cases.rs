@@ -9,15 +9,8 @@ use hytrace_csg::{
 };
 
 mod common;
-use common::Rng;
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
+use common::{Random, Rng};
+use hytrace_testkit::vec3::{dot, sub};
 
 /// Rounds to what an f32 rays file can hold, so both precisions see the same ray.
 fn f32_exact(v: [f64; 3]) -> [f64; 3] {
@@ -125,7 +118,7 @@ fn far_from_origin_solids_placed_20_m_out() {
     for i in 0..4000 {
         let which = i % 2;
         let centre = if which == 0 { c } else { bc };
-        let dir_out = rng.unit();
+        let dir_out = rng.direction();
         let dist = rng.range(150.0, 600.0);
         let o = f32_exact([
             centre[0] + dist * dir_out[0],
@@ -236,11 +229,11 @@ fn on_surface_case<T: Real>() {
     for _ in 0..2000 {
         // A point on the sphere, rays inward (must exit at the far side, no self-hit) and
         // outward (must miss).
-        let n = rng.unit();
+        let n = rng.direction();
         // On the surface to the precision's rounding (an f32-rounded point is 1e-6 mm off
         // the surface, a real distance in f64).
         let p = n.map(|c| T::from_f64(r * c).to_f64());
-        let mut d = rng.unit();
+        let mut d = rng.direction();
         if dot(d, n) > 0.0 {
             d = d.map(|c| -c);
         }
@@ -294,7 +287,7 @@ fn thin_shell_case<T: Real>() {
     let shell = prepared::<T>(&(sphere(r).unwrap() - sphere(inner).unwrap()));
     let mut rng = Rng(3);
     for _ in 0..1000 {
-        let d = rng.unit();
+        let d = rng.direction();
         let o = f32_exact(d.map(|c| -3000.0 * c));
         // Walk the crossings: enter shell, leave into the hollow, enter, leave.
         let want = [2000.0, 3000.0 - inner, 3000.0 + inner, 4000.0];
@@ -329,7 +322,7 @@ fn scale_case<T: Real>(size: f64) {
     let bx = prepared::<T>(&box3(2.0 * size, 2.0 * size, 2.0 * size).unwrap());
     let rel = if T::NAME == "f32" { 2e-6 } else { 1e-12 };
     for _ in 0..1000 {
-        let o = f32_exact(rng.unit().map(|c| 3.0 * size * c));
+        let o = f32_exact(rng.direction().map(|c| 3.0 * size * c));
         let target = [
             rng.range(-0.5, 0.5),
             rng.range(-0.5, 0.5),
@@ -414,7 +407,7 @@ fn zero_component_case<T: Real>() {
             rng.range(-25., 25.),
             rng.range(-35., 35.),
         ]);
-        let axis = (rng.next() * 6.0) as usize;
+        let axis = (rng.uniform() * 6.0) as usize;
         let mut d = [0.0; 3];
         d[axis % 3] = if axis < 3 { 1.0 } else { -1.0 };
         let want = first_after_zero(box_reference([0.0; 3], identity, [10.0, 20.0, 30.0], o, d));

@@ -6,7 +6,7 @@ use hytrace_csg::{sphere, to_tree_with, PrimTree, Ray, Shape, TreeOptions};
 use hytrace_foundry::TypeCode;
 
 mod common;
-use common::Rng;
+use common::{Random, Rng};
 
 /// The interval of a ray (unit direction) inside a sphere, if any.
 fn sphere_span(c: [f64; 3], r: f64, o: [f64; 3], d: [f64; 3]) -> Option<(f64, f64)> {

@@ -7,18 +7,14 @@ use hytrace_csg::mesh::INTERLEAVED;
 use hytrace_csg::{CrossingScratch, MeshPrim, MeshQuery, Ray, Real, V3};
 
 mod common;
-use common::{grid, Rng};
+use common::{grid, Random, Rng};
+use hytrace_testkit::vec3::normalized as unit;
 
 type Tri = [[f64; 3]; 3];
 
 fn first_hit<T: Real>(mesh: &MeshPrim<T>, o: [f64; 3], d: [f64; 3]) -> f64 {
     let ray = Ray::from_f64(o, d);
     mesh.first_crossing(&ray, T::ZERO).t.to_f64()
-}
-
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    v.map(|c| c / l)
 }
 
 /// Checks `got` against the expected distance (`inf`: a miss) within `rel` relative.
@@ -219,7 +215,7 @@ fn random_rays_match_brute_force() {
             rng.range(-1.0, 17.0),
             rng.range(0.0, 3.0),
         ];
-        let mut d = rng.unit();
+        let mut d = rng.direction();
         match k % 3 {
             0 => d[k % 2] = 0.0,
             1 => {

@@ -9,7 +9,7 @@ use hytrace_csg::tessellate::{convex_pieces, simple_polygon};
 use hytrace_csg::{box3, MeshPrim, PrimTree, Ray, Real, V3};
 
 mod common;
-use common::Rng;
+use common::{Random, Rng};
 
 fn mesh_of(solid: &G4Solid, tol: f64) -> Vec<[[f64; 3]; 3]> {
     match solid.to_geometry(tol).unwrap() {
@@ -528,7 +528,7 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
                     T::NAME
                 );
                 // Across the face from either side, and from a point on it.
-                let d = rng.unit();
+                let d = rng.direction();
                 let n = [d[0], d[1], d[2]];
                 check(o, n, "from a shared face");
                 let back = rng.range(0.1, 0.5);
@@ -565,8 +565,8 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
     for &(i, j) in &diagonals {
         let last = &secs[secs.len() - 1];
         for _ in 0..10 {
-            let c = poly[if rng.next() < 0.5 { i } else { j }];
-            let k = (rng.next() * (secs.len() - 1) as f64) as usize;
+            let c = poly[if rng.uniform() < 0.5 { i } else { j }];
+            let k = (rng.uniform() * (secs.len() - 1) as f64) as usize;
             let side = lerp3(
                 section_point(&secs[k], c),
                 section_point(&secs[k + 1], c),
@@ -574,7 +574,7 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
             );
             let u = rng.range(0.05, 0.95);
             let p = [0, 1].map(|k| poly[i][k] + u * (poly[j][k] - poly[i][k]));
-            let cap = section_point(if rng.next() < 0.5 { &secs[0] } else { last }, p);
+            let cap = section_point(if rng.uniform() < 0.5 { &secs[0] } else { last }, p);
             for o in [side, cap] {
                 let x = V3::<T>::from_f64(o);
                 assert_eq!(
@@ -598,7 +598,7 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
                     "{name} {}: {e:?} on a shared edge",
                     T::NAME
                 );
-                let d = rng.unit();
+                let d = rng.direction();
                 check(e, d, "from a shared edge");
                 let back = rng.range(0.2, 0.8);
                 let o = [0, 1, 2].map(|k| e[k] - back * d[k]);
@@ -615,7 +615,7 @@ fn xtru_case<T: Real>(name: &str, polygon: &[[f64; 2]], secs: &[XtruSection], se
             for c in &poly {
                 let e = section_point(s, *c);
                 for _ in 0..5 {
-                    let d = rng.unit();
+                    let d = rng.direction();
                     let back = rng.range(0.2, 0.8);
                     let o = [0, 1, 2].map(|k| e[k] - back * d[k]);
                     check(o, d, "through a corner");

@@ -5,18 +5,10 @@
 use hytrace_csg::{tessellate, MeshPrim, Ray, Real, V3};
 
 mod common;
-use common::{cross, grid, sub, Rng};
+use common::{cross, grid, sub, Random, Rng};
+use hytrace_testkit::vec3::{dot, normalized as unit};
 
 type Tri = [[f64; 3]; 3];
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    a.map(|c| c / l)
-}
 
 /// An icosphere of radius `r` about `centre`, `levels` times subdivided, counter-clockwise
 /// from outside, vertices shared exactly between neighbours.
@@ -87,7 +79,7 @@ fn assert_watertight<T: Real>(name: &str, tris: &[Tri], centre: [f64; 3], seed: 
     let mut misses = Vec::new();
     for p in &targets {
         let out = unit(sub(*p, centre));
-        let wobble = rng.unit();
+        let wobble = rng.direction();
         let from = unit([0, 1, 2].map(|k| out[k] + 0.4 * wobble[k]));
         let dist = rng.range(0.5, 50.0);
         let o = [0, 1, 2].map(|k| p[k] + dist * from[k]);

@@ -2,7 +2,7 @@
 //!
 //! Node, Prim, Solid, Instance and Brick are 64 bytes (four quads of 4x32 bits), in the spirit
 //! of Opticks' CSGFoundry. Planes are one quad, triangles three, transforms four. The GPU
-//! declarations in `shaders/foundry.wgsl` are generated from these definitions.
+//! declarations in `shaders/generated/foundry.wgsl` are generated from these definitions.
 
 use crate::record;
 

@@ -1,4 +1,4 @@
-//! Generation of `shaders/foundry.wgsl`: the WGSL twin of every GPU record, typecode and
+//! Generation of `shaders/generated/foundry.wgsl`: the WGSL twin of every GPU record, typecode and
 //! constant of this crate. The file is checked in; a test fails when it is stale.
 
 use std::fmt::Write;
@@ -12,7 +12,7 @@ use crate::typecode::{PrimKind, TypeCode};
 use crate::validate::MAX_TREE_HEIGHT;
 
 /// Path of the generated file relative to the workspace root.
-pub const GENERATED_PATH: &str = "shaders/foundry.wgsl";
+pub const GENERATED_PATH: &str = "shaders/generated/foundry.wgsl";
 
 /// Appends the WGSL declaration of record `R` (one member per field, same names).
 pub fn push_struct<R: Record>(out: &mut String) {

@@ -10,17 +10,6 @@ use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, read_records, write_array, write_records};
 use hytrace_foundry::records::{Instance, Prim};
 
-/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
-/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
-fn fuzz_cases(default: usize) -> usize {
-    match std::env::var("HYTRACE_FUZZ_CASES") {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
-        Err(_) => default,
-    }
-}
-
 /// SplitMix64: a deterministic source of mutations.
 struct Rng(u64);
 
@@ -146,7 +135,7 @@ fn mutated_npy_files_read_exactly_or_are_refused_with_the_file_named() {
     let path = dir.path().join("fuzz.npy");
     let mut rng = Rng(0x00c0_ffee);
     let (mut read, mut refused) = (0usize, 0usize);
-    let cases = fuzz_cases(5000);
+    let cases = hytrace_testkit::fuzz_cases(5000);
     for case in 0..cases {
         let bytes = mutate(&seeds[rng.below(seeds.len())], &mut rng);
         std::fs::write(&path, &bytes).unwrap();

@@ -25,6 +25,7 @@ use std::path::Path;
 use hytrace_foundry::Foundry;
 
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_testkit::{Random, SplitMix64, XorShift64};
 use hytrace_trace::scan::{rays_from_rows, scan, scan_transmittance, Precision, RayRow};
 use hytrace_trace::scene::{load_scene, obj_to_foundry, scene_from_toml};
 use hytrace_volume::{Estimator, TransmittanceParams};
@@ -285,13 +286,8 @@ fn mutated_scene_files_give_errors_never_panics() {
                 [[place]]\nsolid = \"b\"\ntranslate = [5, 0, 0]\n";
     scene_from_toml(seed, "seed.toml", Path::new(".")).unwrap();
     let alphabet = b"()[]{}=\"+-*!.,0123456789e \nabpstx#";
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = move || rng.next_u64();
     let (mut built, mut refused) = (0, 0);
     // 10^5 mutations: each builds or is refused with an error naming the file.
     for _ in 0..100_000 {
@@ -332,17 +328,17 @@ fn ray_rows_of_special_values_are_accepted_exactly_when_usable() {
         f64::NEG_INFINITY,
         f64::NAN,
     ];
-    let mut rng = common::Rng(0x5eed_0f_0a_5);
-    let cases = common::fuzz_cases(100_000);
+    let mut rng = SplitMix64(0x5eed_0f_0a_5);
+    let cases = hytrace_testkit::fuzz_cases(100_000);
     let (mut accepted, mut refused) = (0, 0);
     for case in 0..cases {
         // One to three rows; the last one is the mutated one.
-        let rows: Vec<[f64; 8]> = (0..1 + rng.next() % 3)
+        let rows: Vec<[f64; 8]> = (0..1 + rng.next_u64() % 3)
             .map(|_| {
-                std::array::from_fn(|c| match rng.next() % 4 {
-                    0 => specials[(rng.next() % specials.len() as u64) as usize],
-                    _ if c == 7 => 1e3 + rng.unit(),
-                    _ => rng.unit() * 2.0 - 1.0,
+                std::array::from_fn(|c| match rng.next_u64() % 4 {
+                    0 => specials[(rng.next_u64() % specials.len() as u64) as usize],
+                    _ if c == 7 => 1e3 + rng.uniform(),
+                    _ => rng.uniform() * 2.0 - 1.0,
                 })
             })
             .collect();

@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{f32_ray, gpu_answers, unit, Rng};
+use common::{f32_ray, gpu_answers, unit, Random, Rng};
 use hytrace_csg::Ray;
 use hytrace_csg::{box3, sphere, to_tree, torus, tube, Shape};
 use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
@@ -55,8 +55,8 @@ fn row(origin: [f64; 3], direction: [f64; 3]) -> RayRow {
 
 /// A uniformly random unit vector.
 fn isotropic(rng: &mut Rng) -> [f64; 3] {
-    let z = 2.0 * rng.unit() - 1.0;
-    let phi = std::f64::consts::TAU * rng.unit();
+    let z = 2.0 * rng.uniform() - 1.0;
+    let phi = std::f64::consts::TAU * rng.uniform();
     let r = (1.0 - z * z).sqrt();
     [r * phi.cos(), r * phi.sin(), z]
 }
@@ -203,7 +203,7 @@ fn box_cases(
 
 /// 1e-6 to 1e-3 mm, alternately outward and inward.
 fn offset(rng: &mut Rng, i: usize) -> f64 {
-    10f64.powf(-6.0 + 3.0 * rng.unit()) * if i.is_multiple_of(2) { 1.0 } else { -1.0 }
+    10f64.powf(-6.0 + 3.0 * rng.uniform()) * if i.is_multiple_of(2) { 1.0 } else { -1.0 }
 }
 
 /// Rays starting 1e-6 to 1e-3 mm off a face of the box, inward and outward, isotropic: the
@@ -212,9 +212,9 @@ fn offset(rng: &mut Rng, i: usize) -> f64 {
 fn near_surface_starts(p: Precision) {
     box_cases("near a face", p, 7, 4000, |rng, i| {
         let axis = i % 3;
-        let side = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
+        let side = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
         let off = offset(rng, i);
-        let mut local = [0, 1, 2].map(|k| BOX[k] * (2.0 * rng.unit() - 1.0) * 0.9);
+        let mut local = [0, 1, 2].map(|k| BOX[k] * (2.0 * rng.uniform() - 1.0) * 0.9);
         local[axis] = side * (BOX[axis] + off);
         (local, isotropic(rng))
     });
@@ -233,11 +233,11 @@ fn along_a_face(p: Precision) {
     box_cases("along a face", p, 11, 2000, |rng, i| {
         let off = offset(rng, i);
         let local = [
-            BOX[0] * (2.0 * rng.unit() - 1.0) * 0.9,
-            BOX[1] * (2.0 * rng.unit() - 1.0) * 0.9,
+            BOX[0] * (2.0 * rng.uniform() - 1.0) * 0.9,
+            BOX[1] * (2.0 * rng.uniform() - 1.0) * 0.9,
             BOX[2] - off,
         ];
-        let phi = std::f64::consts::TAU * rng.unit();
+        let phi = std::f64::consts::TAU * rng.uniform();
         (local, [phi.cos(), phi.sin(), 0.0])
     });
 }
@@ -262,7 +262,7 @@ fn grazing_sphere(p: Precision) {
         };
         let dot = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
         let u = unit([0, 1, 2].map(|k| a[k] - dot * d[k]));
-        let pass = radius - 10f64.powf(-3.0 + 4.5 * rng.unit());
+        let pass = radius - 10f64.powf(-3.0 + 4.5 * rng.uniform());
         let origin = [0, 1, 2].map(|k| -1500.0 * d[k] + pass * u[k]);
         rows.push(row(origin, d));
         want.push(1500.0 - (radius * radius - pass * pass).sqrt());
@@ -284,10 +284,10 @@ fn thin_chord_of_a_long_box(p: Precision) {
     for _ in 0..2000 {
         // In the xz plane, at 45 degrees past the corner (h_x, h_z), cutting the corner by
         // a chord of length c: the line x + z = h_x + h_z - c / sqrt(2).
-        let c = 10f64.powf(-1.55 + 0.5 * rng.unit());
+        let c = 10f64.powf(-1.55 + 0.5 * rng.uniform());
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let y = h[1] * (2.0 * rng.unit() - 1.0) * 0.9;
-        let along = 0.2 * (2.0 * rng.unit() - 1.0);
+        let y = h[1] * (2.0 * rng.uniform() - 1.0) * 0.9;
+        let along = 0.2 * (2.0 * rng.uniform() - 1.0);
         let d = unit([s, along, -s]);
         let back = 50.0;
         let corner = [h[0] - c * s * s, y, h[2] - c * s * s];
@@ -315,12 +315,12 @@ fn inside_a_long_thin_tube(p: Precision) {
     let mut rng = Rng(19);
     let (mut rows, mut want) = (Vec::new(), Vec::new());
     for _ in 0..3000 {
-        let rho = r * rng.unit().sqrt() * 0.99;
-        let phi = std::f64::consts::TAU * rng.unit();
+        let rho = r * rng.uniform().sqrt() * 0.99;
+        let phi = std::f64::consts::TAU * rng.uniform();
         let o = [
             rho * phi.cos(),
             rho * phi.sin(),
-            400.0 * (2.0 * rng.unit() - 1.0),
+            400.0 * (2.0 * rng.uniform() - 1.0),
         ];
         let d = isotropic(&mut rng);
         // The exit: the wall's root of |o_xy + t d_xy| = r, or a cap.
@@ -376,7 +376,7 @@ fn horn_torus_from_afar(p: Precision) {
         .map(|_| {
             let d = isotropic(&mut rng);
             let target: [f64; 3] =
-                std::array::from_fn(|k| aim_at[k] + 50.0 * (2.0 * rng.unit() - 1.0));
+                std::array::from_fn(|k| aim_at[k] + 50.0 * (2.0 * rng.uniform() - 1.0));
             row([0, 1, 2].map(|k| target[k] - 6000.0 * d[k]), d)
         })
         .collect();

@@ -4,14 +4,13 @@
 //! (The 50 shared public files are checked against Geant4 itself in
 //! `tests/tests/gdml_oracle.rs`.)
 
-mod common;
-
 use std::f64::consts::PI;
 use std::path::Path;
 use std::process::Command;
 
 use hytrace_foundry::g4solid::G4Solid;
 use hytrace_foundry::gdml::{parse_gdml, read_gdml, Gdml, GdmlOptions};
+use hytrace_testkit::{Random, XorShift64Star};
 use hytrace_trace::scene::{gdml_to_foundry, load_gdml_scene};
 
 fn gdml(defines: &str, solids: &str, structure: &str) -> String {
@@ -436,21 +435,7 @@ fn fuzz_seed() -> String {
     )
 }
 
-/// xorshift64*: a deterministic source of mutations.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
-fn mutate(seed: &str, rng: &mut Rng) -> String {
+fn mutate(seed: &str, rng: &mut XorShift64Star) -> String {
     let mut s = seed.to_string();
     for _ in 0..1 + rng.below(3) {
         let at = {
@@ -557,10 +542,10 @@ fn mutated_files_give_errors_never_panics_or_hangs() {
     let g = read(&seed);
     let f = gdml_to_foundry(&g).unwrap();
     assert_eq!(f.inst.len(), 1 + 1 + 1 + 1 + 3 + 5);
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = XorShift64Star(0x9E37_79B9_7F4A_7C15);
     let started = std::time::Instant::now();
     let (mut ok, mut failed) = (0, 0);
-    let cases = common::fuzz_cases(1500);
+    let cases = hytrace_testkit::fuzz_cases(1500);
     for case in 0..cases {
         let text = mutate(&seed, &mut rng);
         let t0 = std::time::Instant::now();

@@ -5,6 +5,9 @@
 //! crossing buffer) and inside tests of random points. With HYTRACE_REQUIRE_GPU=1 a missing
 //! adapter fails the test.
 
+mod common;
+use common::{PcgDraws as Rng, Random};
+
 use hytrace_csg::gpu_layout::mesh::MeshArrays;
 use hytrace_csg::kernel::Step;
 use hytrace_csg::{MeshPrim, Ray, V3};
@@ -13,27 +16,6 @@ use hytrace_trace::gpu::GpuContext;
 
 /// WGSL's stand-in for infinity (csg/spans.wgsl).
 const GPU_INF: f32 = 1.0e38;
-
-/// Deterministic pseudo-random numbers in [0, 1) (the volume crate's PCG generator).
-struct Rng(hytrace_volume::Rng);
-
-impl Rng {
-    fn new(seed: u32) -> Self {
-        Rng(hytrace_volume::Rng::new(seed, 0, 0))
-    }
-
-    fn next(&mut self) -> f64 {
-        self.0.next_f64()
-    }
-
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        ((self.next() * n as f64) as usize).min(n - 1)
-    }
-}
 
 type Tri = [[f64; 3]; 3];
 
@@ -234,20 +216,20 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
         let inside_box = |rng: &mut Rng| [0, 1, 2].map(|k| rng.range(lo[k], hi[k]));
         for _ in 0..600 {
             let target = inside_box(rng);
-            let inside = rng.next() < 0.25;
+            let inside = rng.uniform() < 0.25;
             let o = if inside {
                 inside_box(rng)
             } else {
                 [0, 1, 2].map(|k| c[k] + rng.range(-2.0, 2.0) * r)
             };
             let mut d = [0, 1, 2].map(|k| target[k] - o[k]);
-            if rng.next() < 0.15 {
+            if rng.uniform() < 0.15 {
                 d[rng.below(3)] = 0.0;
             }
             if d.iter().all(|&x| x == 0.0) {
                 d = [0.0, 0.0, 1.0];
             }
-            let tmin = if rng.next() < 0.7 {
+            let tmin = if rng.uniform() < 0.7 {
                 0.0
             } else {
                 rng.range(-r, r) as f32
@@ -273,13 +255,17 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
             let axis = rng.below(3);
             let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
             let mut o = [0.0f32; 3];
-            o[u] = if rng.next() < 0.5 { n.lo[u] } else { n.hi[u] };
-            o[v] = if rng.next() < 0.5 {
+            o[u] = if rng.uniform() < 0.5 {
+                n.lo[u]
+            } else {
+                n.hi[u]
+            };
+            o[v] = if rng.uniform() < 0.5 {
                 n.lo[v]
             } else {
                 rng.range(n.lo[v] as f64, n.hi[v] as f64) as f32
             };
-            let forward = rng.next() < 0.5;
+            let forward = rng.uniform() < 0.5;
             o[axis] = if forward { lo[axis] - r } else { hi[axis] + r } as f32;
             let mut d = [0.0f32; 3];
             d[axis] = if forward { 1.0 } else { -2.5 };
@@ -295,12 +281,12 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
         for _ in 0..150 {
             let t = m.triangles[rng.below(m.triangles.len())];
             let k = rng.below(3);
-            let p = if rng.next() < 0.5 {
+            let p = if rng.uniform() < 0.5 {
                 t[k]
             } else {
                 [0, 1, 2].map(|a| 0.5 * (t[k][a] + t[(k + 1) % 3][a]))
             };
-            let (o, d, what) = if rng.next() < 0.5 {
+            let (o, d, what) = if rng.uniform() < 0.5 {
                 let axis = rng.below(3);
                 let mut o = p;
                 o[axis] -= 2.0 * r;
@@ -328,7 +314,11 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
             let axis = rng.below(3);
             let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
             let mut o = inside_box(rng);
-            let plane = if rng.next() < 0.5 { lo[axis] } else { hi[axis] };
+            let plane = if rng.uniform() < 0.5 {
+                lo[axis]
+            } else {
+                hi[axis]
+            };
             o[axis] = plane + [0.0, 1e-6, -1e-6][rng.below(3)] * r;
             o[u] = lo[u] - r;
             let mut d = [0.0; 3];
@@ -399,7 +389,7 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
         let m = &meshes[2];
         let b = m.prim.bounds();
         let target = [0, 1, 2].map(|k| rng.range(b[0].get(k) as f64, b[1].get(k) as f64));
-        let o = if rng.next() < 0.5 {
+        let o = if rng.uniform() < 0.5 {
             [
                 rng.range(-10.0, 10.0),
                 rng.range(-10.0, 10.0),
@@ -419,11 +409,11 @@ fn ray_cases(meshes: &[TestMesh], arrays: &MeshArrays, rng: &mut Rng) -> Vec<Cas
     // Vertical rays through the heightfield's grid points and cell diagonals.
     for _ in 0..200 {
         let (i, j) = (rng.below(41), rng.below(41));
-        let half = if rng.next() < 0.5 { 0.0 } else { 0.25 };
+        let half = if rng.uniform() < 0.5 { 0.0 } else { 0.25 };
         let o = [
             i as f64 * 0.5 - 10.0 + half,
             j as f64 * 0.5 - 10.0 + half,
-            if rng.next() < 0.5 { 10.0 } else { -10.0 },
+            if rng.uniform() < 0.5 { 10.0 } else { -10.0 },
         ];
         cases.push(Case {
             mesh: 3,
@@ -452,8 +442,8 @@ fn point_cases(meshes: &[TestMesh], rng: &mut Rng) -> Vec<(usize, [f32; 3])> {
         }
         for _ in 0..100 {
             let t = m.triangles[rng.below(m.triangles.len())];
-            let (a, bb) = (rng.next(), rng.next());
-            let p = if rng.next() < 0.3 {
+            let (a, bb) = (rng.uniform(), rng.uniform());
+            let p = if rng.uniform() < 0.3 {
                 t[rng.below(3)]
             } else {
                 let (a, bb) = if a + bb > 1.0 {

@@ -7,7 +7,7 @@ mod common;
 
 use std::collections::BTreeSet;
 
-use common::{nanovdb_fixture, Rng};
+use common::{nanovdb_fixture, Random, Rng};
 
 use hytrace_trace::gpu::nanovdb::{nanovdb_gpu_bytes, probe_nanovdb, NanoGpuError};
 use hytrace_trace::gpu::GpuContext;
@@ -30,7 +30,7 @@ impl IntDraws for Rng {
     /// Uniform in `lo..=hi`.
     fn within(&mut self, lo: i32, hi: i32) -> i32 {
         let span = (i64::from(hi) - i64::from(lo) + 1) as u64;
-        (i64::from(lo) + (self.next() % span) as i64) as i32
+        (i64::from(lo) + (self.next_u64() % span) as i64) as i32
     }
 
     /// A far coordinate: within 2^20, anywhere in i32, or an extreme.
@@ -45,10 +45,10 @@ impl IntDraws for Rng {
             (1 << 20) - 1,
             -(1 << 20) - 1,
         ];
-        match self.next() % 3 {
+        match self.next_u64() % 3 {
             0 => self.within(-(1 << 20), 1 << 20),
-            1 => self.next() as i32,
-            _ => EXTREMES[(self.next() % 8) as usize],
+            1 => self.next_u64() as i32,
+            _ => EXTREMES[(self.next_u64() % 8) as usize],
         }
     }
 }

@@ -2,23 +2,14 @@
 //! With HYTRACE_REQUIRE_GPU=1 a missing adapter fails these tests.
 
 use hytrace_foundry::Transform64;
+use hytrace_testkit::{Random, SplitMix64};
 use hytrace_trace::gpu::probe::{apply_itra_cpu, locate_cpu, ProbeKernels};
 use hytrace_trace::gpu::{GpuContext, GpuScene};
 use hytrace_trace::scene::default_scene;
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn point(&mut self, half: f64) -> [f32; 3] {
-        [0; 3].map(|_| ((self.next() * 2.0 - 1.0) * half) as f32)
-    }
+/// A point uniform in the cube of half side `half`, in f32.
+fn point(rng: &mut SplitMix64, half: f64) -> [f32; 3] {
+    [0; 3].map(|_| ((rng.uniform() * 2.0 - 1.0) * half) as f32)
 }
 
 #[test]
@@ -41,9 +32,9 @@ fn gpu_apply_itra_matches_cpu_and_f64() {
     f.add_transform(skew).unwrap();
     let scene = GpuScene::upload(&ctx, &f).unwrap();
     let kernels = ProbeKernels::new(&ctx, &scene).unwrap();
-    let mut rng = Rng(7);
+    let mut rng = SplitMix64(7);
     let n = 10_000;
-    let points: Vec<[f32; 3]> = (0..n).map(|_| rng.point(3.0e4)).collect();
+    let points: Vec<[f32; 3]> = (0..n).map(|_| point(&mut rng, 3.0e4)).collect();
     let transforms: Vec<u32> = (0..n).map(|i| (i % (f.tran.len() + 1)) as u32).collect();
     let gpu = kernels
         .apply_itra(&ctx, &scene, &points, &transforms)
@@ -94,13 +85,13 @@ fn gpu_locate_matches_cpu_twin() {
     let f = default_scene().unwrap();
     let scene = GpuScene::upload(&ctx, &f).unwrap();
     let kernels = ProbeKernels::new(&ctx, &scene).unwrap();
-    let mut rng = Rng(11);
+    let mut rng = SplitMix64(11);
     // Uniform points in the detector plus points near PMT windows, where boxes nest.
-    let mut points: Vec<[f32; 3]> = (0..20_000).map(|_| rng.point(1600.0)).collect();
+    let mut points: Vec<[f32; 3]> = (0..20_000).map(|_| point(&mut rng, 1600.0)).collect();
     for k in 0..f.inst.len() {
         let at = f.inst_tran[k].apply_point([0.0, 0.0, 0.0]);
         for _ in 0..100 {
-            let d = rng.point(150.0);
+            let d = point(&mut rng, 150.0);
             points.push([0, 1, 2].map(|c| at[c] as f32 + d[c]));
         }
     }

@@ -127,7 +127,7 @@ fn gpu_matches_cpu_on_a_hierarchical_gdml_scene() {
 }
 
 /// The kernel carries only what a scene uses: no mesh code for CSG scenes, no CSG code for
-/// mesh scenes, no quartic solver without a torus, and only the primitives the trees use.
+/// mesh scenes, no torus crossing search without a torus, and only the primitives the trees use.
 #[test]
 fn scan_kernels_compose_only_what_the_scene_uses() {
     let Some(ctx) = GpuContext::for_tests() else {

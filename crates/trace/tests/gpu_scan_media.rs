@@ -18,7 +18,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{hytrace, rays_for, read_f64, repo, unit, Rng};
+use common::{hytrace, rays_for, read_f64, repo, unit, Random, Rng};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::media::SceneMedia;
@@ -133,8 +133,8 @@ fn scene_rays(f: &Foundry, centre: [f64; 3], radius: f64) -> (Vec<RayRow>, Vec<S
     let mut names = vec![String::from("sweep or random"); rays.len()];
     let mut rng = Rng(0x3ed1a);
     for i in 0..1000 {
-        let o = centre.map(|c| c + radius * (2.0 * rng.unit() - 1.0));
-        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        let o = centre.map(|c| c + radius * (2.0 * rng.uniform() - 1.0));
+        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0);
         if i % 2 == 0 {
             d[(i / 2) % 3] = 0.0;
         }

@@ -11,9 +11,13 @@
 //! crossing or flip a chord of rounding-noise depth.
 
 use bytemuck::cast_slice;
+mod common;
+use common::{PcgDraws as Rng, Random};
+
 use hytrace_csg::kernel::{primitive_sdf, primitive_spans};
 use hytrace_csg::V3;
 use hytrace_foundry::TypeCode;
+use hytrace_testkit::vec3::{add, dot, scale as mul, sub};
 use hytrace_trace::gpu::oneshot::{run, Buffer};
 use hytrace_trace::gpu::GpuContext;
 
@@ -28,31 +32,8 @@ const NORMAL_TOL: f64 = 1e-4;
 const REQUIRED_RATE: f64 = 0.999;
 const PER_FAMILY: usize = 400;
 
-/// Deterministic pseudo-random numbers (the volume crate's PCG generator).
-struct Rng(hytrace_volume::Rng);
-
-impl Rng {
-    fn new(seed: u32) -> Self {
-        Rng(hytrace_volume::Rng::new(seed, 0, 0))
-    }
-    fn next(&mut self) -> u64 {
-        u64::from(self.0.next_u32())
-    }
-    fn unit(&mut self) -> f64 {
-        self.0.next_f64()
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.unit()
-    }
-    fn direction(&mut self) -> P {
-        loop {
-            let v = [0; 3].map(|_| self.range(-1.0, 1.0));
-            let l2 = dot(v, v);
-            if l2 > 1e-4 && l2 <= 1.0 {
-                return mul(v, 1.0 / l2.sqrt());
-            }
-        }
-    }
+/// The torus draws of this test, on the shared generator.
+trait TorusDraws: Random {
     /// `(rmin, rmax, rtor)` of one of several shapes, sizes 1e-2 to 1e2.
     fn torus(&mut self, shape: usize) -> (f64, f64, f64) {
         let rtor = 10f64.powf(self.range(-2.0, 2.0));
@@ -85,20 +66,10 @@ impl Rng {
     }
 }
 
+impl TorusDraws for Rng {}
+
 type P = [f64; 3];
 
-fn add(a: P, b: P) -> P {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: P, b: P) -> P {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn mul(a: P, k: f64) -> P {
-    a.map(|x| x * k)
-}
-fn dot(a: P, b: P) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 fn unit(a: P) -> P {
     mul(a, 1.0 / dot(a, a).sqrt())
 }
@@ -162,7 +133,7 @@ fn families() -> Vec<Item> {
         // Random rays near the torus.
         let t = rng.torus(i);
         let o = rng.near(t.1, t.2, 3.0);
-        let d = if rng.unit() < 0.7 {
+        let d = if rng.uniform() < 0.7 {
             unit(sub(rng.near(t.1, t.2, 1.0), o))
         } else {
             rng.direction()
@@ -172,13 +143,13 @@ fn families() -> Vec<Item> {
         // Origin inside the (outer) tube.
         let t = rng.torus(i);
         let (phi, theta) = (rng.range(0.0, two_pi), rng.range(0.0, two_pi));
-        let (o, _) = tube_point(t.2, phi, theta, 0.999 * t.1 * rng.unit().sqrt());
+        let (o, _) = tube_point(t.2, phi, theta, 0.999 * t.1 * rng.uniform().sqrt());
         items.push(Item::new("inside_tube", t, o, rng.direction()));
 
         // Through the hole (nearly in the equatorial plane for half of them).
         let t = rng.torus(i);
         let phi = rng.range(0.0, two_pi);
-        let rho = 0.95 * (t.2 - t.1).max(0.0) * rng.unit().sqrt();
+        let rho = 0.95 * (t.2 - t.1).max(0.0) * rng.uniform().sqrt();
         let h = [rho * phi.cos(), rho * phi.sin(), rng.range(-t.1, t.1)];
         let mut d = rng.direction();
         if i % 2 == 0 {
@@ -191,8 +162,8 @@ fn families() -> Vec<Item> {
         // Axis-aligned directions and zero components.
         let t = rng.torus(i);
         let mut o = rng.near(t.1, t.2, 2.0);
-        let k = (rng.next() % 3) as usize;
-        let sign = if rng.unit() < 0.5 { -1.0 } else { 1.0 };
+        let k = rng.below(3);
+        let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
         let mut d = [0.0; 3];
         match i % 5 {
             0 => d[k] = sign,
@@ -208,7 +179,7 @@ fn families() -> Vec<Item> {
             3 => {
                 // Parallel to the axis: on it, or through the tube.
                 d[2] = sign;
-                o[0] = if rng.unit() < 0.2 {
+                o[0] = if rng.uniform() < 0.2 {
                     0.0
                 } else {
                     rng.range(0.0, 1.2 * (t.1 + t.2))

@@ -14,6 +14,9 @@
 use std::f64::consts::PI;
 
 use bytemuck::{Pod, Zeroable};
+mod common;
+use common::{PcgDraws as Rng, Random};
+
 use hytrace_csg::gpu_layout::tree::CsgArrays;
 use hytrace_csg::{
     box3, cone, cylinder, halfspace, phi_cut, polyhedron, sphere, to_tree, torus, tube, zsphere,
@@ -23,37 +26,15 @@ use hytrace_foundry::TypeCode;
 use hytrace_trace::gpu::oneshot::{run, Buffer};
 use hytrace_trace::gpu::GpuContext;
 
-/// Deterministic pseudo-random numbers in [0, 1) (the volume crate's PCG generator).
-struct Rng(hytrace_volume::Rng);
-
-impl Rng {
-    fn new(seed: u32) -> Self {
-        Rng(hytrace_volume::Rng::new(seed, 0, 0))
-    }
-
-    fn next(&mut self) -> f64 {
-        self.0.next_f64()
-    }
-
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-
+/// The draws of this test beyond the shared ones.
+trait BoxDraws: Random {
     /// A uniform point of the box `centre +- half`.
     fn in_box(&mut self, centre: [f64; 3], half: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|k| centre[k] + self.range(-half[k], half[k]))
     }
-
-    fn unit(&mut self) -> [f64; 3] {
-        loop {
-            let v: [f64; 3] = std::array::from_fn(|_| self.range(-1.0, 1.0));
-            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if l > 0.1 && l <= 1.0 {
-                return v.map(|c| c / l);
-            }
-        }
-    }
 }
+
+impl BoxDraws for Rng {}
 
 /// One query of `kernels/tree_probe`: `o.w` holds the tree index's bits, `d.w` the ray's
 /// tmin (mirrors `TreeQuery`).
@@ -243,7 +224,7 @@ fn queries(
         for j in 0..24 {
             let mut o = rng.in_box(centre, scaled(1.5));
             o[axis] = value;
-            let mut d = rng.unit();
+            let mut d = rng.direction();
             d[axis] = 0.0;
             if j % 3 == 0 {
                 d = [0.0; 3];
@@ -255,10 +236,10 @@ fn queries(
     // From inside (origins near the centre) and from far away.
     for _ in 0..40 {
         let o = rng.in_box(centre, scaled(0.3));
-        rays.push((v3(o), v3(rng.unit())));
+        rays.push((v3(o), v3(rng.direction())));
     }
     for _ in 0..20 {
-        let u = rng.unit();
+        let u = rng.direction();
         let o = std::array::from_fn(|k| centre[k] + 1.0e5 * u[k]);
         let target = rng.in_box(centre, half);
         let d: [f64; 3] = std::array::from_fn(|k| target[k] - o[k]);

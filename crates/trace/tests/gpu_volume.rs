@@ -22,7 +22,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{gpu_stats, hytrace, nanovdb_fixture, read_f64, unit, Rng};
+use common::{gpu_stats, hytrace, nanovdb_fixture, read_f64, unit, Random, Rng};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_trace::gpu::{transmittance_source, GpuContext, GpuVolume, TexelStore};
@@ -70,7 +70,7 @@ fn noisy_grid(map: GridMap, background: f32) -> DenseGrid {
                     // Empty space (the background).
                     continue;
                 } else {
-                    (rng.unit() * 2.0) as f32
+                    (rng.uniform() * 2.0) as f32
                 };
                 g.set([x, y, z], v);
             }
@@ -84,7 +84,7 @@ fn noisy_grid(map: GridMap, background: f32) -> DenseGrid {
 fn families(map: &GridMap, lo: [f64; 3], hi: [f64; 3], random: usize) -> Vec<Family> {
     let mut rng = Rng(0xbeef);
     let inside = |rng: &mut Rng| -> [f64; 3] {
-        std::array::from_fn(|k| lo[k] - 6.0 + (hi[k] - lo[k] + 12.0) * rng.unit())
+        std::array::from_fn(|k| lo[k] - 6.0 + (hi[k] - lo[k] + 12.0) * rng.uniform())
     };
     let world = |o: [f64; 3], d: [f64; 3], tmin: f64, tmax: f64| {
         // Index direction d, scaled so that t is world length along it.
@@ -98,9 +98,9 @@ fn families(map: &GridMap, lo: [f64; 3], hi: [f64; 3], random: usize) -> Vec<Fam
     let mut random_rays = Vec::new();
     for i in 0..random {
         let o = inside(&mut rng);
-        let d = unit(std::array::from_fn(|_| 2.0 * rng.unit() - 1.0));
+        let d = unit(std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0));
         let tmax = if i % 3 == 0 {
-            20.0 * rng.unit()
+            20.0 * rng.uniform()
         } else {
             f64::INFINITY
         };
@@ -113,7 +113,7 @@ fn families(map: &GridMap, lo: [f64; 3], hi: [f64; 3], random: usize) -> Vec<Fam
     let mut zero = Vec::new();
     for i in 0..random / 2 {
         let o = inside(&mut rng);
-        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0);
         d[i % 3] = 0.0;
         if i % 2 == 0 {
             d[(i + 1) % 3] = 0.0;
@@ -187,7 +187,7 @@ fn families(map: &GridMap, lo: [f64; 3], hi: [f64; 3], random: usize) -> Vec<Fam
     let mut far = Vec::new();
     for _ in 0..random / 4 {
         let target = inside(&mut rng);
-        let d = unit(std::array::from_fn(|_| 2.0 * rng.unit() - 1.0));
+        let d = unit(std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0));
         let o = std::array::from_fn(|k| target[k] - 1e6 * d[k]);
         far.push(world(o, d, 0.0, f64::INFINITY));
     }

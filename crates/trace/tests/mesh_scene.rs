@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_testkit::{Random, XorShift64Star};
 use hytrace_trace::cpu::{TraceScratch, BATCH};
 use hytrace_trace::scan::{rays_from_rows, scan, Precision, RayRow};
 use hytrace_trace::scene::{gltf_to_foundry, load_scene, obj_to_foundry};
@@ -214,18 +215,6 @@ fn bad_mesh_files_are_errors_naming_the_file() {
     load_error("nan.glb", &nan, "not finite");
 }
 
-/// A deterministic generator (xorshift64*).
-struct Rng(u64);
-
-impl Rng {
-    fn below(&mut self, n: usize) -> usize {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 33) as usize % n
-    }
-}
-
 /// Every truncation and a few thousand random byte mutations of valid files load or fail,
 /// but never panic.
 #[test]
@@ -238,7 +227,7 @@ fn truncated_and_mutated_files_never_panic() {
     for n in 0..glb.len() {
         let _ = gltf_to_foundry(&glb[..n], None);
     }
-    let mut rng = Rng(0x5eed);
+    let mut rng = XorShift64Star(0x5eed);
     let obj_bytes = b"0123456789 -+.eE/\nvfo#";
     // 10^5 mutations of each format.
     for _ in 0..100_000 {
@@ -290,13 +279,8 @@ fn scans_of_a_large_mesh_equal_single_traces() {
         ),
         _ => panic!("prim 0 is not a mesh"),
     }
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut uniform = || {
-        seed ^= seed >> 12;
-        seed ^= seed << 25;
-        seed ^= seed >> 27;
-        (seed.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = XorShift64Star(0x2545_f491_4f6c_dd1d);
+    let mut uniform = || rng.uniform();
     let rows: Vec<[f64; 8]> = (0..20_000)
         .map(|k| {
             let o = [uniform() * 140.0 - 6.0, uniform() * 140.0 - 6.0, 10.0];

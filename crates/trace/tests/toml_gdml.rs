@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{repo, unit, Rng};
+use common::{repo, unit, Random, Rng};
 use hytrace_csg::Ray;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
@@ -97,8 +97,12 @@ rotate = [0, 0, 1, 90]
         let (mut hits, mut rays) = (0, 0);
         for k in 0..2000 {
             let mut origin: [f64; 3] =
-                std::array::from_fn(|a| bounds[a] + rng.unit() * (bounds[a + 3] - bounds[a]));
-            let direction = unit([rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5]);
+                std::array::from_fn(|a| bounds[a] + rng.uniform() * (bounds[a + 3] - bounds[a]));
+            let direction = unit([
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            ]);
             if k % 4 == 0 {
                 // From outside, aimed at a point of the world.
                 let back = 2.0 * (bounds[3] - bounds[0]).max(bounds[5] - bounds[2]);

@@ -6,6 +6,7 @@ use std::collections::HashSet;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
+use hytrace_testkit::{Random, SplitMix64};
 use hytrace_volume::{
     parse_nanovdb, read_nanovdb, Coord, NanoCodec, NanoFile, NanoGrid, NanoGridClass, NanoGridType,
     NanoVersion, RangeMips, VoxelGrid,
@@ -84,23 +85,6 @@ fn density() -> Source<f32> {
 
 fn temperature() -> Source<f64> {
     npy("temperature.npy", [5, 6, 7])
-}
-
-/// Deterministic pseudo-random numbers (SplitMix64).
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
 }
 
 fn block_of(ijk: Coord) -> Coord {
@@ -802,17 +786,6 @@ fn flipped_bytes_never_panic() {
     }
 }
 
-/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
-/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
-fn fuzz_cases(default: usize) -> usize {
-    match std::env::var("HYTRACE_FUZZ_CASES") {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
-        Err(_) => default,
-    }
-}
-
 #[test]
 fn fuzzed_files_never_panic() {
     let none = fixture("density_none.nvdb.gz");
@@ -828,7 +801,7 @@ fn fuzzed_files_never_panic() {
     ];
     let mut rng = SplitMix64(0x5eed);
     let mut outcomes = [0usize; 2];
-    let cases = fuzz_cases(3000);
+    let cases = hytrace_testkit::fuzz_cases(3000);
     for _ in 0..cases {
         let src = &sources[rng.below(sources.len())];
         let mut bytes = src.clone();
@@ -841,7 +814,7 @@ fn fuzzed_files_never_panic() {
             };
             let pos = rng.below(span);
             match rng.below(4) {
-                0 => bytes[pos] = rng.next() as u8,
+                0 => bytes[pos] = rng.next_u64() as u8,
                 1 => bytes[pos] ^= 1 << rng.below(8),
                 2 => {
                     // An 8-byte word set to a boundary value.

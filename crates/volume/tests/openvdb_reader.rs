@@ -4,6 +4,7 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
+use hytrace_testkit::{Random, XorShift64};
 use hytrace_volume::{read_vdb, Coord, VdbFile, VdbGrid, VoxelGrid, BLOCK_SIDE};
 use serde_json::Value;
 
@@ -268,13 +269,8 @@ fn block_origins_cover_every_value_other_than_the_background_once() {
 #[test]
 fn read_box_matches_voxel_lookups() {
     let g = load("grids.vdb", "density");
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
-    let mut next = |n: u64| {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state % n
-    };
+    let mut rng = XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = |n: u64| rng.next_u64() % n;
     let mut boxes: Vec<(Coord, [u32; 3])> = (0..200)
         .map(|_| {
             let o = [0; 3].map(|_| next(300) as i32 - 270);
@@ -389,17 +385,6 @@ fn truncated_files_error_at_every_length() {
     }
 }
 
-/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
-/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
-fn fuzz_cases(default: usize) -> usize {
-    match std::env::var("HYTRACE_FUZZ_CASES") {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
-        Err(_) => default,
-    }
-}
-
 #[test]
 fn corrupt_bytes_never_panic() {
     let mut state = 0x9e37_79b9_7f4a_7c15_u64;
@@ -416,7 +401,7 @@ fn corrupt_bytes_never_panic() {
         "double.vdb",
     ] {
         let bytes = std::fs::read(data(file)).unwrap();
-        for _ in 0..fuzz_cases(1600) / 4 {
+        for _ in 0..hytrace_testkit::fuzz_cases(1600) / 4 {
             let mut b = bytes.clone();
             for _ in 0..1 + next() % 4 {
                 let at = (next() % b.len() as u64) as usize;

@@ -2,6 +2,7 @@
 //! integrals, a Gauss-Legendre quadrature of `sample_trilinear` between sorted cell-face
 //! crossings (found without any walk), and direct lookups along the rays.
 
+use hytrace_testkit::vec3::normalized as unit;
 use hytrace_volume::{
     fog_sphere, global_range, sample_nearest, sample_stochastic, sample_trilinear, transmittance,
     transmittance_batch, CellWalk, Coord, DenseGrid, Estimate, Estimator, Filter, GridMap,
@@ -12,11 +13,6 @@ use hytrace_volume::{
 /// The next uniform number in [0, 1) of `state` (the crate's counter-based generator).
 fn rng(state: &mut Rng) -> f64 {
     state.next_f64()
-}
-
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    v.map(|c| c / n)
 }
 
 fn random_dir(state: &mut Rng) -> [f64; 3] {

@@ -1,6 +1,6 @@
 //! The records the GPU kernels read for prepared CSG trees and meshes, in f32: exactly the
 //! values the CPU's f32 kernels use, so the WGSL twins can be compared ray by ray. Their
-//! WGSL declarations are generated from these definitions (`shaders/trace_records.wgsl`,
+//! WGSL declarations are generated from these definitions (`shaders/generated/trace_records.wgsl`,
 //! see `hytrace_trace::gpu::records`).
 
 use hytrace_foundry::layout::{Field, Record};

@@ -5,9 +5,9 @@
 mod cuts;
 mod planar;
 mod quadric;
-mod ring;
 pub mod spans;
 pub mod torus;
+mod torus_prim;
 
 use hytrace_foundry::{Transform64, TypeCode};
 
@@ -204,7 +204,7 @@ pub fn primitive_spans<T: Real>(
         TypeCode::Cone => quadric::cone_spans(p, o, d),
         TypeCode::Hyperboloid => quadric::hyperboloid_spans(p, o, d),
         TypeCode::Paraboloid => quadric::paraboloid_spans(p, o, d),
-        TypeCode::Torus => ring::torus_spans(p, o, d),
+        TypeCode::Torus => torus_prim::torus_spans(p, o, d),
         TypeCode::Box3 => planar::box_spans(p, o, d),
         TypeCode::ConvexPolyhedron => planar::polyhedron_spans(planes, o, d),
         TypeCode::HalfSpace => planar::halfspace_spans(p, o, d),
@@ -227,7 +227,7 @@ pub fn primitive_sdf<T: Real>(code: TypeCode, p: &[T; 6], planes: &[[T; 4]], x: 
         TypeCode::Cone => quadric::cone_sdf(p, x),
         TypeCode::Hyperboloid => quadric::hyperboloid_sdf(p, x),
         TypeCode::Paraboloid => quadric::paraboloid_sdf(p, x),
-        TypeCode::Torus => ring::torus_prim_sdf(p, x),
+        TypeCode::Torus => torus_prim::torus_prim_sdf(p, x),
         TypeCode::Box3 => planar::box_sdf(p, x),
         TypeCode::ConvexPolyhedron => planar::polyhedron_sdf(planes, x),
         TypeCode::HalfSpace => planar::halfspace_sdf(p, x),

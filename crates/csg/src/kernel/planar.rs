@@ -163,7 +163,7 @@ pub fn slab_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_common::Rng;
+    use crate::test_common::{Random, Rng};
 
     /// The box as its definition: the whole line clipped by each axis' slab in turn.
     fn clipped_by_slabs<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
@@ -213,7 +213,7 @@ mod tests {
             // Near the box, far from the origin (the box's frame is then far too).
             let reach = if i % 4 == 0 { 1.0e6 } else { 15.0 };
             let mut o = [0; 3].map(|_| rng.range(-reach, reach));
-            let mut d = rng.unit();
+            let mut d = rng.direction();
             match i % 5 {
                 // Zero direction components: rays parallel to one or two face pairs.
                 1 => d[i % 3] = 0.0,

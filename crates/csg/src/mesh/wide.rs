@@ -1,5 +1,5 @@
 //! The f32 CPU kernel's form of a mesh BVH: the mesh's binary BVH (the one the GPU
-//! traverses) collapsed into eight-wide nodes ([`crate::wide_tree`]), with leaves holding
+//! traverses) collapsed into eight-wide nodes ([`crate::wide_bvh`]), with leaves holding
 //! triangles in blocks of 4 stored lane by lane, tested all at once with `wide`'s `f32x4`.
 //! A leaf's last block repeats its first triangle in the unused lanes, a duplicate that can
 //! never win (same distance, same number).
@@ -15,7 +15,7 @@ use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
-use crate::wide_tree::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
+use crate::wide_bvh::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
 
 /// Triangles per block.
 const LANES: usize = 4;
@@ -41,7 +41,7 @@ pub(crate) struct WideBvh {
 impl WideBvh {
     /// The wide form of a mesh's binary BVH (`nodes`, root first, children of an inner node
     /// at `first, first + 1`) over its reordered triangles; an error when the binary tree
-    /// is deeper than [`crate::wide_tree::MAX_DEPTH`].
+    /// is deeper than [`crate::wide_bvh::MAX_DEPTH`].
     pub(crate) fn new(nodes: &[BinaryNode], triangles: &[[V3<f32>; 3]]) -> Result<Self, String> {
         let mut blocks = Vec::with_capacity(triangles.len() / 2 + 1);
         let tree = WideTree::new(nodes, |first, count| {
@@ -343,7 +343,7 @@ pub(crate) fn to_f32<T: Real>(
 mod tests {
     use super::*;
 
-    use crate::test_common::{grid, Rng};
+    use crate::test_common::{grid, Random, Rng};
 
     /// A grid with integer heights, shifted by `offset`: every vertex, edge and box face is
     /// exact in f32, so rays aimed at them meet edge functions of exactly 0.
@@ -385,7 +385,7 @@ mod tests {
             let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
             let size = rng.range(0.01, 2.0);
             soup.push([0; 3].map(|_| {
-                let e = rng.unit();
+                let e = rng.direction();
                 [0, 1, 2].map(|k| c[k] + size * e[k])
             }));
         }
@@ -393,7 +393,7 @@ mod tests {
         let mut hits = 0;
         for _ in 0..20_000 {
             let o = [0; 3].map(|_| rng.range(-15.0, 15.0));
-            hits += both_agree(&mesh, o, rng.unit()) as usize;
+            hits += both_agree(&mesh, o, rng.direction()) as usize;
         }
         assert!(hits > 5_000, "only {hits} of 20000 rays hit the soup");
     }
@@ -428,7 +428,7 @@ mod tests {
                 ];
                 let d = [rng.range(-1.0, 1.0), 0.0, rng.range(-0.2, 0.2)];
                 both_agree(&mesh, o, d);
-                both_agree(&mesh, o, rng.unit());
+                both_agree(&mesh, o, rng.direction());
             }
         }
     }

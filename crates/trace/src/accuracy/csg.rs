@@ -1,13 +1,13 @@
 //! Accuracy rows of the CSG kernels: f32 against f64, the far-from-origin strategy on and
-//! off, the quadratic (sphere) and quartic (torus) solvers, list nodes against binary
+//! off, the quadratic (sphere) solver and the torus's crossing search, list nodes against binary
 //! trees. References are double-double evaluations of the exact surfaces ([`super::dd`]),
 //! for the very f32-representable rays the kernels see.
 //!
 //! The far-from-origin strategy is the one every leaf uses: before solving, the ray's
 //! origin moves along the ray to its closest approach to the primitive's centre, so the
-//! quadric or quartic has coefficients of the primitive's size however far the ray starts.
+//! quadric or torus has coefficients of the primitive's size however far the ray starts.
 //! "Off" solves at the ray's own origin, as a textbook intersection does. The torus's
-//! quartic solver moves the origin to the closest approach itself, so for the torus "off"
+//! crossing search moves the origin to the closest approach itself, so for the torus "off"
 //! only shows that the leaf's shift costs nothing there.
 
 use hytrace_csg::kernel::{first_crossing, primitive_spans, Frame, Leaf};

@@ -8,7 +8,7 @@
 //! test of their own. The traversal runs over those boxes with a reciprocal slab test
 //! widened to accept every box the exact test ([`hytrace_csg::ray_meets_bounds`]) accepts:
 //! in f32 eight boxes at a time over the tree collapsed into eight-wide nodes
-//! ([`hytrace_csg::wide_tree`], the mesh kernel's node form), in f64 one at a time over the
+//! ([`hytrace_csg::wide_bvh`], the mesh kernel's node form), in f64 one at a time over the
 //! binary tree ([`SlabRay::entry_conservative`]); the GPU walks the binary tree. The exact
 //! test is monotone in the box, so whenever an item's own exact bounds test passes, so does
 //! every node above it, and no item the ray meets is culled. Items with non-finite bounds
@@ -21,7 +21,7 @@
 
 use glam::Vec3A;
 use hytrace_csg::bvh_build::shallow_bvh2;
-use hytrace_csg::wide_tree::{ray_f32, WideSlabs, WideTree};
+use hytrace_csg::wide_bvh::{ray_f32, WideSlabs, WideTree};
 use hytrace_csg::{Bounds, Ray, Real, SlabRay, V3};
 use obvhs::aabb::Aabb;
 use obvhs::BvhBuildParams;
@@ -72,7 +72,7 @@ impl<T: Real> RaySlabs<T> {
 
 /// Deepest BVH the traversals' fixed stacks accept ([`shallow_bvh2`] never builds a
 /// deeper one).
-pub(crate) const MAX_DEPTH: usize = hytrace_csg::wide_tree::MAX_DEPTH;
+pub(crate) const MAX_DEPTH: usize = hytrace_csg::wide_bvh::MAX_DEPTH;
 
 /// The largest f32 not above `v`.
 pub(super) fn f32_down(v: f64) -> f32 {

@@ -4,7 +4,7 @@
 //!
 //! Lines between `// #if FEATURE` and `// #endif` (not nested) are kept only when the
 //! feature is on, imports included: a scene without meshes gets no mesh code, one without
-//! a torus no quartic solver ([`compose_with`]).
+//! a torus no torus crossing search ([`compose_with`]).
 //!
 //! A line `// #chunked ARRAY TYPE GROUP BINDING MORE ACCESSOR` declares a read-only storage
 //! array that may exceed the device's binding limit, read only through `ACCESSOR(i) ->
@@ -232,12 +232,15 @@ mod tests {
     #[test]
     fn imports_come_first_and_once() {
         let src = compose("kernels/foundry_probe").unwrap();
-        let foundry = src.find("// ---- module foundry ----").unwrap();
+        let foundry = src.find("// ---- module generated/foundry ----").unwrap();
         let kernel = src
             .find("// ---- module kernels/foundry_probe ----")
             .unwrap();
         assert!(foundry < kernel);
-        assert_eq!(src.matches("// ---- module foundry ----").count(), 1);
+        assert_eq!(
+            src.matches("// ---- module generated/foundry ----").count(),
+            1
+        );
         assert!(compose("no_such_module")
             .unwrap_err()
             .contains("unknown module"));

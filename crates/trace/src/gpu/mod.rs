@@ -12,7 +12,7 @@ mod scene;
 mod texels;
 mod timing;
 mod tracer;
-mod volume;
+mod transmittance;
 
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
 pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
@@ -20,4 +20,4 @@ pub use scene::GpuScene;
 pub use texels::TexelStore;
 pub use timing::{add_gpu_stats, warn_redone, GpuTimes};
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};
-pub use volume::{transmittance_source, GpuVolume};
+pub use transmittance::{transmittance_source, GpuVolume};

@@ -1,14 +1,15 @@
 //! The records the tracing kernels share with the CPU beyond the Foundry's own: prepared
 //! CSG trees and meshes ([`hytrace_csg::gpu_layout`]) and the tracer's placements, search
-//! lists, BVH nodes, rays and hits. `shaders/trace_records.wgsl` is generated from them; a
-//! test fails when it is stale or when naga lays a struct out differently from Rust.
+//! lists, BVH nodes, rays and hits. `shaders/generated/trace_records.wgsl` is generated
+//! from them; a test fails when it is stale or when naga lays a struct out differently from
+//! Rust.
 
 use hytrace_csg::gpu_layout::{self, entry, RecordEntry};
 use hytrace_foundry::record;
 use hytrace_foundry::wgsl::push_struct;
 
 /// Path of the generated file relative to the workspace root.
-pub const GENERATED_PATH: &str = "shaders/trace_records.wgsl";
+pub const GENERATED_PATH: &str = "shaders/generated/trace_records.wgsl";
 
 record! {
     /// A node of the tracers' box BVHs: its box (f32, rounded outward), then either children

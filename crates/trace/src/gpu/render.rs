@@ -20,7 +20,7 @@ use super::records::{
 use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use super::volume::{KernelGrid, VolumeUpload};
+use super::transmittance::{KernelGrid, VolumeUpload};
 use crate::render::camera::Projection;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};

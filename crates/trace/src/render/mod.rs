@@ -10,12 +10,12 @@
 
 pub mod camera;
 mod integrator;
+mod media;
 pub mod optics;
 pub mod output;
 pub mod run;
 pub mod spec;
 mod views;
-mod volumes;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -29,9 +29,9 @@ use crate::cpu::media::SceneMedia;
 use crate::cpu::{CpuScene, Hit};
 use camera::{Camera, CameraSpec};
 use integrator::{EMISSION_ABSORPTION, MULTIPLE_SCATTERING, NO_VOLUMES, SINGLE_SCATTERING};
+use media::Media;
 pub use output::{write_image, Image};
 use spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec, View, VolumeMode};
-use volumes::Media;
 
 /// Why a build without the `media` feature refuses a render with media.
 const NO_MEDIA_BUILD: &str =

@@ -17,32 +17,28 @@ use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
 use hytrace_volume::{parse_nanovdb, NanoFile};
 
-/// A deterministic generator (SplitMix64).
-pub struct Rng(pub u64);
+/// The tests' deterministic generator (SplitMix64).
+#[allow(unused_imports)] // not every test file draws
+pub use hytrace_testkit::{Random, SplitMix64 as Rng};
 
-impl Rng {
-    pub fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
+/// The volume crate's PCG stream (what the kernels draw from) as a [`Random`] source, for
+/// the GPU twin tests: uniform draws are its `next_f64`, other bits its `next_u32`.
+pub struct PcgDraws(pub hytrace_volume::Rng);
 
-    /// Uniform in `[0, 1)`.
-    pub fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+impl PcgDraws {
+    /// Stream 0, sample 0 of `seed`.
+    pub fn new(seed: u32) -> Self {
+        PcgDraws(hytrace_volume::Rng::new(seed, 0, 0))
     }
 }
 
-/// How many inputs a fuzz test tries: `default` (sized for CI's time), or the count in
-/// `HYTRACE_FUZZ_CASES` (e.g. 100000 for the full run recorded in BENCHMARKS.md).
-pub fn fuzz_cases(default: usize) -> usize {
-    match std::env::var("HYTRACE_FUZZ_CASES") {
-        Ok(v) => v
-            .parse()
-            .unwrap_or_else(|_| panic!("HYTRACE_FUZZ_CASES={v:?} is not a count")),
-        Err(_) => default,
+impl Random for PcgDraws {
+    fn next_u64(&mut self) -> u64 {
+        u64::from(self.0.next_u32())
+    }
+
+    fn uniform(&mut self) -> f64 {
+        self.0.next_f64()
     }
 }
 
@@ -61,10 +57,8 @@ pub fn repo(path: &str) -> PathBuf {
 }
 
 /// `v` scaled to unit length.
-pub fn unit(d: [f64; 3]) -> [f64; 3] {
-    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    d.map(|v| v / n)
-}
+#[allow(unused_imports)] // not every test file uses it
+pub use hytrace_testkit::vec3::normalized as unit;
 
 /// Runs the `hytrace` binary with `args` and extra environment variables.
 pub fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
@@ -159,9 +153,9 @@ pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
     for i in 0..random {
         let origin: [f64; 3] = std::array::from_fn(|k| {
             let (lo, hi) = (b[k], b[k + 3]);
-            lo + (hi - lo) * (1.2 * rng.unit() - 0.1)
+            lo + (hi - lo) * (1.2 * rng.uniform() - 0.1)
         });
-        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        let mut d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0);
         match i % 8 {
             0 => d[(i / 8) % 3] = 0.0,
             1 => {
@@ -177,8 +171,8 @@ pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
         // A fifth of them on a finite segment.
         let (tmin, tmax) = if i % 5 == 2 {
             let size = (0..3).fold(0.0f64, |a, k| a.max(b[k + 3] - b[k]));
-            let tmin = 0.3 * size * rng.unit();
-            (tmin, tmin + size * rng.unit())
+            let tmin = 0.3 * size * rng.uniform();
+            (tmin, tmin + size * rng.uniform())
         } else {
             (0.0, f64::INFINITY)
         };
@@ -447,8 +441,8 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
     let mut rng = Rng(7);
     for _ in 0..20_000 {
         let origin: [f64; 3] =
-            std::array::from_fn(|k| near[k] + (near[k + 3] - near[k]) * rng.unit());
-        let d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+            std::array::from_fn(|k| near[k] + (near[k + 3] - near[k]) * rng.uniform());
+        let d: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.uniform() - 1.0);
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         rays.push(RayRow {
             origin,

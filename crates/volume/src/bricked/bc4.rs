@@ -205,6 +205,7 @@ pub fn encode_block(targets: &[f64; 16]) -> ([u8; BLOCK_BYTES], f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hytrace_testkit::{Random, SplitMix64};
 
     /// The sixteen texels of `block`, in code units.
     fn decode_block(block: &[u8; BLOCK_BYTES]) -> [f32; 16] {
@@ -293,14 +294,9 @@ mod tests {
 
     #[test]
     fn random_blocks_respect_the_worst_case() {
-        let mut s = 1u64;
+        let mut rng = SplitMix64(1);
         for _ in 0..2000 {
-            let x: [f64; 16] = std::array::from_fn(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64 * 255.0
-            });
+            let x: [f64; 16] = std::array::from_fn(|_| rng.uniform() * 255.0);
             let (block, err) = encode_block(&x);
             assert!(err <= WORST_ERROR);
             assert!((decoded_error(&block, &x) - err).abs() < 1e-4);

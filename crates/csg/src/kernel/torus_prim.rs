@@ -1,5 +1,7 @@
 //! The torus primitive `[rmin, rmax, rtor]`: a tube of radius `rmax` (hollow inside `rmin`)
-//! swept around z at radius `rtor`, built on the quartic solver of [`super::torus`].
+//! swept around z at radius `rtor`. Its spans and signed distance are built on the tube
+//! crossings of [`super::torus`] (a convexity-split Newton search on the squared distance
+//! to the core circle: no quartic is solved, see there why).
 
 use super::spans::Spans;
 use super::torus::{torus_crossings, torus_normal, torus_sdf};

@@ -543,7 +543,7 @@ mod tests {
 
     use super::*;
     use crate::prim_tree::ray_bounds_entry;
-    use crate::test_common::Rng;
+    use crate::test_common::{Random, Rng};
 
     /// Random boxes, a wide tree over them (leaves of up to 4 boxes) and the box numbers in
     /// leaf order.
@@ -634,10 +634,10 @@ mod tests {
             let mut met = 0;
             for _ in 0..3000 {
                 let o = [0; 3].map(|_| centre + rng.range(-150.0, 150.0));
-                met += forest.whole(o, rng.unit());
+                met += forest.whole(o, rng.direction());
                 // A window of the ray, as a closest-hit search's shrinking limit makes.
                 let (a, b) = (rng.range(-50.0, 100.0) as f32, rng.range(0.0, 300.0) as f32);
-                met += forest.window(o, rng.unit(), a, a + b);
+                met += forest.window(o, rng.direction(), a, a + b);
             }
             assert!(met > 10_000, "only {met} boxes met around {centre}");
         }
@@ -650,7 +650,7 @@ mod tests {
         let mut met = 0;
         for _ in 0..2000 {
             let o = [0; 3].map(|_| rng.range(-60.0, 60.0));
-            let u = rng.unit();
+            let u = rng.direction();
             for zeroed in [
                 [true, false, false],
                 [false, true, true],
@@ -683,14 +683,14 @@ mod tests {
             let mut d = [1.0, 1.0, 1.0];
             d[k] = 0.0;
             met += forest.whole(o, d);
-            let mut d = rng.unit();
+            let mut d = rng.direction();
             d[k] = 0.0;
             met += forest.whole(o, d);
             // Aimed from afar at a corner, where the slabs' entry and exit meet: rounding
             // decides whether the ray touches the box, and the walk must not disagree.
             for corner in 0..8 {
                 let c = [0, 1, 2].map(|j| f64::from(b[(corner >> j) & 1].get(j)));
-                let d = rng.unit();
+                let d = rng.direction();
                 let o = [0, 1, 2].map(|j| c[j] - 1.0e3 * d[j]);
                 met += forest.whole(o, d);
             }
