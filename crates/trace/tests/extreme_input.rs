@@ -328,7 +328,7 @@ fn ray_rows_of_special_values_are_accepted_exactly_when_usable() {
         f64::NEG_INFINITY,
         f64::NAN,
     ];
-    let mut rng = SplitMix64(0x5eed_0f_0a_5);
+    let mut rng = SplitMix64(0x0005_eed0_f0a5);
     let cases = hytrace_testkit::fuzz_cases(100_000);
     let (mut accepted, mut refused) = (0, 0);
     for case in 0..cases {
