@@ -9,23 +9,7 @@ use std::path::Path;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, read_records, write_array, write_records};
 use hytrace_foundry::records::{Instance, Prim};
-
-/// SplitMix64: a deterministic source of mutations.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
+use hytrace_testkit::{Random, SplitMix64};
 
 /// Header text edits: each replaces a piece of a valid header by something a broken or
 /// hostile writer could produce.
@@ -78,7 +62,7 @@ fn seeds(dir: &Path) -> Vec<Vec<u8>> {
     out
 }
 
-fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
+fn mutate(seed: &[u8], rng: &mut SplitMix64) -> Vec<u8> {
     let mut bytes = seed.to_vec();
     for _ in 0..1 + rng.below(3) {
         // Mostly the header (magic, version, length, dict), sometimes anywhere.
@@ -87,7 +71,7 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
         } else {
             bytes.len().min(128)
         };
-        let at = rng.below(span);
+        let at = rng.below(span.max(1));
         match rng.below(6) {
             0 => bytes.truncate(at),
             1 => {
@@ -97,12 +81,12 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
             }
             2 => {
                 if let Some(b) = bytes.get_mut(at) {
-                    *b = rng.next() as u8;
+                    *b = rng.next_u64() as u8;
                 }
             }
             3 => {
                 let n = rng.below(16);
-                let junk: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                let junk: Vec<u8> = (0..n).map(|_| rng.next_u64() as u8).collect();
                 bytes.splice(at..at, junk);
             }
             4 => {
@@ -133,7 +117,7 @@ fn mutated_npy_files_read_exactly_or_are_refused_with_the_file_named() {
     let dir = tempfile::tempdir().unwrap();
     let seeds = seeds(dir.path());
     let path = dir.path().join("fuzz.npy");
-    let mut rng = Rng(0x00c0_ffee);
+    let mut rng = SplitMix64(0x00c0_ffee);
     let (mut read, mut refused) = (0usize, 0usize);
     let cases = hytrace_testkit::fuzz_cases(5000);
     for case in 0..cases {
