@@ -23,7 +23,7 @@ impl<const W: usize> Rows<'_, W> {
     pub fn rows(&self) -> &[[f64; W]] {
         match self {
             Rows::Borrowed(a) => {
-                bytemuck::cast_slice(a.as_slice().expect("borrowed only when contiguous"))
+                bytemuck::cast_slice(a.as_slice().expect("borrowed only in C order"))
             }
             Rows::Owned(v) => v,
         }
@@ -51,7 +51,8 @@ pub fn float_rows<'py, const W: usize>(
     check_row_shape::<W>(&shape, what, what, columns).map_err(|e| value_error(e.to_string()))?;
     let dtype = array.dtype();
     if let Ok(a) = array.extract::<PyReadonlyArray2<'py, f64>>() {
-        if a.as_slice().is_ok() {
+        // `as_slice` takes Fortran order too: only C order reads as rows.
+        if array.is_c_contiguous() && a.as_slice().is_ok() {
             return Ok(Rows::Borrowed(a));
         }
         let a = a.as_array();
