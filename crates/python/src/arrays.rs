@@ -3,7 +3,8 @@
 
 use hytrace_trace::scan::{check_row_shape, not_float_rows, rays_from_rows, RayRow};
 use numpy::{
-    Element, PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArray, PyUntypedArrayMethods,
+    Element, PyArray1, PyArrayDescrMethods, PyArrayMethods, PyReadonlyArray2, PyUntypedArray,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -47,9 +48,17 @@ pub fn float_rows<'py, const W: usize>(
             .call_method1("asarray", (value,))?
             .cast_into::<PyUntypedArray>()?,
     };
+    let dtype = array.dtype();
+    let not_float = || -> PyResult<PyErr> {
+        let got = dtype.str()?.to_string();
+        Ok(type_error(not_float_rows(what, what, &got).to_string()).into())
+    };
+    // Text or objects are of the wrong type whatever their shape.
+    if !matches!(dtype.kind(), b'b' | b'i' | b'u' | b'f' | b'c') {
+        return Err(not_float()?);
+    }
     let shape: Vec<u64> = array.shape().iter().map(|&d| d as u64).collect();
     check_row_shape::<W>(&shape, what, what, columns).map_err(|e| value_error(e.to_string()))?;
-    let dtype = array.dtype();
     if let Ok(a) = array.extract::<PyReadonlyArray2<'py, f64>>() {
         // `as_slice` takes Fortran order too: only C order reads as rows.
         if array.is_c_contiguous() && a.as_slice().is_ok() {
@@ -72,8 +81,7 @@ pub fn float_rows<'py, const W: usize>(
                 .collect(),
         ));
     }
-    let got = dtype.str()?.to_string();
-    Err(type_error(not_float_rows(what, what, &got).to_string()).into())
+    Err(not_float()?)
 }
 
 /// Validated rays (finite origins, non-zero finite directions, finite `tmin < tmax`),

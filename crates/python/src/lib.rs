@@ -321,6 +321,14 @@ struct Volume {
     grid: Represented,
 }
 
+/// Whether `spec` names a volume file (`.nvdb`, `.vdb`) rather than a procedural grid.
+fn is_volume_file(spec: &str) -> bool {
+    let extension = Path::new(spec).extension().and_then(|e| e.to_str());
+    !hytrace_volume::is_procedural(spec)
+        && extension
+            .is_some_and(|e| e.eq_ignore_ascii_case("nvdb") || e.eq_ignore_ascii_case("vdb"))
+}
+
 #[pymethods]
 impl Volume {
     #[new]
@@ -341,9 +349,9 @@ impl Volume {
                 let (_, g) = volume::open(&spec, grid)?;
                 volume::represent(g, repr)
             })
-            .map_err(|e| match hytrace_volume::is_procedural(&spec) {
-                true => library_error(e),
-                false => open_error(Path::new(&spec))(e),
+            .map_err(|e| match is_volume_file(&spec) {
+                true => open_error(Path::new(&spec))(e),
+                false => library_error(e),
             })?;
         Ok(Volume {
             spec,
