@@ -10,8 +10,8 @@ use pyo3::prelude::*;
 
 use crate::errors::{type_error, value_error, Error};
 
-/// `(N, W)` rows of f64: a C-contiguous float64 array borrowed in place, or the rows
-/// converted (float32 arrays, other layouts).
+/// `(N, W)` rows of f64: a C-contiguous, aligned float64 array borrowed in place, or the
+/// rows converted (float32 arrays, other layouts).
 pub enum Rows<'py, const W: usize> {
     /// Borrowed from the caller's array.
     Borrowed(PyReadonlyArray2<'py, f64>),
@@ -46,6 +46,16 @@ pub fn float_rows<'py, const W: usize>(
         Err(_) => py
             .import("numpy")?
             .call_method1("asarray", (value,))?
+            .cast_into::<PyUntypedArray>()?,
+    };
+    // NumPy reads misaligned buffers (such as arrays unpickled from a byte stream); Rust
+    // reads aligned ones only: those are copied into an aligned array first.
+    let aligned: bool = array.getattr("flags")?.getattr("aligned")?.extract()?;
+    let array = match aligned {
+        true => array,
+        false => py
+            .import("numpy")?
+            .call_method1("require", (array, py.None(), "A"))?
             .cast_into::<PyUntypedArray>()?,
     };
     let dtype = array.dtype();

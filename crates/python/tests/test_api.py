@@ -52,7 +52,13 @@ def test_scan_reads_any_layout_alike(default_scene):
     fortran = np.asfortranarray(rays)
     strided = np.zeros((500, 16))
     strided[:, ::2] = rays
-    for other in [fortran, strided[:, ::2], rays.tolist()]:
+    # Misaligned, as arrays unpickled from a byte stream can be (Dask sends them so).
+    buffer = bytearray(rays.nbytes + 1)
+    misaligned = np.frombuffer(buffer, dtype=np.float64, offset=1, count=rays.size)
+    misaligned = misaligned.reshape(rays.shape)
+    misaligned[:] = rays
+    assert not misaligned.flags.aligned
+    for other in [fortran, strided[:, ::2], rays.tolist(), misaligned, misaligned[:, :]]:
         h, i = default_scene.scan(other)
         same(h, hits)
         same(i, ids)
