@@ -5,7 +5,7 @@
 //! arrays instead of `.npy` files, so its results equal the command's bit for bit. Rays
 //! and points are checked as the command checks them, with its messages. Tracing runs with
 //! the GIL released. Errors are raised as the package's exceptions
-//! (`hytrace/_errors.py`): [`HytraceError`'s subclasses](errors) for bad input, missing
+//! (`hytrace/_errors.py`): `HytraceError` and its subclasses for bad input, missing
 //! files and failures of the library.
 
 mod arrays;

@@ -74,7 +74,8 @@ pub fn prepare(
         .with_context(|| format!("{}: preparing for photons", path.display()))
 }
 
-/// [`propagate`]s photons through the scene read from `path`, errors naming the file.
+/// Propagates photons through the scene read from `path` ([`propagate()`]), errors naming
+/// the file.
 pub fn propagate_in(
     scene: &PhotonScene,
     path: &Path,
