@@ -136,11 +136,9 @@ impl Scene {
         let n = result.hits.len();
         let hits = match precision {
             Precision::F32 => arrays::matrix(py, result.hits_f32(), n, 4)?,
-            Precision::F64 => {
-                arrays::matrix(py, result.hits.iter().flatten().copied().collect(), n, 4)?
-            }
+            Precision::F64 => arrays::matrix(py, bytemuck::cast_vec::<_, f64>(result.hits), n, 4)?,
         };
-        let ids = arrays::matrix(py, result.ids.iter().flatten().copied().collect(), n, 3)?;
+        let ids = arrays::matrix(py, bytemuck::cast_vec::<_, i32>(result.ids), n, 3)?;
         Ok((hits, ids))
     }
 
@@ -250,7 +248,7 @@ impl Scene {
             .detach(|| render(f, &spec, backend, texels, &|_| {}))
             .map_err(library_error)?;
         let image = rendered.image;
-        let flat: Vec<f32> = image.pixels.iter().flatten().copied().collect();
+        let flat: Vec<f32> = bytemuck::cast_vec(image.pixels);
         let shape = [image.height as usize, image.width as usize, 3];
         Ok(PyArray1::from_vec(py, flat).reshape(shape)?.into_any())
     }
@@ -302,7 +300,8 @@ impl Scene {
             })
             .map_err(library_error)?;
         let n = run.hits.len();
-        let hits = arrays::matrix(py, run.hits.iter().flat_map(|h| h.0).collect(), n, 16)?;
+        let rows: Vec<[f64; 16]> = run.hits.into_iter().map(|h| h.0).collect();
+        let hits = arrays::matrix(py, bytemuck::cast_vec::<_, f64>(rows), n, 16)?;
         if histories {
             let codes = PyArray1::from_vec(py, run.histories).into_any();
             Ok((hits, codes).into_pyobject(py)?.into_any())

@@ -62,6 +62,17 @@ def test_rays_that_are_not_finite_raise_the_commands_message(
         assert f"ray {row}" in str(raised.value)
 
 
+def test_the_first_bad_ray_is_named_however_many_there_are(cli, tmp_path, default_scene):
+    rays = random_rays(20_000, 1)
+    rays[[3170, 15_000, 19_999], 4:7] = 0
+    rays[9000, 0] = np.nan
+    np.save(tmp_path / "rays.npy", rays)
+    p = cli("scan", "--rays", tmp_path / "rays.npy", "--out", tmp_path / "h.npy", check=False)
+    with pytest.raises(hytrace.HytraceValueError, match="ray 3170: direction") as raised:
+        default_scene.scan(rays)
+    assert message_after_source(str(raised.value)) == message_after_source(cli_error(p))
+
+
 def test_zero_directions_raise(default_scene):
     rays = random_rays(3, 1)
     rays[1, 4:7] = 0

@@ -63,35 +63,44 @@ pub struct RayRow {
     pub tmax: f64,
 }
 
-/// Validates raw `(N, 8)` rows, naming `source` and the first bad row in errors.
+/// Validates raw `(N, 8)` rows (in parallel), naming `source` and the first bad row in
+/// errors.
 pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<RayRow>> {
-    rows.iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let o = [r[0], r[1], r[2]];
-            let d = [r[4], r[5], r[6]];
-            let (tmin, tmax) = (r[3], r[7]);
-            if !o.iter().all(|v| v.is_finite()) {
-                bail!("{source}: ray {i}: origin {o:?} is not finite");
-            }
-            if !d.iter().all(|v| v.is_finite()) {
-                bail!("{source}: ray {i}: direction {d:?} is not finite");
-            }
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if len == 0.0 || !len.is_finite() {
-                bail!("{source}: ray {i}: direction {d:?} has zero length");
-            }
-            if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
-                bail!("{source}: ray {i}: needs finite tmin < tmax, got {tmin} {tmax}");
-            }
-            Ok(RayRow {
-                origin: o,
-                direction: d.map(|v| v / len),
-                tmin,
-                tmax,
-            })
-        })
-        .collect()
+    let rays: Option<Vec<RayRow>> = rows.par_iter().map(|r| ray_of_row(r).ok()).collect();
+    rays.ok_or_else(|| {
+        let (i, problem) = rows
+            .iter()
+            .enumerate()
+            .find_map(|(i, r)| ray_of_row(r).err().map(|p| (i, p)))
+            .expect("a row failed");
+        anyhow::anyhow!("{source}: ray {i}: {problem}")
+    })
+}
+
+/// One validated ray, or what is wrong with the row.
+fn ray_of_row(r: &[f64; 8]) -> Result<RayRow, String> {
+    let o = [r[0], r[1], r[2]];
+    let d = [r[4], r[5], r[6]];
+    let (tmin, tmax) = (r[3], r[7]);
+    if !o.iter().all(|v| v.is_finite()) {
+        return Err(format!("origin {o:?} is not finite"));
+    }
+    if !d.iter().all(|v| v.is_finite()) {
+        return Err(format!("direction {d:?} is not finite"));
+    }
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    if len == 0.0 || !len.is_finite() {
+        return Err(format!("direction {d:?} has zero length"));
+    }
+    if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
+        return Err(format!("needs finite tmin < tmax, got {tmin} {tmax}"));
+    }
+    Ok(RayRow {
+        origin: o,
+        direction: d.map(|v| v / len),
+        tmin,
+        tmax,
+    })
 }
 
 /// Reads an `(N, W)` float32 or float64 array as rows of f64; `what` names the rows in
@@ -177,7 +186,10 @@ pub struct ScanResult {
 impl ScanResult {
     /// The hits rounded to f32, row after row (what an `f32` scan writes).
     pub fn hits_f32(&self) -> Vec<f32> {
-        self.hits.iter().flatten().map(|&v| v as f32).collect()
+        self.hits
+            .par_iter()
+            .flat_map_iter(|h| h.map(|v| v as f32))
+            .collect()
     }
 }
 
