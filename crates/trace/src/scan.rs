@@ -66,15 +66,16 @@ pub struct RayRow {
 /// Validates raw `(N, 8)` rows (in parallel), naming `source` and the first bad row in
 /// errors.
 pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<RayRow>> {
-    let rays: Option<Vec<RayRow>> = rows.par_iter().map(|r| ray_of_row(r).ok()).collect();
-    rays.ok_or_else(|| {
-        let (i, problem) = rows
-            .iter()
-            .enumerate()
-            .find_map(|(i, r)| ray_of_row(r).err().map(|p| (i, p)))
-            .expect("a row failed");
-        anyhow::anyhow!("{source}: ray {i}: {problem}")
-    })
+    // Checked first, so that the rays are collected straight into place (an indexed
+    // collect) and the error names the first bad row.
+    if let Some(i) = rows.par_iter().position_first(|r| ray_of_row(r).is_err()) {
+        let problem = ray_of_row(&rows[i]).expect_err("row i failed");
+        bail!("{source}: ray {i}: {problem}");
+    }
+    Ok(rows
+        .par_iter()
+        .map(|r| ray_of_row(r).expect("every row passed"))
+        .collect())
 }
 
 /// One validated ray, or what is wrong with the row.
@@ -186,10 +187,11 @@ pub struct ScanResult {
 impl ScanResult {
     /// The hits rounded to f32, row after row (what an `f32` scan writes).
     pub fn hits_f32(&self) -> Vec<f32> {
-        self.hits
-            .par_iter()
-            .flat_map_iter(|h| h.map(|v| v as f32))
-            .collect()
+        let mut out = vec![0.0; self.hits.len() * 4];
+        out.par_chunks_mut(4)
+            .zip(&self.hits)
+            .for_each(|(o, h)| o.copy_from_slice(&h.map(|v| v as f32)));
+        out
     }
 }
 
