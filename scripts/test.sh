@@ -60,5 +60,7 @@ cargo test -p hytrace-trace --features embree
 # command line's release build beside it), then its tests compare every function with
 # the command bit for bit and run hytrace.dask on LocalClusters.
 cargo build --release -p hytrace-trace --bin hytrace
-"$venv/bin/python" -m pip install -q --no-build-isolation --force-reinstall --no-deps ./crates/python
+# (maturin's build backend runs `maturin`, found on PATH.)
+PATH="$PWD/$venv/bin:$PATH" "$venv/bin/python" -m pip install -q --no-build-isolation \
+  --force-reinstall --no-deps ./crates/python
 HYTRACE_BIN="$PWD/target/release/hytrace" "$venv/bin/python" -m pytest -q crates/python/tests
