@@ -5,7 +5,8 @@
 #  - the OpenVDB/NanoVDB references (Debian: python3-openvdb for /usr/bin/python3,
 #    libnanovdb-tools, libopenvdb-tools), oracles of the volume tests;
 #  - Embree 3 (Debian: libembree-dev), which the `embree` feature's backend links;
-#  - the Python oracle environment (.venv, from tests/requirements.txt).
+#  - the Python oracle environment (.venv, from tests/requirements.txt), into which the
+#    Python package (crates/python) is built and installed, then tested against the command.
 # GPU and oracle tests fail (not skip) when their dependencies are missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -60,3 +61,11 @@ python3 scripts/check_doc_links.py
 # The Embree backend (`--backend embree`): its own build of the tracer crate.
 cargo clippy -p hytrace-trace --features embree --all-targets -- -D warnings
 cargo test -p hytrace-trace --features embree
+# The Python package: installed into .venv as users install it (a release build, the
+# command line's release build beside it), then its tests compare every function with
+# the command bit for bit and run hytrace.dask on LocalClusters.
+cargo build --release -p hytrace-trace --bin hytrace
+# (maturin's build backend runs `maturin`, found on PATH.)
+PATH="$PWD/$venv/bin:$PATH" "$venv/bin/python" -m pip install -q --no-build-isolation \
+  --force-reinstall --no-deps ./crates/python
+HYTRACE_BIN="$PWD/target/release/hytrace" "$venv/bin/python" -m pytest -q crates/python/tests

@@ -84,6 +84,7 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
             source: Source::parse(source).unwrap(),
             wavelength_nm: WAVELENGTH_NM,
             photons: PHOTONS,
+            first: 0,
             seed: 1,
             max_steps: 100_000,
             keep_histories: false,

@@ -363,6 +363,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     precision,
                     &estimate.args().params(),
                     media_backend,
+                    0,
                 )?),
                 None => None,
             };

@@ -63,45 +63,55 @@ pub struct RayRow {
     pub tmax: f64,
 }
 
-/// Validates raw `(N, 8)` rows, naming `source` and the first bad row in errors.
+/// Validates raw `(N, 8)` rows (in parallel), naming `source` and the first bad row in
+/// errors.
 pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<RayRow>> {
-    rows.iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let o = [r[0], r[1], r[2]];
-            let d = [r[4], r[5], r[6]];
-            let (tmin, tmax) = (r[3], r[7]);
-            if !o.iter().all(|v| v.is_finite()) {
-                bail!("{source}: ray {i}: origin {o:?} is not finite");
-            }
-            if !d.iter().all(|v| v.is_finite()) {
-                bail!("{source}: ray {i}: direction {d:?} is not finite");
-            }
-            let largest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            if largest == 0.0 {
-                bail!("{source}: ray {i}: direction {d:?} has zero length");
-            }
-            let mut len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            // Squares of components like 1e200 or 1e-200 overflow or vanish: scaled by the
-            // largest component first, any finite non-zero direction normalizes.
-            let d = if len == 0.0 || !len.is_finite() {
-                let d = d.map(|v| v / largest);
-                len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                d
-            } else {
-                d
-            };
-            if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
-                bail!("{source}: ray {i}: needs finite tmin < tmax, got {tmin} {tmax}");
-            }
-            Ok(RayRow {
-                origin: o,
-                direction: d.map(|v| v / len),
-                tmin,
-                tmax,
-            })
-        })
-        .collect()
+    // Checked first, so that the rays are collected straight into place (an indexed
+    // collect) and the error names the first bad row.
+    if let Some(i) = rows.par_iter().position_first(|r| ray_of_row(r).is_err()) {
+        let problem = ray_of_row(&rows[i]).expect_err("row i failed");
+        bail!("{source}: ray {i}: {problem}");
+    }
+    Ok(rows
+        .par_iter()
+        .map(|r| ray_of_row(r).expect("every row passed"))
+        .collect())
+}
+
+/// One validated ray, or what is wrong with the row.
+fn ray_of_row(r: &[f64; 8]) -> Result<RayRow, String> {
+    let o = [r[0], r[1], r[2]];
+    let d = [r[4], r[5], r[6]];
+    let (tmin, tmax) = (r[3], r[7]);
+    if !o.iter().all(|v| v.is_finite()) {
+        return Err(format!("origin {o:?} is not finite"));
+    }
+    if !d.iter().all(|v| v.is_finite()) {
+        return Err(format!("direction {d:?} is not finite"));
+    }
+    let largest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if largest == 0.0 {
+        return Err(format!("direction {d:?} has zero length"));
+    }
+    let mut len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    // Squares of components like 1e200 or 1e-200 overflow or vanish: scaled by the largest
+    // component first, any finite non-zero direction normalizes.
+    let d = if len == 0.0 || !len.is_finite() {
+        let d = d.map(|v| v / largest);
+        len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d
+    } else {
+        d
+    };
+    if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
+        return Err(format!("needs finite tmin < tmax, got {tmin} {tmax}"));
+    }
+    Ok(RayRow {
+        origin: o,
+        direction: d.map(|v| v / len),
+        tmin,
+        tmax,
+    })
 }
 
 /// Reads an `(N, W)` float32 or float64 array as rows of f64; `what` names the rows in
@@ -112,20 +122,15 @@ pub fn read_float_rows<const W: usize>(
     columns: &str,
 ) -> anyhow::Result<Vec<[f64; W]>> {
     let a = read_array(path)?;
-    let source = path.display();
-    if a.shape.len() != 2 || a.shape[1] != W as u64 {
-        bail!(
-            "{source}: {what} need shape (N, {W}){columns}, got {:?}",
-            a.shape
-        );
-    }
+    let source = path.display().to_string();
+    check_row_shape::<W>(&a.shape, &source, what, columns)?;
     let values: Vec<f64> = match a.scalar {
         Scalar::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&a.bytes)
             .into_iter()
             .map(f64::from)
             .collect(),
         Scalar::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&a.bytes),
-        other => bail!("{source}: {what} must be float32 or float64, got {other:?}"),
+        other => return Err(not_float_rows(&source, what, &format!("{other:?}"))),
     };
     Ok(values
         .chunks_exact(W)
@@ -133,9 +138,32 @@ pub fn read_float_rows<const W: usize>(
         .collect())
 }
 
+/// Errors unless `shape` is `(N, W)`: "{source}: {what} need shape (N, W){columns}, got
+/// [..]" (the message of [`read_float_rows`], for arrays from elsewhere too).
+pub fn check_row_shape<const W: usize>(
+    shape: &[u64],
+    source: &str,
+    what: &str,
+    columns: &str,
+) -> anyhow::Result<()> {
+    if shape.len() != 2 || shape[1] != W as u64 {
+        bail!("{source}: {what} need shape (N, {W}){columns}, got {shape:?}");
+    }
+    Ok(())
+}
+
+/// The error of rows whose element type `got` is not float32 or float64 (the message of
+/// [`read_float_rows`], for arrays from elsewhere too).
+pub fn not_float_rows(source: &str, what: &str, got: &str) -> anyhow::Error {
+    anyhow::anyhow!("{source}: {what} must be float32 or float64, got {got}")
+}
+
+/// The columns of a rays array, as errors describe them.
+pub const RAY_COLUMNS: &str = " (ox oy oz tmin dx dy dz tmax)";
+
 /// Reads and validates a rays file.
 pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
-    let rows = read_float_rows::<8>(path, "rays", " (ox oy oz tmin dx dy dz tmax)")?;
+    let rows = read_float_rows::<8>(path, "rays", RAY_COLUMNS)?;
     rays_from_rows(&rows, &path.display().to_string())
 }
 
@@ -164,6 +192,17 @@ pub struct ScanResult {
     pub hits: Vec<[f64; 4]>,
     /// `instance boundary copy` per ray, -1 where there is none.
     pub ids: Vec<[i32; 3]>,
+}
+
+impl ScanResult {
+    /// The hits rounded to f32, row after row (what an `f32` scan writes).
+    pub fn hits_f32(&self) -> Vec<f32> {
+        let mut out = vec![0.0; self.hits.len() * 4];
+        out.par_chunks_mut(4)
+            .zip(&self.hits)
+            .for_each(|(o, h)| o.copy_from_slice(&h.map(|v| v as f32)));
+        out
+    }
 }
 
 /// Number of columns of the ids array.
@@ -536,17 +575,19 @@ pub fn scan_transmittance(
     precision: Precision,
     params: &TransmittanceParams,
 ) -> anyhow::Result<TransmittanceRun> {
-    scan_transmittance_on(foundry, rays, precision, params, Backend::Cpu)
+    scan_transmittance_on(foundry, rays, precision, params, Backend::Cpu, 0)
 }
 
 /// [`scan_transmittance`] on `backend`: the surfaces scanned there ([`scan_with`]), then
-/// the media estimated where the scan ran ([`media_transmittance`]).
+/// the media estimated where the scan ran ([`media_transmittance`]), ray `i` drawing the
+/// random streams of index `first_ray + i`.
 pub fn scan_transmittance_on(
     foundry: &Foundry,
     rays: &[RayRow],
     precision: Precision,
     params: &TransmittanceParams,
     backend: Backend,
+    first_ray: u32,
 ) -> anyhow::Result<TransmittanceRun> {
     let (result, times) = scan_with(foundry, rays, precision, backend)?;
     let ends = ray_ends(&result, rays);
@@ -555,7 +596,7 @@ pub fn scan_transmittance_on(
         _ if times.gpu.is_some() => Backend::Gpu,
         _ => Backend::Cpu,
     };
-    media_transmittance(foundry, rays, &ends, precision, params, ran_on)
+    media_transmittance(foundry, rays, &ends, precision, params, ran_on, first_ray)
 }
 
 /// Where each ray's media end: its first surface crossing in `result`, or its `tmax` on a
@@ -574,7 +615,8 @@ pub fn ray_ends(result: &ScanResult, rays: &[RayRow]) -> Vec<f64> {
 /// estimates every medium on the very index-space segments and random streams the CPU
 /// would; `auto` falls back to the CPU with a line on stderr when the GPU fails. With
 /// Embree (f32 only) the brick clusters each ray meets are found by Embree, the estimates
-/// are the CPU's.
+/// are the CPU's. Ray `i` draws the random streams of index `first_ray + i`; the GPU's
+/// kernel numbers its rays from 0 and takes `first_ray = 0` only.
 pub fn media_transmittance(
     foundry: &Foundry,
     rays: &[RayRow],
@@ -582,27 +624,37 @@ pub fn media_transmittance(
     precision: Precision,
     params: &TransmittanceParams,
     backend: Backend,
+    first_ray: u32,
 ) -> anyhow::Result<TransmittanceRun> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         ends: &[f64],
         params: &TransmittanceParams,
+        first_ray: u32,
     ) -> anyhow::Result<TransmittanceRun> {
         timed_transmittance(|opened| {
             let scene = CpuScene::<T>::new(f)?;
             let media = SceneMedia::new(&scene, f, params)?;
             *opened = Instant::now();
-            media.transmittances_to(rays, ends)
+            media.transmittances_to(rays, ends, first_ray)
         })
     }
+    if first_ray != 0 && matches!(backend, Backend::Gpu | Backend::Auto) {
+        bail!(
+            "the GPU transmittance kernel numbers its rays from 0: a first ray index of \
+             {first_ray} needs the CPU or Embree backend"
+        );
+    }
     match (backend, precision) {
-        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, ends, params),
-        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, ends, params),
+        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, ends, params, first_ray),
+        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, ends, params, first_ray),
         (Backend::Embree, Precision::F64) => {
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
-        (Backend::Embree, Precision::F32) => embree_transmittance(foundry, rays, ends, params),
+        (Backend::Embree, Precision::F32) => {
+            embree_transmittance(foundry, rays, ends, params, first_ray)
+        }
         (Backend::Gpu | Backend::Auto, Precision::F64) => {
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
@@ -612,7 +664,7 @@ pub fn media_transmittance(
         (Backend::Auto, Precision::F32) => gpu_or_cpu(
             "computes transmittance",
             |ctx| gpu_transmittance(foundry, rays, ends, params, ctx),
-            || cpu::<f32>(foundry, rays, ends, params),
+            || cpu::<f32>(foundry, rays, ends, params, 0),
         ),
     }
 }
@@ -757,13 +809,14 @@ fn embree_transmittance(
     rays: &[RayRow],
     ends: &[f64],
     params: &TransmittanceParams,
+    first_ray: u32,
 ) -> anyhow::Result<TransmittanceRun> {
     timed_transmittance(|opened| {
         let cpu = CpuScene::<f32>::new(f)?;
         let media = SceneMedia::new(&cpu, f, params)?;
         let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
         *opened = Instant::now();
-        media.transmittances_with(rays, ends, |r, end| {
+        media.transmittances_with(rays, ends, first_ray, |r, end| {
             let ray = Ray::from_f64(r.origin, r.direction);
             scene.cluster_visits(&ray, r.tmin, end)
         })
@@ -792,6 +845,7 @@ fn embree_transmittance(
     _: &[RayRow],
     _: &[f64],
     _: &TransmittanceParams,
+    _: u32,
 ) -> anyhow::Result<TransmittanceRun> {
     bail!(NO_EMBREE)
 }
@@ -801,7 +855,7 @@ pub fn write_hits(result: &ScanResult, precision: Precision, path: &Path) -> any
     let shape = [result.hits.len() as u64, 4];
     match precision {
         Precision::F32 => {
-            let flat: Vec<f32> = result.hits.iter().flatten().map(|&v| v as f32).collect();
+            let flat = result.hits_f32();
             write_array(path, Scalar::F32, &shape, bytemuck::cast_slice(&flat))?;
         }
         Precision::F64 => {

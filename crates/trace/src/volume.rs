@@ -139,10 +139,16 @@ pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
 /// Reads `(N, 3)` float32 or float64 points; errors name the file and the first bad row.
 pub fn read_points(path: &Path) -> anyhow::Result<Vec<[f64; 3]>> {
     let rows = read_float_rows::<3>(path, "points", "")?;
-    if let Some(i) = rows.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-        bail!("{}: point {i}: {:?} is not finite", path.display(), rows[i]);
-    }
+    check_points(&rows, &path.display().to_string())?;
     Ok(rows)
+}
+
+/// Errors on the first point that is not finite, naming `source`.
+pub fn check_points(points: &[[f64; 3]], source: &str) -> anyhow::Result<()> {
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        bail!("{source}: point {i}: {:?} is not finite", points[i]);
+    }
+    Ok(())
 }
 
 /// Lookups of `grid` at `points`; point `i` of a stochastic lookup uses the random stream

@@ -172,7 +172,7 @@ fn compare(
     tol: f64,
 ) -> (Tally, f64, f64, f64) {
     let want = scan_transmittance(f, rays, Precision::F32, params).unwrap();
-    let got = scan_transmittance_on(f, rays, Precision::F32, params, Backend::Gpu).unwrap();
+    let got = scan_transmittance_on(f, rays, Precision::F32, params, Backend::Gpu, 0).unwrap();
     let g = got.gpu.as_ref().expect("ran on the GPU");
     eprintln!(
         "{label}: {} rays, cpu {:.2} s, gpu {:.2} s (kernels {:.3} s) on {}",

@@ -28,6 +28,7 @@ fn options(source: &str, photons: u64) -> RunOptions {
         source: Source::parse(source).unwrap(),
         wavelength_nm: 420.0,
         photons,
+        first: 0,
         seed: 3,
         max_steps: 10_000,
         keep_histories: true,
@@ -51,6 +52,38 @@ fn results_do_not_depend_on_the_number_of_threads() {
     assert_eq!(one.histories, three.histories);
     assert_eq!(one.hits, three.hits);
     assert!(!one.hits.is_empty());
+}
+
+#[test]
+fn a_run_split_into_ranges_gives_the_whole_run() {
+    let scene = scene();
+    let whole = propagate(&scene, &options("point:0,0,0", 2500)).unwrap();
+    let (mut hits, mut histories) = (Vec::new(), Vec::new());
+    for (first, photons) in [(0, 700), (700, 1), (701, 1799)] {
+        let part = propagate(
+            &scene,
+            &RunOptions {
+                first,
+                ..options("point:0,0,0", photons)
+            },
+        )
+        .unwrap();
+        assert!(part
+            .hits
+            .iter()
+            .all(|h| (first..first + photons).contains(&(h.0[13] as u64))));
+        hits.extend(part.hits);
+        histories.extend(part.histories);
+    }
+    assert_eq!(hits, whole.hits);
+    assert_eq!(histories, whole.histories);
+    assert!(!whole.hits.is_empty());
+    // A range past the last index is refused.
+    let past = RunOptions {
+        first: u64::MAX,
+        ..options("point:0,0,0", 2)
+    };
+    assert!(propagate(&scene, &past).is_err());
 }
 
 /// The property tables at 420 nm, linear in photon energy (eV): the scene's ABSLENGTH

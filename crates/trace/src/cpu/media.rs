@@ -243,9 +243,16 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     }
 
     /// The transmittance along every ray up to its end (`ends[i]`: its first surface
-    /// crossing from a scan, or its `tmax`), ray `i` drawing the streams of index `i`.
-    pub fn transmittances_to(&self, rays: &[RayRow], ends: &[f64]) -> anyhow::Result<Vec<f64>> {
-        self.each_ray(rays, ends, |r, end, i| {
+    /// crossing from a scan, or its `tmax`), ray `i` drawing the streams of index
+    /// `first_ray + i` (so a batch split in parts, each given the index of its first ray,
+    /// estimates what the whole batch does).
+    pub fn transmittances_to(
+        &self,
+        rays: &[RayRow],
+        ends: &[f64],
+        first_ray: u32,
+    ) -> anyhow::Result<Vec<f64>> {
+        self.each_ray(rays, ends, first_ray, |r, end, i| {
             self.transmittance_to(r.origin, r.direction, r.tmin, end, i)
         })
     }
@@ -256,34 +263,37 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         &self,
         rays: &[RayRow],
         ends: &[f64],
+        first_ray: u32,
         visits: impl Fn(&RayRow, f64) -> anyhow::Result<Vec<(u32, u32, f64, f64)>> + Sync,
     ) -> anyhow::Result<Vec<f64>> {
-        self.each_ray(rays, ends, |r, end, i| {
+        self.each_ray(rays, ends, first_ray, |r, end, i| {
             let found = visits(r, end)?;
             self.transmittance_with(r.origin, r.direction, r.tmin, end, found, i)
         })
     }
 
-    /// `estimate(ray, end, ray index)` of every ray in parallel (the transmittances); an
-    /// error names the first ray that fails.
+    /// `estimate(ray, end, first_ray + ray index)` of every ray in parallel (the
+    /// transmittances); an error names the first ray that fails.
     fn each_ray(
         &self,
         rays: &[RayRow],
         ends: &[f64],
+        first_ray: u32,
         estimate: impl Fn(&RayRow, f64, u32) -> anyhow::Result<(f64, u64)> + Sync,
     ) -> anyhow::Result<Vec<f64>> {
         anyhow::ensure!(
-            rays.len() == ends.len() && u32::try_from(rays.len()).is_ok(),
-            "{} rays and {} ends: need as many, at most {}",
+            rays.len() == ends.len()
+                && u64::from(first_ray) + rays.len() as u64 <= u64::from(u32::MAX) + 1,
+            "{} rays from index {first_ray} and {} ends: need as many, at most {} indices",
             rays.len(),
             ends.len(),
-            u32::MAX
+            u64::from(u32::MAX) + 1
         );
         rays.par_iter()
             .zip(ends)
             .enumerate()
             .map(|(i, (r, &end))| {
-                estimate(r, end, i as u32)
+                estimate(r, end, first_ray + i as u32)
                     .map(|(t, _)| t)
                     .with_context(|| format!("ray {i}"))
             })

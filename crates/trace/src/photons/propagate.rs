@@ -243,6 +243,10 @@ pub struct RunOptions {
     pub wavelength_nm: f64,
     /// Number of photons.
     pub photons: u64,
+    /// Index of the first photon: the run propagates photons `first .. first + photons`,
+    /// each drawing its own stream `(seed, index)`, so runs over consecutive ranges give
+    /// together exactly what one run over their union gives.
+    pub first: u64,
     /// Seed of the random streams.
     pub seed: u32,
     /// Steps after which a photon is stopped (label TR).
@@ -264,7 +268,8 @@ pub struct PhotonRun {
     pub propagate_s: f64,
 }
 
-/// Propagates `run.photons` photons through `scene`, in parallel over photons.
+/// Propagates photons `run.first .. run.first + run.photons` through `scene`, in parallel
+/// over photons.
 pub fn propagate(scene: &PhotonScene, run: &RunOptions) -> Result<PhotonRun, PhotonError> {
     if run.photons == 0 {
         return Err(PhotonError::Input(
@@ -277,6 +282,12 @@ pub fn propagate(scene: &PhotonScene, run: &RunOptions) -> Result<PhotonRun, Pho
             run.wavelength_nm
         )));
     }
+    let Some(end) = run.first.checked_add(run.photons) else {
+        return Err(PhotonError::Input(format!(
+            "photons {} .. {} + {}: past the last photon index",
+            run.first, run.first, run.photons
+        )));
+    };
     if run.max_steps == 0 {
         return Err(PhotonError::Input(
             "the step limit must be at least 1".into(),
@@ -297,9 +308,9 @@ pub fn propagate(scene: &PhotonScene, run: &RunOptions) -> Result<PhotonRun, Pho
     let mut hits = Vec::new();
     let mut histories = Vec::new();
     let mut codes: std::collections::HashMap<u64, u64> = Default::default();
-    let mut first = 0;
-    while first < run.photons {
-        let last = (first + BATCH).min(run.photons);
+    let mut first = run.first;
+    while first < end {
+        let last = first.saturating_add(BATCH).min(end);
         let batch: Vec<(History, Option<HitRow>)> = (first..last)
             .into_par_iter()
             .map(|i| scene.photon(i, run, energy))

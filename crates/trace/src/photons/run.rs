@@ -1,17 +1,19 @@
 //! `hytrace photons`: options, outputs and the history table.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::Foundry;
 use serde_json::json;
 
 use super::output::{history_table, write_histories, write_hits};
 use super::sources::Source;
-use super::{load_photon_scene, propagate, PhotonScene, RunOptions};
+use super::{load_photon_scene, propagate, PhotonRun, PhotonScene, RunOptions};
 use crate::outputs::{check_destinations, OutputSet};
+use crate::scene::VolumeSurfaces;
 
 /// Options of `hytrace photons`.
 #[derive(Args, Debug)]
@@ -36,6 +38,10 @@ pub struct PhotonsArgs {
     /// photon (index) mask (history flags, Opticks' bits) steps; written atomically.
     #[arg(short = 'o', long)]
     pub out: PathBuf,
+    /// Index of the first photon: photons FIRST .. FIRST + N are propagated, each with its
+    /// own stream, so a run split into ranges gives exactly the whole run's photons.
+    #[arg(long, default_value_t = 0)]
+    pub first: u64,
     /// Seed of the random streams: photon i draws stream (seed, i), so results do not
     /// depend on the number of threads.
     #[arg(long, default_value_t = 0)]
@@ -57,6 +63,27 @@ pub struct PhotonsArgs {
     pub stats: bool,
 }
 
+/// Prepares the scene `f` read from `path` for photons ([`PhotonScene::new`]), errors
+/// naming the file.
+pub fn prepare(
+    f: &Foundry,
+    surfaces: Option<VolumeSurfaces>,
+    path: &Path,
+) -> anyhow::Result<PhotonScene> {
+    PhotonScene::new(f, surfaces)
+        .with_context(|| format!("{}: preparing for photons", path.display()))
+}
+
+/// Propagates photons through the scene read from `path` ([`propagate()`]), errors naming
+/// the file.
+pub fn propagate_in(
+    scene: &PhotonScene,
+    path: &Path,
+    run: &RunOptions,
+) -> anyhow::Result<PhotonRun> {
+    propagate(scene, run).with_context(|| format!("{}: propagating photons", path.display()))
+}
+
 /// Runs `hytrace photons`.
 pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let source = Source::parse(&args.source)?;
@@ -69,21 +96,21 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let (f, surfaces) = load_photon_scene(&args.scene, options)?;
     let load_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let scene = PhotonScene::new(&f, surfaces)
-        .with_context(|| format!("{}: preparing for photons", args.scene.display()))?;
+    let scene = prepare(&f, surfaces, &args.scene)?;
     let build_s = t1.elapsed().as_secs_f64();
-    let run = propagate(
+    let run = propagate_in(
         &scene,
+        &args.scene,
         &RunOptions {
             source,
             wavelength_nm: args.wavelength,
             photons: args.photons,
+            first: args.first,
             seed: args.seed,
             max_steps: args.max_steps,
             keep_histories: matches!(args.history, Some(Some(_))),
         },
-    )
-    .with_context(|| format!("{}: propagating photons", args.scene.display()))?;
+    )?;
     let mut written = OutputSet::new();
     written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
     if let Some(path) = history_path {

@@ -6,9 +6,10 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::Foundry;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::spec::{View, VolumeMode};
+use super::spec::{RenderSpec, View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
 use crate::cpu::CpuScene;
 use crate::gpu::{
@@ -81,6 +82,20 @@ pub struct RenderArgs {
     /// medium in one format).
     #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
     pub gpu_texels: TexelStore,
+    #[command(flatten)]
+    pub settings: RenderSettings,
+    /// Print which effects and kernels the scene uses, and render nothing.
+    #[arg(long)]
+    pub explain: bool,
+    /// Print one JSON line of timings.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+/// The render settings a caller may set; each overrides the scene's own (its `[render]`
+/// table, or the defaults).
+#[derive(Args, Clone, Debug, Default)]
+pub struct RenderSettings {
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<[u32; 2]>,
@@ -106,16 +121,78 @@ pub struct RenderArgs {
     /// enclosures (`hytrace info` lists the solids).
     #[arg(long)]
     pub transparent: Vec<String>,
-    /// Print which effects and kernels the scene uses, and render nothing.
-    #[arg(long)]
-    pub explain: bool,
-    /// Print one JSON line of timings.
-    #[arg(long)]
-    pub stats: bool,
+}
+
+impl RenderSettings {
+    /// Sets these settings on the scene's render description, checks that every
+    /// transparent solid exists, and validates the result.
+    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> anyhow::Result<()> {
+        let s = &mut spec.settings;
+        s.size = self.size.unwrap_or(s.size);
+        s.spp = self.spp.unwrap_or(s.spp);
+        s.view = self.view.unwrap_or(s.view);
+        s.volumes = self.volumes.or(s.volumes);
+        s.max_bounces = self.max_bounces.unwrap_or(s.max_bounces);
+        s.step = self.step.unwrap_or(s.step);
+        s.seed = self.seed.unwrap_or(s.seed);
+        for name in &self.transparent {
+            if !f.solid_names.contains(name) {
+                bail!("--transparent {name}: the scene has no solid of that name");
+            }
+            spec.transparent_solids.push(name.clone());
+        }
+        spec.validate().context("render settings")
+    }
+}
+
+/// A finished render: the image, where it ran and where its time went.
+pub struct Rendered {
+    /// The image (linear radiance).
+    pub image: Image,
+    /// The effects the render simulated.
+    pub effects: Effects,
+    /// Seconds preparing the scene and the renderer.
+    pub build_s: f64,
+    /// Seconds rendering.
+    pub render_s: f64,
+    /// Set when it ran on the GPU.
+    gpu: Option<GpuRun>,
+}
+
+/// Renders scene `f` as `spec` describes on `backend`, calling `progress` with the rows
+/// done.
+pub fn render(
+    f: &Foundry,
+    spec: &RenderSpec,
+    backend: RenderBackend,
+    texels: TexelStore,
+    progress: &(dyn Fn(u64) + Sync),
+) -> anyhow::Result<Rendered> {
+    let t1 = Instant::now();
+    let scene = CpuScene::<f32>::new(f)?;
+    let renderer = Renderer::new(&scene, f, spec)?;
+    let build_s = t1.elapsed().as_secs_f64();
+    let t2 = Instant::now();
+    let cpu = || renderer.render(progress).map(|image| (image, None));
+    let gpu = |ctx: GpuContext| {
+        render_gpu(&ctx, &renderer, texels, progress).map(|(image, run)| (image, Some(run)))
+    };
+    let (image, gpu) = match backend {
+        RenderBackend::Cpu => cpu()?,
+        RenderBackend::Gpu => gpu(GpuContext::new()?)?,
+        RenderBackend::Auto => gpu_or_cpu("renders", gpu, cpu)?,
+    };
+    Ok(Rendered {
+        image,
+        effects: renderer.effects(),
+        build_s,
+        render_s: t2.elapsed().as_secs_f64(),
+        gpu,
+    })
 }
 
 /// Parses `WIDTHxHEIGHT`.
-fn parse_size(text: &str) -> Result<[u32; 2], String> {
+pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
     let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|v| *v > 0);
     match text.split_once(['x', 'X']) {
         Some((w, h)) => match (parse(w), parse(h)) {
@@ -139,21 +216,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     }
     let t0 = Instant::now();
     let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
-    let s = &mut spec.settings;
-    s.size = args.size.unwrap_or(s.size);
-    s.spp = args.spp.unwrap_or(s.spp);
-    s.view = args.view.unwrap_or(s.view);
-    s.volumes = args.volumes.or(s.volumes);
-    s.max_bounces = args.max_bounces.unwrap_or(s.max_bounces);
-    s.step = args.step.unwrap_or(s.step);
-    s.seed = args.seed.unwrap_or(s.seed);
-    for name in &args.transparent {
-        if !f.solid_names.contains(name) {
-            bail!("--transparent {name}: the scene has no solid of that name");
-        }
-        spec.transparent_solids.push(name.clone());
-    }
-    spec.validate().context("render settings")?;
+    args.settings.apply(&f, &mut spec)?;
     if args.explain {
         for line in Effects::of(&f, &spec).explain() {
             println!("{line}");
@@ -166,10 +229,6 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         return Ok(());
     }
     let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let scene = CpuScene::<f32>::new(&f)?;
-    let renderer = Renderer::new(&scene, &f, &spec)?;
-    let build_s = t1.elapsed().as_secs_f64();
     let [width, height] = spec.settings.size;
     let bar = ProgressBar::new(height as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} rows, {eta} left")
@@ -177,24 +236,18 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             .progress_chars("=> "),
     );
     bar.set_message("rendering");
-    let t2 = Instant::now();
     let progress = |rows| bar.set_position(rows);
-    let cpu = || renderer.render(&progress).map(|image| (image, None));
-    let gpu = |ctx: GpuContext| {
-        render_gpu(&ctx, &renderer, args.gpu_texels, &progress)
-            .map(|(image, run)| (image, Some(run)))
-    };
-    let (image, gpu_run) = match args.backend {
-        RenderBackend::Cpu => cpu()?,
-        RenderBackend::Gpu => gpu(GpuContext::new()?)?,
-        RenderBackend::Auto => gpu_or_cpu("renders", gpu, cpu)?,
-    };
+    let Rendered {
+        image,
+        effects: fx,
+        build_s,
+        render_s,
+        gpu: gpu_run,
+    } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
     bar.finish_and_clear();
-    let render_s = t2.elapsed().as_secs_f64();
     write_image(&image, &args.out)?;
     let samples = width as f64 * height as f64 * spec.settings.spp as f64;
     if args.stats {
-        let fx = renderer.effects();
         let mut line = serde_json::json!({
             "backend": if gpu_run.is_some() { "gpu" } else { "cpu" },
             "width": width,

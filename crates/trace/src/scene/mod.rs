@@ -48,7 +48,11 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<F
         {
             load_mesh_scene(p)
         }
-        Some(p) if !p.exists() => bail!("{}: no such file or directory", p.display()),
+        Some(p) if !p.exists() => Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("{}: no such file or directory", p.display()),
+        )
+        .into()),
         Some(p) => bail!(
             "{}: not a scene this build reads (expected `default`, a Foundry directory with meta.json, a .toml scene file, a .gdml file or an .obj, .gltf or .glb mesh)",
             p.display()

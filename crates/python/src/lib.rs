@@ -1,0 +1,418 @@
+//! Python bindings of hytrace: the `hytrace._hytrace` extension module of the `hytrace`
+//! package (built by maturin, see `pyproject.toml` and `docs/python.md`).
+//!
+//! Every function calls the library the command line calls ([`hytrace_trace`]), on NumPy
+//! arrays instead of `.npy` files, so its results equal the command's bit for bit. Rays
+//! and points are checked as the command checks them, with its messages. Tracing runs with
+//! the GIL released. Errors are raised as the package's exceptions
+//! (`hytrace/_errors.py`): `HytraceError` and its subclasses for bad input, missing
+//! files and failures of the library.
+
+mod arrays;
+mod errors;
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::Foundry;
+use hytrace_trace::gpu::TexelStore;
+use hytrace_trace::photons::run::{prepare, propagate_in};
+use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::{load_photon_scene, PhotonScene, RunOptions};
+use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
+use hytrace_trace::render::spec::RenderSpec;
+use hytrace_trace::scan::{self, Backend, Precision, RAY_COLUMNS};
+use hytrace_trace::scene::load_render_scene;
+use hytrace_trace::volume::{self, EstimatorOptions, Represented};
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyAny;
+
+use arrays::{float_rows, ray_rows};
+use errors::{choice, library_error, open_error, value_error};
+
+/// The JSON text `value` as a Python object (dicts, lists, numbers, strings).
+fn to_python<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    py.import("json")?
+        .call_method1("loads", (value.to_string(),))
+}
+
+/// A scene loaded once and traced many times: `hytrace.load(path)`.
+#[pyclass(frozen, module = "hytrace")]
+struct Scene {
+    /// What it was loaded from (`default` for the embedded scene).
+    path: PathBuf,
+    /// Whether unsupported GDML elements were skipped.
+    lenient: bool,
+    foundry: Foundry,
+    /// The scene's render description (its file's, or the defaults).
+    render_spec: RenderSpec,
+    /// Prepared on the first photon run: the scene read again with what finds the optical
+    /// surface of every crossing (GDML), and its property tables.
+    photon_scene: OnceLock<PhotonScene>,
+}
+
+impl Scene {
+    fn options(&self) -> GdmlOptions {
+        GdmlOptions {
+            lenient: self.lenient,
+        }
+    }
+}
+
+/// Loads a scene: `"default"` (the embedded default scene), a Foundry directory, a
+/// `.toml` scene file, a `.gdml` file or an `.obj`, `.gltf` or `.glb` mesh, as
+/// `hytrace info` reads it. With `lenient`, GDML elements this build does not support are
+/// skipped with a warning instead of failing.
+#[pyfunction]
+#[pyo3(signature = (path = PathBuf::from("default"), *, lenient = false))]
+fn load(py: Python<'_>, path: PathBuf, lenient: bool) -> PyResult<Scene> {
+    let options = GdmlOptions { lenient };
+    let (foundry, render_spec) = py
+        .detach(|| load_render_scene(Some(&path), &options))
+        .map_err(|e| match path.as_os_str() == "default" {
+            true => library_error(e),
+            false => open_error(&path)(e),
+        })?;
+    Ok(Scene {
+        path,
+        lenient,
+        foundry,
+        render_spec,
+        photon_scene: OnceLock::new(),
+    })
+}
+
+#[pymethods]
+impl Scene {
+    /// What the scene was loaded from.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.path.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "hytrace.Scene({:?}: {} solids, {} instances)",
+            self.path.display().to_string(),
+            self.foundry.solid_names.len(),
+            self.foundry.inst.len()
+        )
+    }
+
+    /// The scene's summary, as `hytrace info --json` prints it.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &hytrace_trace::report::summary(&self.foundry))
+    }
+
+    /// The first boundary crossing of each ray, as `hytrace scan` computes it.
+    ///
+    /// `rays`: (N, 8) float32 or float64, `ox oy oz tmin dx dy dz tmax` (a C-contiguous
+    /// float64 array is read in place). Returns `(hits, ids)`: hits (N, 4) `nx ny nz t`
+    /// (float32 for `precision="f32"`, float64 for `"f64"`; `t = inf` on a miss) and ids
+    /// (N, 3) int32 `instance boundary copy` (-1 on a miss).
+    #[pyo3(signature = (rays, *, precision = "f32", backend = "cpu"))]
+    fn scan<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+        precision: &str,
+        backend: &str,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let precision: Precision = choice("precision", precision)?;
+        let backend: Backend = choice("backend", backend)?;
+        let rows = float_rows::<8>(rays, "rays", RAY_COLUMNS)?;
+        let rows = rows.rows();
+        let f = &self.foundry;
+        let result = py
+            .detach(|| {
+                let rays = ray_rows(rows)?;
+                scan::scan_with(f, &rays, precision, backend)
+                    .map(|(result, _)| result)
+                    .map_err(library_error)
+            })
+            .map_err(|e| e.into_pyerr())?;
+        let n = result.hits.len();
+        let hits = match precision {
+            Precision::F32 => arrays::matrix(py, result.hits_f32(), n, 4)?,
+            Precision::F64 => arrays::matrix(py, bytemuck::cast_vec::<_, f64>(result.hits), n, 4)?,
+        };
+        let ids = arrays::matrix(py, bytemuck::cast_vec::<_, i32>(result.ids), n, 3)?;
+        Ok((hits, ids))
+    }
+
+    /// The transmittance of the scene's media along each ray up to its first surface
+    /// crossing (to `tmax` on a miss), as `hytrace scan --transmittance` computes it:
+    /// (N,) float64. The options are the command's (`--estimator` ...); ray `i` draws the
+    /// random streams of index `first + i`.
+    #[pyo3(signature = (
+        rays, *, estimator = "exact", step = 0.5, spp = 1, seed = 0, density_scale = 1.0,
+        filter = "trilinear", level = 0, global_majorant = false, precision = "f32",
+        backend = "cpu", first = 0
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn transmittance<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+        estimator: &str,
+        step: f64,
+        spp: u32,
+        seed: u32,
+        density_scale: f64,
+        filter: &str,
+        level: usize,
+        global_majorant: bool,
+        precision: &str,
+        backend: &str,
+        first: u32,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let options = EstimatorOptions {
+            estimator: choice("estimator", estimator)?,
+            step,
+            spp,
+            seed,
+            density_scale,
+            filter: choice("filter", filter)?,
+            level,
+            global_majorant,
+        };
+        let precision: Precision = choice("precision", precision)?;
+        let backend: Backend = choice("backend", backend)?;
+        let rows = float_rows::<8>(rays, "rays", RAY_COLUMNS)?;
+        let rows = rows.rows();
+        let f = &self.foundry;
+        let params = options.args().params();
+        let run = py
+            .detach(|| {
+                let rays = ray_rows(rows)?;
+                scan::scan_transmittance_on(f, &rays, precision, &params, backend, first)
+                    .map_err(library_error)
+            })
+            .map_err(|e| e.into_pyerr())?;
+        Ok(PyArray1::from_vec(py, run.values))
+    }
+
+    /// Renders the scene as `hytrace render` does, returning the image: (H, W, 3) float32
+    /// linear radiance, rows from the top. Each option overrides the scene's own:
+    /// `size` as `(width, height)` or `"WIDTHxHEIGHT"`.
+    #[pyo3(signature = (
+        *, size = None, spp = None, view = None, volumes = None, max_bounces = None,
+        step = None, seed = None, transparent = Vec::new(), backend = "cpu",
+        gpu_texels = "storage"
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        size: Option<&Bound<'py, PyAny>>,
+        spp: Option<u32>,
+        view: Option<&str>,
+        volumes: Option<&str>,
+        max_bounces: Option<u32>,
+        step: Option<f64>,
+        seed: Option<u32>,
+        transparent: Vec<String>,
+        backend: &str,
+        gpu_texels: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let size = match size {
+            None => None,
+            Some(s) => {
+                let text = match s.extract::<(i64, i64)>() {
+                    Ok((w, h)) => format!("{w}x{h}"),
+                    Err(_) => s.extract::<String>()?,
+                };
+                Some(parse_size(&text).map_err(|e| value_error(format!("size {e}")))?)
+            }
+        };
+        let settings = RenderSettings {
+            size,
+            spp,
+            view: view.map(|v| choice("view", v)).transpose()?,
+            volumes: volumes.map(|v| choice("volumes", v)).transpose()?,
+            max_bounces,
+            step,
+            seed,
+            transparent,
+        };
+        let backend: RenderBackend = choice("backend", backend)?;
+        let texels: TexelStore = choice("gpu_texels", gpu_texels)?;
+        let f = &self.foundry;
+        let mut spec = self.render_spec.clone();
+        settings
+            .apply(f, &mut spec)
+            .map_err(|e| value_error(format!("{e:#}")))?;
+        let rendered = py
+            .detach(|| render(f, &spec, backend, texels, &|_| {}))
+            .map_err(library_error)?;
+        let image = rendered.image;
+        let flat: Vec<f32> = bytemuck::cast_vec(image.pixels);
+        let shape = [image.height as usize, image.width as usize, 3];
+        Ok(PyArray1::from_vec(py, flat).reshape(shape)?.into_any())
+    }
+
+    /// Propagates optical photons from `source` through the scene as `hytrace photons`
+    /// does, photons `first .. first + photons` (photon `i` draws the random stream
+    /// `(seed, i)`, so runs over consecutive ranges give together what one run gives).
+    ///
+    /// Returns the detected photons, (H, 16) float64 with the columns of the command's
+    /// output; with `histories=True`, `(hits, histories)` where histories is every photon's
+    /// packed step history, (photons,) uint64.
+    #[pyo3(signature = (
+        source, photons, *, wavelength = 420.0, seed = 0, max_steps = 10_000, first = 0,
+        histories = false
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn photons<'py>(
+        &self,
+        py: Python<'py>,
+        source: &str,
+        photons: u64,
+        wavelength: f64,
+        seed: u32,
+        max_steps: u32,
+        first: u64,
+        histories: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let source = Source::parse(source).map_err(|e| library_error(e.into()))?;
+        let options = RunOptions {
+            source,
+            wavelength_nm: wavelength,
+            photons,
+            first,
+            seed,
+            max_steps,
+            keep_histories: histories,
+        };
+        let run = py
+            .detach(|| {
+                let scene = match self.photon_scene.get() {
+                    Some(s) => s,
+                    None => {
+                        let (f, surfaces) = load_photon_scene(&self.path, &self.options())?;
+                        let scene = prepare(&f, surfaces, &self.path)?;
+                        self.photon_scene.get_or_init(|| scene)
+                    }
+                };
+                propagate_in(scene, &self.path, &options)
+            })
+            .map_err(library_error)?;
+        let n = run.hits.len();
+        let rows: Vec<[f64; 16]> = run.hits.into_iter().map(|h| h.0).collect();
+        let hits = arrays::matrix(py, bytemuck::cast_vec::<_, f64>(rows), n, 16)?;
+        if histories {
+            let codes = PyArray1::from_vec(py, run.histories).into_any();
+            Ok((hits, codes).into_pyobject(py)?.into_any())
+        } else {
+            Ok(hits)
+        }
+    }
+}
+
+/// A sparse volume: one grid of a NanoVDB (`.nvdb`) or OpenVDB (`.vdb`) file or a
+/// procedural grid (`sphere:RADIUS[,VOXEL[,BLEND]]`, `box:W,H,D[,VOXEL[,BLEND]]`), in the
+/// representation `repr` (as `hytrace volume sample --repr`).
+#[pyclass(frozen, module = "hytrace")]
+struct Volume {
+    spec: String,
+    grid: Represented,
+}
+
+/// Whether `spec` names a volume file (`.nvdb`, `.vdb`) rather than a procedural grid.
+fn is_volume_file(spec: &str) -> bool {
+    let extension = Path::new(spec).extension().and_then(|e| e.to_str());
+    !hytrace_volume::is_procedural(spec)
+        && extension
+            .is_some_and(|e| e.eq_ignore_ascii_case("nvdb") || e.eq_ignore_ascii_case("vdb"))
+}
+
+#[pymethods]
+impl Volume {
+    #[new]
+    #[pyo3(signature = (path, *, grid = None, repr = "nanovdb"))]
+    fn new(
+        py: Python<'_>,
+        path: &Bound<'_, PyAny>,
+        grid: Option<&str>,
+        repr: &str,
+    ) -> PyResult<Self> {
+        let spec = match path.extract::<PathBuf>() {
+            Ok(p) => p.display().to_string(),
+            Err(_) => path.extract::<String>()?,
+        };
+        let repr = choice("repr", repr)?;
+        let represented = py
+            .detach(|| {
+                let (_, g) = volume::open(&spec, grid)?;
+                volume::represent(g, repr)
+            })
+            .map_err(|e| match is_volume_file(&spec) {
+                true => open_error(Path::new(&spec))(e),
+                false => library_error(e),
+            })?;
+        Ok(Volume {
+            spec,
+            grid: represented,
+        })
+    }
+
+    fn __repr__(&self) -> String {
+        format!("hytrace.Volume({:?})", self.spec)
+    }
+
+    /// The file's grids (names, value types, bounding boxes, voxel counts, memory per
+    /// representation), as `hytrace volume info --json` prints them.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let spec = &self.spec;
+        let info = py.detach(|| volume::info(spec)).map_err(library_error)?;
+        to_python(py, &info)
+    }
+
+    /// Looks the grid up at `points`, (N, 3) float32 or float64, as `hytrace volume sample`
+    /// does: (N,) float32 values, or with `majorant=LEVEL` the local majorant at that mip
+    /// level of the block holding each point. Point `i` of a stochastic lookup draws the
+    /// random stream `(seed, i)`.
+    #[pyo3(signature = (points, *, filter = "trilinear", space = "world", seed = 0, majorant = None))]
+    fn sample<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        filter: &str,
+        space: &str,
+        seed: u32,
+        majorant: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let filter: volume::FilterArg = choice("filter", filter)?;
+        let space: volume::Space = choice("space", space)?;
+        let rows = float_rows::<3>(points, "points", "")?;
+        let points = rows.rows();
+        volume::check_points(points, "points").map_err(|e| value_error(format!("{e:#}")))?;
+        let grid = &self.grid;
+        let values = py
+            .detach(|| match majorant {
+                Some(level) => volume::majorants(grid, points, space, level),
+                None => Ok(volume::sample_points(
+                    grid.grid(),
+                    points,
+                    space,
+                    filter.into(),
+                    seed,
+                )),
+            })
+            .map_err(library_error)?;
+        Ok(PyArray1::from_vec(py, values))
+    }
+}
+
+/// The extension module: `Scene`, `Volume` and `load`, re-exported by the `hytrace`
+/// package.
+#[pymodule]
+fn _hytrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Scene>()?;
+    m.add_class::<Volume>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
