@@ -154,6 +154,9 @@ enum VolumeCommand {
         /// holding each point instead of the value: the largest value any lookup there reads.
         #[arg(long)]
         majorant: Option<usize>,
+        /// Memory a brick store may hold resident (its tables and brick cache), e.g. 4G.
+        #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
+        memory: u64,
     },
     /// Transmittance along rays: (N, 8) rays (ox oy oz tmin dx dy dz tmax, world space) in,
     /// (N,) float64 out; density = value x scale, per unit of world length.
@@ -186,20 +189,32 @@ enum VolumeCommand {
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
+        /// Memory a brick store may hold resident (its tables and brick cache), e.g. 4G.
+        #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
+        memory: u64,
     },
-    /// Write the bricked grid (atlas, indirection, brick table, range mips) as .npy files.
+    /// Write the bricked grid (atlas, indirection, brick table, range mips) as .npy files,
+    /// or with --store an out-of-core brick store (also from raw files larger than memory).
     Convert {
-        /// A .nvdb or .vdb file, or a procedural grid.
+        /// A .nvdb or .vdb file, a procedural grid, or with --store a raw file (`.raw`,
+        /// with --dims and --dtype).
         file: String,
-        /// Texel format.
+        /// Texel format of the bricked grid.
+        #[arg(long, required_unless_present = "store", conflicts_with = "store")]
+        format: Option<TexelFormat>,
+        /// Write a brick store instead: superchunks of 16^3 bricks of 16-bit 8^3 bricks,
+        /// empty bricks dropped, range mips and levels of detail, converted in bounded
+        /// memory (--memory); every volume command then reads it through a brick cache.
         #[arg(long)]
-        format: TexelFormat,
-        /// Output directory.
+        store: bool,
+        /// Output directory (a brick store's must not exist).
         #[arg(short, long)]
         out: PathBuf,
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
+        #[command(flatten)]
+        store_options: volume::StoreOptions,
     },
 }
 
@@ -223,8 +238,9 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             grid,
             seed,
             majorant,
+            memory,
         } => {
-            let (_, g) = volume::open(&file, grid.as_deref())?;
+            let (_, g) = volume::open_within(&file, grid.as_deref(), memory)?;
             let points = volume::read_points(&points)?;
             let g = volume::represent(g, repr)?;
             let values = match majorant {
@@ -244,9 +260,10 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             backend,
             gpu_texels,
             stats,
+            memory,
         } => {
             let t0 = std::time::Instant::now();
-            let (_, g) = volume::open(&file, grid.as_deref())?;
+            let (_, g) = volume::open_within(&file, grid.as_deref(), memory)?;
             let rays = scan::read_rays(&rays)?;
             let g = volume::represent(g, repr)?;
             let load_s = t0.elapsed().as_secs_f64();
@@ -267,9 +284,30 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
         VolumeCommand::Convert {
             file,
             format,
+            store,
             out,
             grid,
+            store_options,
         } => {
+            if store {
+                let r = volume::convert_store(&file, grid.as_deref(), &out, &store_options)?;
+                eprintln!(
+                    "{}x{}x{} voxels: {} bricks kept, {} dropped; {} bytes written in {:.1} s (range {:.1} s); wrote {}",
+                    r.meta.dims[0],
+                    r.meta.dims[1],
+                    r.meta.dims[2],
+                    r.meta.kept_bricks,
+                    r.meta.dropped_bricks,
+                    r.bytes_written,
+                    r.range_s + r.brick_s,
+                    r.range_s,
+                    out.display()
+                );
+                return Ok(());
+            }
+            let Some(format) = format else {
+                anyhow::bail!("volume convert needs --format (or --store)");
+            };
             let (_, g) = volume::open(&file, grid.as_deref())?;
             let b = hytrace_volume::BrickedGrid::convert(&g, format)?;
             b.write_npy_dir(&out)?;

@@ -22,8 +22,29 @@ pub fn check_fits(what: &str, bytes: u64) -> Result<(), String> {
     }
 }
 
+/// Parses a byte count: digits with an optional binary unit `K`, `M`, `G` or `T` (`KiB`,
+/// `MB`... also read as powers of 1024), e.g. `2G`, `512MiB`, `1048576`.
+pub fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let digits = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
+    let (number, unit) = t.split_at(digits);
+    let shift = match unit.trim().to_ascii_uppercase().as_str() {
+        "" | "B" => 0,
+        "K" | "KB" | "KIB" => 10,
+        "M" | "MB" | "MIB" => 20,
+        "G" | "GB" | "GIB" => 30,
+        "T" | "TB" | "TIB" => 40,
+        _ => return Err(format!("`{text}`: not a byte count (e.g. 4096, 512M, 2G)")),
+    };
+    number
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(1u64 << shift))
+        .ok_or_else(|| format!("`{text}`: not a byte count (e.g. 4096, 512M, 2G)"))
+}
+
 /// A byte count with a binary unit.
-fn human(bytes: u64) -> String {
+pub fn human(bytes: u64) -> String {
     const UNITS: [&str; 7] = ["bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
     let mut value = bytes as f64;
     let mut unit = 0;

@@ -9,8 +9,10 @@ use anyhow::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
-    open_volume, sample, select_grid, BrickedGrid, Estimate, Estimator, Filter, GridSummary,
-    Majorant, RangeMips, Ray, Rng, TexelFormat, TransmittanceParams, Volume, VoxelGrid,
+    convert_grid, convert_raw, open_volume, open_volume_with, sample, select_grid, BrickedGrid,
+    ConvertOptions, ConvertReport, Endian, Estimate, Estimator, Filter, GridSummary, Majorant,
+    RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams, Volume, VoxelGrid,
+    DEFAULT_STORE_BUDGET,
 };
 use rayon::prelude::*;
 use serde_json::json;
@@ -113,25 +115,44 @@ impl Represented {
         }
     }
 
-    /// The range mips of what lookups on this representation read: the bricked grid's own,
-    /// or built from the grid as read.
+    /// The range mips of what lookups on this representation read: the bricked grid's or
+    /// brick store's own, or built from the grid as read.
     pub fn range_mips(&self) -> anyhow::Result<Cow<'_, RangeMips>> {
         Ok(match self {
             Represented::Bricked(b) => Cow::Borrowed(b.ranges()),
-            Represented::Source(v) => Cow::Owned(RangeMips::build(v)?),
+            Represented::Source(v) => v.range_mips()?,
         })
+    }
+
+    /// Whether this is a brick store, read through its cache.
+    pub fn is_brick_store(&self) -> bool {
+        matches!(self, Represented::Source(Volume::Store(_)))
     }
 }
 
-/// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, or a procedural grid.
+/// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, a brick store (with
+/// [`DEFAULT_STORE_BUDGET`]) or a procedural grid.
 pub fn open(spec: &str, name: Option<&str>) -> anyhow::Result<(GridSummary, Volume)> {
-    Ok(select_grid(spec, open_volume(spec)?, name)?)
+    open_within(spec, name, DEFAULT_STORE_BUDGET)
+}
+
+/// Opens grid `name` of `spec` as [`open`] does, a brick store holding at most `memory`
+/// bytes resident.
+pub fn open_within(
+    spec: &str,
+    name: Option<&str>,
+    memory: u64,
+) -> anyhow::Result<(GridSummary, Volume)> {
+    Ok(select_grid(spec, open_volume_with(spec, memory)?, name)?)
 }
 
 /// The grid in representation `repr`.
 pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
     Ok(match repr.texel_format() {
         None => Represented::Source(volume),
+        Some(_) if matches!(volume, Volume::Store(_)) => bail!(
+            "a brick store is read as stored (--repr nanovdb, the default): converting it to a bricked grid would read it whole"
+        ),
         Some(format) => Represented::Bricked(Box::new(BrickedGrid::convert(&volume, format)?)),
     })
 }
@@ -397,6 +418,15 @@ pub fn transmittances_on(
             gpu: None,
         })
     };
+    if grid.is_brick_store() {
+        // The GPU's brick pool and request buffer are not built yet: stores stay on the CPU.
+        return match backend {
+            VolumeBackend::Gpu => {
+                bail!("brick stores are traced on the CPU only (--backend cpu or auto)")
+            }
+            _ => cpu(),
+        };
+    }
     match backend {
         VolumeBackend::Cpu => cpu(),
         VolumeBackend::Gpu => gpu_transmittances(GpuContext::new()?, grid, rays, args, texels),
@@ -499,6 +529,24 @@ pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
     let mut grids = Vec::new();
     for named in open_volume(spec)? {
         let s = &named.summary;
+        if let Some(store) = &s.brick_store {
+            // A store is described by its metadata; converting it would read it whole.
+            grids.push(json!({
+                "name": s.name,
+                "value_type": s.value_type,
+                "index_bbox": s.index_bbox,
+                "world_bbox": s.world_bbox,
+                "active_voxels": s.active_voxels,
+                "memory": [memory_row(s.source_kind, s.source_bytes as usize, None)],
+                "brick_store": store,
+                "note": format!(
+                    "brick store of {}x{}x{} voxels: {} bricks kept, {} dropped, {} bytes on disk; 16-bit codes (value = {} + code x {}); levels of detail 8^3, 2^3, 1^3 per brick; range mips of 8 to 64 voxels",
+                    store.dims[0], store.dims[1], store.dims[2], store.kept_bricks, store.dropped_bricks,
+                    s.source_bytes, store.quantization.lo, store.quantization.step
+                ),
+            }));
+            continue;
+        }
         let mut memory = vec![memory_row(
             s.source_kind,
             s.source_bytes as usize,
@@ -565,4 +613,131 @@ pub fn info_text(info: &serde_json::Value) -> String {
         }
     }
     out
+}
+
+/// Element type of a raw volume file on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RawTypeArg {
+    /// Unsigned 8-bit.
+    U8,
+    /// Unsigned 16-bit.
+    U16,
+    /// 32-bit float.
+    F32,
+}
+
+/// Byte order of a raw volume file on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EndianArg {
+    /// Least significant byte first.
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+/// The options of `hytrace volume convert --store`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct StoreOptions {
+    /// Voxels of a raw file along x, y, z (`X,Y,Z`; x fastest in the file, no header).
+    #[arg(long)]
+    pub dims: Option<String>,
+    /// Element type of a raw file.
+    #[arg(long, value_enum)]
+    pub dtype: Option<RawTypeArg>,
+    /// Byte order of a raw file.
+    #[arg(long, value_enum, default_value_t = EndianArg::Little)]
+    pub endian: EndianArg,
+    /// World size of a raw file's voxel along x, y, z (`SX,SY,SZ`).
+    #[arg(long, default_value = "1,1,1")]
+    pub spacing: String,
+    /// World position of a raw file's first voxel (`X,Y,Z`).
+    #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
+    pub origin: String,
+    /// Value outside the volume and of dropped bricks.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub background: f32,
+    /// Bricks whose values all lie within this of the background are dropped.
+    #[arg(long, default_value_t = 0.0)]
+    pub threshold: f32,
+    /// The range the 16-bit codes span (`MIN,MAX`); the data's own range by default (a
+    /// first pass over the file finds it).
+    #[arg(long, allow_hyphen_values = true)]
+    pub range: Option<String>,
+    /// Memory the converter may hold resident (e.g. 2G): its window of brick layers and
+    /// its tables; refused when that does not fit.
+    #[arg(long, value_parser = crate::memory::parse_bytes, default_value = "2G")]
+    pub memory: u64,
+}
+
+/// `N` comma-separated finite numbers of option `what`.
+fn numbers<const N: usize>(text: &str, what: &str) -> anyhow::Result<[f64; N]> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    if parts.len() != N || values.len() != N || !values.iter().all(|v| v.is_finite()) {
+        bail!("{what} `{text}`: expected {N} comma-separated finite numbers");
+    }
+    Ok(std::array::from_fn(|k| values[k]))
+}
+
+/// `hytrace volume convert --store`: a raw file (`.raw`) or any volume `spec` (grid `name`)
+/// into a brick store at `out`, with a progress bar; returns the conversion's report.
+pub fn convert_store(
+    spec: &str,
+    name: Option<&str>,
+    out: &Path,
+    options: &StoreOptions,
+) -> anyhow::Result<ConvertReport> {
+    let convert = ConvertOptions {
+        background: options.background,
+        threshold: options.threshold,
+        range: match &options.range {
+            Some(r) => Some(numbers::<2>(r, "--range")?.map(|v| v as f32)),
+            None => None,
+        },
+        memory: options.memory,
+    };
+    let bar = indicatif::ProgressBar::new(100).with_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {percent}%, {eta} left")
+            .expect("a valid progress template")
+            .progress_chars("=> "),
+    );
+    bar.set_message("converting");
+    let progress = |done: u64, total: u64| bar.set_position(done * 100 / total.max(1));
+    let raw = Path::new(spec)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+    let report = match (raw, &options.dims, options.dtype) {
+        (true, Some(dims), Some(dtype)) => {
+            let d = numbers::<3>(dims, "--dims")?;
+            if !d
+                .iter()
+                .all(|v| *v >= 1.0 && *v <= u32::MAX as f64 && v.fract() == 0.0)
+            {
+                bail!("--dims `{dims}`: expected three whole numbers of voxels, at least 1");
+            }
+            let spec_raw = RawSpec {
+                dims: d.map(|v| v as u32),
+                dtype: match dtype {
+                    RawTypeArg::U8 => RawType::U8,
+                    RawTypeArg::U16 => RawType::U16,
+                    RawTypeArg::F32 => RawType::F32,
+                },
+                endian: match options.endian {
+                    EndianArg::Little => Endian::Little,
+                    EndianArg::Big => Endian::Big,
+                },
+                spacing: numbers::<3>(&options.spacing, "--spacing")?,
+                origin: numbers::<3>(&options.origin, "--origin")?,
+            };
+            convert_raw(Path::new(spec), &spec_raw, &convert, out, &progress)?
+        }
+        (true, _, _) => bail!("{spec}: a raw file needs --dims X,Y,Z and --dtype u8|u16|f32"),
+        (false, None, None) => {
+            let (_, volume) = open(spec, name)?;
+            convert_grid(&volume, spec, &convert, out, &progress)?
+        }
+        (false, _, _) => bail!("{spec}: --dims and --dtype describe raw files (.raw) only"),
+    };
+    bar.finish_and_clear();
+    Ok(report)
 }

@@ -399,3 +399,240 @@ impl MapOwned for Vec<&str> {
         self.into_iter().map(str::to_string).collect()
     }
 }
+
+/// A raw f32 volume whose values are a function of the voxel: a ball of radius 10 voxels
+/// with a ramp inside, zero outside, 40 x 32 x 24 voxels.
+fn write_ball_raw(path: &Path) -> Vec<f32> {
+    let dims = [40usize, 32, 24];
+    let mut values = Vec::new();
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let r = ((x as f32 - 20.0).powi(2)
+                    + (y as f32 - 16.0).powi(2)
+                    + (z as f32 - 12.0).powi(2))
+                .sqrt();
+                values.push(if r < 10.0 { 2.0 - r / 10.0 } else { 0.0 });
+            }
+        }
+    }
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(path, bytes).unwrap();
+    values
+}
+
+#[test]
+fn a_raw_volume_converts_to_a_brick_store_that_every_budget_reads_alike() {
+    let d = Dir::new();
+    write_ball_raw(&d.path("ball.raw"));
+    let convert = hytrace(&[
+        "volume",
+        "convert",
+        &d.arg("ball.raw"),
+        "--store",
+        "--dims",
+        "40,32,24",
+        "--dtype",
+        "f32",
+        "--spacing",
+        "0.5,0.5,0.5",
+        "--origin",
+        "-10,-8,-6",
+        "-o",
+        &d.arg("ball.bricks"),
+    ]);
+    assert!(convert.status.success(), "{}", stderr(&convert));
+    assert!(
+        stderr(&convert).contains("bricks kept"),
+        "{}",
+        stderr(&convert)
+    );
+    let info = hytrace(&["volume", "info", &d.arg("ball.bricks"), "--json"]);
+    assert!(info.status.success(), "{}", stderr(&info));
+    let json: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let store = &json["grids"][0]["brick_store"];
+    assert_eq!(store["dims"], serde_json::json!([40, 32, 24]));
+    // The ball (radius 10 voxels) touches bricks of 8^3 around the centre; the corners drop.
+    let (kept, dropped) = (
+        store["kept_bricks"].as_u64().unwrap(),
+        store["dropped_bricks"].as_u64().unwrap(),
+    );
+    assert_eq!(kept + dropped, 5 * 4 * 3);
+    assert!(kept > 10 && dropped > 4, "{kept} kept, {dropped} dropped");
+    // Rays through the ball's centre (world (0, 0, 0)) along x: the exact optical depth is
+    // the integral of the ramp, 2 * integral_0^5 (2 - r/5) dr = 15 world units, up to
+    // quantization and the voxel grid.
+    let rays: Vec<f64> = (0..5)
+        .flat_map(|k| {
+            let y = -0.5 + 0.25 * k as f64;
+            [-20.0, y, 0.0, 0.0, 1.0, 0.0, 0.0, 40.0]
+        })
+        .collect();
+    write_f64(&d.path("rays.npy"), &[5, 8], &rays);
+    let mut answers = Vec::new();
+    for (memory, estimator) in [
+        ("6M", "exact"),
+        ("1G", "exact"),
+        ("6M", "ratio"),
+        ("1G", "ratio"),
+    ] {
+        let out = d.arg(&format!("t_{memory}_{estimator}.npy"));
+        let o = hytrace(&[
+            "volume",
+            "transmittance",
+            &d.arg("ball.bricks"),
+            "--rays",
+            &d.arg("rays.npy"),
+            "--out",
+            &out,
+            "--memory",
+            memory,
+            "--estimator",
+            estimator,
+            "--spp",
+            "16",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        answers.push(read_values::<f64>(Path::new(&out), Scalar::F64));
+    }
+    assert_eq!(
+        answers[0], answers[1],
+        "exact: every budget reads the same voxels"
+    );
+    assert_eq!(answers[2], answers[3], "ratio: the same random streams");
+    let tau = -answers[0][2].ln();
+    assert!((tau - 15.0).abs() < 0.6, "optical depth {tau}");
+}
+
+#[test]
+fn brick_store_misuse_fails_cleanly_without_output() {
+    let d = Dir::new();
+    write_ball_raw(&d.path("ball.raw"));
+    let fails = |args: &[&str], want: &str| {
+        let o = hytrace(args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+    };
+    let out = d.arg("out.bricks");
+    let raw = d.arg("ball.raw");
+    fails(
+        &[
+            "volume", "convert", &raw, "--store", "--dims", "40,32,25", "--dtype", "f32", "-o",
+            &out,
+        ],
+        "need 128000",
+    );
+    fails(
+        &["volume", "convert", &raw, "--store", "-o", &out],
+        "needs --dims X,Y,Z and --dtype",
+    );
+    fails(
+        &[
+            "volume", "convert", &raw, "--store", "--dims", "40,32", "--dtype", "f32", "-o", &out,
+        ],
+        "--dims `40,32`",
+    );
+    fails(
+        &[
+            "volume",
+            "convert",
+            "sphere:10",
+            "--store",
+            "--dims",
+            "1,1,1",
+            "-o",
+            &out,
+        ],
+        "raw files (.raw) only",
+    );
+    fails(
+        &[
+            "volume", "convert", &raw, "--store", "--dims", "40,32,24", "--dtype", "f32",
+            "--memory", "1K", "-o", &out,
+        ],
+        "--memory 1024",
+    );
+    fails(
+        &[
+            "volume", "convert", &raw, "--store", "--dims", "40,32,24", "--dtype", "f32",
+            "--memory", "lots", "-o", &out,
+        ],
+        "not a byte count",
+    );
+    fails(&["volume", "convert", "sphere:10", "-o", &out], "--format");
+    assert!(!d.path("out.bricks").exists());
+    let o = hytrace(&[
+        "volume", "convert", &raw, "--store", "--dims", "40,32,24", "--dtype", "f32", "-o", &out,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    fails(
+        &[
+            "volume", "convert", &raw, "--store", "--dims", "40,32,24", "--dtype", "f32", "-o",
+            &out,
+        ],
+        "already exists",
+    );
+    write_f64(
+        &d.path("rays.npy"),
+        &[1, 8],
+        &[-20.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 40.0],
+    );
+    let t = d.arg("t.npy");
+    let rays = d.arg("rays.npy");
+    fails(
+        &[
+            "volume",
+            "transmittance",
+            &out,
+            "--rays",
+            &rays,
+            "--out",
+            &t,
+            "--memory",
+            "1M",
+        ],
+        "too small",
+    );
+    fails(
+        &[
+            "volume",
+            "transmittance",
+            &out,
+            "--rays",
+            &rays,
+            "--out",
+            &t,
+            "--repr",
+            "bc4",
+        ],
+        "read it whole",
+    );
+    fails(
+        &[
+            "volume",
+            "transmittance",
+            &out,
+            "--rays",
+            &rays,
+            "--out",
+            &t,
+            "--backend",
+            "gpu",
+        ],
+        "CPU only",
+    );
+    std::fs::remove_file(d.path("out.bricks").join("ranges.npy")).unwrap();
+    fails(
+        &[
+            "volume",
+            "transmittance",
+            &out,
+            "--rays",
+            &rays,
+            "--out",
+            &t,
+        ],
+        "ranges.npy",
+    );
+    assert!(!d.path("t.npy").exists());
+}

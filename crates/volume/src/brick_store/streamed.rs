@@ -29,6 +29,17 @@ const CACHED_BRICK_BYTES: u64 = BRICK_BYTES as u64 + 64;
 
 type Brick = Arc<[u16; BRICK_VOXELS]>;
 
+/// Stores opened so far: each gets its own number, which the per-thread memo is keyed by.
+static STORES_OPENED: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// The brick this thread read last (store number, record, codes): consecutive lookups
+    /// mostly fall in one brick (a trilinear lookup reads eight neighbours), and the memo
+    /// spares them the cache's lock. It holds one brick per thread beyond the budget.
+    static LAST_BRICK: std::cell::RefCell<Option<(u64, u32, Brick)>> =
+        const { std::cell::RefCell::new(None) };
+}
+
 /// What the cache did so far.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct CacheStats {
@@ -52,6 +63,8 @@ pub struct BrickStore {
     shards: Vec<Mutex<LruCache<u32, Brick>>>,
     bricks_read: AtomicU64,
     capacity_bricks: u64,
+    /// This store's number (for the per-thread memo).
+    id: u64,
     /// The first failed read: the brick reads as the background and callers learn of it
     /// from [`BrickStore::check`].
     failure: Mutex<Option<String>>,
@@ -160,6 +173,7 @@ impl BrickStore {
                 .collect(),
             bricks_read: AtomicU64::new(0),
             capacity_bricks: per_shard.get() as u64 * SHARDS as u64,
+            id: STORES_OPENED.fetch_add(1, Ordering::Relaxed),
             failure: Mutex::new(None),
         })
     }
@@ -336,13 +350,24 @@ impl VoxelGrid for BrickStore {
         let Some(record) = self.record_of(v) else {
             return self.meta.background;
         };
-        let Some(brick) = self.brick(record) else {
-            return self.meta.background;
-        };
         let l = v.map(|c| c as usize % BRICK_SIDE);
-        self.meta
-            .quantization
-            .decode(brick[(l[2] * BRICK_SIDE + l[1]) * BRICK_SIDE + l[0]])
+        let at = (l[2] * BRICK_SIDE + l[1]) * BRICK_SIDE + l[0];
+        let memo = LAST_BRICK.with_borrow(|last| match last {
+            Some((id, r, brick)) if *id == self.id && *r == record => Some(brick[at]),
+            _ => None,
+        });
+        let code = match memo {
+            Some(code) => code,
+            None => {
+                let Some(brick) = self.brick(record) else {
+                    return self.meta.background;
+                };
+                let code = brick[at];
+                LAST_BRICK.set(Some((self.id, record, brick)));
+                code
+            }
+        };
+        self.meta.quantization.decode(code)
     }
 
     fn block_origins(&self) -> Result<Vec<Coord>, VolumeError> {
