@@ -247,6 +247,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
                 Some(level) => volume::majorants(&g, &points, space, level)?,
                 None => volume::sample_points(g.grid(), &points, space, filter.into(), seed),
             };
+            g.check_reads()?;
             volume::write_f32(&out, &values)?;
             eprintln!("{} lookups; wrote {}", values.len(), out.display());
         }
@@ -268,6 +269,7 @@ fn run_volume(command: VolumeCommand) -> anyhow::Result<()> {
             let g = volume::represent(g, repr)?;
             let load_s = t0.elapsed().as_secs_f64();
             let run = volume::transmittances_on(&g, &rays, &estimate.args(), backend, gpu_texels)?;
+            g.check_reads()?;
             let values: Vec<f64> = run.estimates.iter().map(|e| e.transmittance).collect();
             volume::write_f64(&out, &values)?;
             if stats {

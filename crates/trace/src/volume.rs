@@ -124,6 +124,15 @@ impl Represented {
         })
     }
 
+    /// An error when lookups could not read what they needed (see
+    /// [`Volume::check_reads`]); results computed meanwhile must not be written.
+    pub fn check_reads(&self) -> anyhow::Result<()> {
+        match self {
+            Represented::Source(v) => Ok(v.check_reads()?),
+            Represented::Bricked(_) => Ok(()),
+        }
+    }
+
     /// Whether this is a brick store, read through its cache.
     pub fn is_brick_store(&self) -> bool {
         matches!(self, Represented::Source(Volume::Store(_)))

@@ -37,6 +37,15 @@ impl Volume {
         }
     }
 
+    /// An error when lookups since the grid was opened could not read what they needed (a
+    /// brick store's file failing after it was opened; such lookups read the background).
+    pub fn check_reads(&self) -> Result<(), VolumeError> {
+        match self {
+            Volume::Store(s) => s.check().map_err(|e| VolumeError(e.to_string())),
+            _ => Ok(()),
+        }
+    }
+
     /// The range mips of the grid's lookups: a brick store's own (read with it), else built
     /// from the voxels.
     pub fn range_mips(&self) -> Result<Cow<'_, RangeMips>, VolumeError> {
