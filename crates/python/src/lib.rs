@@ -296,7 +296,7 @@ impl Scene {
                         self.photon_scene.get_or_init(|| scene)
                     }
                 };
-                propagate_in(scene, &self.path, &options)
+                propagate_in(scene, &self.path, &options, &|_| ())
             })
             .map_err(library_error)?;
         let n = run.hits.len();

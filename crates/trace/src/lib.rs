@@ -12,6 +12,7 @@ pub mod gpu;
 pub mod memory;
 pub mod outputs;
 pub mod photons;
+pub mod progress;
 pub mod render;
 pub mod report;
 pub mod scan;

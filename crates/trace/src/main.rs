@@ -389,7 +389,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 (None, None) => anyhow::bail!("give --rays RAYS.npy or --sweep KIND"),
             };
             let load_s = t0.elapsed().as_secs_f64();
-            let (result, times) = scan::scan_with(&f, &ray_rows, precision, backend)?;
+            let bar = hytrace_trace::progress::bar(ray_rows.len() as u64, "tracing", "rays");
+            let progress = |done| bar.set_position(done);
+            let (result, times) =
+                scan::scan_reporting(&f, &ray_rows, precision, backend, &progress)?;
+            bar.finish_and_clear();
             // The media where the surfaces ran (`auto` on the GPU may still fall back).
             let media_backend = match times.gpu {
                 Some(_) => backend,

@@ -235,6 +235,16 @@ fn answers<T: Real>(
 /// Every ray's answer from the CPU tracer, handed rays in batches
 /// ([`CpuScene::trace_batch`]: the same answers as its `trace`, sooner).
 pub(crate) fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
+    cpu_answers_reporting(scene, rays, &|_| ())
+}
+
+/// [`cpu_answers`], calling `progress` with the number of rays answered after each batch.
+fn cpu_answers_reporting<T: Real>(
+    scene: &CpuScene<T>,
+    rays: &[RayRow],
+    progress: &(dyn Fn(u64) + Sync),
+) -> Vec<Answer> {
+    let done = std::sync::atomic::AtomicU64::new(0);
     let mut answers = vec![answer_of::<T>(None); rays.len()];
     answers
         .par_chunks_mut(BATCH)
@@ -248,6 +258,8 @@ pub(crate) fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<
                 for (a, h) in answers.iter_mut().zip(hits.iter()) {
                     *a = answer_of(*h);
                 }
+                let n = chunk.len() as u64;
+                progress(done.fetch_add(n, std::sync::atomic::Ordering::Relaxed) + n);
             },
         );
     answers
@@ -337,16 +349,29 @@ pub fn scan_with(
     precision: Precision,
     backend: Backend,
 ) -> anyhow::Result<(ScanResult, ScanTimes)> {
+    scan_reporting(foundry, rays, precision, backend, &|_| ())
+}
+
+/// [`scan_with`], calling `progress` with the number of rays the CPU tracer has answered
+/// after each batch (the GPU and Embree report nothing until they are done).
+pub fn scan_reporting(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+    backend: Backend,
+    progress: &(dyn Fn(u64) + Sync),
+) -> anyhow::Result<(ScanResult, ScanTimes)> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
+        progress: &(dyn Fn(u64) + Sync),
         finish: impl FnOnce(&CpuScene<T>, &mut [Answer]) -> anyhow::Result<usize>,
     ) -> anyhow::Result<(ScanResult, ScanTimes)> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let build_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let mut answers = cpu_answers(&scene, rays);
+        let mut answers = cpu_answers_reporting(&scene, rays, progress);
         let redone_in_f64 = finish(&scene, &mut answers)?;
         let result = result_from(f, &answers);
         let trace_s = t1.elapsed().as_secs_f64();
@@ -359,13 +384,13 @@ pub fn scan_with(
         Ok((result, times))
     }
     let f32_cpu = || {
-        cpu::<f32>(foundry, rays, |scene, answers| {
+        cpu::<f32>(foundry, rays, progress, |scene, answers| {
             redo_uncertain_in_f64(foundry, scene, rays, answers)
         })
     };
     match (backend, precision) {
         (Backend::Cpu, Precision::F32) => f32_cpu(),
-        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, |_, _| Ok(0)),
+        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, progress, |_, _| Ok(0)),
         (Backend::Embree, Precision::F64) => {
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }

@@ -705,12 +705,7 @@ pub fn convert_store(
         },
         memory: options.memory,
     };
-    let bar = indicatif::ProgressBar::new(100).with_style(
-        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {percent}%, {eta} left")
-            .expect("a valid progress template")
-            .progress_chars("=> "),
-    );
-    bar.set_message("converting");
+    let bar = crate::progress::bar(100, "converting", "percent");
     let progress = |done: u64, total: u64| bar.set_position(done * 100 / total.max(1));
     let raw = Path::new(spec)
         .extension()

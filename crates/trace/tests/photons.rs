@@ -12,7 +12,9 @@ use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_trace::photons::properties::energy_of_wavelength;
 use hytrace_trace::photons::sources::Source;
-use hytrace_trace::photons::{load_photon_scene, propagate, PhotonRun, PhotonScene, RunOptions};
+use hytrace_trace::photons::{
+    load_photon_scene, propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions,
+};
 
 fn scene_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/photons/every_process.gdml")
@@ -52,6 +54,23 @@ fn results_do_not_depend_on_the_number_of_threads() {
     assert_eq!(one.histories, three.histories);
     assert_eq!(one.hits, three.hits);
     assert!(!one.hits.is_empty());
+}
+
+#[test]
+fn progress_counts_every_photon_once_in_order_and_changes_nothing() {
+    let scene = scene();
+    // Past the first photon, in more than one batch of the propagator.
+    let mut run = options("point:0,0,0", 70_000);
+    run.first = 5;
+    run.keep_histories = false;
+    let seen = std::sync::Mutex::new(Vec::new());
+    let reported =
+        propagate_reporting(&scene, &run, &|done| seen.lock().unwrap().push(done)).unwrap();
+    let seen = seen.into_inner().unwrap();
+    assert!(seen.len() > 1, "{seen:?}");
+    assert!(seen.windows(2).all(|w| w[0] < w[1]), "{seen:?}");
+    assert_eq!(seen.last(), Some(&70_000));
+    assert_eq!(reported.hits, propagate(&scene, &run).unwrap().hits);
 }
 
 #[test]

@@ -451,3 +451,38 @@ fn an_interrupted_scan_exits_130_and_leaves_nothing() {
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+/// The scan's progress counts every ray once (batches answered in any order add up to the
+/// ray count) and the answers are the plain scan's.
+#[test]
+fn scan_progress_counts_every_ray_and_changes_nothing() {
+    use hytrace_trace::scan::{rays_from_rows, scan_reporting, scan_with, Backend, Precision};
+    let f = hytrace_trace::scene::load_scene(None, &Default::default()).unwrap();
+    let rows: Vec<[f64; 8]> = (0..20_000)
+        .map(|k| {
+            let a = k as f64 * 0.618;
+            let d = [
+                a.cos() * (0.37 * a).sin(),
+                a.sin() * (0.37 * a).sin(),
+                (0.37 * a).cos(),
+            ];
+            [0.0, 0.0, 50.0, 0.0, d[0], d[1], d[2], f64::INFINITY]
+        })
+        .collect();
+    let rays = rays_from_rows(&rows, "rays").unwrap();
+    for precision in [Precision::F32, Precision::F64] {
+        let most = std::sync::atomic::AtomicU64::new(0);
+        let calls = std::sync::atomic::AtomicU64::new(0);
+        let progress = |done: u64| {
+            assert!(done <= rays.len() as u64);
+            most.fetch_max(done, std::sync::atomic::Ordering::Relaxed);
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        };
+        let (reported, _) = scan_reporting(&f, &rays, precision, Backend::Cpu, &progress).unwrap();
+        assert_eq!(most.into_inner(), rays.len() as u64);
+        assert!(calls.into_inner() > 1);
+        let (plain, _) = scan_with(&f, &rays, precision, Backend::Cpu).unwrap();
+        assert_eq!(reported.hits, plain.hits);
+        assert_eq!(reported.ids, plain.ids);
+    }
+}

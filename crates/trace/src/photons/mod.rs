@@ -27,7 +27,7 @@ use hytrace_foundry::Foundry;
 
 use crate::scene::{load_gdml_scene_with_surfaces, load_scene, VolumeSurfaces};
 
-pub use propagate::{propagate, PhotonRun, PhotonScene, RunOptions};
+pub use propagate::{propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions};
 
 /// Vectors of the propagator: f64 throughout.
 pub type V = V3<f64>;

@@ -271,6 +271,15 @@ pub struct PhotonRun {
 /// Propagates photons `run.first .. run.first + run.photons` through `scene`, in parallel
 /// over photons.
 pub fn propagate(scene: &PhotonScene, run: &RunOptions) -> Result<PhotonRun, PhotonError> {
+    propagate_reporting(scene, run, &|_| ())
+}
+
+/// [`propagate`], calling `progress` with the number of photons done after each batch.
+pub fn propagate_reporting(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    progress: &dyn Fn(u64),
+) -> Result<PhotonRun, PhotonError> {
     if run.photons == 0 {
         return Err(PhotonError::Input(
             "the number of photons (-n) must be at least 1".into(),
@@ -323,6 +332,7 @@ pub fn propagate(scene: &PhotonScene, run: &RunOptions) -> Result<PhotonRun, Pho
             hits.extend(hit);
         }
         first = last;
+        progress(first - run.first);
     }
     let propagate_s = start.elapsed().as_secs_f64();
     let counts = sorted_counts(codes);

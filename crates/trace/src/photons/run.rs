@@ -11,7 +11,7 @@ use serde_json::json;
 
 use super::output::{history_table, write_histories, write_hits};
 use super::sources::Source;
-use super::{load_photon_scene, propagate, PhotonRun, PhotonScene, RunOptions};
+use super::{load_photon_scene, propagate_reporting, PhotonRun, PhotonScene, RunOptions};
 use crate::outputs::{check_destinations, OutputSet};
 use crate::scene::VolumeSurfaces;
 
@@ -74,14 +74,16 @@ pub fn prepare(
         .with_context(|| format!("{}: preparing for photons", path.display()))
 }
 
-/// Propagates photons through the scene read from `path` ([`propagate()`]), errors naming
-/// the file.
+/// Propagates photons through the scene read from `path` ([`propagate_reporting`]), errors
+/// naming the file; `progress` hears the photons done after each batch.
 pub fn propagate_in(
     scene: &PhotonScene,
     path: &Path,
     run: &RunOptions,
+    progress: &dyn Fn(u64),
 ) -> anyhow::Result<PhotonRun> {
-    propagate(scene, run).with_context(|| format!("{}: propagating photons", path.display()))
+    propagate_reporting(scene, run, progress)
+        .with_context(|| format!("{}: propagating photons", path.display()))
 }
 
 /// Runs `hytrace photons`.
@@ -98,6 +100,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let scene = prepare(&f, surfaces, &args.scene)?;
     let build_s = t1.elapsed().as_secs_f64();
+    let bar = crate::progress::bar(args.photons, "propagating", "photons");
     let run = propagate_in(
         &scene,
         &args.scene,
@@ -110,7 +113,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             max_steps: args.max_steps,
             keep_histories: matches!(args.history, Some(Some(_))),
         },
+        &|done| bar.set_position(done),
     )?;
+    bar.finish_and_clear();
     let mut written = OutputSet::new();
     written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
     if let Some(path) = history_path {

@@ -7,7 +7,6 @@ use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
-use indicatif::{ProgressBar, ProgressStyle};
 
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{write_image, Effects, Image, Renderer};
@@ -230,12 +229,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     }
     let load_s = t0.elapsed().as_secs_f64();
     let [width, height] = spec.settings.size;
-    let bar = ProgressBar::new(height as u64).with_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} rows, {eta} left")
-            .expect("a valid progress template")
-            .progress_chars("=> "),
-    );
-    bar.set_message("rendering");
+    let bar = crate::progress::bar(height as u64, "rendering", "rows");
     let progress = |rows| bar.set_position(rows);
     let Rendered {
         image,
