@@ -531,6 +531,41 @@ fn memory_row(name: &str, bytes: usize, bound: Option<f64>) -> serde_json::Value
     json!({"representation": name, "bytes": bytes, "error_bound": bound})
 }
 
+/// The memory rows of a grid as read and as each bricked representation (measured by
+/// converting it), and why a representation is missing.
+fn representations(
+    s: &GridSummary,
+    grid: &Result<Volume, String>,
+) -> (Vec<serde_json::Value>, Option<String>) {
+    let mut memory = vec![memory_row(
+        s.source_kind,
+        s.source_bytes as usize,
+        Some(0.0),
+    )];
+    let mut note = None;
+    match grid {
+        Ok(volume) => {
+            // A grid that cannot be bricked (tiles spanning too many blocks, values a
+            // format cannot hold) is still described; the reason replaces its rows.
+            for format in TexelFormat::ALL {
+                match BrickedGrid::convert(volume, format) {
+                    Ok(b) => memory.push(memory_row(
+                        format.name(),
+                        b.memory_bytes().total(),
+                        Some(b.error_bound()),
+                    )),
+                    Err(e) => {
+                        note = Some(format!("not bricked as {format}: {}", e.0));
+                        break;
+                    }
+                }
+            }
+        }
+        Err(why) => note = Some(why.clone()),
+    }
+    (memory, note)
+}
+
 /// The summary `hytrace volume info` prints: every grid of `spec` with its bounding boxes,
 /// voxel counts and the memory of each representation (bricked ones measured by
 /// converting the scalar grids).
@@ -538,50 +573,18 @@ pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
     let mut grids = Vec::new();
     for named in open_volume(spec)? {
         let s = &named.summary;
-        if let Some(store) = &s.brick_store {
+        let (memory, note) = match &s.brick_store {
             // A store is described by its metadata; converting it would read it whole.
-            grids.push(json!({
-                "name": s.name,
-                "value_type": s.value_type,
-                "index_bbox": s.index_bbox,
-                "world_bbox": s.world_bbox,
-                "active_voxels": s.active_voxels,
-                "memory": [memory_row(s.source_kind, s.source_bytes as usize, None)],
-                "brick_store": store,
-                "note": format!(
+            Some(store) => (
+                vec![memory_row(s.source_kind, s.source_bytes as usize, None)],
+                Some(format!(
                     "brick store of {}x{}x{} voxels: {} bricks kept, {} dropped, {} bytes on disk; 16-bit codes (value = {} + code x {}); levels of detail 8^3, 2^3, 1^3 per brick; range mips of 8 to 64 voxels",
                     store.dims[0], store.dims[1], store.dims[2], store.kept_bricks, store.dropped_bricks,
                     s.source_bytes, store.quantization.lo, store.quantization.step
-                ),
-            }));
-            continue;
-        }
-        let mut memory = vec![memory_row(
-            s.source_kind,
-            s.source_bytes as usize,
-            Some(0.0),
-        )];
-        let mut note = None;
-        match &named.grid {
-            Ok(volume) => {
-                // A grid that cannot be bricked (tiles spanning too many blocks, values a
-                // format cannot hold) is still described; the reason replaces its rows.
-                for format in TexelFormat::ALL {
-                    match BrickedGrid::convert(volume, format) {
-                        Ok(b) => memory.push(memory_row(
-                            format.name(),
-                            b.memory_bytes().total(),
-                            Some(b.error_bound()),
-                        )),
-                        Err(e) => {
-                            note = Some(format!("not bricked as {format}: {}", e.0));
-                            break;
-                        }
-                    }
-                }
-            }
-            Err(why) => note = Some(why.clone()),
-        }
+                )),
+            ),
+            None => representations(s, &named.grid),
+        };
         grids.push(json!({
             "name": s.name,
             "value_type": s.value_type,
@@ -589,6 +592,7 @@ pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
             "world_bbox": s.world_bbox,
             "active_voxels": s.active_voxels,
             "memory": memory,
+            "brick_store": s.brick_store,
             "note": note,
         }));
     }
