@@ -1,67 +1,13 @@
-//! `hytrace photons`: options, outputs and the history table.
+//! Photon runs on a scene read from a file: preparing it and propagating, errors naming
+//! the file (what `hytrace photons` and the Python package call).
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::Path;
 
 use anyhow::Context;
-use clap::Args;
-use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
-use serde_json::json;
 
-use super::output::{history_table, write_histories, write_hits};
-use super::sources::Source;
-use super::{load_photon_scene, propagate_reporting, PhotonRun, PhotonScene, RunOptions};
-use crate::outputs::{check_destinations, OutputSet};
+use super::{propagate_reporting, PhotonRun, PhotonScene, RunOptions};
 use crate::scene::VolumeSurfaces;
-
-/// Options of `hytrace photons`.
-#[derive(Args, Debug)]
-pub struct PhotonsArgs {
-    /// A .gdml file (optical surfaces found as Geant4 finds them), a Foundry directory or a
-    /// .toml scene file (surfaces from the boundary table).
-    pub scene: PathBuf,
-    /// Photon source: `point:X,Y,Z` (isotropic from a point) or `beam:X,Y,Z:DX,DY,DZ:R`
-    /// (parallel along D over the disk of radius R centred on X,Y,Z, perpendicular to
-    /// D); mm. Photons start at time 0 with a random linear polarization perpendicular to
-    /// their direction.
-    #[arg(long)]
-    pub source: String,
-    /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm).
-    #[arg(long, default_value_t = 420.0)]
-    pub wavelength: f64,
-    /// Number of photons.
-    #[arg(short = 'n', long)]
-    pub photons: u64,
-    /// Detected photons, float64 (H, 16): x y z (mm) t (ns) dx dy dz wavelength (nm)
-    /// px py pz (polarization) instance (whose surface detected it) copy (its copy number)
-    /// photon (index) mask (history flags, Opticks' bits) steps; written atomically.
-    #[arg(short = 'o', long)]
-    pub out: PathBuf,
-    /// Index of the first photon: photons FIRST .. FIRST + N are propagated, each with its
-    /// own stream, so a run split into ranges gives exactly the whole run's photons.
-    #[arg(long, default_value_t = 0)]
-    pub first: u64,
-    /// Seed of the random streams: photon i draws stream (seed, i), so results do not
-    /// depend on the number of threads.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u32,
-    /// Print the table of the most frequent step histories (Opticks labels: TO BT BR SR
-    /// SC AB SD SA MI TR), and with `--history=PATH` also write every photon's packed
-    /// history there, uint64 (N,), 4 bits a label, first label lowest.
-    #[arg(long, num_args = 0..=1, require_equals = true, value_name = "PATH")]
-    pub history: Option<Option<PathBuf>>,
-    /// Rows of the history table.
-    #[arg(long, default_value_t = 20)]
-    pub top: usize,
-    /// Steps after which a photon is stopped (history label TR).
-    #[arg(long, default_value_t = 10_000)]
-    pub max_steps: u32,
-    /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
-    /// propagate_s, photons_per_s, threads, backend).
-    #[arg(long)]
-    pub stats: bool,
-}
 
 /// Prepares the scene `f` read from `path` for photons ([`PhotonScene::new`]), errors
 /// naming the file.
@@ -84,66 +30,4 @@ pub fn propagate_in(
 ) -> anyhow::Result<PhotonRun> {
     propagate_reporting(scene, run, progress)
         .with_context(|| format!("{}: propagating photons", path.display()))
-}
-
-/// Runs `hytrace photons`.
-pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
-    let source = Source::parse(&args.source)?;
-    // Both outputs are checked before the work and written together after it.
-    let history_path = args.history.as_ref().and_then(|h| h.as_deref());
-    let mut destinations = vec![("--out", args.out.as_path())];
-    destinations.extend(history_path.map(|p| ("--history", p)));
-    check_destinations(&destinations)?;
-    let t0 = Instant::now();
-    let (f, surfaces) = load_photon_scene(&args.scene, options)?;
-    let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let scene = prepare(&f, surfaces, &args.scene)?;
-    let build_s = t1.elapsed().as_secs_f64();
-    let bar = crate::progress::bar(args.photons, "propagating", "photons");
-    let run = propagate_in(
-        &scene,
-        &args.scene,
-        &RunOptions {
-            source,
-            wavelength_nm: args.wavelength,
-            photons: args.photons,
-            first: args.first,
-            seed: args.seed,
-            max_steps: args.max_steps,
-            keep_histories: matches!(args.history, Some(Some(_))),
-        },
-        &|done| bar.set_position(done),
-    )?;
-    bar.finish_and_clear();
-    let mut written = OutputSet::new();
-    written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
-    if let Some(path) = history_path {
-        written.stage(path, |p| Ok(write_histories(p, &run.histories)?))?;
-    }
-    written.commit()?;
-    if args.history.is_some() {
-        print!("{}", history_table(&run.counts, args.top));
-    }
-    if args.stats {
-        let line = json!({
-            "backend": "cpu",
-            "photons": args.photons,
-            "hits": run.hits.len(),
-            "load_s": load_s,
-            "build_s": build_s,
-            "propagate_s": run.propagate_s,
-            "photons_per_s": if run.propagate_s > 0.0 { args.photons as f64 / run.propagate_s } else { 0.0 },
-            "threads": rayon::current_num_threads(),
-        });
-        println!("{line}");
-    } else {
-        eprintln!(
-            "{} photons, {} detected, written to {}",
-            args.photons,
-            run.hits.len(),
-            args.out.display()
-        );
-    }
-    Ok(())
 }

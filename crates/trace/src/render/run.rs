@@ -1,20 +1,15 @@
 //! `hytrace render`: options, progress bar and output.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clap::Args;
-use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 
 use super::spec::{RenderSpec, View, VolumeMode};
-use super::{write_image, Effects, Image, Renderer};
+use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{
-    add_gpu_stats, gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore,
-};
-use crate::scene::load_render_scene;
+use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore};
 
 /// Where a render runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -29,10 +24,13 @@ pub enum RenderBackend {
 }
 
 /// What the GPU side of a render reports.
-struct GpuRun {
-    adapter: String,
-    features: Vec<&'static str>,
-    times: GpuTimes,
+pub struct GpuRun {
+    /// The adapter (name, type, backend, driver).
+    pub adapter: String,
+    /// The composition features of the render kernel.
+    pub features: Vec<&'static str>,
+    /// Upload, kernel and readback seconds.
+    pub times: GpuTimes,
 }
 
 /// Renders on the GPU of `ctx`. Pixels whose samples ran out of the driver's loop budget
@@ -62,33 +60,6 @@ fn render_gpu(
             times: run.times,
         },
     ))
-}
-
-/// The options of `hytrace render`; each overrides the scene file's `[render]` table.
-#[derive(Args, Debug)]
-pub struct RenderArgs {
-    /// `default` (or nothing) for the embedded default scene, a .toml scene file, a .gdml
-    /// file, a mesh or a Foundry directory.
-    pub scene: Option<PathBuf>,
-    /// The image: .png (8-bit sRGB) or .npy (float32 linear radiance, height x width x 3).
-    #[arg(short, long, default_value = "out/render.png")]
-    pub out: PathBuf,
-    /// Where it renders.
-    #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
-    pub backend: RenderBackend,
-    /// Where the GPU reads the media's texels from: a storage buffer, decoded as on the CPU,
-    /// or one 3D texture of their texel format (BC4 then decoded by the device; every
-    /// medium in one format).
-    #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
-    pub gpu_texels: TexelStore,
-    #[command(flatten)]
-    pub settings: RenderSettings,
-    /// Print which effects and kernels the scene uses, and render nothing.
-    #[arg(long)]
-    pub explain: bool,
-    /// Print one JSON line of timings.
-    #[arg(long)]
-    pub stats: bool,
 }
 
 /// The render settings a caller may set; each overrides the scene's own (its `[render]`
@@ -155,7 +126,7 @@ pub struct Rendered {
     /// Seconds rendering.
     pub render_s: f64,
     /// Set when it ran on the GPU.
-    gpu: Option<GpuRun>,
+    pub gpu: Option<GpuRun>,
 }
 
 /// Renders scene `f` as `spec` describes on `backend`, calling `progress` with the rows
@@ -202,72 +173,6 @@ pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
         },
         None => Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 1280x720")),
     }
-}
-
-/// Runs `hytrace render`.
-pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
-    let ext = args.out.extension().and_then(|e| e.to_str());
-    if !matches!(ext, Some("png" | "npy")) && !args.explain {
-        bail!(
-            "{}: the image must be a .png or .npy file",
-            args.out.display()
-        );
-    }
-    let t0 = Instant::now();
-    let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
-    args.settings.apply(&f, &mut spec)?;
-    if args.explain {
-        for line in Effects::of(&f, &spec).explain() {
-            println!("{line}");
-        }
-        println!(
-            "backends: the CPU path is monomorphised over these effects; the GPU kernel \
-             composes only their WGSL (geometry views, surfaces, specular, media of up to \
-             16 placements by emission-absorption, single or multiple scattering)"
-        );
-        return Ok(());
-    }
-    let load_s = t0.elapsed().as_secs_f64();
-    let [width, height] = spec.settings.size;
-    let bar = crate::progress::bar(height as u64, "rendering", "rows");
-    let progress = |rows| bar.set_position(rows);
-    let Rendered {
-        image,
-        effects: fx,
-        build_s,
-        render_s,
-        gpu: gpu_run,
-    } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
-    bar.finish_and_clear();
-    write_image(&image, &args.out)?;
-    let samples = width as f64 * height as f64 * spec.settings.spp as f64;
-    if args.stats {
-        let mut line = serde_json::json!({
-            "backend": if gpu_run.is_some() { "gpu" } else { "cpu" },
-            "width": width,
-            "height": height,
-            "spp": spec.settings.spp,
-            "view": format!("{:?}", fx.view).to_lowercase(),
-            "shading": fx.shading,
-            "specular": fx.specular,
-            "volumes": fx.volumes.map(|v| format!("{v:?}")),
-            "load_s": load_s,
-            "build_s": build_s,
-            "render_s": render_s,
-            "samples_per_s": samples / render_s.max(1e-9),
-            "threads": rayon::current_num_threads(),
-        });
-        if let Some(g) = &gpu_run {
-            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
-        }
-        println!("{line}");
-    }
-    eprintln!(
-        "{width}x{height}, {} spp in {render_s:.2} s; wrote {}",
-        spec.settings.spp,
-        args.out.display()
-    );
-    Ok(())
 }
 
 #[cfg(test)]

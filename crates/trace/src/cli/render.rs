@@ -1,0 +1,105 @@
+//! `hytrace render`: options, the progress bar and the report.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::bail;
+use clap::Args;
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{add_gpu_stats, TexelStore};
+use hytrace_trace::render::run::{render, RenderBackend, RenderSettings, Rendered};
+use hytrace_trace::render::{write_image, Effects};
+use hytrace_trace::scene::load_render_scene;
+
+/// The options of `hytrace render`; each overrides the scene file's `[render]` table.
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// `default` (or nothing) for the embedded default scene, a .toml scene file, a .gdml
+    /// file, a mesh or a Foundry directory.
+    pub scene: Option<PathBuf>,
+    /// The image: .png (8-bit sRGB) or .npy (float32 linear radiance, height x width x 3).
+    #[arg(short, long, default_value = "out/render.png")]
+    pub out: PathBuf,
+    /// Where it renders.
+    #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
+    pub backend: RenderBackend,
+    /// Where the GPU reads the media's texels from: a storage buffer, decoded as on the CPU,
+    /// or one 3D texture of their texel format (BC4 then decoded by the device; every
+    /// medium in one format).
+    #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
+    pub gpu_texels: TexelStore,
+    #[command(flatten)]
+    pub settings: RenderSettings,
+    /// Print which effects and kernels the scene uses, and render nothing.
+    #[arg(long)]
+    pub explain: bool,
+    /// Print one JSON line of timings.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+/// Runs `hytrace render`.
+pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
+    let ext = args.out.extension().and_then(|e| e.to_str());
+    if !matches!(ext, Some("png" | "npy")) && !args.explain {
+        bail!(
+            "{}: the image must be a .png or .npy file",
+            args.out.display()
+        );
+    }
+    let t0 = Instant::now();
+    let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
+    args.settings.apply(&f, &mut spec)?;
+    if args.explain {
+        for line in Effects::of(&f, &spec).explain() {
+            println!("{line}");
+        }
+        println!(
+            "backends: the CPU path is monomorphised over these effects; the GPU kernel \
+             composes only their WGSL (geometry views, surfaces, specular, media of up to \
+             16 placements by emission-absorption, single or multiple scattering)"
+        );
+        return Ok(());
+    }
+    let load_s = t0.elapsed().as_secs_f64();
+    let [width, height] = spec.settings.size;
+    let bar = hytrace_trace::progress::bar(height as u64, "rendering", "rows");
+    let progress = |rows| bar.set_position(rows);
+    let Rendered {
+        image,
+        effects: fx,
+        build_s,
+        render_s,
+        gpu: gpu_run,
+    } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
+    bar.finish_and_clear();
+    write_image(&image, &args.out)?;
+    let samples = width as f64 * height as f64 * spec.settings.spp as f64;
+    if args.stats {
+        let mut line = serde_json::json!({
+            "backend": if gpu_run.is_some() { "gpu" } else { "cpu" },
+            "width": width,
+            "height": height,
+            "spp": spec.settings.spp,
+            "view": format!("{:?}", fx.view).to_lowercase(),
+            "shading": fx.shading,
+            "specular": fx.specular,
+            "volumes": fx.volumes.map(|v| format!("{v:?}")),
+            "load_s": load_s,
+            "build_s": build_s,
+            "render_s": render_s,
+            "samples_per_s": samples / render_s.max(1e-9),
+            "threads": rayon::current_num_threads(),
+        });
+        if let Some(g) = &gpu_run {
+            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        }
+        println!("{line}");
+    }
+    eprintln!(
+        "{width}x{height}, {} spp in {render_s:.2} s; wrote {}",
+        spec.settings.spp,
+        args.out.display()
+    );
+    Ok(())
+}
