@@ -29,7 +29,7 @@ mod transmittance;
 pub use brick_store::{
     convert_grid, convert_raw, is_brick_store, planned_memory, BrickStore, CacheStats,
     ConvertOptions, ConvertReport, Endian, Quantization, RawSpec, RawType, StoreError, StoreMeta,
-    BRICK_BYTES, LOD_VALUES, SUPERCHUNK_BRICKS,
+    BRICK_BYTES, LOD_VALUES, STORE_FORMAT, STORE_VERSION, SUPERCHUNK_BRICKS,
 };
 pub use bricked::{BrickEntry, BrickedGrid, MemoryBreakdown, TexelFormat, NO_BRICK, NO_SLOT};
 pub use dda::{
