@@ -402,6 +402,8 @@ impl Volume {
                 )),
             })
             .map_err(library_error)?;
+        // A brick store whose file failed after it opened read the background: no answer.
+        grid.check_reads().map_err(library_error)?;
         Ok(PyArray1::from_vec(py, values))
     }
 }

@@ -5,7 +5,7 @@
 use std::borrow::Cow;
 use std::path::Path;
 
-use crate::brick_store::{is_brick_store, BrickStore, StoreMeta};
+use crate::brick_store::{is_brick_store, store_bytes, BrickStore, StoreMeta};
 use crate::ranges::RangeMips;
 
 use crate::dense::{DenseGrid, VolumeError};
@@ -199,13 +199,7 @@ fn open_store(path: &Path, budget: u64) -> Result<Vec<NamedVolume>, VolumeError>
     let meta = store.meta().clone();
     let lo = meta.index_origin;
     let bbox = [lo, std::array::from_fn(|k| lo[k] + meta.dims[k] as i32 - 1)];
-    let bytes = std::fs::read_dir(path)
-        .map(|d| {
-            d.filter_map(|e| e.ok()?.metadata().ok())
-                .map(|m| m.len())
-                .sum()
-        })
-        .unwrap_or(0);
+    let bytes = store_bytes(path).map_err(|e| VolumeError(format!("{}: {e}", path.display())))?;
     Ok(vec![NamedVolume {
         summary: GridSummary {
             name: "density".to_string(),

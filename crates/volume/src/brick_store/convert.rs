@@ -241,11 +241,7 @@ fn write_store<S: PlaneSource>(
     let json = serde_json::to_vec_pretty(&meta).expect("the metadata serializes");
     write_atomically(&staging.path().join("store.json"), |w| w.write_all(&json))
         .map_err(|e| StoreError::new(out, e.to_string()))?;
-    let bytes_written = std::fs::read_dir(staging.path())
-        .map_err(io_error(staging.path()))?
-        .filter_map(|e| e.ok()?.metadata().ok())
-        .map(|m| m.len())
-        .sum();
+    let bytes_written = super::store_bytes(staging.path()).map_err(io_error(staging.path()))?;
     std::fs::rename(staging.path(), out).map_err(io_error(out))?;
     // The directory now lives under its final name.
     let _ = staging.keep();

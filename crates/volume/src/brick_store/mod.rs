@@ -34,6 +34,15 @@ pub struct StoreError {
     pub problem: String,
 }
 
+/// Bytes of the files in store directory `dir`.
+pub fn store_bytes(dir: &Path) -> std::io::Result<u64> {
+    let mut total = 0;
+    for entry in std::fs::read_dir(dir)? {
+        total += entry?.metadata()?.len();
+    }
+    Ok(total)
+}
+
 impl StoreError {
     /// An error about `path`.
     pub fn new(path: &Path, problem: String) -> StoreError {
