@@ -253,8 +253,7 @@ fn a_store_truncated_while_open_is_an_error_naming_its_file() {
             &rays(50),
             &params(Estimator::Exact, Filter::Trilinear),
         )
-        .err()
-        .expect("a truncated store must fail");
+        .expect_err("a truncated store must fail");
     let text = format!("{err:#}");
     assert!(
         text.contains("bricks.bin") && text.contains("reading brick"),
