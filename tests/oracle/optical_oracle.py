@@ -36,8 +36,8 @@ action runs and nothing is recorded. The document holds the photon count,
 Physics
 -------
 A modular physics list with G4OpticalPhysics only (Geant4 adds
-transportation); of its processes only OpAbsorption, OpRayleigh and
-OpBoundary are active (Cerenkov, Scintillation, OpWLS, OpWLS2 and OpMieHG are
+transportation); of its processes only OpAbsorption, OpRayleigh, OpWLS and
+OpBoundary are active (Cerenkov, Scintillation, OpWLS2 and OpMieHG are
 switched off with /process/optical/processActivation). No Geant4 data set is
 needed: run with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
 directory (the script makes a temporary one when it is unset). The run
@@ -50,7 +50,9 @@ Labels
 ------
 Every step of a photon gives one label, in order after ``TO`` (the start):
 
-* ``AB``: the step ended in OpAbsorption; ``SC``: in OpRayleigh;
+* ``AB``: the step ended in OpAbsorption; ``SC``: in OpRayleigh; ``RE``: in
+  OpWLS (absorbed by a wavelength shifter): each photon it emits carries the
+  history on (``AB`` instead when it emits none);
 * ``MI``: the photon left the world (step status fWorldBoundary);
 * a step to a geometry boundary no longer than Geant4's surface tolerance
   (1e-9 mm) gets no label: G4OpBoundaryProcess does nothing there
@@ -217,6 +219,7 @@ def main():
     histories = {}
     hit_times = []
     hit_positions = []
+    hit_wavelengths = []
     state = {"labels": None}
     navigator = [None]
 
@@ -250,12 +253,24 @@ def main():
         return polished_dd and pre.GetMaterial() != post.GetMaterial() \
             and not has_rindex(post.GetMaterial())
 
+    # Labels of photons absorbed by a wavelength shifter, by track ID: the photons it
+    # emits carry them on (hytrace keeps one history through a re-emission).
+    shifted = {}
+
     class Tracking(g4.G4UserTrackingAction):
         def PreUserTrackingAction(self, track):
-            state["labels"] = ["TO"]
+            parent = shifted.get(track.GetParentID())
+            state["labels"] = list(parent) if parent is not None else ["TO"]
 
         def PostUserTrackingAction(self, track):
-            key = " ".join(state["labels"][:MAX_LABELS])
+            labels = state["labels"]
+            if labels[-1] == "RE":
+                if track.GetStep().GetNumberOfSecondariesInCurrentStep() > 0:
+                    shifted[track.GetTrackID()] = labels
+                    return
+                # Absorbed by the shifter with nothing emitted.
+                labels[-1] = "AB"
+            key = " ".join(labels[:MAX_LABELS])
             histories[key] = histories.get(key, 0) + 1
 
     class Stepping(g4.G4UserSteppingAction):
@@ -271,6 +286,8 @@ def main():
                 labels.append("AB")
             elif name == "OpRayleigh":
                 labels.append("SC")
+            elif name == "OpWLS":
+                labels.append("RE")
             elif status == g4.G4StepStatus.fGeomBoundary:
                 if step.GetStepLength() <= STEP_TOO_SMALL:
                     # G4OpBoundaryProcess's StepTooSmall: no boundary action. Geant4
@@ -281,6 +298,7 @@ def main():
                     if step.GetTotalEnergyDeposit() > 0 and not no_rindex_kill(pre, post):
                         labels.append("SD")
                         hit_times.append(post.GetGlobalTime() / g4.ns)
+                        hit_wavelengths.append(HC_EV_NM / (pre.GetTotalEnergy() / g4.eV))
                         p = post.GetPosition()
                         hit_positions.append([p.x / g4.mm, p.y / g4.mm, p.z / g4.mm])
                     else:
@@ -310,7 +328,7 @@ def main():
     rm = g4.G4RunManagerFactory.CreateRunManager(g4.G4RunManagerType.Serial)
     detector, physics = Detector(), Physics()
     ui = g4.G4UImanager.GetUIpointer()
-    for process in ("Cerenkov", "Scintillation", "OpWLS", "OpWLS2", "OpMieHG"):
+    for process in ("Cerenkov", "Scintillation", "OpWLS2", "OpMieHG"):
         ui.ApplyCommand("/process/optical/processActivation %s false" % process)
     rm.SetUserInitialization(detector)
     rm.SetUserInitialization(physics)
@@ -345,6 +363,7 @@ def main():
         "histories": histories,
         "hit_times": hit_times,
         "hit_positions": hit_positions,
+        "hit_wavelengths": hit_wavelengths,
         "seconds": time.time() - t0,
     }
     real_out.write(json.dumps(out) + "\n")
