@@ -92,14 +92,19 @@ SPECULAR_TOLERANCE = 1e-7
 
 
 def parse_source(spec):
+    """Source tuples: ("point", centre), ("beam", centre, axis, radius, cos of the
+    divergence half-angle), ("sphere", centre, radius, inward)."""
     parts = spec.split(":")
     nums = lambda s: [float(v) for v in s.split(",")]
     if parts[0] == "point" and len(parts) == 2:
         return ("point", np.array(nums(parts[1])))
-    if parts[0] == "beam" and len(parts) == 4:
+    if parts[0] == "beam" and len(parts) in (4, 5):
         d = np.array(nums(parts[2]))
+        half_angle = float(parts[4]) if len(parts) == 5 else 0.0
         return ("beam", np.array(nums(parts[1])), d / np.linalg.norm(d),
-                float(parts[3]))
+                float(parts[3]), np.cos(np.radians(half_angle)))
+    if parts[0] == "sphere" and len(parts) == 4 and parts[3] in ("in", "out"):
+        return ("sphere", np.array(nums(parts[1])), float(parts[2]), parts[3] == "in")
     raise SystemExit("unknown source %r" % spec)
 
 
@@ -111,19 +116,32 @@ def orthonormal(d):
     return e1, np.cross(d, e1)
 
 
+def isotropic(rng):
+    c = 1.0 - 2.0 * rng.random()
+    s = np.sqrt(max(0.0, 1.0 - c * c))
+    phi = 2.0 * np.pi * rng.random()
+    return np.array([s * np.cos(phi), s * np.sin(phi), c])
+
+
 def sample(source, rng):
     """Position, direction, polarization of one photon."""
     if source[0] == "point":
-        c = 1.0 - 2.0 * rng.random()
-        s = np.sqrt(max(0.0, 1.0 - c * c))
-        phi = 2.0 * np.pi * rng.random()
-        pos, d = source[1], np.array([s * np.cos(phi), s * np.sin(phi), c])
+        pos, d = source[1], isotropic(rng)
+    elif source[0] == "sphere":
+        _, centre, radius, inward = source
+        n = isotropic(rng)
+        pos, d = centre + radius * n, (-n if inward else n)
     else:
-        _, centre, d, radius = source
-        e1, e2 = orthonormal(d)
+        _, centre, axis, radius, cos_div = source
+        e1, e2 = orthonormal(axis)
         r = radius * np.sqrt(rng.random())
         phi = 2.0 * np.pi * rng.random()
         pos = centre + r * (np.cos(phi) * e1 + np.sin(phi) * e2)
+        # Uniform in solid angle within the cone: the cosine uniform in [cos A, 1].
+        c = 1.0 - (1.0 - cos_div) * rng.random()
+        s = np.sqrt(max(0.0, 1.0 - c * c))
+        psi = 2.0 * np.pi * rng.random()
+        d = c * axis + s * (np.cos(psi) * e1 + np.sin(psi) * e2)
     e1, e2 = orthonormal(d)
     a = 2.0 * np.pi * rng.random()
     return pos, d, np.cos(a) * e1 + np.sin(a) * e2
@@ -190,7 +208,9 @@ def main():
                 "/gps/pos/centre %r %r %r mm" % (x, y, z)]
         if source[0] == "point":
             return cmds + ["/gps/pos/type Point", "/gps/ang/type iso"]
-        _, _, d, radius = source
+        if source[0] != "beam" or source[4] < 1.0:
+            raise SystemExit("--speed runs point sources and parallel beams only")
+        _, _, d, radius, _ = source
         e1, e2 = orthonormal(d)
         return cmds + ["/gps/pos/type Plane", "/gps/pos/shape Circle",
                        "/gps/pos/radius %r mm" % radius,

@@ -210,6 +210,13 @@ fn photon_histories_and_detections_agree_with_geant4() {
         // surface (dielectric_metal, REFLECTIVITY 0.9) and a block without RINDEX.
         ("data/photons/every_process.gdml", "point:0,0,0"),
         ("data/photons/every_process.gdml", "beam:-90,0,5:1,0,0:20"),
+        // The other sources: a beam diverging 20 degrees into the drop, a sphere in the
+        // tank shining inward.
+        (
+            "eic-opticks/opticks_raindrop.gdml",
+            "beam:-90,0,60:1,0,-0.4:30:20",
+        ),
+        ("data/photons/every_process.gdml", "sphere:0,0,0:90:in"),
     ];
     let failures: Vec<String> = cases
         .iter()

@@ -18,10 +18,12 @@ pub struct PhotonsArgs {
     /// A .gdml file (optical surfaces found as Geant4 finds them), a Foundry directory or a
     /// .toml scene file (surfaces from the boundary table).
     pub scene: PathBuf,
-    /// Photon source: `point:X,Y,Z` (isotropic from a point) or `beam:X,Y,Z:DX,DY,DZ:R`
-    /// (parallel along D over the disk of radius R centred on X,Y,Z, perpendicular to
-    /// D); mm. Photons start at time 0 with a random linear polarization perpendicular to
-    /// their direction.
+    /// Photon source: `point:X,Y,Z` (isotropic from a point), `beam:X,Y,Z:DX,DY,DZ:R[:A]`
+    /// (along D over the disk of radius R centred on X,Y,Z, perpendicular to D; parallel,
+    /// or spread uniformly within a cone of half-angle A degrees) or `sphere:X,Y,Z:R:in`
+    /// / `...:out` (from the sphere's surface along its inward or outward normal); mm.
+    /// Photons start at time 0 with a random linear polarization perpendicular to their
+    /// direction.
     #[arg(long)]
     pub source: String,
     /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm).

@@ -413,7 +413,7 @@ pub fn propagate_reporting(
     }
     let origin = match run.source {
         Source::Point { position } => position,
-        Source::Beam { centre, .. } => centre,
+        Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
     };
     if scene.tracer.locate_point(origin.to_f64()).is_none() {
         return Err(PhotonError::Input(format!(
