@@ -12,13 +12,18 @@ draw different random numbers).
 
 Command line::
 
-    optical_oracle.py GDML --source SPEC --wavelength NM -n N [--seed S] [--speed]
+    optical_oracle.py GDML --source SPEC --wavelength NM|MATERIAL:PROPERTY -n N
+        [--seed S] [--speed]
 
-``SPEC`` is ``point:X,Y,Z`` (isotropic) or ``beam:X,Y,Z:DX,DY,DZ:R`` (a
-parallel beam over a disk of radius R perpendicular to D), mm, as in
+``SPEC`` is ``point:X,Y,Z`` (isotropic), ``beam:X,Y,Z:DX,DY,DZ:R[:A]`` (a
+beam over a disk of radius R perpendicular to D, parallel or spread within a
+cone of half-angle A degrees) or ``sphere:X,Y,Z:R:in|out``, mm, as in
 ``hytrace photons``. Every photon starts at time 0 with a random linear
 polarization perpendicular to its direction and energy h c / lambda
-(h c = 1239.84198 eV nm). stdout carries one JSON document::
+(h c = 1239.84198 eV nm), or with ``MATERIAL:PROPERTY`` an energy drawn from
+that intensity table of the material as Geant4 builds it (the trapezoid
+integral over energy, inverted linearly between rows: written here with
+NumPy, not taken from hytrace). stdout carries one JSON document::
 
     {"geant4": VERSION, "photons": N, "detected": D,
      "histories": {"TO BT SD": count, ...},
@@ -147,11 +152,26 @@ def sample(source, rng):
     return pos, d, np.cos(a) * e1 + np.sin(a) * e2
 
 
+def spectrum_table(g4, material, prop):
+    """Photon energies and the running trapezoid integral of a material's intensity
+    table, read from Geant4's material (energies in Geant4's internal units)."""
+    m = g4.G4Material.GetMaterial(material)
+    if m is None or m.GetMaterialPropertiesTable() is None:
+        raise SystemExit("no material %r with properties" % material)
+    v = m.GetMaterialPropertiesTable().GetProperty(prop)
+    if v is None:
+        raise SystemExit("material %r has no property %r" % (material, prop))
+    es = np.array([v.Energy(i) for i in range(v.GetVectorLength())])
+    ys = np.array([v.Value(e) for e in es])
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * np.diff(es) * (ys[1:] + ys[:-1]))])
+    return es, cum
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("gdml")
     ap.add_argument("--source", required=True)
-    ap.add_argument("--wavelength", type=float, default=420.0)
+    ap.add_argument("--wavelength", default="420")
     ap.add_argument("-n", type=int, required=True)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--speed", action="store_true",
@@ -186,7 +206,8 @@ def main():
             self.RegisterPhysics(g4.G4OpticalPhysics())
 
     rng = np.random.default_rng(args.seed)
-    energy = HC_EV_NM / args.wavelength * g4.eV
+    spectrum_of = args.wavelength.rsplit(":", 1) if ":" in args.wavelength else None
+    energy = None if spectrum_of else HC_EV_NM / float(args.wavelength) * g4.eV
 
     class SpeedGun(g4.G4VUserPrimaryGeneratorAction):
         """The source as a G4GeneralParticleSource: no Python per photon."""
@@ -202,9 +223,11 @@ def main():
             self.gps.GeneratePrimaryVertex(event)
 
     def gps_commands():
+        if energy is None:
+            raise SystemExit("--speed runs fixed wavelengths only")
         x, y, z = source[1]
         cmds = ["/gps/particle opticalphoton",
-                "/gps/energy %.9g eV" % (HC_EV_NM / args.wavelength),
+                "/gps/energy %.9g eV" % (energy / g4.eV),
                 "/gps/pos/centre %r %r %r mm" % (x, y, z)]
         if source[0] == "point":
             return cmds + ["/gps/pos/type Point", "/gps/ang/type iso"]
@@ -223,13 +246,20 @@ def main():
             super().__init__()
             self.gun = g4.G4ParticleGun(1)
             self.gun.SetParticleDefinition(g4.G4OpticalPhoton.Definition())
-            self.gun.SetParticleEnergy(energy)
+            if energy is not None:
+                self.gun.SetParticleEnergy(energy)
             self.gun.SetParticleTime(0.0)
             self.left = args.n
+            self.spectrum = None
 
         def GeneratePrimaries(self, event):
+            if spectrum_of and self.spectrum is None:
+                self.spectrum = spectrum_table(g4, *spectrum_of)
             for _ in range(min(PHOTONS_PER_EVENT, self.left)):
                 pos, d, pol = sample(source, rng)
+                if self.spectrum is not None:
+                    es, cum = self.spectrum
+                    self.gun.SetParticleEnergy(float(np.interp(rng.random() * cum[-1], cum, es)))
                 self.gun.SetParticlePosition(g4.G4ThreeVector(*pos))
                 self.gun.SetParticleMomentumDirection(g4.G4ThreeVector(*d))
                 self.gun.SetParticlePolarization(g4.G4ThreeVector(*pol))

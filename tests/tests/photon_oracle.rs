@@ -16,7 +16,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_tests::gdml::gdml_dir;
 use hytrace_tests::{geant4_data_dir, oracle_python};
 use hytrace_trace::photons::output::compare_histories;
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, propagate, PhotonScene, RunOptions};
 use serde::Deserialize;
 
@@ -66,17 +66,12 @@ fn position_bins(positions: impl Iterator<Item = [f64; 3]>) -> Vec<(String, u64)
     counts.into_iter().collect()
 }
 
-fn geant4(python: &Path, gdml: &Path, source: &str) -> Geant4Run {
+fn geant4(python: &Path, gdml: &Path, source: &str, wavelength: &str) -> Geant4Run {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/optical_oracle.py");
     let out = Command::new(python)
         .arg(&script)
         .arg(gdml)
-        .args([
-            "--source",
-            source,
-            "--wavelength",
-            &WAVELENGTH_NM.to_string(),
-        ])
+        .args(["--source", source, "--wavelength", wavelength])
         .args(["-n", &PHOTONS.to_string(), "--seed", "5"])
         .env("GEANT4_DATA_DIR", geant4_data_dir())
         .output()
@@ -97,13 +92,19 @@ fn mean_and_error(x: &[f64]) -> (f64, f64) {
     (mean, (var / n).sqrt())
 }
 
-/// Runs both programs on one file and source; returns a failure description, if any.
+/// Runs both programs on one file and source at [`WAVELENGTH_NM`]; returns a failure
+/// description, if any.
 fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
+    compare_at(python, file, source, &WAVELENGTH_NM.to_string())
+}
+
+/// [`compare`] at a wavelength given as `--wavelength` takes it (nm or MATERIAL:PROPERTY).
+fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Option<String> {
     let gdml = match file.strip_prefix("data/") {
         Some(own) => Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(own),
         None => gdml_dir().join(file),
     };
-    let g4 = geant4(python, &gdml, source);
+    let g4 = geant4(python, &gdml, source, wavelength);
     // One history per photon, and one more for each further photon a wavelength shifter
     // emitted.
     assert!(g4.photons >= PHOTONS, "{} histories", g4.photons);
@@ -113,7 +114,7 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
         &scene,
         &RunOptions {
             source: Source::parse(source).unwrap(),
-            wavelength_nm: WAVELENGTH_NM,
+            wavelength: Wavelength::parse(wavelength).unwrap(),
             photons: PHOTONS,
             first: 0,
             seed: 1,
@@ -139,7 +140,7 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
         MIN_COUNT,
     );
     eprintln!(
-        "{file} {source} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}; hit wavelengths chi2/ndf {:.2}/{}, p {:.3}",
+        "{file} {source} {wavelength} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}; hit wavelengths chi2/ndf {:.2}/{}, p {:.3}",
         g4.geant4,
         c.chi2,
         c.ndf,
@@ -177,7 +178,7 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
     if time_sigmas > 4.0 {
         problems.push(format!("mean hit time {ta} vs {tb} ns"));
     }
-    (!problems.is_empty()).then(|| format!("{file} {source}: {}", problems.join("; ")))
+    (!problems.is_empty()).then(|| format!("{file} {source} {wavelength}: {}", problems.join("; ")))
 }
 
 #[test]
@@ -275,6 +276,29 @@ fn wavelength_shifting_agrees_with_geant4() {
     let failures: Vec<String> = ["beam:-80,0,50:0.2,0,-1:10", "beam:80,0,50:0.2,0,-1:10"]
         .iter()
         .filter_map(|source| compare(&python, file, source))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Wavelengths drawn from a material's emission spectrum (the liquid's
+/// SCINTILLATIONCOMPONENT1 in tests/data/photons/every_process.gdml), through absorption
+/// and Rayleigh lengths and a RINDEX that vary with energy: the hit wavelengths weigh the
+/// spectrum as the liquid filters it.
+#[test]
+fn wavelengths_drawn_from_a_spectrum_agree_with_geant4() {
+    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
+        return;
+    };
+    let failures: Vec<String> = ["beam:0,0,50:0,0,-1:20", "point:0,0,0"]
+        .iter()
+        .filter_map(|source| {
+            compare_at(
+                &python,
+                "data/photons/every_process.gdml",
+                source,
+                "Liquid:SCINTILLATIONCOMPONENT1",
+            )
+        })
         .collect();
     assert!(failures.is_empty(), "{failures:#?}");
 }

@@ -8,7 +8,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::outputs::{check_destinations, OutputSet};
 use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
 use hytrace_trace::photons::run::{prepare, propagate_in};
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, RunOptions};
 use serde_json::json;
 
@@ -26,9 +26,11 @@ pub struct PhotonsArgs {
     /// direction.
     #[arg(long)]
     pub source: String,
-    /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm).
-    #[arg(long, default_value_t = 420.0)]
-    pub wavelength: f64,
+    /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm),
+    /// or MATERIAL:PROPERTY: drawn for each photon from that intensity table (per photon
+    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1.
+    #[arg(long, default_value = "420")]
+    pub wavelength: String,
     /// Number of photons.
     #[arg(short = 'n', long)]
     pub photons: u64,
@@ -82,7 +84,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         &args.scene,
         &RunOptions {
             source,
-            wavelength_nm: args.wavelength,
+            wavelength: Wavelength::parse(&args.wavelength)?,
             photons: args.photons,
             first: args.first,
             seed: args.seed,

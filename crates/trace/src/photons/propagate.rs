@@ -21,9 +21,9 @@ use rayon::prelude::*;
 use super::bulk::{rayleigh_scatter, rotate_uz, sample_distance};
 use super::output::{sorted_counts, History, HitRow, Label};
 use super::properties::{
-    energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, C_LIGHT_MM_PER_NS,
+    energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
 };
-use super::sources::Source;
+use super::sources::{Source, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
 use super::{PhotonError, V};
 use crate::cpu::{CpuScene, Hit};
@@ -36,6 +36,8 @@ const BATCH: u64 = 1 << 16;
 pub struct PhotonScene {
     tracer: CpuScene<f64>,
     tables: OpticsTables,
+    /// The scene's materials as read (their tables, for spectra a run draws from).
+    materials: Vec<hytrace_foundry::optics::Material>,
     /// Material inside every instance ([`UNSET`] for none).
     material: Vec<u32>,
     mother: Vec<u32>,
@@ -88,12 +90,47 @@ impl PhotonScene {
         Ok(PhotonScene {
             tracer,
             tables,
+            materials: f.optics.materials.clone(),
             material,
             hierarchical: mother.iter().any(|&m| m != UNSET),
             mother,
             copy: f.inst.iter().map(|i| i.copy_number).collect(),
             surfaces,
         })
+    }
+
+    /// Resolves a run's wavelength: a fixed one checked, a spectrum looked up among the
+    /// scene's materials.
+    fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
+        match wavelength {
+            Wavelength::Fixed(nm) if nm.is_finite() && *nm > 0.0 => Ok(Emission::Fixed {
+                energy: energy_of_wavelength(*nm),
+                nm: *nm,
+            }),
+            Wavelength::Fixed(nm) => Err(PhotonError::Input(format!(
+                "the wavelength {nm} nm is not a positive number"
+            ))),
+            Wavelength::Spectrum { material, property } => {
+                let names = |v: Vec<&str>| v.join(", ");
+                let Some(m) = self.materials.iter().find(|m| &m.name == material) else {
+                    return Err(PhotonError::Input(format!(
+                        "--wavelength: no material `{material}` in the scene (materials: {})",
+                        names(self.materials.iter().map(|m| m.name.as_str()).collect())
+                    )));
+                };
+                let Some((_, table)) = m.properties.iter().find(|(n, _)| n == property) else {
+                    return Err(PhotonError::Input(format!(
+                        "--wavelength: material `{material}` has no property `{property}` (its properties: {})",
+                        names(m.properties.iter().map(|(n, _)| n.as_str()).collect())
+                    )));
+                };
+                let intensity = Property::new(
+                    table,
+                    &format!("material `{material}`: property {property}"),
+                )?;
+                Ok(Emission::Spectrum(Spectrum::new(&intensity)))
+            }
+        }
     }
 
     /// The next boundary from `pos` along `dir` inside instance `current`. A crossing of
@@ -143,9 +180,21 @@ impl PhotonScene {
     /// Propagates photon `index` to its end: the histories of its lineages (the photon
     /// itself first, then the further photons its wavelength-shifting absorptions
     /// emitted) and the hit rows of those detected.
-    fn photon(&self, index: u64, run: &RunOptions, energy: f64) -> (Vec<History>, Vec<HitRow>) {
+    fn photon(
+        &self,
+        index: u64,
+        run: &RunOptions,
+        emission: &Emission,
+    ) -> (Vec<History>, Vec<HitRow>) {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
         let start = run.source.sample(&mut rng);
+        let (energy, wavelength_nm) = match emission {
+            Emission::Fixed { energy, nm } => (*energy, *nm),
+            Emission::Spectrum(s) => {
+                let e = s.sample(&mut rng);
+                (e, wavelength_of_energy(e))
+            }
+        };
         let mut history = History::default();
         history.push(Label::To);
         let Some(current) = self.tracer.locate_point(start.position.to_f64()) else {
@@ -158,7 +207,7 @@ impl PhotonScene {
             pol: start.polarization,
             time: 0.0,
             energy,
-            wavelength_nm: run.wavelength_nm,
+            wavelength_nm,
             current,
             history,
         }];
@@ -314,6 +363,12 @@ impl PhotonScene {
     }
 }
 
+/// The wavelength of a run, resolved: fixed (energy in MeV and nm) or a spectrum.
+enum Emission {
+    Fixed { energy: f64, nm: f64 },
+    Spectrum(Spectrum),
+}
+
 /// A photon on its way: where, which way, its polarization, time (ns), energy (MeV) and
 /// wavelength (nm), the instance it is in and its history so far.
 struct Lineage {
@@ -346,8 +401,8 @@ fn isotropic(rng: &mut Rng) -> (V, V) {
 pub struct RunOptions {
     /// Where photons start.
     pub source: Source,
-    /// Wavelength of every photon (nm).
-    pub wavelength_nm: f64,
+    /// The photons' wavelength: fixed or drawn from a material's spectrum.
+    pub wavelength: Wavelength,
     /// Number of photons.
     pub photons: u64,
     /// Index of the first photon: the run propagates photons `first .. first + photons`,
@@ -394,12 +449,7 @@ pub fn propagate_reporting(
             "the number of photons (-n) must be at least 1".into(),
         ));
     }
-    if !(run.wavelength_nm.is_finite() && run.wavelength_nm > 0.0) {
-        return Err(PhotonError::Input(format!(
-            "the wavelength {} nm is not a positive number",
-            run.wavelength_nm
-        )));
-    }
+    let emission = scene.emission(&run.wavelength)?;
     let Some(end) = run.first.checked_add(run.photons) else {
         return Err(PhotonError::Input(format!(
             "photons {} .. {} + {}: past the last photon index",
@@ -421,7 +471,6 @@ pub fn propagate_reporting(
             origin.x, origin.y, origin.z
         )));
     }
-    let energy = energy_of_wavelength(run.wavelength_nm);
     let start = Instant::now();
     let mut hits = Vec::new();
     let mut histories = Vec::new();
@@ -431,7 +480,7 @@ pub fn propagate_reporting(
         let last = first.saturating_add(BATCH).min(end);
         let batch: Vec<(Vec<History>, Vec<HitRow>)> = (first..last)
             .into_par_iter()
-            .map(|i| scene.photon(i, run, energy))
+            .map(|i| scene.photon(i, run, &emission))
             .collect();
         for (lineages, photon_hits) in batch {
             for h in &lineages {

@@ -129,45 +129,32 @@ pub struct MaterialOptics {
     pub wls: Option<Wls>,
 }
 
-/// Re-emission by a wavelength shifter (Geant4's G4OpWLS): how many photons, at which
-/// energies, after which delay.
+/// An emission spectrum to draw photon energies from, as Geant4 draws its scintillation and
+/// wavelength-shifting spectra: the trapezoid integral of the intensity over photon energy,
+/// inverted linearly between rows (G4PhysicsVector::GetEnergy).
 #[derive(Clone, Debug)]
-pub struct Wls {
-    /// Cumulative trapezoid integral of WLSCOMPONENT over photon energy: `(energy,
-    /// integral)` rows, the integral not decreasing.
+pub struct Spectrum {
+    /// `(energy, integral)` rows, the integral not decreasing.
     energies: Vec<f64>,
     cumulative: Vec<f64>,
-    /// WLSTIMECONSTANT (ns): the delay of every re-emitted photon (Geant4's default
-    /// `delta` time profile).
-    pub time_constant: f64,
-    /// WLSMEANNUMBERPHOTONS: photons emitted per absorption, Poisson distributed with
-    /// this mean; none: exactly one.
-    pub mean_photons: Option<f64>,
 }
 
-/// Draws past which the Poisson sampler stops counting (the tail beyond is below f64's
-/// resolution for the means Geant4 samples this way).
-const POISSON_MAX: u32 = 1000;
-
-impl Wls {
-    /// The re-emission of a material with WLSCOMPONENT `component`.
-    fn new(component: &Property, time_constant: f64, mean_photons: Option<f64>) -> Self {
-        let (es, vs) = (&component.energies, &component.values);
+impl Spectrum {
+    /// The spectrum of an intensity table (intensity per photon energy).
+    pub fn new(intensity: &Property) -> Self {
+        let (es, vs) = (&intensity.energies, &intensity.values);
         let mut cumulative = vec![0.0];
         for i in 1..es.len() {
             let last = cumulative[i - 1];
             cumulative.push(last + 0.5 * (es[i] - es[i - 1]) * (vs[i - 1] + vs[i]));
         }
-        Wls {
+        Spectrum {
             energies: es.clone(),
             cumulative,
-            time_constant,
-            mean_photons,
         }
     }
 
-    /// The energy at which the cumulative integral reaches `c` (linear between rows;
-    /// G4PhysicsVector::GetEnergy).
+    /// The energy at which the cumulative integral reaches `c`.
     fn energy_at(&self, c: f64) -> f64 {
         let (es, cs) = (&self.energies, &self.cumulative);
         let last = cs.len() - 1;
@@ -187,12 +174,45 @@ impl Wls {
         }
     }
 
+    /// One photon energy (MeV) drawn from the spectrum.
+    pub fn sample(&self, rng: &mut Rng) -> f64 {
+        self.energy_at(rng.next_f64() * self.cumulative[self.cumulative.len() - 1])
+    }
+}
+
+/// Re-emission by a wavelength shifter (Geant4's G4OpWLS): how many photons, at which
+/// energies, after which delay.
+#[derive(Clone, Debug)]
+pub struct Wls {
+    /// WLSCOMPONENT.
+    spectrum: Spectrum,
+    /// WLSTIMECONSTANT (ns): the delay of every re-emitted photon (Geant4's default
+    /// `delta` time profile).
+    pub time_constant: f64,
+    /// WLSMEANNUMBERPHOTONS: photons emitted per absorption, Poisson distributed with
+    /// this mean; none: exactly one.
+    pub mean_photons: Option<f64>,
+}
+
+/// Draws past which the Poisson sampler stops counting (the tail beyond is below f64's
+/// resolution for the means Geant4 samples this way).
+const POISSON_MAX: u32 = 1000;
+
+impl Wls {
+    /// The re-emission of a material with WLSCOMPONENT `component`.
+    fn new(component: &Property, time_constant: f64, mean_photons: Option<f64>) -> Self {
+        Wls {
+            spectrum: Spectrum::new(component),
+            time_constant,
+            mean_photons,
+        }
+    }
+
     /// The energy of one re-emitted photon, no higher than `primary` (MeV): up to 100
     /// draws from the spectrum, as Geant4 tries; `None` when none is low enough.
     pub fn sample_energy(&self, primary: f64, rng: &mut Rng) -> Option<f64> {
-        let max = self.cumulative[self.cumulative.len() - 1];
         (0..100)
-            .map(|_| self.energy_at(rng.next_f64() * max))
+            .map(|_| self.spectrum.sample(rng))
             .find(|&e| e <= primary)
     }
 

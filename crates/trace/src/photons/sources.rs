@@ -46,6 +46,44 @@ pub enum Source {
     },
 }
 
+/// The wavelength photons start with (`--wavelength`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Wavelength {
+    /// Every photon at this wavelength (nm).
+    Fixed(f64),
+    /// Drawn for each photon from an intensity table (intensity per photon energy) of a
+    /// material of the scene, as Geant4 draws its emission spectra, e.g.
+    /// `LAr:SCINTILLATIONCOMPONENT1`.
+    Spectrum {
+        /// Material name.
+        material: String,
+        /// Property name.
+        property: String,
+    },
+}
+
+impl Wavelength {
+    /// Parses `NM` (a positive number of nanometres) or `MATERIAL:PROPERTY`.
+    pub fn parse(text: &str) -> Result<Wavelength, PhotonError> {
+        let bad = |problem: String| PhotonError::Input(format!("--wavelength `{text}`: {problem}"));
+        if let Some((material, property)) = text.rsplit_once(':') {
+            if material.trim().is_empty() || property.trim().is_empty() {
+                return Err(bad("expected NM or MATERIAL:PROPERTY".into()));
+            }
+            return Ok(Wavelength::Spectrum {
+                material: material.trim().to_string(),
+                property: property.trim().to_string(),
+            });
+        }
+        match text.trim().parse::<f64>() {
+            Ok(nm) if nm.is_finite() && nm > 0.0 => Ok(Wavelength::Fixed(nm)),
+            _ => Err(bad(
+                "not a positive number of nanometres or MATERIAL:PROPERTY".into(),
+            )),
+        }
+    }
+}
+
 /// A photon's starting position, direction and polarization.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Start {
