@@ -252,7 +252,7 @@ fn coincident_faces_render_as_their_separated_twin_without_black_pixels() {
         if view == View::Instance {
             for i in [A as u32, B as u32] {
                 let c = id_colour(i).as_vec3().to_array();
-                assert!(a.pixels.iter().any(|p| *p == c), "instance {i} not visible");
+                assert!(a.pixels.contains(&c), "instance {i} not visible");
             }
         }
     }
