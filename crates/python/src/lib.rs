@@ -237,6 +237,7 @@ impl Scene {
             step,
             seed,
             transparent,
+            detector: Default::default(),
         };
         let backend: RenderBackend = choice("backend", backend)?;
         let texels: TexelStore = choice("gpu_texels", gpu_texels)?;
