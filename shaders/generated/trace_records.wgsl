@@ -222,7 +222,10 @@ struct RenderParams {
     medium_step: f32,
     sample: u32,
     probe_trips: u32,
-    pad: array<u32, 3>,
+    cut_count: u32,
+    cut_mode: u32,
+    pad: array<u32, 2>,
+    cuts: array<vec4<f32>, 3>,
 }
 
 struct RenderItem {
@@ -291,6 +294,8 @@ const RENDER_VIEW_SOLID: u32 = 3u;
 const RENDER_VIEW_PRIM: u32 = 4u;
 const RENDER_VIEW_INSTANCE: u32 = 5u;
 const RENDER_VIEW_BOUNDARY: u32 = 6u;
+const RENDER_CUT_UNION: u32 = 0u;
+const RENDER_CUT_INTERSECTION: u32 = 1u;
 const RENDER_EFFECT_SHADING: u32 = 1u;
 const RENDER_EFFECT_SPECULAR: u32 = 2u;
 const RENDER_VOLUMES_NONE: u32 = 0u;

@@ -16,19 +16,129 @@ fn spawn(p: vec3<f32>, n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
     return p + side * (64.0 * 1.1920929e-7 * scale) * n;
 }
 
-// The instance the last traced ray's origin was located in (UNSET: none, or a flat scene).
+// The instance the last traced ray's origin was located in (UNSET: none, a flat scene, or
+// an origin the cut planes remove).
 var<private> traced_from: u32;
 
-// The scene's first crossing along a ray from its origin (the one traversal call site).
-fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
-    var located = UNSET;
-    if rparams.hierarchical != 0u {
-        var status = 0u;
-        located = locate_point(o, vec3<f32>(0.0), &status);
+// The kept stretches of a ray (twin of render::cutaway::Cutaway::pieces): `count` of them,
+// from `start[k]` to `end[k]`, entered through plane `entry[k]` (UNSET: from the origin).
+struct Pieces {
+    count: u32,
+    start: array<f32, 2>,
+    end: array<f32, 2>,
+    entry: array<u32, 2>,
+}
+
+// The stretches of the ray `o + t d` (t >= 0) that the cut planes keep.
+fn kept_pieces(o: vec3<f32>, d: vec3<f32>) -> Pieces {
+    var out: Pieces;
+    out.count = 0u;
+    // (start, entry, end) of up to two stretches before clipping to t >= 0.
+    var lo = array<f32, 2>(-INF, -INF);
+    var hi = array<f32, 2>(INF, INF);
+    var entry = array<u32, 2>(UNSET, UNSET);
+    var raw = 1u;
+    if rparams.cut_count > 0u {
+        // Intersection: the latest start and the earliest end of the planes' kept sides.
+        // Union: the stretch every plane removes is (rlo, rhi); kept is before and after.
+        var rlo = -INF;
+        var rhi = INF;
+        var exit = UNSET;
+        for (var k = 0u; k < rparams.cut_count; k++) {
+            let c = rparams.cuts[k];
+            let s0 = dot(c.xyz, o) - c.w;
+            let nd = dot(c.xyz, d);
+            var l = -INF;
+            var h = INF;
+            if nd == 0.0 {
+                if s0 > 0.0 {
+                    l = INF;
+                    h = -INF;
+                }
+            } else if nd > 0.0 {
+                h = -s0 / nd;
+            } else {
+                l = -s0 / nd;
+            }
+            if rparams.cut_mode == RENDER_CUT_INTERSECTION {
+                if l > lo[0] {
+                    lo[0] = l;
+                    entry[0] = k;
+                }
+                hi[0] = min(hi[0], h);
+            } else {
+                var a = -INF;
+                var b = INF;
+                if l > h {
+                } else if l == -INF && h == INF {
+                    a = INF;
+                    b = -INF;
+                } else if l == -INF {
+                    a = h;
+                } else {
+                    b = l;
+                }
+                rlo = max(rlo, a);
+                if b < rhi {
+                    rhi = b;
+                    exit = k;
+                }
+            }
+        }
+        if rparams.cut_mode == RENDER_CUT_UNION && rlo < rhi {
+            hi[0] = rlo;
+            lo[1] = rhi;
+            entry[1] = exit;
+            raw = 2u;
+        }
     }
-    traced_from = located;
-    // Render rays are f32 throughout: their origins have no rest.
-    return cross_from(located, o, vec3<f32>(0.0), d, 0.0, tmax);
+    for (var k = 0u; k < raw; k++) {
+        if hi[k] >= 0.0 && lo[k] <= hi[k] {
+            let n = out.count;
+            out.start[n] = max(lo[k], 0.0);
+            out.end[n] = hi[k];
+            out.entry[n] = select(UNSET, entry[k], lo[k] > 0.0);
+            out.count = n + 1u;
+        }
+    }
+    return out;
+}
+
+// The scene's first crossing along a ray from its origin within the stretches the cut
+// planes keep (the one traversal call site); a stretch entered through a cut plane inside
+// an instance drawn solid shows that instance's section there (twin of Renderer::trace).
+fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
+    traced_from = UNSET;
+    let pieces = kept_pieces(o, d);
+    for (var k = 0u; k < pieces.count; k++) {
+        let start = pieces.start[k];
+        if start >= tmax {
+            break;
+        }
+        let p = o + start * d;
+        var located = UNSET;
+        if rparams.hierarchical != 0u {
+            var status = 0u;
+            located = locate_point(p, vec3<f32>(0.0), &status);
+        }
+        if start == 0.0 {
+            traced_from = located;
+        }
+        let plane = pieces.entry[k];
+        if plane != UNSET && located != UNSET {
+            let cover = instances[located].covering;
+            if cover != UNSET {
+                return Hit(true, start, rparams.cuts[plane].xyz, cover, UNSET);
+            }
+        }
+        // Render rays are f32 throughout: their origins have no rest.
+        var h = cross_from(located, p, vec3<f32>(0.0), d, 0.0, min(pieces.end[k], tmax) - start);
+        if h.found {
+            h.t += start;
+            return h;
+        }
+    }
+    return no_hit();
 }
 
 // The path (or view ray) has just passed a see-through surface: if its origin lies in an

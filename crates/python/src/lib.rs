@@ -237,6 +237,7 @@ impl Scene {
             step,
             seed,
             transparent,
+            cutaway: Default::default(),
             detector: Default::default(),
         };
         let backend: RenderBackend = choice("backend", backend)?;

@@ -298,8 +298,14 @@ record! {
         pub sample: u32,
         /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
         pub probe_trips: u32,
+        /// Number of cut planes (0 to 3; see [`crate::render::cutaway`]).
+        pub cut_count: u32,
+        /// `RENDER_CUT_*`: how the planes' kept sides combine.
+        pub cut_mode: u32,
         /// Padding.
-        pub pad: [u32; 3],
+        pub pad: [u32; 2],
+        /// The cut planes: unit normal (pointing into the removed side) and offset.
+        pub cuts: [[f32; 4]; 3],
     }
 }
 
@@ -370,6 +376,10 @@ pub const RENDER_VIEW_PRIM: u32 = 4;
 pub const RENDER_VIEW_INSTANCE: u32 = 5;
 /// Boundary identity.
 pub const RENDER_VIEW_BOUNDARY: u32 = 6;
+/// [`RenderParams::cut_mode`] values: a point is drawn when any plane keeps it.
+pub const RENDER_CUT_UNION: u32 = 0;
+/// Only when every plane keeps it.
+pub const RENDER_CUT_INTERSECTION: u32 = 1;
 /// [`RenderParams::effects`] bit: direct light and hard shadows on diffuse surfaces.
 pub const RENDER_EFFECT_SHADING: u32 = 1;
 /// Mirrors and dielectrics.
@@ -545,6 +555,8 @@ pub fn generate() -> String {
         ("RENDER_VIEW_PRIM", RENDER_VIEW_PRIM),
         ("RENDER_VIEW_INSTANCE", RENDER_VIEW_INSTANCE),
         ("RENDER_VIEW_BOUNDARY", RENDER_VIEW_BOUNDARY),
+        ("RENDER_CUT_UNION", RENDER_CUT_UNION),
+        ("RENDER_CUT_INTERSECTION", RENDER_CUT_INTERSECTION),
         ("RENDER_EFFECT_SHADING", RENDER_EFFECT_SHADING),
         ("RENDER_EFFECT_SPECULAR", RENDER_EFFECT_SPECULAR),
         ("RENDER_VOLUMES_NONE", RENDER_VOLUMES_NONE),

@@ -10,18 +10,19 @@ use std::time::Instant;
 use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{
-    RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_EFFECT_SHADING,
-    RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT,
-    RENDER_MATERIAL_DIELECTRIC, RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER,
-    RENDER_MATERIAL_MIRROR, RENDER_MATERIAL_SHELL, RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA,
-    RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE,
-    VOLUME_FILTER_TRILINEAR,
+    RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_CUT_INTERSECTION,
+    RENDER_CUT_UNION, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL,
+    RENDER_LIGHT_POINT, RENDER_MATERIAL_DIELECTRIC, RENDER_MATERIAL_DIFFUSE,
+    RENDER_MATERIAL_EMITTER, RENDER_MATERIAL_MIRROR, RENDER_MATERIAL_SHELL,
+    RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA, RENDER_VOLUMES_ABSORPTION,
+    RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE, VOLUME_FILTER_TRILINEAR,
 };
 use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use super::transmittance::{KernelGrid, VolumeUpload};
 use crate::render::camera::Projection;
+use crate::render::cutaway::CutMode;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
 use hytrace_volume::{global_range, BrickedGrid};
@@ -267,7 +268,19 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shifts: &[[f64; 3]]) -> Rende
         medium_step: s.step as f32,
         sample: 0,
         probe_trips: 2,
-        pad: [0; 3],
+        cut_count: renderer.cutaway.planes.len() as u32,
+        cut_mode: match renderer.cutaway.mode {
+            CutMode::Union => RENDER_CUT_UNION,
+            CutMode::Intersection => RENDER_CUT_INTERSECTION,
+        },
+        pad: [0; 2],
+        cuts: std::array::from_fn(|k| match renderer.cutaway.planes.get(k) {
+            Some(c) => {
+                let n = c.normal.map(|x| x as f32);
+                [n[0], n[1], n[2], c.offset as f32]
+            }
+            None => [0.0; 4],
+        }),
     };
     let mut params = params;
     let mut media = Vec::new();

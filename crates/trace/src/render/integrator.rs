@@ -73,9 +73,48 @@ fn uniforms2(rng: &mut Rng) -> [f64; 2] {
 }
 
 impl Renderer<'_> {
-    /// The first surface crossing along the ray (f32, as the GPU traces).
+    /// The first surface crossing along the ray (f32, as the GPU traces) within the
+    /// stretches the cut planes keep. A stretch entered through a cut plane inside an
+    /// instance drawn solid (located as the navigator locates the f32 point) shows that
+    /// instance's section there, with the plane's normal.
     pub(super) fn trace(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit<f32>> {
-        self.scene.trace(&f32_ray(origin, dir), 0.0, tmax as f32)
+        if self.cutaway.is_empty() {
+            return self.scene.trace(&f32_ray(origin, dir), 0.0, tmax as f32);
+        }
+        for piece in self.cutaway.pieces(origin, dir) {
+            if piece.start >= tmax {
+                break;
+            }
+            let start = origin + piece.start * dir;
+            if let Some(plane) = piece.entry {
+                if let Some(cover) = self.covering_at(start) {
+                    return Some(Hit {
+                        t: piece.start as f32,
+                        normal: V3::from_f64(self.cutaway.planes[plane].normal),
+                        instance: cover,
+                        prim: UNSET,
+                    });
+                }
+            }
+            let left = (piece.end.min(tmax) - piece.start) as f32;
+            if let Some(mut hit) = self.scene.trace(&f32_ray(start, dir), 0.0, left) {
+                hit.t += piece.start as f32;
+                return Some(hit);
+            }
+        }
+        None
+    }
+
+    /// The outermost instance drawn solid among the one the f32 point `p` is located in
+    /// and its ancestors (see [`Renderer::covering`]).
+    fn covering_at(&self, p: DVec3) -> Option<u32> {
+        let located = self
+            .scene
+            .locate_point(<[f64; 3]>::from(p).map(|x| f64::from(x as f32)))?;
+        self.covering
+            .get(located as usize)
+            .copied()
+            .filter(|&c| c != UNSET)
     }
 
     /// The first surface along a ray from `origin` that has just passed the see-through
@@ -83,27 +122,23 @@ impl Renderer<'_> {
     /// itself inside an instance drawn solid (located as the navigator locates the f32
     /// origin) entered it where its face coincides with the surface passed: that instance
     /// is hit there, at distance 0 from the crossing point (returned as the origin), with
-    /// the crossed surface's normal. Otherwise [`Self::trace`] from `origin`.
+    /// the crossed surface's normal (unless the cut planes remove that point). Otherwise
+    /// [`Self::trace`] from `origin`.
     pub(super) fn trace_after(
         &self,
         origin: DVec3,
         dir: DVec3,
         crossed: Option<Crossed>,
     ) -> (DVec3, Option<Hit<f32>>) {
-        if let Some(c) = crossed {
-            let located = self
-                .scene
-                .locate_point(<[f64; 3]>::from(origin).map(|x| f64::from(x as f32)));
-            if let Some(&cover) = located.and_then(|l| self.covering.get(l as usize)) {
-                if cover != UNSET {
-                    let hit = Hit {
-                        t: 0.0,
-                        normal: V3::from_f64(c.normal.to_array()),
-                        instance: cover,
-                        prim: UNSET,
-                    };
-                    return (c.point, Some(hit));
-                }
+        if let Some(c) = crossed.filter(|_| self.cutaway.keeps(origin)) {
+            if let Some(cover) = self.covering_at(origin) {
+                let hit = Hit {
+                    t: 0.0,
+                    normal: V3::from_f64(c.normal.to_array()),
+                    instance: cover,
+                    prim: UNSET,
+                };
+                return (c.point, Some(hit));
             }
         }
         (origin, self.trace(origin, dir, f64::INFINITY))

@@ -9,6 +9,7 @@
 //! sample per pixel the ray goes through the pixel centre.
 
 pub mod camera;
+pub mod cutaway;
 pub mod detector;
 mod integrator;
 mod media;
@@ -211,6 +212,8 @@ pub struct Renderer<'a> {
     pub(crate) depth_range: [f64; 2],
     pub(crate) settings: RenderSettings,
     pub(crate) effects: Effects,
+    /// Cut planes.
+    pub(crate) cutaway: cutaway::Cutaway,
 }
 
 /// A camera looking at the scene's bounds from the front right, above (the default when a
@@ -356,6 +359,7 @@ impl<'a> Renderer<'a> {
             depth_range,
             settings,
             effects,
+            cutaway: spec.cutaway.clone(),
         })
     }
 

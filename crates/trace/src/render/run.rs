@@ -6,6 +6,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::Foundry;
 
+use super::cutaway::{CutMode, CutPlane, Cutaway};
 use super::detector::{ColorBy, DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
@@ -93,7 +94,24 @@ pub struct RenderSettings {
     #[arg(long)]
     pub transparent: Vec<String>,
     #[command(flatten)]
+    pub cutaway: CutArgs,
+    #[command(flatten)]
     pub detector: DetectorArgs,
+}
+
+/// The cut planes of a render.
+#[derive(Args, Clone, Debug, Default)]
+pub struct CutArgs {
+    /// Cut away what lies beyond this plane (repeatable, at most 3): `x=C`, `y=C`, `z=C`
+    /// remove the side above C (`-x=C` the side below), `NX,NY,NZ:D` the side of the plane
+    /// n.p = D that n points to. Volumes drawn solid show their sections on the plane
+    /// (hierarchical scenes: GDML detectors).
+    #[arg(long = "cut", value_name = "PLANE", allow_hyphen_values = true)]
+    pub planes: Vec<CutPlane>,
+    /// How several planes combine, as Geant4's cutaway modes: union draws what any plane
+    /// keeps, intersection only what every plane keeps.
+    #[arg(long = "cut-mode", value_enum, value_name = "MODE", default_value_t = CutMode::Union)]
+    pub mode: CutMode,
 }
 
 /// The options of detector views (GDML and other hierarchical scenes).
@@ -153,6 +171,12 @@ impl RenderSettings {
                 bail!("--transparent {name}: the scene has no solid of that name");
             }
             spec.transparent_solids.push(name.clone());
+        }
+        if !self.cutaway.planes.is_empty() {
+            spec.cutaway = Cutaway {
+                planes: self.cutaway.planes.clone(),
+                mode: self.cutaway.mode,
+            };
         }
         let mut legend = None;
         if spec.volumes.is_empty() {

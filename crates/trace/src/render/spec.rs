@@ -349,6 +349,8 @@ pub struct RenderSpec {
     pub instance_materials: Vec<Material>,
     /// What a detector view knows of each placed volume (empty for flat scenes).
     pub volumes: Vec<VolumeLabel>,
+    /// Cut planes (none: nothing is cut away).
+    pub cutaway: super::cutaway::Cutaway,
 }
 
 /// The names and file attributes of one placed volume of a hierarchical scene.
@@ -370,6 +372,7 @@ impl RenderSpec {
     /// Checks every material, light and medium, the settings, and that every material a
     /// solid names exists.
     pub fn validate(&self) -> anyhow::Result<()> {
+        self.cutaway.validate().map_err(anyhow::Error::msg)?;
         for (name, m) in &self.materials {
             m.validate()
                 .map_err(|e| e.context(format!("material `{name}`")))?;
