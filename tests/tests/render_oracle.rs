@@ -155,3 +155,54 @@ fn emission_absorption_render_of_a_nanovdb_fog_matches_numpy_quadrature() {
         show(&rms)
     );
 }
+
+/// OpenEXR output read back by the OpenEXR Python bindings equals the .npy output of the
+/// same image: exactly in float, and as NumPy rounds it to float16 in half; for a render of
+/// the default scene and for an image of high dynamic range (1e-6 to 6e4).
+#[test]
+fn exr_images_read_back_by_openexr_equal_the_npy_output() {
+    use hytrace_trace::render::{write_image, ExrPrecision, Image};
+    let Some(python) = hytrace_tests::oracle_python(&["OpenEXR", "numpy"]) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (f, mut spec) = load_render_scene(None, &GdmlOptions::default()).unwrap();
+    spec.settings.size = [24, 16];
+    spec.settings.spp = 1;
+    let scene = CpuScene::<f32>::new(&f).unwrap();
+    let rendered = Renderer::new(&scene, &f, &spec)
+        .unwrap()
+        .render(&|_| {})
+        .unwrap();
+    let ramp = Image {
+        width: 7,
+        height: 3,
+        pixels: (0..21)
+            .map(|k| {
+                let v = 1e-6 * 10f32.powf(k as f32 * 10.7 / 20.0);
+                [v, 0.5 * v, 1.0 / (1.0 + v)]
+            })
+            .collect(),
+    };
+    let script = r#"
+import sys, numpy as np, OpenEXR
+npy, flt, hlf = sys.argv[1:4]
+ref = np.load(npy)
+a = OpenEXR.File(flt).channels()["RGB"].pixels
+b = OpenEXR.File(hlf).channels()["RGB"].pixels
+assert a.dtype == np.float32 and a.shape == ref.shape, (a.dtype, a.shape, ref.shape)
+assert b.dtype == np.float16 and b.shape == ref.shape, (b.dtype, b.shape)
+assert np.array_equal(a, ref), np.abs(a - ref).max()
+assert np.array_equal(b, ref.astype(np.float16)), np.abs(b.astype(np.float32) - ref).max()
+print(ref.shape, float(ref.max()))
+"#;
+    for (name, image) in [("render", &rendered), ("ramp", &ramp)] {
+        let path = |ext: &str| dir.path().join(format!("{name}.{ext}"));
+        write_image(image, &path("npy"), ExrPrecision::Float).unwrap();
+        write_image(image, &path("exr"), ExrPrecision::Float).unwrap();
+        write_image(image, &path("half.exr"), ExrPrecision::Half).unwrap();
+        let paths = ["npy", "exr", "half.exr"].map(|e| path(e).to_string_lossy().into_owned());
+        let out = hytrace_tests::run_python(&python, script, &paths.each_ref().map(String::as_str));
+        eprintln!("{name}: {out}");
+    }
+}

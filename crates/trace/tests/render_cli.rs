@@ -179,6 +179,14 @@ fn bad_input_is_refused_with_a_clear_error_and_no_image() {
         (vec!["--size", "0x8"], "WIDTHxHEIGHT"),
         (vec!["--spp", "0"], "spp must be"),
         (vec!["--step=-1"], "step must be"),
+        (vec!["--cut", "w=0"], "unknown axis `w`"),
+        (vec!["--cut", "0,0,0:1"], "the normal is zero"),
+        (
+            vec![
+                "--cut", "x=0", "--cut", "y=0", "--cut", "z=0", "--cut", "x=1",
+            ],
+            "at most 3 planes",
+        ),
     ] {
         let mut all = vec!["render", "-o", o];
         all.extend(args);
@@ -194,7 +202,7 @@ fn bad_input_is_refused_with_a_clear_error_and_no_image() {
     assert!(!out.exists());
     let err = run_err(&["render", "-o", dir.path().join("x.jpg").to_str().unwrap()]);
     assert!(
-        err.contains("x.jpg") && err.contains(".png or .npy"),
+        err.contains("x.jpg") && err.contains(".npy or .exr"),
         "{err}"
     );
 }

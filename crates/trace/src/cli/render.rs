@@ -9,7 +9,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::npy::write_atomically;
 use hytrace_trace::gpu::{add_gpu_stats, TexelStore};
 use hytrace_trace::render::run::{render, RenderBackend, RenderSettings, Rendered};
-use hytrace_trace::render::{write_image, Effects};
+use hytrace_trace::render::{write_image, Effects, ExrPrecision, IMAGE_EXTENSIONS};
 use hytrace_trace::scene::load_render_scene;
 
 /// The options of `hytrace render`; each overrides the scene file's `[render]` table.
@@ -18,9 +18,13 @@ pub struct RenderArgs {
     /// `default` (or nothing) for the embedded default scene, a .toml scene file, a .gdml
     /// file, a mesh or a Foundry directory.
     pub scene: Option<PathBuf>,
-    /// The image: .png (8-bit sRGB) or .npy (float32 linear radiance, height x width x 3).
+    /// The image: .png (8-bit sRGB), .npy (float32 linear radiance, height x width x 3) or
+    /// .exr (OpenEXR linear RGB, see --exr).
     #[arg(short, long, default_value = "out/render.png")]
     pub out: PathBuf,
+    /// The sample type of an .exr image: float (32-bit, the radiance exactly) or half.
+    #[arg(long, value_enum, value_name = "TYPE", default_value_t = ExrPrecision::Float)]
+    pub exr: ExrPrecision,
     /// Where it renders.
     #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
     pub backend: RenderBackend,
@@ -48,9 +52,9 @@ fn legend_path(out: &Path) -> PathBuf {
 /// Runs `hytrace render`.
 pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let ext = args.out.extension().and_then(|e| e.to_str());
-    if !matches!(ext, Some("png" | "npy")) && !args.explain {
+    if !matches!(ext, Some("png" | "npy" | "exr")) && !args.explain {
         bail!(
-            "{}: the image must be a .png or .npy file",
+            "{}: the image must be a {IMAGE_EXTENSIONS} file",
             args.out.display()
         );
     }
@@ -80,7 +84,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         gpu: gpu_run,
     } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
     bar.finish_and_clear();
-    write_image(&image, &args.out)?;
+    write_image(&image, &args.out, args.exr)?;
     if let Some(legend) = &legend {
         let path = legend_path(&args.out);
         let text = serde_json::to_string_pretty(&legend.to_json())?;

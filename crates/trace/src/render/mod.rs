@@ -32,7 +32,7 @@ use crate::cpu::{CpuScene, Hit};
 use camera::{Camera, CameraSpec};
 use integrator::{EMISSION_ABSORPTION, MULTIPLE_SCATTERING, NO_VOLUMES, SINGLE_SCATTERING};
 use media::Media;
-pub use output::{write_image, Image};
+pub use output::{write_image, ExrPrecision, Image, IMAGE_EXTENSIONS};
 use spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec, View, VolumeMode};
 pub use views::id_colour;
 

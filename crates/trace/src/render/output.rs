@@ -1,5 +1,6 @@
-//! Rendered images and their files: PNG (sRGB, 8 bits, clamped) or NumPy (float32
-//! `(height, width, 3)` linear radiance), written atomically.
+//! Rendered images and their files: PNG (sRGB, 8 bits, clamped), NumPy (float32
+//! `(height, width, 3)` linear radiance) or OpenEXR (linear RGB, half or float), written
+//! atomically.
 
 use std::path::Path;
 
@@ -33,7 +34,48 @@ pub fn srgb8(linear: f32) -> u8 {
     (encoded * 255.0 + 0.5) as u8
 }
 
+/// The sample type of an OpenEXR image.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExrPrecision {
+    /// 32-bit float: the radiance exactly as rendered.
+    #[default]
+    Float,
+    /// 16-bit half float (rounded to nearest; values beyond 65504 become infinite).
+    Half,
+}
+
 impl Image {
+    /// The OpenEXR file's bytes: one scan-line part with linear R, G and B channels of
+    /// `precision`, ZIP-compressed in blocks of 16 lines.
+    pub fn exr_bytes(&self, precision: ExrPrecision) -> anyhow::Result<Vec<u8>> {
+        use exr::prelude::{Encoding, Image as ExrImage, SpecificChannels, Vec2, WritableImage};
+        let (w, h) = (self.width as usize, self.height as usize);
+        let at = |x: usize, y: usize| self.pixels[y * w + x];
+        let mut cursor = std::io::Cursor::new(Vec::new());
+        let encoding = Encoding::SMALL_LOSSLESS;
+        match precision {
+            ExrPrecision::Float => {
+                let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+                    let [r, g, b] = at(x, y);
+                    (r, g, b)
+                });
+                ExrImage::from_encoded_channels((w, h), encoding, channels)
+                    .write()
+                    .to_buffered(&mut cursor)?;
+            }
+            ExrPrecision::Half => {
+                let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+                    let [r, g, b] = at(x, y).map(exr::prelude::f16::from_f32);
+                    (r, g, b)
+                });
+                ExrImage::from_encoded_channels((w, h), encoding, channels)
+                    .write()
+                    .to_buffered(&mut cursor)?;
+            }
+        }
+        Ok(cursor.into_inner())
+    }
+
     /// The PNG file's bytes: 8-bit sRGB.
     pub fn png_bytes(&self) -> anyhow::Result<Vec<u8>> {
         let mut bytes = Vec::new();
@@ -50,10 +92,13 @@ impl Image {
     }
 }
 
-/// Writes `image` to `path` as PNG (`.png`) or NumPy (`.npy`, float32
-/// `(height, width, 3)`), through a temporary file in the same folder renamed into place,
-/// so no partial file is ever left.
-pub fn write_image(image: &Image, path: &Path) -> anyhow::Result<()> {
+/// The image file extensions [`write_image`] writes.
+pub const IMAGE_EXTENSIONS: &str = ".png, .npy or .exr";
+
+/// Writes `image` to `path` as PNG (`.png`), NumPy (`.npy`, float32 `(height, width, 3)`)
+/// or OpenEXR (`.exr`, of `exr` precision), through a temporary file in the same folder
+/// renamed into place, so no partial file is ever left.
+pub fn write_image(image: &Image, path: &Path, exr: ExrPrecision) -> anyhow::Result<()> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -72,7 +117,14 @@ pub fn write_image(image: &Image, path: &Path) -> anyhow::Result<()> {
                 bytemuck::cast_slice(&image.pixels),
             )?;
         }
-        _ => bail!("{}: the image must be a .png or .npy file", path.display()),
+        Some("exr") => {
+            let bytes = image.exr_bytes(exr)?;
+            write_atomically(path, |w| w.write_all(&bytes))?;
+        }
+        _ => bail!(
+            "{}: the image must be a {IMAGE_EXTENSIONS} file",
+            path.display()
+        ),
     }
     Ok(())
 }
