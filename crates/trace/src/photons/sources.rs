@@ -63,7 +63,8 @@ pub enum Wavelength {
 }
 
 impl Wavelength {
-    /// Parses `NM` (a positive number of nanometres) or `MATERIAL:PROPERTY`.
+    /// Parses `NM` (a number of nanometres, checked when a run starts) or
+    /// `MATERIAL:PROPERTY`.
     pub fn parse(text: &str) -> Result<Wavelength, PhotonError> {
         let bad = |problem: String| PhotonError::Input(format!("--wavelength `{text}`: {problem}"));
         if let Some((material, property)) = text.rsplit_once(':') {
@@ -75,10 +76,11 @@ impl Wavelength {
                 property: property.trim().to_string(),
             });
         }
+        // A number is checked where the run starts, as one given through the library.
         match text.trim().parse::<f64>() {
-            Ok(nm) if nm.is_finite() && nm > 0.0 => Ok(Wavelength::Fixed(nm)),
-            _ => Err(bad(
-                "not a positive number of nanometres or MATERIAL:PROPERTY".into(),
+            Ok(nm) => Ok(Wavelength::Fixed(nm)),
+            Err(_) => Err(bad(
+                "not a number of nanometres or MATERIAL:PROPERTY".into(),
             )),
         }
     }
