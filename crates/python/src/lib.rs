@@ -276,7 +276,7 @@ impl Scene {
         first: u64,
         histories: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let source = Source::parse(source).map_err(|e| library_error(e.into()))?;
+        let source = Source::parse(source).map_err(library_error)?;
         let options = RunOptions {
             source,
             wavelength_nm: wavelength,

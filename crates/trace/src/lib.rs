@@ -8,6 +8,7 @@ pub mod accuracy;
 pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod error;
 pub mod gpu;
 pub mod memory;
 pub mod outputs;
@@ -19,3 +20,5 @@ pub mod scan;
 pub mod scene;
 pub mod sweep;
 pub mod volume;
+
+pub use error::{Error, Result};

@@ -80,7 +80,7 @@ pub fn generate(sweep: Sweep, bounds: &[f64; 6], count: usize) -> Result<Vec<Ray
     let total = ray_count(sweep, count).ok_or(SweepError::TooManyRays { sweep, count })?;
     let bytes = (total as u64).saturating_mul(SCAN_BYTES_PER_RAY);
     crate::memory::check_fits(&format!("{} sweep of {total} rays", sweep.name()), bytes)
-        .map_err(SweepError::OutOfMemory)?;
+        .map_err(|e| SweepError::OutOfMemory(e.to_string()))?;
     let mut rays = Vec::new();
     rays.try_reserve_exact(total)
         .map_err(|e| SweepError::OutOfMemory(format!("{total} rays: {e}")))?;

@@ -5,14 +5,14 @@ use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::bail;
+use crate::error::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
     convert_grid, convert_raw, open_volume, open_volume_with, sample, select_grid, BrickedGrid,
     ConvertOptions, ConvertReport, Endian, Estimate, Estimator, Filter, GridSummary, Majorant,
-    RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams, Volume, VoxelGrid,
-    DEFAULT_STORE_BUDGET,
+    RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams, Unsampleable, Volume,
+    VoxelGrid, DEFAULT_STORE_BUDGET,
 };
 use rayon::prelude::*;
 use serde_json::json;
@@ -117,7 +117,7 @@ impl Represented {
 
     /// The range mips of what lookups on this representation read: the bricked grid's or
     /// brick store's own, or built from the grid as read.
-    pub fn range_mips(&self) -> anyhow::Result<Cow<'_, RangeMips>> {
+    pub fn range_mips(&self) -> crate::Result<Cow<'_, RangeMips>> {
         Ok(match self {
             Represented::Bricked(b) => Cow::Borrowed(b.ranges()),
             Represented::Source(v) => v.range_mips()?,
@@ -126,7 +126,7 @@ impl Represented {
 
     /// An error when lookups could not read what they needed (see
     /// [`Volume::check_reads`]); results computed meanwhile must not be written.
-    pub fn check_reads(&self) -> anyhow::Result<()> {
+    pub fn check_reads(&self) -> crate::Result<()> {
         match self {
             Represented::Source(v) => Ok(v.check_reads()?),
             Represented::Bricked(_) => Ok(()),
@@ -141,7 +141,7 @@ impl Represented {
 
 /// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, a brick store (with
 /// [`DEFAULT_STORE_BUDGET`]) or a procedural grid.
-pub fn open(spec: &str, name: Option<&str>) -> anyhow::Result<(GridSummary, Volume)> {
+pub fn open(spec: &str, name: Option<&str>) -> crate::Result<(GridSummary, Volume)> {
     open_within(spec, name, DEFAULT_STORE_BUDGET)
 }
 
@@ -151,12 +151,12 @@ pub fn open_within(
     spec: &str,
     name: Option<&str>,
     memory: u64,
-) -> anyhow::Result<(GridSummary, Volume)> {
+) -> crate::Result<(GridSummary, Volume)> {
     Ok(select_grid(spec, open_volume_with(spec, memory)?, name)?)
 }
 
 /// The grid in representation `repr`.
-pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
+pub fn represent(volume: Volume, repr: Repr) -> crate::Result<Represented> {
     Ok(match repr.texel_format() {
         None => Represented::Source(volume),
         Some(_) if matches!(volume, Volume::Store(_)) => bail!(
@@ -167,14 +167,14 @@ pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
 }
 
 /// Reads `(N, 3)` float32 or float64 points; errors name the file and the first bad row.
-pub fn read_points(path: &Path) -> anyhow::Result<Vec<[f64; 3]>> {
+pub fn read_points(path: &Path) -> crate::Result<Vec<[f64; 3]>> {
     let rows = read_float_rows::<3>(path, "points", "")?;
     check_points(&rows, &path.display().to_string())?;
     Ok(rows)
 }
 
 /// Errors on the first point that is not finite, naming `source`.
-pub fn check_points(points: &[[f64; 3]], source: &str) -> anyhow::Result<()> {
+pub fn check_points(points: &[[f64; 3]], source: &str) -> crate::Result<()> {
     if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
         bail!("{source}: point {i}: {:?} is not finite", points[i]);
     }
@@ -212,7 +212,7 @@ pub fn majorants(
     points: &[[f64; 3]],
     space: Space,
     level: usize,
-) -> anyhow::Result<Vec<f32>> {
+) -> crate::Result<Vec<f32>> {
     let mips = grid.range_mips()?;
     if level >= mips.levels.len() {
         bail!(
@@ -234,7 +234,7 @@ pub fn majorants(
 }
 
 /// Writes `(N,)` values atomically.
-pub fn write_f32(path: &Path, values: &[f32]) -> anyhow::Result<()> {
+pub fn write_f32(path: &Path, values: &[f32]) -> crate::Result<()> {
     write_array(
         path,
         Scalar::F32,
@@ -245,7 +245,7 @@ pub fn write_f32(path: &Path, values: &[f32]) -> anyhow::Result<()> {
 }
 
 /// Writes `(N,)` values atomically.
-pub fn write_f64(path: &Path, values: &[f64]) -> anyhow::Result<()> {
+pub fn write_f64(path: &Path, values: &[f64]) -> crate::Result<()> {
     write_array(
         path,
         Scalar::F64,
@@ -355,7 +355,7 @@ pub fn transmittances(
     grid: &Represented,
     rays: &[RayRow],
     args: &TransmittanceArgs,
-) -> anyhow::Result<(Vec<Estimate>, f64, f64)> {
+) -> crate::Result<(Vec<Estimate>, f64, f64)> {
     let t0 = Instant::now();
     let mips = grid.range_mips()?;
     let t1 = Instant::now();
@@ -417,7 +417,7 @@ pub fn transmittances_on(
     args: &TransmittanceArgs,
     backend: VolumeBackend,
     texels: TexelStore,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let cpu = || {
         let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
         Ok(TransmittanceRun {
@@ -454,7 +454,7 @@ fn gpu_transmittances(
     rays: &[RayRow],
     args: &TransmittanceArgs,
     texels: TexelStore,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let in_texture = |repr: String| match texels {
         TexelStore::Storage => repr,
@@ -535,7 +535,7 @@ fn memory_row(name: &str, bytes: usize, bound: Option<f64>) -> serde_json::Value
 /// converting it), and why a representation is missing.
 fn representations(
     s: &GridSummary,
-    grid: &Result<Volume, String>,
+    grid: &Result<Volume, Unsampleable>,
 ) -> (Vec<serde_json::Value>, Option<String>) {
     let mut memory = vec![memory_row(
         s.source_kind,
@@ -561,7 +561,7 @@ fn representations(
                 }
             }
         }
-        Err(why) => note = Some(why.clone()),
+        Err(why) => note = Some(why.to_string()),
     }
     (memory, note)
 }
@@ -569,7 +569,7 @@ fn representations(
 /// The summary `hytrace volume info` prints: every grid of `spec` with its bounding boxes,
 /// voxel counts and the memory of each representation (bricked ones measured by
 /// converting the scalar grids).
-pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
+pub fn info(spec: &str) -> crate::Result<serde_json::Value> {
     let mut grids = Vec::new();
     for named in open_volume(spec)? {
         let s = &named.summary;
@@ -683,7 +683,7 @@ pub struct StoreOptions {
 }
 
 /// `N` comma-separated finite numbers of option `what`.
-fn numbers<const N: usize>(text: &str, what: &str) -> anyhow::Result<[f64; N]> {
+fn numbers<const N: usize>(text: &str, what: &str) -> crate::Result<[f64; N]> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
     if parts.len() != N || values.len() != N || !values.iter().all(|v| v.is_finite()) {
@@ -699,7 +699,7 @@ pub fn convert_store(
     name: Option<&str>,
     out: &Path,
     options: &StoreOptions,
-) -> anyhow::Result<ConvertReport> {
+) -> crate::Result<ConvertReport> {
     let convert = ConvertOptions {
         background: options.background,
         threshold: options.threshold,

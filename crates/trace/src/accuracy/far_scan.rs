@@ -43,8 +43,8 @@ fn group_centre(distance: f64) -> [f64; 3] {
 }
 
 /// The scene: the three solids placed around `centre`.
-fn scene(centre: [f64; 3]) -> Result<Foundry, String> {
-    let err = |e: &dyn std::fmt::Display| format!("far-scan scene: {e}");
+fn scene(centre: [f64; 3]) -> crate::Result<Foundry> {
+    let err = |e: &dyn std::fmt::Display| crate::Error::Invalid(format!("far-scan scene: {e}"));
     let shapes: [Shape; 3] = [
         sphere(RADIUS).map_err(|e| err(&e))?,
         torus(0.0, TUBE, RADIUS).map_err(|e| err(&e))?,
@@ -201,8 +201,8 @@ fn distance_rows(
     component: &'static str,
     distance: f64,
     seed: u32,
-) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("{component}: {e}");
+) -> crate::Result<Vec<Row>> {
+    let err = |e: &dyn std::fmt::Display| crate::Error::Invalid(format!("{component}: {e}"));
     let centre = group_centre(distance);
     let f = scene(centre)?;
     let mut rng = Rng::new(13, seed, 0);
@@ -228,7 +228,7 @@ fn distance_rows(
         .collect();
     let f32_scene = CpuScene::<f32>::new(&f).map_err(|e| err(&e))?;
     let f64_scene = CpuScene::<f64>::new(&f).map_err(|e| err(&e))?;
-    let with_fallback = || -> Result<Vec<Answer>, String> {
+    let with_fallback = || -> crate::Result<Vec<Answer>> {
         let mut answers = cpu_answers(&f32_scene, &rays);
         redo_uncertain_in_f64(&f, &f32_scene, &rays, &mut answers).map_err(|e| err(&e))?;
         Ok(answers)
@@ -269,11 +269,11 @@ fn distance_rows(
 
 /// Every far-scan row, timed on one thread (the scan's rayon loops run in a one-thread
 /// pool, as every other row of the benchmark is timed).
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .map_err(|e| format!("far-scan rows: {e}"))?;
+        .map_err(|e| crate::Error::Invalid(format!("far-scan rows: {e}")))?;
     pool.install(|| {
         let mut rows = Vec::new();
         for (k, (&distance, component)) in DISTANCES.iter().zip(COMPONENTS).enumerate() {

@@ -58,7 +58,7 @@ fn functional(ctx: &GpuContext) -> &'static str {
 
 /// The scan rows and the transmittance rows; without an adapter the GPU rows are left out
 /// with a note on stderr.
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let ctx = match GpuContext::new() {
         Ok(ctx) => Some(ctx),
         Err(e) => {
@@ -72,8 +72,8 @@ pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
 }
 
 /// The CPU f32 scan row and, with `ctx`, the GPU's.
-fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("{COMPONENT}: {e}");
+fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> crate::Result<Vec<Row>> {
+    let err = |e: &dyn std::fmt::Display| crate::Error::Invalid(format!("{COMPONENT}: {e}"));
     let foundry = default_scene().map_err(|e| err(&e))?;
     let bounds = scene_bounds(&foundry).ok_or_else(|| err(&"the default scene is empty"))?;
     let rays =
@@ -125,8 +125,9 @@ fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, S
 
 /// Exact and ratio-tracking transmittance on the CPU (f64, one thread) and, with `ctx`, on
 /// the GPU (f32, the grid as f32 bricks, which hold its values exactly).
-fn transmittance_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("gpu vs cpu transmittance: {e}");
+fn transmittance_rows(settings: Settings, ctx: Option<&GpuContext>) -> crate::Result<Vec<Row>> {
+    let err =
+        |e: &dyn std::fmt::Display| crate::Error::Invalid(format!("gpu vs cpu transmittance: {e}"));
     let fog = Fog::new(settings)?;
     let timer = Timer::new(settings);
     let bricks = BrickedGrid::convert(&fog.grid, TexelFormat::F32).map_err(|e| err(&e))?;

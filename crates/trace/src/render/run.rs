@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use clap::Args;
 use hytrace_foundry::Foundry;
 
@@ -42,7 +42,7 @@ fn render_gpu(
     renderer: &Renderer,
     texels: TexelStore,
     progress: &dyn Fn(u64),
-) -> anyhow::Result<(Image, GpuRun)> {
+) -> crate::Result<(Image, GpuRun)> {
     let gpu = GpuRenderer::with_texels(ctx, renderer, texels)?;
     let mut run = gpu.render(ctx, renderer, progress)?;
     run.redo_cut_short(renderer)?;
@@ -96,7 +96,7 @@ pub struct RenderSettings {
 impl RenderSettings {
     /// Sets these settings on the scene's render description, checks that every
     /// transparent solid exists, and validates the result.
-    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> anyhow::Result<()> {
+    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> crate::Result<()> {
         let s = &mut spec.settings;
         s.size = self.size.unwrap_or(s.size);
         s.spp = self.spp.unwrap_or(s.spp);
@@ -137,7 +137,7 @@ pub fn render(
     backend: RenderBackend,
     texels: TexelStore,
     progress: &(dyn Fn(u64) + Sync),
-) -> anyhow::Result<Rendered> {
+) -> crate::Result<Rendered> {
     let t1 = Instant::now();
     let scene = CpuScene::<f32>::new(f)?;
     let renderer = Renderer::new(&scene, f, spec)?;
@@ -161,17 +161,26 @@ pub fn render(
     })
 }
 
+/// An image size that cannot be parsed.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum SizeError {
+    /// No `x` between the width and the height.
+    #[error("`{0}`: expected WIDTHxHEIGHT, e.g. 1280x720")]
+    NoSeparator(String),
+    /// The width or the height is not a positive integer.
+    #[error("`{0}`: expected WIDTHxHEIGHT, both positive integers")]
+    NotPositive(String),
+}
+
 /// Parses `WIDTHxHEIGHT`.
-pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
+pub fn parse_size(text: &str) -> Result<[u32; 2], SizeError> {
     let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|v| *v > 0);
     match text.split_once(['x', 'X']) {
         Some((w, h)) => match (parse(w), parse(h)) {
             (Some(w), Some(h)) => Ok([w, h]),
-            _ => Err(format!(
-                "`{text}`: expected WIDTHxHEIGHT, both positive integers"
-            )),
+            _ => Err(SizeError::NotPositive(text.to_string())),
         },
-        None => Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 1280x720")),
+        None => Err(SizeError::NoSeparator(text.to_string())),
     }
 }
 

@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{bail, ensure};
+use crate::error::{bail, ensure};
 use serde::Deserialize;
 
 use super::camera::{Camera, CameraSpec};
@@ -50,7 +50,7 @@ pub const DEFAULT_MATERIAL: Material = Material::Diffuse {
 impl Material {
     /// Errors on colours outside [0, 1], an index of refraction below 1, or a
     /// non-positive absorption length.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let unit = |c: &[f64; 3]| c.iter().all(|v| (0.0..=1.0).contains(v));
         match self {
             Material::Diffuse { colour } | Material::Mirror { colour } => ensure!(
@@ -111,7 +111,7 @@ pub enum Light {
 
 impl Light {
     /// Errors on non-finite or negative values and a zero direction.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let finite = |v: &[f64; 3]| v.iter().all(|c| c.is_finite());
         let power = |v: &[f64; 3]| v.iter().all(|c| c.is_finite() && *c >= 0.0);
         match self {
@@ -163,7 +163,7 @@ impl Default for MediumOptics {
 
 impl MediumOptics {
     /// Errors on an albedo outside [0, 1], `|g| >= 1` or a negative emission.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         ensure!(
             (0.0..=1.0).contains(&self.albedo),
             "albedo must be in [0, 1], got {}",
@@ -278,7 +278,7 @@ pub const MAX_IMAGE_SIDE: u32 = 16384;
 
 impl RenderSettings {
     /// Errors on impossible sizes, sample counts or steps.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let [w, h] = self.size;
         ensure!(
             (1..=MAX_IMAGE_SIDE).contains(&w) && (1..=MAX_IMAGE_SIDE).contains(&h),
@@ -325,7 +325,7 @@ pub struct RenderSpec {
 impl RenderSpec {
     /// Checks every material, light and medium, the settings, and that every material a
     /// solid names exists.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         for (name, m) in &self.materials {
             m.validate()
                 .map_err(|e| e.context(format!("material `{name}`")))?;

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_csg::add_geometry;
 use hytrace_csg::geant4::G4Mapping;
 use hytrace_foundry::gdml::{read_gdml, strip_name, Gdml, GdmlOptions, SurfaceLink};
@@ -74,7 +74,7 @@ pub(crate) fn world_solids(f: &Foundry) -> Vec<String> {
 }
 
 /// Reads a GDML file into a Foundry.
-pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
+pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> crate::Result<Foundry> {
     Ok(load_gdml_scene_with_surfaces(path, options)?.0)
 }
 
@@ -83,7 +83,7 @@ pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Fou
 pub fn load_gdml_scene_with_surfaces(
     path: &Path,
     options: &GdmlOptions,
-) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
+) -> crate::Result<(Foundry, VolumeSurfaces)> {
     let gdml = read_gdml(path, options)?;
     for w in &gdml.warnings {
         eprintln!("warning: skipped {w}");
@@ -209,12 +209,12 @@ fn material_index(m: Option<usize>) -> u32 {
 }
 
 /// Builds the Foundry of a read GDML file.
-pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
+pub fn gdml_to_foundry(g: &Gdml) -> crate::Result<Foundry> {
     Ok(gdml_to_foundry_with_surfaces(g)?.0)
 }
 
 /// Builds the Foundry of a read GDML file and its [`VolumeSurfaces`].
-pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
+pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> crate::Result<(Foundry, VolumeSurfaces)> {
     let total = subtree_sizes(g)[g.world];
     if total > MAX_INSTANCES {
         bail!("the hierarchy expands into {total} placements, more than {MAX_INSTANCES}");
@@ -222,7 +222,7 @@ pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> anyhow::Result<(Foundry, Volum
     let mut f = Foundry::new();
     // One Foundry solid per GDML solid that a placed volume uses, built on first use.
     let mut solid_of: HashMap<usize, u32> = HashMap::new();
-    let mut foundry_solid = |f: &mut Foundry, solid: usize| -> anyhow::Result<u32> {
+    let mut foundry_solid = |f: &mut Foundry, solid: usize| -> crate::Result<u32> {
         if let Some(&s) = solid_of.get(&solid) {
             return Ok(s);
         }
