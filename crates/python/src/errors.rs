@@ -5,6 +5,7 @@ use std::error::Error as StdError;
 use std::io::ErrorKind;
 use std::path::Path;
 
+use hytrace_trace::choice::Named;
 use hytrace_trace::photons::PhotonError;
 use pyo3::prelude::*;
 use pyo3::types::PyType;
@@ -95,16 +96,11 @@ pub fn type_error(message: String) -> Error {
 
 /// The value of option `name` among the command line's choices (the same names), or a
 /// `HytraceValueError` listing them.
-pub fn choice<T: clap::ValueEnum>(name: &str, value: &str) -> Result<T, Error> {
-    T::from_str(value, false).map_err(|_| {
-        let names: Vec<String> = T::value_variants()
-            .iter()
-            .filter_map(|v| v.to_possible_value())
-            .map(|p| p.get_name().to_string())
-            .collect();
+pub fn choice<T: Named>(name: &str, value: &str) -> Result<T, Error> {
+    T::from_name(value).ok_or_else(|| {
         value_error(format!(
             "invalid value '{value}' for '{name}' [possible values: {}]",
-            names.join(", ")
+            T::names().join(", ")
         ))
     })
 }

@@ -5,6 +5,7 @@
 //! command line reads ([`scene`]).
 
 pub mod accuracy;
+pub mod choice;
 pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;

@@ -28,7 +28,7 @@ use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
 
 /// Which tracer answers a scan.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
     /// Our CPU tracer ([`CpuScene`]), in f32 or f64.
     #[default]
@@ -41,14 +41,26 @@ pub enum Backend {
     Auto,
 }
 
+crate::choice::named!(Backend {
+    (Backend::Cpu, "cpu", [], "Our CPU tracer ([`CpuScene`]), in f32 or f64"),
+    (Backend::Embree, "embree", [], "Embree 3 (f32; builds with the `embree` feature only)"),
+    (Backend::Gpu, "gpu", [], "Our GPU tracer through wgpu (f32): the scan kernel, twin of the CPU's f32 tracer"),
+    (Backend::Auto, "auto", [], "The GPU when one can be opened, else the CPU (with a note on stderr)"),
+});
+
 /// Arithmetic precision of the intersection kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Precision {
     /// Single precision (what the GPU runs).
     F32,
     /// Double precision.
     F64,
 }
+
+crate::choice::named!(Precision {
+    (Precision::F32, "f32", [], "Single precision (what the GPU runs)"),
+    (Precision::F64, "f64", [], "Double precision"),
+});
 
 /// One validated ray in f64: origin, unit direction, parameter range.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -22,7 +22,7 @@ use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume, Texel
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Space {
     /// Index space: voxel centres at integer coordinates.
     Index,
@@ -30,8 +30,13 @@ pub enum Space {
     World,
 }
 
+crate::choice::named!(Space {
+    (Space::Index, "index", [], "Index space: voxel centres at integer coordinates"),
+    (Space::World, "world", [], "World space, through the grid's index-to-world map"),
+});
+
 /// Lookup filter (see `hytrace_volume::Filter`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FilterArg {
     /// The voxel at floor(p + 0.5).
     Nearest,
@@ -40,6 +45,12 @@ pub enum FilterArg {
     /// One of those eight voxels, with probability equal to its trilinear weight.
     Stochastic,
 }
+
+crate::choice::named!(FilterArg {
+    (FilterArg::Nearest, "nearest", [], "The voxel at floor(p + 0.5)"),
+    (FilterArg::Trilinear, "trilinear", [], "OpenVDB's box sampler: the trilinear blend of the eight voxels around p"),
+    (FilterArg::Stochastic, "stochastic", [], "One of those eight voxels, with probability equal to its trilinear weight"),
+});
 
 impl From<FilterArg> for Filter {
     fn from(f: FilterArg) -> Filter {
@@ -52,11 +63,10 @@ impl From<FilterArg> for Filter {
 }
 
 /// Representation sampled: the grid as read, or a bricked grid of one texel format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Repr {
     /// The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as
     /// read).
-    #[value(alias = "source")]
     Nanovdb,
     /// Bricked grid, BC4 texels.
     Bc4,
@@ -69,6 +79,15 @@ pub enum Repr {
     /// Bricked grid, single-precision texels.
     F32,
 }
+
+crate::choice::named!(Repr {
+    (Repr::Nanovdb, "nanovdb", ["source"], "The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as read)"),
+    (Repr::Bc4, "bc4", [], "Bricked grid, BC4 texels"),
+    (Repr::Unorm8, "unorm8", [], "Bricked grid, 8-bit normalized texels"),
+    (Repr::Unorm16, "unorm16", [], "Bricked grid, 16-bit normalized texels"),
+    (Repr::F16, "f16", [], "Bricked grid, half-precision texels"),
+    (Repr::F32, "f32", [], "Bricked grid, single-precision texels"),
+});
 
 impl Repr {
     fn texel_format(self) -> Option<TexelFormat> {
@@ -84,7 +103,7 @@ impl Repr {
 }
 
 /// Transmittance estimator on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EstimatorArg {
     /// The optical depth integrated exactly (per voxel cell, in f64).
     Exact,
@@ -97,6 +116,14 @@ pub enum EstimatorArg {
     /// Residual ratio tracking (control density = local minorant).
     Residual,
 }
+
+crate::choice::named!(EstimatorArg {
+    (EstimatorArg::Exact, "exact", [], "The optical depth integrated exactly (per voxel cell, in f64)"),
+    (EstimatorArg::March, "march", [], "Fixed-step midpoint ray marching (--step)"),
+    (EstimatorArg::Delta, "delta", [], "Delta tracking with local majorants"),
+    (EstimatorArg::Ratio, "ratio", [], "Ratio tracking with local majorants"),
+    (EstimatorArg::Residual, "residual", [], "Residual ratio tracking (control density = local minorant)"),
+});
 
 /// A grid in the representation asked for.
 pub enum Represented {
@@ -257,31 +284,23 @@ pub fn write_f64(path: &Path, values: &[f64]) -> crate::Result<()> {
 
 /// The estimator options of `hytrace volume transmittance` and `hytrace scan
 /// --transmittance`.
-#[derive(Clone, Copy, Debug, clap::Args)]
+#[derive(Clone, Copy, Debug)]
 pub struct EstimatorOptions {
     /// Estimator.
-    #[arg(long, value_enum, default_value_t = EstimatorArg::Exact)]
     pub estimator: EstimatorArg,
     /// Step of `march`, world units.
-    #[arg(long, default_value_t = 0.5)]
     pub step: f64,
     /// Samples per ray of the trackers (delta, ratio, residual).
-    #[arg(long, default_value_t = 1)]
     pub spp: u32,
     /// Seed of the random streams (ray i uses stream i).
-    #[arg(long, default_value_t = 0)]
     pub seed: u32,
     /// Density per unit of grid value (for scene media: a factor on each medium's own).
-    #[arg(long, default_value_t = 1.0)]
     pub density_scale: f64,
     /// Lookup filter.
-    #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
     pub filter: FilterArg,
     /// Finest mip level of the local majorants (0: 8^3 bricks ... 3: 64^3).
-    #[arg(long, default_value_t = 0)]
     pub level: usize,
     /// One majorant for the whole grid instead of local ones.
-    #[arg(long)]
     pub global_majorant: bool,
 }
 
@@ -366,7 +385,7 @@ pub fn transmittances(
 }
 
 /// Where `hytrace volume transmittance` runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum VolumeBackend {
     /// The CPU estimators in f64, on any representation.
     #[default]
@@ -378,6 +397,12 @@ pub enum VolumeBackend {
     /// The GPU when an adapter opens, else the CPU (with a note on stderr).
     Auto,
 }
+
+crate::choice::named!(VolumeBackend {
+    (VolumeBackend::Cpu, "cpu", [], "The CPU estimators in f64, on any representation"),
+    (VolumeBackend::Gpu, "gpu", [], "The GPU kernel in f32: on the bricked grid, or with `--repr nanovdb` on the raw NanoVDB buffer (other grids as read, and NanoVDB types the GPU does not read, are converted to f32 bricks)"),
+    (VolumeBackend::Auto, "auto", [], "The GPU when an adapter opens, else the CPU (with a note on stderr)"),
+});
 
 /// Where a GPU transmittance ran and where its time went.
 #[derive(Clone, Debug)]
@@ -629,7 +654,7 @@ pub fn info_text(info: &serde_json::Value) -> String {
 }
 
 /// Element type of a raw volume file on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RawTypeArg {
     /// Unsigned 8-bit.
     U8,
@@ -639,8 +664,14 @@ pub enum RawTypeArg {
     F32,
 }
 
+crate::choice::named!(RawTypeArg {
+    (RawTypeArg::U8, "u8", [], "Unsigned 8-bit"),
+    (RawTypeArg::U16, "u16", [], "Unsigned 16-bit"),
+    (RawTypeArg::F32, "f32", [], "32-bit float"),
+});
+
 /// Byte order of a raw volume file on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EndianArg {
     /// Least significant byte first.
     Little,
@@ -648,37 +679,33 @@ pub enum EndianArg {
     Big,
 }
 
+crate::choice::named!(EndianArg {
+    (EndianArg::Little, "little", [], "Least significant byte first"),
+    (EndianArg::Big, "big", [], "Most significant byte first"),
+});
+
 /// The options of `hytrace volume convert --store`.
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct StoreOptions {
     /// Voxels of a raw file along x, y, z (`X,Y,Z`; x fastest in the file, no header).
-    #[arg(long)]
     pub dims: Option<String>,
     /// Element type of a raw file.
-    #[arg(long, value_enum)]
     pub dtype: Option<RawTypeArg>,
     /// Byte order of a raw file.
-    #[arg(long, value_enum, default_value_t = EndianArg::Little)]
     pub endian: EndianArg,
     /// World size of a raw file's voxel along x, y, z (`SX,SY,SZ`).
-    #[arg(long, default_value = "1,1,1")]
     pub spacing: String,
     /// World position of a raw file's first voxel (`X,Y,Z`).
-    #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub origin: String,
     /// Value outside the volume and of dropped bricks.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub background: f32,
     /// Bricks whose values all lie within this of the background are dropped.
-    #[arg(long, default_value_t = 0.0)]
     pub threshold: f32,
     /// The range the 16-bit codes span (`MIN,MAX`); the data's own range by default (a
     /// first pass over the file finds it).
-    #[arg(long, allow_hyphen_values = true)]
     pub range: Option<String>,
     /// Memory the converter may hold resident (e.g. 2G): its window of brick layers and
     /// its tables; refused when that does not fit.
-    #[arg(long, value_parser = crate::memory::parse_bytes, default_value = "2G")]
     pub memory: u64,
 }
 

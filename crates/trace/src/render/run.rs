@@ -3,7 +3,6 @@
 use std::time::Instant;
 
 use crate::error::{bail, Context};
-use clap::Args;
 use hytrace_foundry::Foundry;
 
 use super::spec::{RenderSpec, View, VolumeMode};
@@ -12,7 +11,7 @@ use crate::cpu::CpuScene;
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore};
 
 /// Where a render runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RenderBackend {
     /// Our CPU path (rayon over rows).
     Cpu,
@@ -22,6 +21,12 @@ pub enum RenderBackend {
     /// The GPU when one opens and the render is one it does, else the CPU.
     Auto,
 }
+
+crate::choice::named!(RenderBackend {
+    (RenderBackend::Cpu, "cpu", [], "Our CPU path (rayon over rows)"),
+    (RenderBackend::Gpu, "gpu", [], "Our WGSL render kernel through wgpu (f32): every effect, media of up to 16 placements"),
+    (RenderBackend::Auto, "auto", [], "The GPU when one opens and the render is one it does, else the CPU"),
+});
 
 /// What the GPU side of a render reports.
 pub struct GpuRun {
@@ -64,32 +69,24 @@ fn render_gpu(
 
 /// The render settings a caller may set; each overrides the scene's own (its `[render]`
 /// table, or the defaults).
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RenderSettings {
     /// Image size, WIDTHxHEIGHT.
-    #[arg(long, value_parser = parse_size)]
     pub size: Option<[u32; 2]>,
     /// Samples per pixel (1: pixel centres).
-    #[arg(long)]
     pub spp: Option<u32>,
     /// What the image shows.
-    #[arg(long, value_enum)]
     pub view: Option<View>,
     /// How media are rendered.
-    #[arg(long, value_enum)]
     pub volumes: Option<VolumeMode>,
     /// Longest path (surface and medium scattering events).
-    #[arg(long)]
     pub max_bounces: Option<u32>,
     /// Emission-absorption march step in voxels.
-    #[arg(long)]
     pub step: Option<f64>,
     /// Seed of the random streams.
-    #[arg(long)]
     pub seed: Option<u32>,
     /// Render the solid of this name transparent (repeatable): to see inside a detector's
     /// enclosures (`hytrace info` lists the solids).
-    #[arg(long)]
     pub transparent: Vec<String>,
 }
 

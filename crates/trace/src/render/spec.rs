@@ -184,7 +184,7 @@ impl MediumOptics {
 }
 
 /// What the image shows.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum View {
     /// Light transport: materials, lights, media.
@@ -204,8 +204,18 @@ pub enum View {
     Boundary,
 }
 
+crate::choice::named!(View {
+    (View::Shaded, "shaded", [], "Light transport: materials, lights, media"),
+    (View::Depth, "depth", [], "Distance to the first surface, near white to far black"),
+    (View::Normal, "normal", [], "Outward normal of the first surface, `0.5 (n + 1)` as RGB"),
+    (View::Solid, "solid", [], "A colour per solid"),
+    (View::Prim, "prim", [], "A colour per prim"),
+    (View::Instance, "instance", [], "A colour per instance (placement)"),
+    (View::Boundary, "boundary", [], "A colour per boundary (GDML's material pairs and optical surfaces)"),
+});
+
 /// How media are rendered.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum VolumeMode {
     /// Media are left out: the render sees the surfaces only.
@@ -217,6 +227,13 @@ pub enum VolumeMode {
     /// Light scattered any number of times (delta tracking with the local majorants).
     MultipleScattering,
 }
+
+crate::choice::named!(VolumeMode {
+    (VolumeMode::Off, "off", [], "Media are left out: the render sees the surfaces only"),
+    (VolumeMode::EmissionAbsorption, "emission-absorption", [], "Emission and absorption only (no scattering): exact transmittance, marched emission"),
+    (VolumeMode::SingleScattering, "single-scattering", [], "Light scattered once toward the lights (transmittance to them by ratio tracking)"),
+    (VolumeMode::MultipleScattering, "multiple-scattering", [], "Light scattered any number of times (delta tracking with the local majorants)"),
+});
 
 /// The `[render]` table of a scene file; command-line options override it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
