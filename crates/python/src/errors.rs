@@ -74,7 +74,7 @@ fn classify(e: hytrace_trace::Error, missing: bool) -> Error {
     };
     Error {
         class,
-        message: e.to_string(),
+        message: hytrace_trace::error::report(&e),
     }
 }
 

@@ -4,7 +4,8 @@
 //!
 //! Each variant's message is complete: a wrapped error or a context shows its cause after
 //! a colon, and also returns it from `source()`, so that callers can find a cause by type
-//! (a missing file, bad photon input) by walking the chain.
+//! (a missing file, bad photon input) by walking the chain. [`report`] writes an error and
+//! its causes once each.
 
 use std::fmt::Display;
 
@@ -105,6 +106,20 @@ impl Error {
             source: Box::new(self),
         }
     }
+}
+
+/// The message of `e` followed by its causes (`source()`), each cause left out when the
+/// message so far already ends with it: the whole story once, however an error shows its
+/// causes. What the command line prints after `hytrace: error: `.
+pub fn report(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    for cause in std::iter::successors(e.source(), |&c| c.source()) {
+        let cause = cause.to_string();
+        if !text.ends_with(&cause) {
+            text = format!("{text}: {cause}");
+        }
+    }
+    text
 }
 
 /// Adds what was being done to the error of a `Result`, or makes the missing value of an

@@ -12,6 +12,7 @@ pub mod embree;
 pub mod error;
 pub mod gpu;
 pub mod memory;
+pub mod number_list;
 pub mod outputs;
 pub mod photons;
 pub mod progress;

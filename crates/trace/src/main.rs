@@ -21,22 +21,11 @@ fn main() -> ExitCode {
     match cli::run(cli::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("hytrace: error: {}", message(&e));
+            eprintln!(
+                "hytrace: error: {}",
+                hytrace_trace::error::report(e.as_ref())
+            );
             ExitCode::FAILURE
         }
     }
-}
-
-/// The message of an error followed by its causes, each cause left out when the message so
-/// far already ends with it (the library's errors spell out their causes).
-fn message(e: &anyhow::Error) -> String {
-    let mut text = String::new();
-    for cause in e.chain().map(ToString::to_string) {
-        if text.is_empty() {
-            text = cause;
-        } else if !text.ends_with(&cause) {
-            text = format!("{text}: {cause}");
-        }
-    }
-    text
 }

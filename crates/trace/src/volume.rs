@@ -19,6 +19,7 @@ use serde_json::json;
 
 use crate::gpu::nanovdb::nanovdb_gpu_bytes;
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume, TexelStore};
+use crate::number_list::parse_numbers;
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
@@ -711,12 +712,11 @@ pub struct StoreOptions {
 
 /// `N` comma-separated finite numbers of option `what`.
 fn numbers<const N: usize>(text: &str, what: &str) -> crate::Result<[f64; N]> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
-    if parts.len() != N || values.len() != N || !values.iter().all(|v| v.is_finite()) {
-        bail!("{what} `{text}`: expected {N} comma-separated finite numbers");
-    }
-    Ok(std::array::from_fn(|k| values[k]))
+    parse_numbers(text).map_err(|_| {
+        crate::Error::invalid(format!(
+            "{what} `{text}`: expected {N} comma-separated finite numbers"
+        ))
+    })
 }
 
 /// `hytrace volume convert --store`: a raw file (`.raw`) or any volume `spec` (grid `name`)

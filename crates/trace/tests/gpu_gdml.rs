@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use common::{compare, gpu_run, rays_for};
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_testkit::files::files_with_extension;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scene::load_scene;
 
@@ -24,20 +25,7 @@ const RANDOM: usize = 3000;
 
 /// Every `.gdml` file under `dir`, sorted.
 fn gdml_files(dir: &Path) -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "gdml") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(dir, &mut files);
-    files.sort();
-    files
+    files_with_extension(dir, "gdml")
 }
 
 #[test]

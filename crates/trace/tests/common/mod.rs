@@ -69,6 +69,11 @@ pub fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
         .unwrap()
 }
 
+/// The standard error of a command, as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 /// The `--stats` line of a GPU run, after checking that the command succeeded (its stderr
 /// shown otherwise) and reported what every GPU command reports: backend `gpu`, the
 /// adapter, host kernel seconds and the timestamp field (null where a device has no
