@@ -162,8 +162,10 @@ macro_rules! bail {
 /// Returns an [`Error::Invalid`] made with `format!` from the function unless `cond` holds.
 macro_rules! ensure {
     ($cond:expr, $($arg:tt)*) => {
-        if !$cond {
-            $crate::error::bail!($($arg)*);
+        // A match, not `if !cond`: conditions on floats read as written (NaN fails them).
+        match $cond {
+            true => {}
+            false => $crate::error::bail!($($arg)*),
         }
     };
 }
