@@ -62,9 +62,11 @@ Every step of a photon gives one label, in order after ``TO`` (the start):
   polished/ground dielectric_dielectric crossing -- no surface counts as one
   -- into a material without RINDEX), else ``SA``; a photon alive after the
   boundary was reflected when its direction before and after lie on opposite
-  sides of the surface (the navigator's exit normal): ``SR`` when the
-  crossing's optical surface is dielectric_metal, else ``BR``; otherwise it
-  went on: ``BT``.
+  sides of the surface (the navigator's exit normal): ``DR`` when the new
+  direction is not the mirror image of the old one about that normal (a
+  rough or painted surface's diffuse, lobe or backscatter reflection),
+  else ``SR`` when the crossing's optical surface is dielectric_metal, else
+  ``BR``; otherwise it went on: ``BT``.
 
 Histories keep their first 16 labels (Opticks' seqhis), as hytrace does.
 """
@@ -83,6 +85,8 @@ MAX_LABELS = 16
 PHOTONS_PER_EVENT = 500
 # Geant4's surface tolerance (mm): boundary steps no longer are StepTooSmall.
 STEP_TOO_SMALL = 1e-9
+# A reflected direction this close to the mirror image of the incoming one is specular.
+SPECULAR_TOLERANCE = 1e-7
 
 
 def parse_source(spec):
@@ -212,6 +216,7 @@ def main():
 
     histories = {}
     hit_times = []
+    hit_positions = []
     state = {"labels": None}
     navigator = [None]
 
@@ -276,6 +281,8 @@ def main():
                     if step.GetTotalEnergyDeposit() > 0 and not no_rindex_kill(pre, post):
                         labels.append("SD")
                         hit_times.append(post.GetGlobalTime() / g4.ns)
+                        p = post.GetPosition()
+                        hit_positions.append([p.x / g4.mm, p.y / g4.mm, p.z / g4.mm])
                     else:
                         labels.append("SA")
                     return
@@ -283,13 +290,17 @@ def main():
                     navigator[0] = g4.G4TransportationManager.GetTransportationManager() \
                         .GetNavigatorForTracking()
                 n = navigator[0].GetGlobalExitNormal(post.GetPosition(), True)
-                before = pre.GetMomentumDirection().dot(n)
-                after = post.GetMomentumDirection().dot(n)
+                d0, d1 = pre.GetMomentumDirection(), post.GetMomentumDirection()
+                before, after = d0.dot(n), d1.dot(n)
                 if (before > 0) != (after > 0):
+                    mirror = d0 - n * (2.0 * before)
                     surface = surface_of(volume(pre), volume(post))
                     metal = surface is not None and \
                         surface.GetType() == g4.G4SurfaceType.dielectric_metal
-                    labels.append("SR" if metal else "BR")
+                    if (d1 - mirror).mag() > SPECULAR_TOLERANCE:
+                        labels.append("DR")
+                    else:
+                        labels.append("SR" if metal else "BR")
                 else:
                     labels.append("BT")
             else:
@@ -333,6 +344,7 @@ def main():
         "detected": detected,
         "histories": histories,
         "hit_times": hit_times,
+        "hit_positions": hit_positions,
         "seconds": time.time() - t0,
     }
     real_out.write(json.dumps(out) + "\n")

@@ -90,7 +90,8 @@ impl<'a, 'input> Reader<'a, 'input> {
             model: text("model"),
             finish: text("finish"),
             kind: text("type"),
-            value: self.num(node, "value", 1.0)?,
+            // Geant4's GDML reader: 0 when absent (glisur's polish, unified's sigma_alpha).
+            value: self.num(node, "value", 0.0)?,
             properties: self.properties(node)?,
         };
         self.surface_index

@@ -14,7 +14,7 @@ use super::V;
 
 /// Cosines within this of 1 count as normal incidence (Geant4's surface tolerance,
 /// 1e-9, used the same way).
-const NORMAL_INCIDENCE: f64 = 1e-9;
+pub const NORMAL_INCIDENCE: f64 = 1e-9;
 
 /// What happened at the boundary.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -93,67 +93,114 @@ pub fn mirror(v: V, normal: V) -> V {
     v - normal * (2.0 * v.dot(normal))
 }
 
-/// One Fresnel decision: `u` uniform in [0, 1); `transmittance` (a surface's
-/// TRANSMITTANCE when positive) replaces the Fresnel transmission probability, as in
-/// Geant4. Returns what happened and the new direction and polarization.
-pub fn dielectric_dielectric(
-    dir: V,
-    pol: V,
-    normal: V,
+/// One Fresnel decision on a facet, before the new direction is chosen.
+pub struct FresnelStep {
+    /// What happened.
+    pub what: Fresnel,
+    incidence: Option<Incidence>,
     n1: f64,
     n2: f64,
-    transmittance: f64,
-    u: f64,
-) -> (Fresnel, V, V) {
-    let Some(i) = incidence(dir, pol, normal, n1, n2) else {
-        // Total internal reflection keeps the field mirrored.
-        return (
-            Fresnel::TotalInternal,
-            mirror(dir, normal),
-            -pol + normal * (2.0 * pol.dot(normal)),
-        );
-    };
-    let e2_total = i.e2_s * i.e2_s + i.e2_p * i.e2_p;
-    let t = if transmittance > 0.0 {
-        transmittance
-    } else if i.cos1 != 0.0 {
-        n2 * i.cos2 * e2_total / (n1 * i.cos1)
-    } else {
-        0.0
-    };
-    if u < t {
-        if !i.oblique {
-            return (Fresnel::Refracted, dir, pol);
+}
+
+impl FresnelStep {
+    /// Decides between reflection and refraction of a photon (unit `dir` and `pol`) on a
+    /// facet with unit normal `facet` facing it, from index `n1` into `n2`; `u` uniform in
+    /// [0, 1); `transmittance` (a surface's TRANSMITTANCE when positive) replaces the
+    /// Fresnel transmission probability, as in Geant4.
+    pub fn decide(dir: V, pol: V, facet: V, n1: f64, n2: f64, transmittance: f64, u: f64) -> Self {
+        let incidence = incidence(dir, pol, facet, n1, n2);
+        let what = match &incidence {
+            None => Fresnel::TotalInternal,
+            Some(i) => {
+                let e2_total = i.e2_s * i.e2_s + i.e2_p * i.e2_p;
+                let t = if transmittance > 0.0 {
+                    transmittance
+                } else if i.cos1 != 0.0 {
+                    n2 * i.cos2 * e2_total / (n1 * i.cos1)
+                } else {
+                    0.0
+                };
+                if u < t {
+                    Fresnel::Refracted
+                } else {
+                    Fresnel::Reflected
+                }
+            }
+        };
+        FresnelStep {
+            what,
+            incidence,
+            n1,
+            n2,
         }
-        let k = i.cos1 - i.cos2 * (n2 / n1);
-        let new_dir = (dir + normal * k).normalized();
+    }
+
+    /// The refracted direction and polarization (the step must be [`Fresnel::Refracted`]).
+    pub fn refracted(&self, dir: V, pol: V, facet: V) -> (V, V) {
+        let i = self
+            .incidence
+            .as_ref()
+            .expect("a refraction has amplitudes");
+        if !i.oblique {
+            return (dir, pol);
+        }
+        let k = i.cos1 - i.cos2 * (self.n2 / self.n1);
+        let new_dir = (dir + facet * k).normalized();
         let p_axis = new_dir.cross(i.s_axis).normalized();
-        let norm = e2_total.sqrt();
+        let norm = (i.e2_s * i.e2_s + i.e2_p * i.e2_p).sqrt();
         let new_pol = p_axis * (i.e2_p / norm) + i.s_axis * (i.e2_s / norm);
-        return (Fresnel::Refracted, new_dir, new_pol.normalized());
+        (new_dir, new_pol.normalized())
     }
-    let new_dir = mirror(dir, normal);
-    if !i.oblique {
-        let new_pol = if n2 > n1 { -pol } else { pol };
-        return (Fresnel::Reflected, new_dir, new_pol);
+
+    /// The direction and polarization after a specular reflection about `axis` (the facet
+    /// the decision was made on, or for the unified model's spike the surface's normal).
+    /// Total internal reflection mirrors the field; Fresnel reflection takes the reflected
+    /// wave's field, as Geant4 forms it.
+    pub fn reflected(&self, dir: V, pol: V, axis: V) -> (V, V) {
+        let new_dir = mirror(dir, axis);
+        let Some(i) = &self.incidence else {
+            return (new_dir, -pol + axis * (2.0 * pol.dot(axis)));
+        };
+        if !i.oblique {
+            let new_pol = if self.n2 > self.n1 { -pol } else { pol };
+            return (new_dir, new_pol);
+        }
+        // The reflected amplitudes, from the transmitted ones.
+        let r_p = self.n2 * i.e2_p / self.n1 - i.e1_p;
+        let r_s = i.e2_s - i.e1_s;
+        let norm = (r_p * r_p + r_s * r_s).sqrt();
+        let p_axis = new_dir.cross(i.s_axis).normalized();
+        let new_pol = if norm > 0.0 {
+            p_axis * (r_p / norm) + i.s_axis * (r_s / norm)
+        } else {
+            i.s_axis
+        };
+        (new_dir, new_pol.normalized())
     }
-    // The reflected amplitudes, from the transmitted ones.
-    let r_p = n2 * i.e2_p / n1 - i.e1_p;
-    let r_s = i.e2_s - i.e1_s;
-    let norm = (r_p * r_p + r_s * r_s).sqrt();
-    let p_axis = new_dir.cross(i.s_axis).normalized();
-    let new_pol = if norm > 0.0 {
-        p_axis * (r_p / norm) + i.s_axis * (r_s / norm)
-    } else {
-        i.s_axis
-    };
-    (Fresnel::Reflected, new_dir, new_pol.normalized())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use hytrace_volume::Rng;
+
+    /// A polished boundary: one decision, then the new direction and polarization.
+    fn dielectric_dielectric(
+        dir: V,
+        pol: V,
+        normal: V,
+        n1: f64,
+        n2: f64,
+        transmittance: f64,
+        u: f64,
+    ) -> (Fresnel, V, V) {
+        let step = FresnelStep::decide(dir, pol, normal, n1, n2, transmittance, u);
+        let (d, p) = match step.what {
+            Fresnel::Refracted => step.refracted(dir, pol, normal),
+            _ => step.reflected(dir, pol, normal),
+        };
+        (step.what, d, p)
+    }
 
     fn v(x: f64, y: f64, z: f64) -> V {
         V::new(x, y, z)

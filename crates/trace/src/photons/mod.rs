@@ -1,7 +1,8 @@
 //! Optical photon propagation on the CPU, with Geant4's optical physics (`hytrace
 //! photons`): torch sources ([`sources`]), material and surface property tables
 //! ([`properties`]), Fresnel reflection and refraction ([`boundary`]), bulk absorption and
-//! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]), the propagation loop
+//! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]) and their rough and painted
+//! models ([`surface_models`]), the propagation loop
 //! through the scene's navigator ([`propagate()`]) and the outputs ([`output`]).
 //!
 //! Photon `i` draws every random number from the counter-based stream `(seed, i)`
@@ -16,6 +17,7 @@ pub mod propagate;
 pub mod properties;
 pub mod run;
 pub mod sources;
+pub mod surface_models;
 pub mod surfaces;
 
 use std::path::Path;

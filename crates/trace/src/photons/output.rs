@@ -43,6 +43,8 @@ pub enum Label {
     Sd = 7,
     /// Absorbed at a surface.
     Sa = 8,
+    /// Reflected diffusely (not specularly) by a rough or painted surface.
+    Dr = 9,
     /// Specularly reflected by a surface.
     Sr = 10,
     /// Fresnel or total internal reflection.
@@ -55,12 +57,13 @@ pub enum Label {
     Tr = 15,
 }
 
-const LABELS: [(u8, &str); 10] = [
+const LABELS: [(u8, &str); 11] = [
     (3, "MI"),
     (4, "AB"),
     (6, "SC"),
     (7, "SD"),
     (8, "SA"),
+    (9, "DR"),
     (10, "SR"),
     (11, "BR"),
     (12, "BT"),

@@ -201,6 +201,7 @@ impl PhotonScene {
                 }
                 Crossing::Reflected => history.push(Label::Br),
                 Crossing::SurfaceReflected => history.push(Label::Sr),
+                Crossing::DiffuseReflected => history.push(Label::Dr),
                 Crossing::Absorbed => {
                     history.push(Label::Sa);
                     return (history, None);

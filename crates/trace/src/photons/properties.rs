@@ -205,6 +205,50 @@ pub enum SurfaceKind {
     DielectricDielectric,
 }
 
+/// Geant4's surface finishes this propagator models (G4OpticalSurfaceFinish's first six).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Finish {
+    /// Smooth.
+    Polished,
+    /// Smooth, with paint on the surface (reflection spike, no refraction).
+    PolishedFrontPainted,
+    /// Smooth, with paint behind a gap of the surface's RINDEX (specular paint).
+    PolishedBackPainted,
+    /// Rough: facets drawn per crossing.
+    Ground,
+    /// Rough, with paint on the surface (Lambertian reflection).
+    GroundFrontPainted,
+    /// Rough, with paint behind a gap of the surface's RINDEX (Lambertian paint).
+    GroundBackPainted,
+}
+
+impl Finish {
+    /// Painted behind a gap (the surface's RINDEX fills it).
+    pub fn back_painted(self) -> bool {
+        matches!(
+            self,
+            Finish::PolishedBackPainted | Finish::GroundBackPainted
+        )
+    }
+}
+
+/// How a surface's facets are drawn (G4OpticalSurfaceModel with the surface's `value`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Roughness {
+    /// The glisur model: facet normals are the normal plus `1 - polish` times a point
+    /// uniform in the unit ball; polish 1 is smooth.
+    Glisur {
+        /// `value` of the surface.
+        polish: f64,
+    },
+    /// The unified model: facet normals at an angle drawn from a Gaussian of standard
+    /// deviation `sigma_alpha` (radians) times its sine; 0 is smooth.
+    Unified {
+        /// `value` of the surface.
+        sigma_alpha: f64,
+    },
+}
+
 /// The looked-up properties of an optical surface.
 #[derive(Clone, Debug)]
 pub struct SurfaceOptics {
@@ -212,12 +256,25 @@ pub struct SurfaceOptics {
     pub name: String,
     /// Type.
     pub kind: SurfaceKind,
+    /// Finish.
+    pub finish: Finish,
+    /// Model and its roughness parameter.
+    pub roughness: Roughness,
     /// REFLECTIVITY (Geant4's default without the table: 1).
     pub reflectivity: Option<Property>,
     /// EFFICIENCY (default 0).
     pub efficiency: Option<Property>,
     /// TRANSMITTANCE (default 0).
     pub transmittance: Option<Property>,
+    /// RINDEX of the gap behind back-painted finishes (without it photons die there).
+    pub rindex: Option<Property>,
+    /// The unified model's SPECULARSPIKECONSTANT, SPECULARLOBECONSTANT and
+    /// BACKSCATTERCONSTANT (default 0 each; the rest of the reflections are Lambertian).
+    pub spike: Option<Property>,
+    /// SPECULARLOBECONSTANT.
+    pub lobe: Option<Property>,
+    /// BACKSCATTERCONSTANT.
+    pub backscatter: Option<Property>,
 }
 
 /// A GDML enumeration attribute: a name or Geant4's enumerator value.
@@ -230,15 +287,21 @@ fn enumerated<'a>(text: &str, names: &[&'a str]) -> Option<&'a str> {
         .map(|(_, n)| *n)
 }
 
+/// Properties of surfaces that change the physics in ways this propagator does not model.
+const UNMODELLED_SURFACE_PROPERTIES: [&str; 3] =
+    ["REALRINDEX", "IMAGINARYRINDEX", "SURFACEROUGHNESS"];
+
 impl SurfaceOptics {
-    /// The properties of a surface, which must be a polished `dielectric_metal` or
-    /// `dielectric_dielectric` surface (the surface models of this propagator).
+    /// The properties of a surface, which must be a `dielectric_metal` or
+    /// `dielectric_dielectric` surface of the glisur or unified model with one of the six
+    /// plain finishes (the surface models of this propagator).
     pub fn new(s: &OpticalSurface) -> Result<Self, PhotonError> {
         let owner = format!("optical surface `{}`", s.name);
         let unsupported = |what: &str, value: &str| PhotonError::Unsupported {
             what: format!("{owner}: {what} `{value}`"),
         };
-        // G4SurfaceType and G4OpticalSurfaceFinish, in enumerator order.
+        // G4SurfaceType, G4OpticalSurfaceFinish and G4OpticalSurfaceModel, in enumerator
+        // order (GDML gives either the name or the number).
         let kind = match enumerated(
             &s.kind,
             &[
@@ -256,27 +319,64 @@ impl SurfaceOptics {
             "polishedfrontpainted",
             "polishedbackpainted",
             "ground",
+            "groundfrontpainted",
+            "groundbackpainted",
         ];
-        if s.finish.trim().is_empty() || enumerated(&s.finish, &finishes) == Some("polished") {
-            // Geant4's default finish is polished.
-        } else {
-            return Err(unsupported("finish (only polished is modelled)", &s.finish));
+        // Geant4's default finish is polished.
+        let finish = match s.finish.trim() {
+            "" => Finish::Polished,
+            f => match enumerated(f, &finishes) {
+                Some("polished") => Finish::Polished,
+                Some("polishedfrontpainted") => Finish::PolishedFrontPainted,
+                Some("polishedbackpainted") => Finish::PolishedBackPainted,
+                Some("ground") => Finish::Ground,
+                Some("groundfrontpainted") => Finish::GroundFrontPainted,
+                Some("groundbackpainted") => Finish::GroundBackPainted,
+                _ => return Err(unsupported("finish", &s.finish)),
+            },
+        };
+        if !s.value.is_finite() {
+            return Err(PhotonError::Input(format!(
+                "{owner}: value {} is not a finite number",
+                s.value
+            )));
         }
-        // The glisur model reads `value` as polish: below 1 it smears the normal.
-        let glisur = s.model.trim().is_empty()
-            || enumerated(&s.model, &["glisur", "unified"]) == Some("glisur");
-        if glisur && s.value < 1.0 {
-            return Err(unsupported(
-                "glisur polish below 1 (smeared normals are not modelled)",
-                &s.value.to_string(),
-            ));
+        let roughness = match s.model.trim() {
+            "" => Roughness::Glisur { polish: s.value },
+            m => match enumerated(m, &["glisur", "unified"]) {
+                Some("glisur") => Roughness::Glisur { polish: s.value },
+                Some("unified") if s.value < 0.0 => {
+                    return Err(PhotonError::Input(format!(
+                        "{owner}: sigma_alpha (value) {} is negative",
+                        s.value
+                    )))
+                }
+                Some("unified") => Roughness::Unified {
+                    sigma_alpha: s.value,
+                },
+                _ => return Err(unsupported("model", &s.model)),
+            },
+        };
+        if let Some((name, _)) = s
+            .properties
+            .iter()
+            .find(|(n, _)| UNMODELLED_SURFACE_PROPERTIES.contains(&n.as_str()))
+        {
+            return Err(unsupported("property", name));
         }
+        let get = |name: &str| property(&s.properties, name, &owner);
         Ok(SurfaceOptics {
             name: s.name.clone(),
             kind,
-            reflectivity: property(&s.properties, "REFLECTIVITY", &owner)?,
-            efficiency: property(&s.properties, "EFFICIENCY", &owner)?,
-            transmittance: property(&s.properties, "TRANSMITTANCE", &owner)?,
+            finish,
+            roughness,
+            reflectivity: get("REFLECTIVITY")?,
+            efficiency: get("EFFICIENCY")?,
+            transmittance: get("TRANSMITTANCE")?,
+            rindex: get("RINDEX")?,
+            spike: get("SPECULARSPIKECONSTANT")?,
+            lobe: get("SPECULARLOBECONSTANT")?,
+            backscatter: get("BACKSCATTERCONSTANT")?,
         })
     }
 }
@@ -397,5 +497,50 @@ mod tests {
         // 1239.84198 eV nm: 420 nm is 2.952 eV.
         assert!((energy_of_wavelength(420.0) - 2.95200471e-6).abs() < 1e-13);
         assert!((wavelength_of_energy(energy_of_wavelength(420.0)) - 420.0).abs() < 1e-9);
+    }
+
+    fn optical_surface(model: &str, finish: &str, value: f64) -> OpticalSurface {
+        OpticalSurface {
+            name: "skin".into(),
+            model: model.into(),
+            finish: finish.into(),
+            kind: "dielectric_dielectric".into(),
+            value,
+            properties: vec![],
+        }
+    }
+
+    #[test]
+    fn surface_models_and_finishes_read_as_geant4_names_them() {
+        let s = SurfaceOptics::new(&optical_surface("1", "5", 0.25)).unwrap();
+        assert_eq!(s.finish, Finish::GroundBackPainted);
+        assert_eq!(s.roughness, Roughness::Unified { sigma_alpha: 0.25 });
+        let s = SurfaceOptics::new(&optical_surface("", "", 0.0)).unwrap();
+        assert_eq!(s.finish, Finish::Polished);
+        assert_eq!(s.roughness, Roughness::Glisur { polish: 0.0 });
+    }
+
+    #[test]
+    fn unmodelled_or_impossible_surfaces_are_refused_by_name() {
+        let refused = |s: OpticalSurface, needle: &str| {
+            let e = SurfaceOptics::new(&s).expect_err("refused").to_string();
+            assert!(e.contains("`skin`") && e.contains(needle), "{e}");
+        };
+        refused(optical_surface("LUT", "polished", 0.0), "model `LUT`");
+        refused(
+            optical_surface("unified", "polishedlumirrorair", 0.1),
+            "finish",
+        );
+        refused(optical_surface("unified", "ground", -0.1), "negative");
+        refused(optical_surface("unified", "ground", f64::NAN), "finite");
+        let mut s = optical_surface("unified", "ground", 0.1);
+        s.properties = vec![(
+            "SURFACEROUGHNESS".into(),
+            Table {
+                columns: 1,
+                values: vec![1e-6],
+            },
+        )];
+        refused(s, "SURFACEROUGHNESS");
     }
 }

@@ -6,19 +6,29 @@
 //! - the optical surface is found as Geant4 finds it (border surface of the ordered pair
 //!   of physical volumes, else skin surfaces: see [`SurfaceLookup`]); without one the
 //!   boundary is a polished dielectric-dielectric one with REFLECTIVITY 1;
-//! - `dielectric_dielectric`: the same material on both sides passes straight
-//!   (SameMaterial); material 2 without RINDEX kills the photon (NoRINDEX); otherwise one
-//!   uniform `u` decides: absorbed when `u > R + T` (then detected with probability
-//!   EFFICIENCY), passed straight when `u > R`, else Fresnel reflection or refraction;
-//! - `dielectric_metal`: reflected specularly when `u <= R`, else passed straight when
-//!   `u <= R + T`, else absorbed (detected with probability EFFICIENCY).
+//! - a back-painted finish without RINDEX kills the photon;
+//! - `dielectric_dielectric`, polished or ground: the same material on both sides passes
+//!   straight (SameMaterial); material 2 without RINDEX kills the photon (NoRINDEX);
+//! - `dielectric_dielectric` not back-painted: one uniform `u` decides: absorbed when
+//!   `u > R + T` (then detected with probability EFFICIENCY), passed straight when
+//!   `u > R`, else Fresnel reflection or refraction (polished, ground) or the paint's
+//!   reflection (front-painted); back-painted: Fresnel into the gap first
+//!   ([`super::surface_models`]);
+//! - `dielectric_metal`: reflected when `u <= R` (as the model and finish say), else
+//!   passed straight when `u <= R + T`, else absorbed (detected with probability
+//!   EFFICIENCY).
+//!
+//! The photon ends on the side its new direction points to (as Geant4's navigator
+//! relocates it), and the reflections are labelled by what they did: specular about the
+//! surface normal on a dielectric boundary, specular on a metal, or diffuse.
 
 use hytrace_foundry::optics::Boundary;
 use hytrace_foundry::UNSET;
 use hytrace_volume::Rng;
 
-use super::boundary::{dielectric_dielectric, mirror, Fresnel};
-use super::properties::{OpticsTables, Property, SurfaceKind};
+use super::boundary::mirror;
+use super::properties::{Finish, OpticsTables, Property, Roughness, SurfaceKind};
+use super::surface_models::{SurfaceAt, SurfaceEnd};
 use super::V;
 use crate::scene::VolumeSurfaces;
 
@@ -63,15 +73,23 @@ impl SurfaceLookup {
 pub enum Crossing {
     /// Went on into the far side (refracted, or passed straight).
     Transmitted,
-    /// Reflected back by Fresnel reflection or total internal reflection.
+    /// Reflected specularly (about the surface normal) by a dielectric boundary: Fresnel
+    /// reflection, total internal reflection, a unified surface's spike or paint.
     Reflected,
-    /// Reflected by a (metal) surface.
+    /// Reflected specularly by a (metal) surface.
     SurfaceReflected,
+    /// Reflected in any other direction: Lambertian, a lobe or a facet of a rough
+    /// surface, backscattered.
+    DiffuseReflected,
     /// Absorbed at the surface (or killed for want of RINDEX).
     Absorbed,
     /// Absorbed and detected.
     Detected,
 }
+
+/// A reflected direction within this of the mirror image of the incoming one counts as
+/// specular.
+const SPECULAR_TOLERANCE: f64 = 1e-7;
 
 /// A photon at a boundary: its direction and polarization (changed in place) and energy.
 pub struct AtBoundary<'a> {
@@ -94,7 +112,7 @@ fn absorb(efficiency: f64, rng: &mut Rng) -> Crossing {
 
 /// The boundary process at a crossing from material `m1` into `m2` through `surface`
 /// (indices; [`UNSET`] for none). `normal` is the unit normal facing the photon
-/// (`dir . normal < 0`).
+/// (`dir . normal < 0`). The photon ends on the side its new direction points to.
 pub fn cross(
     tables: &OpticsTables,
     (m1, m2): (u32, u32),
@@ -104,64 +122,105 @@ pub fn cross(
     rng: &mut Rng,
 ) -> Crossing {
     let e = photon.energy;
-    let Some(n1) = tables
-        .material(m1)
-        .and_then(|m| m.rindex.as_ref())
-        .map(|r| r.value(e))
-    else {
+    let rindex = |m: u32| {
+        tables
+            .material(m)
+            .and_then(|m| m.rindex.as_ref())
+            .map(|r| r.value(e))
+    };
+    let Some(n1) = rindex(m1) else {
         return Crossing::Absorbed;
     };
     let s = tables.surface(surface);
     let value = |p: Option<&Property>, default: f64| p.map_or(default, |p| p.value(e));
-    let (kind, r, t, eff) = match s {
-        Some(s) => (
-            s.kind,
-            value(s.reflectivity.as_ref(), 1.0),
-            value(s.transmittance.as_ref(), 0.0),
-            value(s.efficiency.as_ref(), 0.0),
-        ),
-        None => (SurfaceKind::DielectricDielectric, 1.0, 0.0, 0.0),
+    let at = match s {
+        Some(s) => SurfaceAt {
+            finish: s.finish,
+            roughness: s.roughness,
+            reflectivity: value(s.reflectivity.as_ref(), 1.0),
+            transmittance: value(s.transmittance.as_ref(), 0.0),
+            spike: value(s.spike.as_ref(), 0.0),
+            lobe: value(s.lobe.as_ref(), 0.0),
+            backscatter: value(s.backscatter.as_ref(), 0.0),
+        },
+        None => SurfaceAt {
+            finish: Finish::Polished,
+            roughness: Roughness::Glisur { polish: 1.0 },
+            reflectivity: 1.0,
+            transmittance: 0.0,
+            spike: 0.0,
+            lobe: 0.0,
+            backscatter: 0.0,
+        },
     };
-    match kind {
+    let efficiency = s.map_or(0.0, |s| value(s.efficiency.as_ref(), 0.0));
+    let kind = s.map_or(SurfaceKind::DielectricDielectric, |s| s.kind);
+    // Back-painted finishes fill the gap with the surface's RINDEX; without it the
+    // photon dies there (Geant4's NoRINDEX).
+    let gap = match s.filter(|s| s.finish.back_painted()) {
+        Some(s) => match s.rindex.as_ref() {
+            Some(r) => Some(r.value(e)),
+            None => return Crossing::Absorbed,
+        },
+        None => None,
+    };
+    let incoming = *photon.dir;
+    let (dir, pol) = (photon.dir, photon.pol);
+    let end = match kind {
         SurfaceKind::DielectricDielectric => {
-            if m1 == m2 {
-                return Crossing::Transmitted;
-            }
-            let Some(n2) = tables
-                .material(m2)
-                .and_then(|m| m.rindex.as_ref())
-                .map(|r| r.value(e))
-            else {
-                return Crossing::Absorbed;
+            let plain = matches!(at.finish, Finish::Polished | Finish::Ground);
+            let n2 = if plain {
+                if m1 == m2 {
+                    return Crossing::Transmitted;
+                }
+                match rindex(m2) {
+                    Some(n2) => n2,
+                    None => return Crossing::Absorbed,
+                }
+            } else {
+                gap.unwrap_or(n1)
             };
-            let u = rng.next_f64();
-            if u > r + t {
-                return absorb(eff, rng);
-            }
-            if u > r {
-                return Crossing::Transmitted;
-            }
-            let (what, dir, pol) =
-                dielectric_dielectric(*photon.dir, *photon.pol, normal, n1, n2, t, rng.next_f64());
-            *photon.dir = dir;
-            *photon.pol = pol;
-            match what {
-                Fresnel::Refracted => Crossing::Transmitted,
-                Fresnel::Reflected | Fresnel::TotalInternal => Crossing::Reflected,
+            if at.finish.back_painted() {
+                at.dielectric(dir, pol, normal, (n1, n2), rng)
+            } else {
+                let u = rng.next_f64();
+                if u > at.reflectivity + at.transmittance {
+                    return absorb(efficiency, rng);
+                }
+                if u > at.reflectivity {
+                    return Crossing::Transmitted;
+                }
+                if plain {
+                    at.dielectric(dir, pol, normal, (n1, n2), rng)
+                } else {
+                    at.paint_reflection(dir, pol, normal, rng);
+                    SurfaceEnd::Left
+                }
             }
         }
         SurfaceKind::DielectricMetal => {
             let u = rng.next_f64();
-            if u > r {
-                return if u > r + t {
-                    absorb(eff, rng)
+            if u > at.reflectivity {
+                return if u > at.reflectivity + at.transmittance {
+                    absorb(efficiency, rng)
                 } else {
                     Crossing::Transmitted
                 };
             }
-            *photon.dir = mirror(*photon.dir, normal);
-            *photon.pol = -mirror(*photon.pol, normal);
-            Crossing::SurfaceReflected
+            at.metal_reflection(dir, pol, normal, rng);
+            SurfaceEnd::Left
         }
+    };
+    if end == SurfaceEnd::Absorbed {
+        return absorb(efficiency, rng);
+    }
+    if dir.dot(normal) < 0.0 {
+        Crossing::Transmitted
+    } else if (*dir - mirror(incoming, normal)).length() > SPECULAR_TOLERANCE {
+        Crossing::DiffuseReflected
+    } else if kind == SurfaceKind::DielectricMetal {
+        Crossing::SurfaceReflected
+    } else {
+        Crossing::Reflected
     }
 }
