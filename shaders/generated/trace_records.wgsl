@@ -236,7 +236,7 @@ struct RenderInstance {
     material: u32,
     solid: u32,
     boundary: u32,
-    pad: u32,
+    covering: u32,
 }
 
 struct RenderMedium {
@@ -274,6 +274,14 @@ const VOLUME_FORMAT_NANOVDB: u32 = 5u;
 const VOLUME_STATUS_NEGATIVE: u32 = 1u;
 const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
 const VOLUME_STATUS_LOOPS_CUT: u32 = 4u;
+const VOLUME_STATUS_MISSING: u32 = 8u;
+const VOLUME_ABSENT_BRICK: u32 = 4294967294u;
+const STREAM_HEADER_WORDS: u32 = 8u;
+const STREAM_REQUESTED: u32 = 0u;
+const STREAM_CAPACITY: u32 = 1u;
+const STREAM_FLAGS: u32 = 2u;
+const STREAM_STAMPS: u32 = 3u;
+const STREAM_PASS: u32 = 4u;
 const VOLUME_NO_BRICK: u32 = 4294967295u;
 const VOLUME_NO_SLOT: u32 = 4294967295u;
 const RENDER_VIEW_SHADED: u32 = 0u;
@@ -295,6 +303,7 @@ const RENDER_MATERIAL_MIRROR: u32 = 1u;
 const RENDER_MATERIAL_DIELECTRIC: u32 = 2u;
 const RENDER_MATERIAL_EMITTER: u32 = 3u;
 const RENDER_MATERIAL_TRANSPARENT: u32 = 4u;
+const RENDER_MATERIAL_SHELL: u32 = 5u;
 const RENDER_LIGHT_POINT: u32 = 16u;
 const RENDER_LIGHT_DIRECTIONAL: u32 = 17u;
 // Infinity of the volume kernels (hytrace_trace::gpu::GPU_INF).

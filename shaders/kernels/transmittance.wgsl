@@ -2,7 +2,9 @@
 // gpu), the twin of hytrace_volume::transmittance_batch in f32, compared ray by ray in
 // crates/trace/tests/gpu_volume.rs. Rays come in the grid's index space, moved near the
 // grid by the host (crates/trace/src/gpu/transmittance.rs), so only lengths of t matter here.
-// Every estimator is one call of `estimate_sample` (volume/estimate) per sample.
+// Every estimator is one call of `estimate_sample` (volume/estimate) per sample. Composed
+// with `streamed`, it reads a brick store through the brick pool (volume/stream): a ray
+// that missed a brick is marked VOLUME_STATUS_MISSING and run again in a later pass.
 // #import generated/trace_records
 // #import volume/bindings
 // #import volume/rng
@@ -11,6 +13,19 @@
 
 @group(1) @binding(0) var<storage, read> rays: array<RayRecord>;
 @group(1) @binding(1) var<storage, read_write> results: array<TransmittanceRecord>;
+// #if streamed
+// The random stream of each ray of a streamed pass (its index among all the rays: a
+// pass reruns the rays that missed bricks, not a contiguous range).
+@group(1) @binding(2) var<storage, read> ray_streams: array<u32>;
+// #endif
+
+// The random stream of ray `i` of the batch.
+fn ray_stream(i: u32) -> u32 {
+    // #if streamed
+    return ray_streams[i];
+    // #endif
+    return vparams.ray_offset + i;
+}
 
 @compute @workgroup_size(64)
 fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
@@ -34,7 +49,7 @@ fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     var nulls = 0u;
     var status = 0u;
     for (var sample = 0u; sample < passes; sample++) {
-        var rng = rng_new(vparams.seed, vparams.ray_offset + i, sample);
+        var rng = rng_new(vparams.seed, ray_stream(i), sample);
         // Sample 0 walks the whole ray: the CPU refuses a ray with a negative density
         // anywhere along it.
         let e = estimate_sample(o, d, r.tmin, r.tmax, est, global, &rng, sample == 0u);
@@ -57,6 +72,11 @@ fn transmittance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     if loops_cut_short(vparams.probe_trips) {
         status |= VOLUME_STATUS_LOOPS_CUT;
     }
+    // #if streamed
+    if stream_missing {
+        status |= VOLUME_STATUS_MISSING;
+    }
+    // #endif
     out.status = status;
     results[i] = out;
 }

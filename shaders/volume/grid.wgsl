@@ -2,10 +2,14 @@
 // brick table, atlas texel, decode `offset + t * scale`; and the two trilinear blends of the
 // CPU (the lookup's weighted sum and the exact estimator's nested lerps), in its order of
 // operations. No hardware filtering. Kernels composed with `nanovdb` also read grids stored
-// as raw NanoVDB buffers (volume/nanovdb).
+// as raw NanoVDB buffers (volume/nanovdb); kernels composed with `streamed` read a brick
+// store through the brick pool's page table (volume/stream).
 // #import volume/bindings
 // #if nanovdb
 // #import volume/nanovdb
+// #endif
+// #if streamed
+// #import volume/stream
 // #endif
 
 // Code-unit value of texel `j` (4 * row + column) of a BC4 block at atlas word `w`
@@ -133,10 +137,19 @@ fn grid_voxel(c: vec3<i32>) -> f32 {
     }
     let l = vec3<u32>(local);
     let d = vec3<u32>(dims);
-    let e = indirection_entry(vparams.indirection_base + (l.z * d.y + l.y) * d.x + l.x);
+    let page = (l.z * d.y + l.y) * d.x + l.x;
+    let e = indirection_entry(vparams.indirection_base + page);
     if e == VOLUME_NO_BRICK {
         return vparams.background;
     }
+    // #if streamed
+    // A brick store's page table: `e` is the brick's pool slot, or it is absent.
+    if e == VOLUME_ABSENT_BRICK {
+        stream_request(page);
+        return vparams.background;
+    }
+    stream_touch(e);
+    // #endif
     let entry = brick_entry(e);
     if entry.atlas_slot == VOLUME_NO_SLOT {
         return entry.offset;

@@ -19,13 +19,14 @@ use hytrace_foundry::Foundry;
 use hytrace_trace::error::report;
 use hytrace_trace::gpu::TexelStore;
 use hytrace_trace::photons::run::{prepare, propagate_in};
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, PhotonScene, RunOptions};
 use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
 use hytrace_trace::render::spec::RenderSpec;
 use hytrace_trace::scan::{self, Backend, Precision, RAY_COLUMNS};
 use hytrace_trace::scene::load_render_scene;
 use hytrace_trace::volume::{self, EstimatorOptions, Represented};
+use hytrace_volume::DEFAULT_STORE_BUDGET;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyAny;
@@ -237,6 +238,7 @@ impl Scene {
             step,
             seed,
             transparent,
+            detector: Default::default(),
         };
         let backend: RenderBackend = choice("backend", backend)?;
         let texels: TexelStore = choice("gpu_texels", gpu_texels)?;
@@ -280,7 +282,7 @@ impl Scene {
         let source = Source::parse(source).map_err(library_error)?;
         let options = RunOptions {
             source,
-            wavelength_nm: wavelength,
+            wavelength: Wavelength::Fixed(wavelength),
             photons,
             first,
             seed,
@@ -312,13 +314,15 @@ impl Scene {
     }
 }
 
-/// A sparse volume: one grid of a NanoVDB (`.nvdb`) or OpenVDB (`.vdb`) file or a
+/// A sparse volume: one grid of a NanoVDB (`.nvdb`) or OpenVDB (`.vdb`) file, a brick store
+/// directory (read through a cache of at most `memory` bytes, as `--memory`) or a
 /// procedural grid (`sphere:RADIUS[,VOXEL[,BLEND]]`, `box:W,H,D[,VOXEL[,BLEND]]`), in the
 /// representation `repr` (as `hytrace volume sample --repr`).
 #[pyclass(frozen, module = "hytrace")]
 struct Volume {
     spec: String,
     grid: Represented,
+    memory: u64,
 }
 
 /// Whether `spec` names a volume file (`.nvdb`, `.vdb`) rather than a procedural grid.
@@ -332,12 +336,13 @@ fn is_volume_file(spec: &str) -> bool {
 #[pymethods]
 impl Volume {
     #[new]
-    #[pyo3(signature = (path, *, grid = None, repr = "nanovdb"))]
+    #[pyo3(signature = (path, *, grid = None, repr = "nanovdb", memory = DEFAULT_STORE_BUDGET))]
     fn new(
         py: Python<'_>,
         path: &Bound<'_, PyAny>,
         grid: Option<&str>,
         repr: &str,
+        memory: u64,
     ) -> PyResult<Self> {
         let spec = match path.extract::<PathBuf>() {
             Ok(p) => p.display().to_string(),
@@ -346,7 +351,7 @@ impl Volume {
         let repr = choice("repr", repr)?;
         let represented = py
             .detach(|| {
-                let (_, g) = volume::open(&spec, grid)?;
+                let (_, g) = volume::open_within(&spec, grid, memory)?;
                 volume::represent(g, repr)
             })
             .map_err(|e| match is_volume_file(&spec) {
@@ -356,6 +361,7 @@ impl Volume {
         Ok(Volume {
             spec,
             grid: represented,
+            memory,
         })
     }
 
@@ -405,6 +411,58 @@ impl Volume {
             .map_err(library_error)?;
         // A brick store whose file failed after it opened read the background: no answer.
         grid.check_reads().map_err(library_error)?;
+        Ok(PyArray1::from_vec(py, values))
+    }
+
+    /// The transmittance along each world ray, (N, 8) float32 or float64 (`ox oy oz tmin dx
+    /// dy dz tmax`), as `hytrace volume transmittance` computes it: (N,) float64. The
+    /// options are the command's; ray `i` draws the random streams of index `i`. On
+    /// `backend="gpu"` a brick store streams through a brick pool of at most the volume's
+    /// `memory` bytes of device memory.
+    #[pyo3(signature = (
+        rays, *, estimator = "exact", step = 0.5, spp = 1, seed = 0, density_scale = 1.0,
+        filter = "trilinear", level = 0, global_majorant = false, backend = "cpu"
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn transmittance<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+        estimator: &str,
+        step: f64,
+        spp: u32,
+        seed: u32,
+        density_scale: f64,
+        filter: &str,
+        level: usize,
+        global_majorant: bool,
+        backend: &str,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let options = EstimatorOptions {
+            estimator: choice("estimator", estimator)?,
+            step,
+            spp,
+            seed,
+            density_scale,
+            filter: choice("filter", filter)?,
+            level,
+            global_majorant,
+        };
+        let backend: volume::VolumeBackend = choice("backend", backend)?;
+        let rows = float_rows::<8>(rays, "rays", RAY_COLUMNS)?;
+        let rows = rows.rows();
+        let (grid, memory) = (&self.grid, self.memory);
+        let run = py
+            .detach(|| {
+                let rays = ray_rows(rows)?;
+                let args = options.args();
+                volume::transmittances_on(grid, &rays, &args, backend, TexelStore::Storage, memory)
+                    .map_err(library_error)
+            })
+            .map_err(|e| e.into_pyerr())?;
+        // A brick store whose file failed after it opened read the background: no answer.
+        grid.check_reads().map_err(library_error)?;
+        let values = run.estimates.iter().map(|e| e.transmittance).collect();
         Ok(PyArray1::from_vec(py, values))
     }
 }

@@ -16,8 +16,9 @@ use hytrace_foundry::FoundryError;
 use hytrace_volume::{NanoError, StoreError, VolumeError};
 
 use crate::gpu::nanovdb::NanoGpuError;
-use crate::gpu::GpuError;
+use crate::gpu::{GpuError, StreamError};
 use crate::photons::PhotonError;
+use crate::render::detector::DetectorError;
 use crate::sweep::SweepError;
 
 /// What went wrong in the library.
@@ -71,6 +72,12 @@ pub enum Error {
     /// The GPU failed or refused the work.
     #[error("{0}")]
     Gpu(#[from] GpuError),
+    /// A brick store cannot be streamed through the GPU's brick pool.
+    #[error("{0}")]
+    Stream(#[from] StreamError),
+    /// A detector view cannot be drawn as asked.
+    #[error("{0}")]
+    Detector(#[from] DetectorError),
     /// A NanoVDB grid was not read on the GPU.
     #[error("{0}")]
     NanoGpu(#[from] NanoGpuError),

@@ -9,16 +9,19 @@ use crate::error::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
-    convert_grid, convert_raw, open_volume, open_volume_with, sample, select_grid, BrickedGrid,
-    ConvertOptions, ConvertReport, Endian, Estimate, Estimator, Filter, GridSummary, Majorant,
-    RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams, Unsampleable, Volume,
-    VoxelGrid, DEFAULT_STORE_BUDGET,
+    convert_grid, convert_raw, open_volume, open_volume_with, sample, select_grid, BrickStore,
+    BrickedGrid, ConvertOptions, ConvertReport, Endian, Estimate, Estimator, Filter, GridSummary,
+    Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams,
+    Unsampleable, Volume, VoxelGrid, DEFAULT_STORE_BUDGET,
 };
 use rayon::prelude::*;
 use serde_json::json;
 
 use crate::gpu::nanovdb::nanovdb_gpu_bytes;
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuVolume, TexelStore};
+use crate::gpu::{
+    gpu_or_cpu, warn_redone, GpuContext, GpuStreamedVolume, GpuTimes, GpuVolume, StreamStats,
+    TexelStore,
+};
 use crate::number_list::parse_numbers;
 use crate::scan::{read_float_rows, RayRow};
 
@@ -418,6 +421,8 @@ pub struct GpuVolumeInfo {
     pub setup_s: f64,
     /// Upload, kernel and readback seconds of the rays' batches (host wall clock).
     pub times: GpuTimes,
+    /// A brick store's streaming: passes, bricks uploaded, pool size.
+    pub stream: Option<StreamStats>,
 }
 
 /// A transmittance run: the estimates, the seconds building mips (CPU) and tracing, and
@@ -435,7 +440,8 @@ pub struct TransmittanceRun {
 
 /// [`transmittances`] on `backend`: the GPU traces, in f32, the bricked grid or the raw
 /// NanoVDB buffer of a grid as read (other grids as read are converted to f32 bricks, exact
-/// for float grids). `gpu` without an adapter is an
+/// for float grids; a brick store streams through a brick pool of at most `gpu_memory`
+/// bytes: [`GpuStreamedVolume`]). `gpu` without an adapter is an
 /// error; `auto` falls back to the CPU with a line on stderr when the GPU fails.
 pub fn transmittances_on(
     grid: &Represented,
@@ -443,6 +449,7 @@ pub fn transmittances_on(
     args: &TransmittanceArgs,
     backend: VolumeBackend,
     texels: TexelStore,
+    gpu_memory: u64,
 ) -> crate::Result<TransmittanceRun> {
     let cpu = || {
         let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
@@ -453,24 +460,50 @@ pub fn transmittances_on(
             gpu: None,
         })
     };
-    if grid.is_brick_store() {
-        // The GPU's brick pool and request buffer are not built yet: stores stay on the CPU.
-        return match backend {
-            VolumeBackend::Gpu => {
-                bail!("brick stores are traced on the CPU only (--backend cpu or auto)")
+    let gpu = |ctx| match grid {
+        Represented::Source(Volume::Store(store)) => {
+            if texels == TexelStore::Texture {
+                bail!("--gpu-texels texture reads bricked grids; a brick store streams its bricks through a storage buffer");
             }
-            _ => cpu(),
-        };
-    }
+            gpu_store_transmittances(ctx, store, rays, args, gpu_memory)
+        }
+        _ => gpu_transmittances(ctx, grid, rays, args, texels),
+    };
     match backend {
         VolumeBackend::Cpu => cpu(),
-        VolumeBackend::Gpu => gpu_transmittances(GpuContext::new()?, grid, rays, args, texels),
-        VolumeBackend::Auto => gpu_or_cpu(
-            "traces",
-            |ctx| gpu_transmittances(ctx, grid, rays, args, texels),
-            cpu,
-        ),
+        VolumeBackend::Gpu => gpu(GpuContext::new()?),
+        VolumeBackend::Auto => gpu_or_cpu("traces", gpu, cpu),
     }
+}
+
+/// The GPU side of [`transmittances_on`] for a brick store: streamed through a brick pool of
+/// at most `memory` device bytes.
+fn gpu_store_transmittances(
+    ctx: GpuContext,
+    store: &BrickStore,
+    rays: &[RayRow],
+    args: &TransmittanceArgs,
+    memory: u64,
+) -> crate::Result<TransmittanceRun> {
+    let t0 = Instant::now();
+    let mut volume = GpuStreamedVolume::new(&ctx, store, memory)?;
+    let setup_s = t0.elapsed().as_secs_f64();
+    let rays = world_rays(rays);
+    let t1 = Instant::now();
+    let (estimates, times) = volume.transmittance(&ctx, &rays, &args.params())?;
+    warn_redone(&ctx.describe(), &times, rays.len(), "rays");
+    Ok(TransmittanceRun {
+        estimates,
+        mips_s: 0.0,
+        trace_s: t1.elapsed().as_secs_f64(),
+        gpu: Some(GpuVolumeInfo {
+            adapter: ctx.describe(),
+            repr: "brick store (16-bit codes streamed through a brick pool)".to_string(),
+            setup_s,
+            times,
+            stream: Some(volume.stats()),
+        }),
+    })
 }
 
 /// The GPU side of [`transmittances_on`], reading bricked grids' texels from `texels`.
@@ -526,6 +559,7 @@ fn gpu_transmittances(
             repr,
             setup_s,
             times,
+            stream: None,
         }),
     })
 }
@@ -548,6 +582,15 @@ pub fn transmittance_stats(run: &TransmittanceRun, load_s: f64) -> serde_json::V
         line["gpu_kernel_s"] = g.times.kernel_s.into();
         line["gpu_readback_s"] = g.times.readback_s.into();
         line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
+        if let Some(st) = &g.stream {
+            line["stream"] = json!({
+                "passes": st.passes, "rays_deferred": st.rays_deferred,
+                "bricks_uploaded": st.bricks_uploaded, "bricks_evicted": st.bricks_evicted,
+                "resident_bricks": st.resident_bricks, "pool_slots": st.pool_slots,
+                "max_slots": st.max_slots, "pool_doublings": st.pool_doublings,
+                "device_bytes": st.device_bytes,
+            });
+        }
     }
     line
 }

@@ -12,9 +12,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use common::{compare, gpu_run, rays_for};
+use common::{compare, gdml_files, gpu_run, rays_for};
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_testkit::files::files_with_extension;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scene::load_scene;
 
@@ -22,11 +21,6 @@ use hytrace_trace::scene::load_scene;
 const SWEEP: usize = 40;
 /// ... and this many random rays.
 const RANDOM: usize = 3000;
-
-/// Every `.gdml` file under `dir`, sorted.
-fn gdml_files(dir: &Path) -> Vec<PathBuf> {
-    files_with_extension(dir, "gdml")
-}
 
 #[test]
 fn gpu_matches_cpu_on_every_shared_gdml_file() {

@@ -614,8 +614,10 @@ fn brick_store_misuse_fails_cleanly_without_output() {
             &t,
             "--backend",
             "gpu",
+            "--memory",
+            "1M",
         ],
-        "CPU only",
+        "give at least",
     );
     std::fs::remove_file(d.path("out.bricks").join("ranges.npy")).unwrap();
     fails(

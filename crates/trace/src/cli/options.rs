@@ -2,6 +2,7 @@
 //! library's plain settings.
 
 use clap::Args;
+use hytrace_trace::render::detector::{ColorBy, DetectorStyle};
 use hytrace_trace::render::run::{parse_size, RenderSettings};
 use hytrace_trace::render::spec::{View, VolumeMode};
 use hytrace_trace::volume::{
@@ -134,6 +135,41 @@ pub struct RenderSettingsArgs {
     /// enclosures (`hytrace info` lists the solids).
     #[arg(long)]
     pub transparent: Vec<String>,
+    #[command(flatten)]
+    pub detector: DetectorArgs,
+}
+
+/// The options of detector views (GDML and other hierarchical scenes).
+#[derive(Args, Clone, Debug, Default)]
+#[command(next_help_heading = "GDML detectors (hierarchical scenes only)")]
+pub struct DetectorArgs {
+    /// Draw down to this depth of the placement tree (the world is 0, its daughters 1;
+    /// with --show, the shown volumes are 0), as Geant4's drawing depth [default: all].
+    #[arg(long, value_name = "N")]
+    pub depth: Option<u32>,
+    /// Draw only the volumes whose logical or physical name matches this glob (`*`, `?`;
+    /// case-insensitive) and their contents (repeatable).
+    #[arg(long, value_name = "PATTERN")]
+    pub show: Vec<String>,
+    /// Do not draw the volumes whose logical or physical name matches this glob (their
+    /// daughters still are; repeatable).
+    #[arg(long, value_name = "PATTERN")]
+    pub hide: Vec<String>,
+    /// What the colours tell apart [default: material, with the colours the file gives].
+    /// Every detector view writes its legend beside the image (IMAGE.legend.json).
+    #[arg(long, value_parser = choice::<ColorBy>(), value_name = "KEY")]
+    pub color_by: Option<ColorBy>,
+}
+
+impl From<DetectorArgs> for DetectorStyle {
+    fn from(a: DetectorArgs) -> DetectorStyle {
+        DetectorStyle {
+            depth: a.depth,
+            show: a.show,
+            hide: a.hide,
+            color_by: a.color_by,
+        }
+    }
 }
 
 impl From<RenderSettingsArgs> for RenderSettings {
@@ -147,6 +183,7 @@ impl From<RenderSettingsArgs> for RenderSettings {
             step: a.step,
             seed: a.seed,
             transparent: a.transparent,
+            detector: a.detector.into(),
         }
     }
 }

@@ -59,7 +59,7 @@ pub enum VolumeCommand {
     /// Transmittance along rays: (N, 8) rays (ox oy oz tmin dx dy dz tmax, world space) in,
     /// (N,) float64 out; density = value x scale, per unit of world length.
     Transmittance {
-        /// A .nvdb or .vdb file, or a procedural grid.
+        /// A .nvdb or .vdb file, a brick store directory, or a procedural grid.
         file: String,
         /// Rays, (N, 8) float32 or float64.
         #[arg(long)]
@@ -76,8 +76,9 @@ pub enum VolumeCommand {
         #[arg(long)]
         grid: Option<String>,
         /// Where to trace: the CPU (f64), the GPU (f32: bricked grids, or with `--repr
-        /// nanovdb` a NanoVDB file's raw buffer; other grids are converted to f32 bricks) or
-        /// the GPU when one opens, else the CPU.
+        /// nanovdb` a NanoVDB file's raw buffer; other grids are converted to f32 bricks; a
+        /// brick store streams through a brick pool of --memory bytes) or the GPU when one
+        /// opens, else the CPU.
         #[arg(long, value_parser = choice::<volume::VolumeBackend>(), default_value_t = volume::VolumeBackend::Cpu)]
         backend: volume::VolumeBackend,
         /// Where the GPU reads a bricked grid's texels from: a storage buffer, decoded as on
@@ -87,7 +88,8 @@ pub enum VolumeCommand {
         /// Print one JSON line of counts and timings.
         #[arg(long)]
         stats: bool,
-        /// Memory a brick store may hold resident (its tables and brick cache), e.g. 4G.
+        /// Memory a brick store may hold resident (its tables and brick cache), e.g. 4G; on
+        /// the GPU also the device memory of its brick pool, page table and request buffer.
         #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
         memory: u64,
     },
@@ -173,6 +175,7 @@ pub fn run(command: VolumeCommand) -> anyhow::Result<()> {
                 &volume::EstimatorOptions::from(estimate).args(),
                 backend,
                 gpu_texels,
+                memory,
             )?;
             g.check_reads()?;
             let values: Vec<f64> = run.estimates.iter().map(|e| e.transmittance).collect();

@@ -371,7 +371,7 @@ pub fn gpu_or_cpu<R>(
 }
 
 /// Layout entry of a storage buffer visible to compute shaders.
-fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+pub(super) fn storage_layout_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,

@@ -1,5 +1,6 @@
 //! GPU compute through wgpu: device setup, WGSL composition, scene upload and kernels.
 
+mod brick_pool;
 mod chunks;
 pub mod compose;
 mod context;
@@ -9,6 +10,7 @@ pub mod probe;
 pub mod records;
 mod render;
 mod scene;
+mod streamed;
 mod texels;
 mod timing;
 mod tracer;
@@ -17,6 +19,7 @@ mod transmittance;
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
 pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
+pub use streamed::{GpuStreamedVolume, StreamError, StreamStats};
 pub use texels::TexelStore;
 pub use timing::{add_gpu_stats, warn_redone, GpuTimes};
 pub use tracer::{primitive_feature, scene_features, GpuTracer, GPU_INF};

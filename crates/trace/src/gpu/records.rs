@@ -342,8 +342,8 @@ record! {
 }
 
 record! {
-    /// What a render needs of an instance: its material (index into the items), solid and
-    /// boundary (`u32::MAX`: none).
+    /// What a render needs of an instance: its material (index into the items), solid,
+    /// boundary and covering instance (`u32::MAX`: none; see the renderer's `covering`).
     pub struct RenderInstance {
         /// Material item.
         pub material: u32,
@@ -351,8 +351,8 @@ record! {
         pub solid: u32,
         /// Boundary.
         pub boundary: u32,
-        /// Padding.
-        pub pad: u32,
+        /// The outermost of itself and its ancestors drawn solid.
+        pub covering: u32,
     }
 }
 
@@ -394,6 +394,8 @@ pub const RENDER_MATERIAL_DIELECTRIC: u32 = 2;
 pub const RENDER_MATERIAL_EMITTER: u32 = 3;
 /// Transparent.
 pub const RENDER_MATERIAL_TRANSPARENT: u32 = 4;
+/// Shell (an envelope: colour in `a`, opacity in `b.x`).
+pub const RENDER_MATERIAL_SHELL: u32 = 5;
 /// [`RenderItem::kind`] of lights: point.
 pub const RENDER_LIGHT_POINT: u32 = 16;
 /// Directional.
@@ -434,6 +436,24 @@ pub const VOLUME_STATUS_MARCH_STEPS: u32 = 2;
 /// [`TransmittanceRecord::status`] bit: the driver's loop budget cut the ray's loops short
 /// (llvmpipe: `shaders/loop_budget.wgsl`); its answer is wrong.
 pub const VOLUME_STATUS_LOOPS_CUT: u32 = 4;
+/// [`TransmittanceRecord::status`] bit of a streamed pass: the ray read a brick that is not
+/// in the brick pool; its answer is discarded and it runs again once the brick is uploaded.
+pub const VOLUME_STATUS_MISSING: u32 = 8;
+/// Page-table (indirection) entry of a brick store's kept brick that is not in the GPU's
+/// brick pool (`crate::gpu::brick_pool`): a lookup there requests it.
+pub const VOLUME_ABSENT_BRICK: u32 = u32::MAX - 1;
+/// Words of the stream state's header (`shaders/volume/stream.wgsl`), before the requests.
+pub const STREAM_HEADER_WORDS: u32 = 8;
+/// Stream state header word: requests recorded in this pass (may exceed the capacity).
+pub const STREAM_REQUESTED: u32 = 0;
+/// Stream state header word: requests the request list holds.
+pub const STREAM_CAPACITY: u32 = 1;
+/// Stream state header word: first word of the per-brick request flags (one bit a brick).
+pub const STREAM_FLAGS: u32 = 2;
+/// Stream state header word: first word of the per-slot use stamps.
+pub const STREAM_STAMPS: u32 = 3;
+/// Stream state header word: this pass's number (the stamp lookups write).
+pub const STREAM_PASS: u32 = 4;
 
 /// The tracers' own records, in declaration order.
 fn trace_records() -> Vec<RecordEntry> {
@@ -508,6 +528,14 @@ pub fn generate() -> String {
         ("VOLUME_STATUS_NEGATIVE", VOLUME_STATUS_NEGATIVE),
         ("VOLUME_STATUS_MARCH_STEPS", VOLUME_STATUS_MARCH_STEPS),
         ("VOLUME_STATUS_LOOPS_CUT", VOLUME_STATUS_LOOPS_CUT),
+        ("VOLUME_STATUS_MISSING", VOLUME_STATUS_MISSING),
+        ("VOLUME_ABSENT_BRICK", VOLUME_ABSENT_BRICK),
+        ("STREAM_HEADER_WORDS", STREAM_HEADER_WORDS),
+        ("STREAM_REQUESTED", STREAM_REQUESTED),
+        ("STREAM_CAPACITY", STREAM_CAPACITY),
+        ("STREAM_FLAGS", STREAM_FLAGS),
+        ("STREAM_STAMPS", STREAM_STAMPS),
+        ("STREAM_PASS", STREAM_PASS),
         ("VOLUME_NO_BRICK", hytrace_volume::NO_BRICK),
         ("VOLUME_NO_SLOT", hytrace_volume::NO_SLOT),
         ("RENDER_VIEW_SHADED", RENDER_VIEW_SHADED),
@@ -529,6 +557,7 @@ pub fn generate() -> String {
         ("RENDER_MATERIAL_DIELECTRIC", RENDER_MATERIAL_DIELECTRIC),
         ("RENDER_MATERIAL_EMITTER", RENDER_MATERIAL_EMITTER),
         ("RENDER_MATERIAL_TRANSPARENT", RENDER_MATERIAL_TRANSPARENT),
+        ("RENDER_MATERIAL_SHELL", RENDER_MATERIAL_SHELL),
         ("RENDER_LIGHT_POINT", RENDER_LIGHT_POINT),
         ("RENDER_LIGHT_DIRECTIONAL", RENDER_LIGHT_DIRECTIONAL),
     ];

@@ -15,9 +15,9 @@ use std::time::Instant;
 
 use bytemuck::Zeroable;
 use hytrace_volume::{
-    global_range, transmittance, BrickEntry, BrickedGrid, Estimate, Estimator, Filter, IndexRay,
-    Majorant, NanoGrid, RangeMips, Ray, TexelFormat, TransmittanceParams, VolumeError, VoxelGrid,
-    BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
+    global_range, transmittance, BrickEntry, BrickedGrid, Estimate, Estimator, Filter, GridMap,
+    IndexRay, Majorant, NanoGrid, RangeMips, Ray, TexelFormat, TransmittanceParams, VolumeError,
+    VoxelGrid, BLOCK_SIDE, NO_BRICK, RANGE_LEVELS,
 };
 
 use super::chunks::{chunked_capacity, ChunkedUpload, NamedArray};
@@ -119,6 +119,18 @@ pub(super) enum KernelGrid<'a> {
     /// A bricked grid whose texels the kernel reads from a 3D texture (`super::texels`):
     /// its brick table only.
     TexturedBricks(&'a BrickedGrid),
+    /// A brick store read through a GPU brick pool (`super::streamed`): its range mips and
+    /// its bricks' box; the page table, brick table and texels are the pool's own buffers.
+    Store {
+        /// The store's range mips.
+        mips: &'a RangeMips,
+        /// Brick coordinate of its first brick.
+        brick_lo: [i32; 3],
+        /// Bricks along x, y, z.
+        brick_dims: [u32; 3],
+        /// Its background.
+        background: f32,
+    },
     /// A raw NanoVDB grid buffer (checked by [`nanovdb_gpu_bytes`]) and the range mips
     /// built from the grid.
     Nanovdb {
@@ -135,7 +147,7 @@ impl KernelGrid<'_> {
     fn mips(&self) -> &RangeMips {
         match self {
             KernelGrid::Bricked(grid) | KernelGrid::TexturedBricks(grid) => grid.ranges(),
-            KernelGrid::Nanovdb { mips, .. } => mips,
+            KernelGrid::Nanovdb { mips, .. } | KernelGrid::Store { mips, .. } => mips,
         }
     }
 }
@@ -199,6 +211,19 @@ impl VolumeArrays {
             KernelGrid::Bricked(grid) => self.push_bricks(grid, true, &mut base, shifted)?,
             KernelGrid::TexturedBricks(grid) => {
                 self.push_bricks(grid, false, &mut base, shifted)?
+            }
+            KernelGrid::Store {
+                brick_lo,
+                brick_dims,
+                background,
+                ..
+            } => {
+                // Pool texels are the store's 16-bit codes (each brick-table entry decodes
+                // them with the store's quantization).
+                base.brick_lo = shifted(brick_lo, BLOCK_SIDE as u32)?;
+                base.brick_dims = brick_dims;
+                base.format = VOLUME_FORMAT_UNORM16;
+                base.background = background;
             }
             KernelGrid::Nanovdb {
                 bytes, background, ..
@@ -341,6 +366,147 @@ impl VolumeUpload {
 /// Bytes the volume atlas may hold on a device with binding limit `limit`.
 pub fn atlas_capacity(limit: u64) -> u64 {
     chunked_capacity(4, limit)
+}
+
+/// The parameters of a [`KernelGrid::Store`] and its range mips' ranges, level after level
+/// (the arrays of a brick pool's kernel but its own page table, brick table and texels).
+pub(super) fn store_grid(grid: KernelGrid) -> Result<(UploadedGrid, Vec<[f32; 2]>), GpuError> {
+    let mut arrays = VolumeArrays::default();
+    let uploaded = arrays.push(grid)?;
+    Ok((uploaded, arrays.ranges))
+}
+
+/// The kernel's form of world ray `ray` through a grid mapped by `map` and uploaded as
+/// `grid`: in the translated index space, moved near the box when its origin is far; errors
+/// as [`IndexRay::from_world`].
+pub(super) fn kernel_ray(
+    map: &GridMap,
+    grid: &UploadedGrid,
+    ray: &Ray,
+) -> Result<RayRecord, VolumeError> {
+    let r = IndexRay::from_world(ray, map)?;
+    let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - grid.shift[k]);
+    let near = origin.iter().all(|c| c.abs() <= NEAR) && r.tmin.abs() <= NEAR;
+    let base = if near {
+        0.0
+    } else {
+        // The point nearest the box's centre, within [tmin, tmax].
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let to_centre = std::array::from_fn(|k| grid.centre[k] - origin[k]);
+        (dot(to_centre, r.dir) / dot(r.dir, r.dir))
+            .min(r.tmax)
+            .max(r.tmin)
+    };
+    let gpu_f32 = f64::from(GPU_INF);
+    let local = |t: f64| (t - base).clamp(-gpu_f32, gpu_f32) as f32;
+    let (origin, origin_lo) = split_f64(std::array::from_fn(|k| origin[k] + base * r.dir[k]));
+    Ok(RayRecord {
+        origin,
+        tmin: local(r.tmin),
+        direction: r.dir.map(|v| v as f32),
+        tmax: local(r.tmax),
+        origin_lo,
+        pad: 0,
+    })
+}
+
+/// The kernel records of `rays` (errors name the ray) after checking `params` against the
+/// grid and the batch's size.
+pub(super) fn kernel_rays(
+    grid: &dyn VoxelGrid,
+    mips: &RangeMips,
+    uploaded: &UploadedGrid,
+    rays: &[Ray],
+    params: &TransmittanceParams,
+) -> crate::Result<Vec<RayRecord>> {
+    params.validate(grid, mips)?;
+    if u32::try_from(rays.len()).is_err() {
+        crate::error::bail!(
+            "transmittance: {} rays in one batch, at most {}",
+            rays.len(),
+            u32::MAX
+        );
+    }
+    Ok(rays
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            kernel_ray(grid.map(), uploaded, r)
+                .map_err(|e| VolumeError(format!("transmittance: ray {i}: {}", e.0)))
+        })
+        .collect::<Result<Vec<_>, _>>()?)
+}
+
+/// The kernel's parameters of an estimate with `params` through the grid of `base`.
+pub(super) fn kernel_params(base: &VolumeParams, params: &TransmittanceParams) -> VolumeParams {
+    let mut p = *base;
+    (p.estimator, p.march_step) = match params.estimator {
+        Estimator::Exact => (VOLUME_ESTIMATOR_EXACT, 0.0),
+        Estimator::March { step } => (VOLUME_ESTIMATOR_MARCH, step as f32),
+        Estimator::Delta => (VOLUME_ESTIMATOR_DELTA, 0.0),
+        Estimator::Ratio => (VOLUME_ESTIMATOR_RATIO, 0.0),
+        Estimator::Residual => (VOLUME_ESTIMATOR_RESIDUAL, 0.0),
+    };
+    p.lookup_filter = match params.filter {
+        Filter::Nearest => VOLUME_FILTER_NEAREST,
+        Filter::Trilinear => VOLUME_FILTER_TRILINEAR,
+        Filter::Stochastic => VOLUME_FILTER_STOCHASTIC,
+    };
+    (p.global, p.finest) = match params.majorant {
+        Majorant::Global => (1, 0),
+        Majorant::Local { level } => (0, level as u32),
+    };
+    p.spp = params.spp;
+    p.seed = params.seed;
+    p.density_scale = params.density_scale as f32;
+    p
+}
+
+/// Rays of one batch under the device's binding limit (and at most 2^20, to keep one
+/// dispatch short: drivers may kill long ones).
+pub(super) fn ray_batch(ctx: &GpuContext) -> usize {
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    (limit / size_of::<TransmittanceRecord>() as u64).clamp(1, 1 << 20) as usize
+}
+
+/// The estimate of ray `i` (world ray `ray`) from the kernel's record `r`: errors for the
+/// statuses the CPU refuses, and for rays whose loops the driver's loop budget cut short,
+/// the CPU twin's answer on `grid` and `mips` (counted in `times`).
+pub(super) fn record_estimate(
+    r: &TransmittanceRecord,
+    i: usize,
+    ray: &Ray,
+    (grid, mips): (&dyn VoxelGrid, &RangeMips),
+    params: &TransmittanceParams,
+    times: &mut GpuTimes,
+) -> crate::Result<Estimate> {
+    if r.status & VOLUME_STATUS_NEGATIVE != 0 {
+        crate::error::bail!(
+            "transmittance: ray {i} meets values below 0; delta, ratio and residual \
+             tracking need a density >= 0"
+        );
+    }
+    if r.status & VOLUME_STATUS_MARCH_STEPS != 0 {
+        let step = match params.estimator {
+            Estimator::March { step } => step,
+            _ => 0.0,
+        };
+        crate::error::bail!(
+            "transmittance: ray {i}: a march step of {step} needs more than {} steps",
+            u32::MAX
+        );
+    }
+    if r.status & VOLUME_STATUS_LOOPS_CUT != 0 {
+        // The CPU twin, on the ray's own streams.
+        times.redone_on_cpu += 1;
+        return Ok(transmittance(grid, mips, ray, i as u32, params)?);
+    }
+    Ok(Estimate {
+        transmittance: f64::from(r.transmittance),
+        variance: f64::from(r.variance),
+        lookups: u64::from(r.lookups),
+        null_collisions: u64::from(r.null_collisions),
+    })
 }
 
 impl<'a> GpuVolume<'a> {
@@ -489,35 +655,6 @@ impl<'a> GpuVolume<'a> {
         self.upload_s
     }
 
-    /// The kernel's form of world ray `ray`: in the translated index space, moved near the
-    /// box when its origin is far; errors as [`IndexRay::from_world`].
-    fn kernel_ray(&self, ray: &Ray) -> Result<RayRecord, VolumeError> {
-        let r = IndexRay::from_world(ray, self.grid.map())?;
-        let origin: [f64; 3] = std::array::from_fn(|k| r.origin[k] - self.grid_upload.shift[k]);
-        let near = origin.iter().all(|c| c.abs() <= NEAR) && r.tmin.abs() <= NEAR;
-        let base = if near {
-            0.0
-        } else {
-            // The point nearest the box's centre, within [tmin, tmax].
-            let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            let to_centre = std::array::from_fn(|k| self.grid_upload.centre[k] - origin[k]);
-            (dot(to_centre, r.dir) / dot(r.dir, r.dir))
-                .min(r.tmax)
-                .max(r.tmin)
-        };
-        let gpu_f32 = f64::from(GPU_INF);
-        let local = |t: f64| (t - base).clamp(-gpu_f32, gpu_f32) as f32;
-        let (origin, origin_lo) = split_f64(std::array::from_fn(|k| origin[k] + base * r.dir[k]));
-        Ok(RayRecord {
-            origin,
-            tmin: local(r.tmin),
-            direction: r.dir.map(|v| v as f32),
-            tmax: local(r.tmax),
-            origin_lo,
-            pad: 0,
-        })
-    }
-
     /// The transmittance of every world ray (ray `i` uses the random streams of index `i`),
     /// with the upload, kernel and readback seconds of the batches. Errors as the CPU's
     /// [`hytrace_volume::transmittance_batch`] on bad parameters or rays (NaN, zero
@@ -530,47 +667,9 @@ impl<'a> GpuVolume<'a> {
         rays: &[Ray],
         params: &TransmittanceParams,
     ) -> crate::Result<(Vec<Estimate>, GpuTimes)> {
-        params.validate(self.grid, &self.mips)?;
-        if u32::try_from(rays.len()).is_err() {
-            crate::error::bail!(
-                "transmittance: {} rays in one batch, at most {}",
-                rays.len(),
-                u32::MAX
-            );
-        }
-        let records = rays
-            .iter()
-            .enumerate()
-            .map(|(i, r)| {
-                self.kernel_ray(r)
-                    .map_err(|e| VolumeError(format!("transmittance: ray {i}: {}", e.0)))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut p = self.grid_upload.base;
-        let (estimator, step) = match params.estimator {
-            Estimator::Exact => (VOLUME_ESTIMATOR_EXACT, 0.0),
-            Estimator::March { step } => (VOLUME_ESTIMATOR_MARCH, step as f32),
-            Estimator::Delta => (VOLUME_ESTIMATOR_DELTA, 0.0),
-            Estimator::Ratio => (VOLUME_ESTIMATOR_RATIO, 0.0),
-            Estimator::Residual => (VOLUME_ESTIMATOR_RESIDUAL, 0.0),
-        };
-        p.estimator = estimator;
-        p.march_step = step;
-        p.lookup_filter = match params.filter {
-            Filter::Nearest => VOLUME_FILTER_NEAREST,
-            Filter::Trilinear => VOLUME_FILTER_TRILINEAR,
-            Filter::Stochastic => VOLUME_FILTER_STOCHASTIC,
-        };
-        (p.global, p.finest) = match params.majorant {
-            Majorant::Global => (1, 0),
-            Majorant::Local { level } => (0, level as u32),
-        };
-        p.spp = params.spp;
-        p.seed = params.seed;
-        p.density_scale = params.density_scale as f32;
-        let limit = ctx.limits.max_storage_buffer_binding_size;
-        // Batches also bounded to keep one dispatch short (drivers may kill long ones).
-        let batch = (limit / size_of::<TransmittanceRecord>() as u64).clamp(1, 1 << 20) as usize;
+        let records = kernel_rays(self.grid, &self.mips, &self.grid_upload, rays, params)?;
+        let mut p = kernel_params(&self.grid_upload.base, params);
+        let batch = ray_batch(ctx);
         let mut out = Vec::with_capacity(rays.len());
         let mut times = GpuTimes::default();
         for (b, chunk) in records.chunks(batch).enumerate() {
@@ -579,32 +678,8 @@ impl<'a> GpuVolume<'a> {
             let results = self.dispatch(ctx, &p, chunk, &mut times)?;
             for (j, r) in results.iter().enumerate() {
                 let i = b * batch + j;
-                if r.status & VOLUME_STATUS_NEGATIVE != 0 {
-                    crate::error::bail!(
-                        "transmittance: ray {i} meets values below 0; delta, ratio and residual \
-                         tracking need a density >= 0"
-                    );
-                }
-                if r.status & VOLUME_STATUS_MARCH_STEPS != 0 {
-                    crate::error::bail!(
-                        "transmittance: ray {i}: a march step of {step} needs more than {} steps",
-                        u32::MAX
-                    );
-                }
-                if r.status & VOLUME_STATUS_LOOPS_CUT != 0 {
-                    // The CPU twin, on the ray's own streams.
-                    out.push(transmittance(
-                        self.grid, &self.mips, &rays[i], i as u32, params,
-                    )?);
-                    times.redone_on_cpu += 1;
-                    continue;
-                }
-                out.push(Estimate {
-                    transmittance: f64::from(r.transmittance),
-                    variance: f64::from(r.variance),
-                    lookups: u64::from(r.lookups),
-                    null_collisions: u64::from(r.null_collisions),
-                });
+                let twin = (self.grid, self.mips.as_ref());
+                out.push(record_estimate(r, i, &rays[i], twin, params, &mut times)?);
             }
         }
         Ok((out, times))

@@ -5,6 +5,7 @@ use std::time::Instant;
 use crate::error::{bail, Context};
 use hytrace_foundry::Foundry;
 
+use super::detector::{DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
@@ -88,12 +89,15 @@ pub struct RenderSettings {
     /// Render the solid of this name transparent (repeatable): to see inside a detector's
     /// enclosures (`hytrace info` lists the solids).
     pub transparent: Vec<String>,
+    /// The detector view's style (GDML and other hierarchical scenes).
+    pub detector: DetectorStyle,
 }
 
 impl RenderSettings {
     /// Sets these settings on the scene's render description, checks that every
-    /// transparent solid exists, and validates the result.
-    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> crate::Result<()> {
+    /// transparent solid exists, and validates the result. A hierarchical scene gets its
+    /// detector view, whose legend is returned.
+    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> crate::Result<Option<Legend>> {
         let s = &mut spec.settings;
         s.size = self.size.unwrap_or(s.size);
         s.spp = self.spp.unwrap_or(s.spp);
@@ -108,7 +112,18 @@ impl RenderSettings {
             }
             spec.transparent_solids.push(name.clone());
         }
-        spec.validate().context("render settings")
+        let mut legend = None;
+        if spec.volumes.is_empty() {
+            if self.detector != DetectorStyle::default() {
+                return Err(DetectorError::NotHierarchical.into());
+            }
+        } else {
+            let view = self.detector.apply(f, &spec.volumes)?;
+            spec.instance_materials = view.materials;
+            legend = Some(view.legend);
+        }
+        spec.validate().context("render settings")?;
+        Ok(legend)
     }
 }
 

@@ -458,3 +458,8 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
     }
     rays
 }
+
+/// Every `.gdml` file under `dir`, sorted.
+pub fn gdml_files(dir: &Path) -> Vec<PathBuf> {
+    hytrace_testkit::files::files_with_extension(dir, "gdml")
+}

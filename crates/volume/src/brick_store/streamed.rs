@@ -227,6 +227,46 @@ impl BrickStore {
         }
     }
 
+    /// The record of every brick, x fastest over [`StoreMeta::bricks`], or `None` for a
+    /// dropped brick: the page table a GPU brick pool starts from.
+    pub fn brick_records(&self) -> Vec<Option<u32>> {
+        let b = self.meta.bricks();
+        let mut out = Vec::with_capacity(b.iter().product());
+        for z in 0..b[2] {
+            for y in 0..b[1] {
+                for x in 0..b[0] {
+                    let r = self.table[self.meta.table_slot([x, y, z])];
+                    out.push((r != NO_RECORD).then_some(r));
+                }
+            }
+        }
+        out
+    }
+
+    /// The 16-bit codes of kept brick `record` (x fastest), read from disk past the cache
+    /// (a GPU brick pool keeps its own copies); counted in [`CacheStats::bricks_read`].
+    pub fn read_brick(&self, record: u32) -> Result<[u16; BRICK_VOXELS], StoreError> {
+        let bin = self.dir.join("bricks.bin");
+        if u64::from(record) >= self.meta.kept_bricks {
+            return Err(file_error(
+                &bin,
+                format!(
+                    "brick {record} is past the {} kept bricks",
+                    self.meta.kept_bricks
+                ),
+            ));
+        }
+        let mut bytes = vec![0u8; BRICK_BYTES];
+        read_at(&self.bricks, &mut bytes, record as u64 * BRICK_BYTES as u64)
+            .map_err(|e| file_error(&bin, format!("reading brick {record}: {e}")))?;
+        self.bricks_read.fetch_add(1, Ordering::Relaxed);
+        let mut codes = [0u16; BRICK_VOXELS];
+        for (c, b) in codes.iter_mut().zip(bytes.chunks_exact(2)) {
+            *c = u16::from_le_bytes([b[0], b[1]]);
+        }
+        Ok(codes)
+    }
+
     /// Kept brick `record`, from the cache or read from disk.
     fn brick(&self, record: u32) -> Option<Brick> {
         let shard = &self.shards[record as usize % SHARDS];
@@ -234,17 +274,14 @@ impl BrickStore {
             return Some(b.clone());
         }
         // Read outside the lock; two threads missing the same brick both read it.
-        let mut bytes = vec![0u8; BRICK_BYTES];
-        if let Err(e) = read_at(&self.bricks, &mut bytes, record as u64 * BRICK_BYTES as u64) {
-            let mut failure = self.failure.lock().unwrap_or_else(|e| e.into_inner());
-            failure.get_or_insert_with(|| format!("reading brick {record}: {e}"));
-            return None;
-        }
-        self.bricks_read.fetch_add(1, Ordering::Relaxed);
-        let mut codes = [0u16; BRICK_VOXELS];
-        for (c, b) in codes.iter_mut().zip(bytes.chunks_exact(2)) {
-            *c = u16::from_le_bytes([b[0], b[1]]);
-        }
+        let codes = match self.read_brick(record) {
+            Ok(codes) => codes,
+            Err(e) => {
+                let mut failure = self.failure.lock().unwrap_or_else(|e| e.into_inner());
+                failure.get_or_insert_with(|| e.problem);
+                return None;
+            }
+        };
         let brick: Brick = Arc::new(codes);
         shard
             .lock()

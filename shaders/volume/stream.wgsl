@@ -1,0 +1,39 @@
+// A brick store streamed through the GPU's brick pool (crates/trace/src/gpu/brick_pool.rs):
+// the page table is the indirection, whose entries are pool slots, VOLUME_NO_BRICK for a
+// dropped brick, or VOLUME_ABSENT_BRICK for a kept brick not in the pool. A lookup there
+// records the brick in the request list (once a pass: a per-brick flag bit set atomically
+// decides which invocation appends it), marks the invocation's item as missing (its answer
+// is discarded and it runs again after the host uploads the brick) and reads the
+// background. A lookup in a resident brick stamps its slot with the pass number, which
+// the host's least-recently-used eviction reads.
+// #import generated/trace_records
+
+// Header (STREAM_* words), then the request list, the flag bits, the slot stamps.
+@group(0) @binding(20) var<storage, read_write> stream_state: array<atomic<u32>>;
+
+// Whether this invocation read a brick that is not in the pool.
+var<private> stream_missing: bool = false;
+// The slot this invocation stamped last (consecutive lookups mostly share a brick).
+var<private> stream_last_slot: u32 = 0xffffffffu;
+
+// Records brick `brick` (its index in the page table) as needed and missing.
+fn stream_request(brick: u32) {
+    stream_missing = true;
+    let bit = 1u << (brick & 31u);
+    let word = atomicLoad(&stream_state[STREAM_FLAGS]) + (brick >> 5u);
+    if (atomicOr(&stream_state[word], bit) & bit) == 0u {
+        let k = atomicAdd(&stream_state[STREAM_REQUESTED], 1u);
+        if k < atomicLoad(&stream_state[STREAM_CAPACITY]) {
+            atomicStore(&stream_state[STREAM_HEADER_WORDS + k], brick);
+        }
+    }
+}
+
+// Stamps pool slot `slot` as used in this pass.
+fn stream_touch(slot: u32) {
+    if slot != stream_last_slot {
+        stream_last_slot = slot;
+        let stamps = atomicLoad(&stream_state[STREAM_STAMPS]);
+        atomicMax(&stream_state[stamps + slot], atomicLoad(&stream_state[STREAM_PASS]));
+    }
+}
