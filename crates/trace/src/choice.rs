@@ -90,3 +90,60 @@ macro_rules! named {
 }
 
 pub(crate) use named;
+
+#[cfg(test)]
+mod tests {
+    use super::{Named, UnknownName};
+    use crate::volume::Repr;
+
+    /// Every value of `T` is read back from its name and each of its aliases.
+    fn round_trips<T: Named + std::fmt::Debug>() {
+        for c in T::CHOICES {
+            assert_eq!(T::from_name(c.name), Some(c.value), "{}", c.name);
+            assert_eq!(c.value.name(), c.name);
+            for alias in c.aliases {
+                assert_eq!(T::from_name(alias), Some(c.value), "{alias}");
+            }
+        }
+    }
+
+    #[test]
+    fn every_table_names_each_value_once() {
+        round_trips::<crate::sweep::Sweep>();
+        round_trips::<crate::volume::Space>();
+        round_trips::<crate::volume::FilterArg>();
+        round_trips::<Repr>();
+        round_trips::<crate::volume::EstimatorArg>();
+        round_trips::<crate::volume::VolumeBackend>();
+        round_trips::<crate::volume::RawTypeArg>();
+        round_trips::<crate::volume::EndianArg>();
+        round_trips::<crate::render::run::RenderBackend>();
+        round_trips::<crate::render::spec::View>();
+        round_trips::<crate::render::spec::VolumeMode>();
+        round_trips::<crate::render::detector::ColorBy>();
+        round_trips::<crate::gpu::TexelStore>();
+        round_trips::<crate::scan::Backend>();
+        round_trips::<crate::scan::Precision>();
+    }
+
+    #[test]
+    fn names_parse_display_and_others_are_refused_with_the_list() {
+        assert_eq!("bc4".parse::<Repr>(), Ok(Repr::Bc4));
+        assert_eq!("source".parse::<Repr>(), Ok(Repr::Nanovdb));
+        assert_eq!(Repr::Unorm16.to_string(), "unorm16");
+        let e = "jpeg".parse::<Repr>().unwrap_err();
+        assert_eq!(
+            e,
+            UnknownName {
+                value: "jpeg".into(),
+                names: vec!["nanovdb", "bc4", "unorm8", "unorm16", "f16", "f32"],
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "invalid value 'jpeg' [possible values: nanovdb, bc4, unorm8, unorm16, f16, f32]"
+        );
+        // Names are matched exactly, as the command line matches them.
+        assert!("BC4".parse::<Repr>().is_err());
+    }
+}

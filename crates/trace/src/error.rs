@@ -178,3 +178,52 @@ macro_rules! ensure {
 }
 
 pub(crate) use {bail, ensure};
+
+#[cfg(test)]
+mod tests {
+    use std::io::{Error as IoError, ErrorKind};
+
+    use super::*;
+
+    #[test]
+    fn contexts_show_their_causes_and_a_report_writes_each_once() {
+        let e = Error::from(IoError::new(ErrorKind::NotFound, "no such file"))
+            .context("scene.toml")
+            .context("loading the scene");
+        assert_eq!(e.to_string(), "loading the scene: scene.toml: no such file");
+        assert_eq!(report(&e), e.to_string());
+        // The cause is found by type under the contexts.
+        assert!(matches!(e.without_context(), Error::Io(io) if io.kind() == ErrorKind::NotFound));
+        let io = std::iter::successors(Some(&e as &dyn std::error::Error), |&c| c.source())
+            .find_map(|c| c.downcast_ref::<IoError>());
+        assert_eq!(io.map(IoError::kind), Some(ErrorKind::NotFound));
+
+        // An error that leaves its cause out of its message gets it added.
+        #[derive(Debug, thiserror::Error)]
+        #[error("cannot read")]
+        struct Terse(#[source] IoError);
+        let terse = Terse(IoError::new(ErrorKind::NotFound, "no such file"));
+        assert_eq!(report(&terse), "cannot read: no such file");
+    }
+
+    #[test]
+    fn options_and_checks_give_invalid_errors() {
+        assert_eq!(
+            None::<u32>
+                .context("no grid `density`")
+                .unwrap_err()
+                .to_string(),
+            "no grid `density`"
+        );
+        let check = |x: f64| -> Result<()> {
+            ensure!(x > 0.0, "x must be > 0, got {x}");
+            Ok(())
+        };
+        assert!(check(1.0).is_ok());
+        assert_eq!(
+            check(-1.0).unwrap_err().to_string(),
+            "x must be > 0, got -1"
+        );
+        assert!(matches!(check(f64::NAN), Err(Error::Invalid(_))));
+    }
+}
