@@ -15,6 +15,7 @@ use hytrace_volume::Rng;
 
 use super::bulk::rotate_uz;
 use super::{PhotonError, V};
+use crate::number_list::{parse_numbers, NumberListError};
 
 /// A photon source.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,24 +99,13 @@ pub struct Start {
 }
 
 fn numbers<const N: usize>(text: &str, spec: &str, what: &str) -> Result<[f64; N], PhotonError> {
-    let bad = |problem: String| PhotonError::Source {
+    parse_numbers(text).map_err(|e| PhotonError::Source {
         spec: spec.to_string(),
-        problem,
-    };
-    let parts: Vec<&str> = text.split(',').collect();
-    if parts.len() != N {
-        return Err(bad(format!("{what} needs {N} numbers, got `{text}`")));
-    }
-    let mut out = [0.0; N];
-    for (o, p) in out.iter_mut().zip(&parts) {
-        *o = p
-            .trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| bad(format!("{what}: `{}` is not a finite number", p.trim())))?;
-    }
-    Ok(out)
+        problem: match e {
+            NumberListError::Count { .. } => format!("{what} needs {N} numbers, got `{text}`"),
+            NumberListError::NotFinite(item) => format!("{what}: `{item}` is not a finite number"),
+        },
+    })
 }
 
 impl Source {

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::bail;
+use crate::error::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{write_array, write_atomically};
 
@@ -35,7 +35,7 @@ pub fn srgb8(linear: f32) -> u8 {
 
 impl Image {
     /// The PNG file's bytes: 8-bit sRGB.
-    pub fn png_bytes(&self) -> anyhow::Result<Vec<u8>> {
+    pub fn png_bytes(&self) -> crate::Result<Vec<u8>> {
         let mut bytes = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
@@ -53,7 +53,7 @@ impl Image {
 /// Writes `image` to `path` as PNG (`.png`) or NumPy (`.npy`, float32
 /// `(height, width, 3)`), through a temporary file in the same folder renamed into place,
 /// so no partial file is ever left.
-pub fn write_image(image: &Image, path: &Path) -> anyhow::Result<()> {
+pub fn write_image(image: &Image, path: &Path) -> crate::Result<()> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
