@@ -2,6 +2,7 @@
 // of its records (crates/trace/src/gpu/records.rs: RenderParams, RenderItem, RenderInstance,
 // RenderMedium), shared by the render modules.
 // #import generated/trace_records
+// #import trace/scene
 
 @group(2) @binding(0) var<storage, read> rparams: RenderParams;
 @group(2) @binding(1) var<storage, read> items: array<RenderItem>;

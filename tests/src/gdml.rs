@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use hytrace_testkit::files::files_with_extension;
 use serde::Deserialize;
 
 use crate::f64_array;
@@ -25,26 +26,11 @@ pub fn gdml_dir() -> PathBuf {
 /// Every `.gdml` file under [`gdml_dir`], sorted, then the project's own files of
 /// `tests/data/gdml` (features the public files do not use).
 pub fn gdml_files() -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "gdml") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(&gdml_dir(), &mut files);
-    files.sort();
-    let mut own = Vec::new();
-    walk(
+    let mut files = files_with_extension(&gdml_dir(), "gdml");
+    files.extend(files_with_extension(
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("data/gdml"),
-        &mut own,
-    );
-    own.sort();
-    files.extend(own);
+        "gdml",
+    ));
     files
 }
 

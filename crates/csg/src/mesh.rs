@@ -268,9 +268,9 @@ impl<T: Real> MeshPrim<T> {
                 wide::WideBvh::new(&nodes, &triangles)
             })
             .transpose()
-            .map_err(|problem| CsgError {
+            .map_err(|e| CsgError {
                 primitive: "mesh",
-                problem,
+                problem: e.to_string(),
             })?;
         Ok(MeshPrim {
             triangles: ordered,

@@ -327,7 +327,7 @@ impl<T: Real> PrimTree<T> {
                     let start = members.len();
                     for index in first..first + count as usize {
                         let m = &foundry.node[index];
-                        let leaf = make_leaf(foundry, index, &mut planes).map_err(err)?;
+                        let leaf = make_leaf(foundry, index, &mut planes, &err)?;
                         if leaf.complement || !is_bounded(leaf.code) {
                             return Err(err(
                                 "list members must be bounded, uncomplemented primitives".into(),
@@ -341,7 +341,7 @@ impl<T: Real> PrimTree<T> {
                         bounds: bounds_of(&n.aabb),
                     }
                 }
-                _ => Slot::Leaf(make_leaf(foundry, index, &mut planes).map_err(err)?),
+                _ => Slot::Leaf(make_leaf(foundry, index, &mut planes, &err)?),
             });
         }
         let [lo, hi] = bounds_of(&p.aabb);
@@ -705,16 +705,17 @@ pub(crate) fn probe_direction(k: usize) -> [f64; 3] {
 }
 
 /// The leaf of node `index`, its parameters and planes from the double-precision copies
-/// (rounded to `T`: exactly the f32 values for f32).
+/// (rounded to `T`: exactly the f32 values for f32); errors are made by `err`.
 fn make_leaf<T: Real>(
     foundry: &Foundry,
     index: usize,
     planes: &mut Vec<[T; 4]>,
-) -> Result<Leaf<T>, String> {
+    err: &impl Fn(String) -> CsgError,
+) -> Result<Leaf<T>, CsgError> {
     let n = &foundry.node[index];
     let code = TypeCode::from_u32(n.typecode)
         .filter(|c| c.is_primitive())
-        .ok_or_else(|| format!("typecode {} is not a primitive", n.typecode))?;
+        .ok_or_else(|| err(format!("typecode {} is not a primitive", n.typecode)))?;
     let tran = (n.transform & !COMPLEMENT_BIT) as usize;
     let frame = match tran {
         0 => None,
@@ -722,8 +723,11 @@ fn make_leaf<T: Real>(
             let t = foundry
                 .tran
                 .get(k - 1)
-                .ok_or_else(|| format!("transform {k} out of range"))?;
-            Some(Frame::from_transform(t).ok_or_else(|| format!("transform {k} is singular"))?)
+                .ok_or_else(|| err(format!("transform {k} out of range")))?;
+            Some(
+                Frame::from_transform(t)
+                    .ok_or_else(|| err(format!("transform {k} is singular")))?,
+            )
         }
     };
     let mut leaf_planes = 0..0;
@@ -732,7 +736,7 @@ fn make_leaf<T: Real>(
         let src = foundry
             .plan64
             .get(first..first + count)
-            .ok_or_else(|| "planes out of range".to_string())?;
+            .ok_or_else(|| err("planes out of range".to_string()))?;
         let start = planes.len();
         planes.extend(src.iter().map(|p| p.plane.map(T::from_f64)));
         leaf_planes = start..planes.len();
@@ -740,7 +744,7 @@ fn make_leaf<T: Real>(
     let params = foundry
         .node64
         .get(index)
-        .ok_or_else(|| format!("node {index} has no double-precision parameters"))?
+        .ok_or_else(|| err(format!("node {index} has no double-precision parameters")))?
         .param
         .map(T::from_f64);
     Ok(Leaf {

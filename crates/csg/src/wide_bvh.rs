@@ -46,6 +46,35 @@ pub const MAX_DEPTH: usize = 64;
 /// and the wide tree is at most [`MAX_DEPTH`] levels deep.
 const STACK: usize = (WIDTH - 1) * MAX_DEPTH + 1;
 
+/// A binary BVH that cannot be collapsed into a wide tree.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WideBvhError {
+    /// An inner node names children past the end of the node list.
+    #[error("BVH node {node} names children {first} and {second} of {nodes} nodes")]
+    MissingChild {
+        /// The inner node.
+        node: usize,
+        /// Its first child.
+        first: u32,
+        /// Its second child.
+        second: u64,
+        /// Nodes in the tree.
+        nodes: usize,
+    },
+    /// The tree is deeper than [`MAX_DEPTH`] (a cycle included).
+    #[error("a BVH over {nodes} nodes is deeper than {MAX_DEPTH} levels")]
+    TooDeep {
+        /// Nodes in the tree.
+        nodes: usize,
+    },
+    /// The leaf callback stored a leaf with no items.
+    #[error("leaf node {node} was stored with no items")]
+    EmptyLeaf {
+        /// The leaf.
+        node: usize,
+    },
+}
+
 /// A node of the binary BVH a wide tree is collapsed from: its box, then either children
 /// `first, first + 1` (`count == 0`) or a leaf's `count` items from `first`.
 #[derive(Clone, Copy, Debug)]
@@ -102,17 +131,17 @@ impl WideTree {
     pub fn new(
         nodes: &[BinaryNode],
         mut leaf: impl FnMut(u32, u32) -> (u32, u32),
-    ) -> Result<Self, String> {
+    ) -> Result<Self, WideBvhError> {
         if let Some(i) = nodes
             .iter()
             .position(|n| n.count == 0 && n.first as usize + 1 >= nodes.len())
         {
-            return Err(format!(
-                "BVH node {i} names children {} and {} of {} nodes",
-                nodes[i].first,
-                nodes[i].first as u64 + 1,
-                nodes.len()
-            ));
+            return Err(WideBvhError::MissingChild {
+                node: i,
+                first: nodes[i].first,
+                second: nodes[i].first as u64 + 1,
+                nodes: nodes.len(),
+            });
         }
         let mut tree = WideTree {
             nodes: Vec::with_capacity(nodes.len() / 4 + 1),
@@ -125,7 +154,7 @@ impl WideTree {
 
     /// The wide form of an obvhs binary BVH whose leaves keep their ranges of the BVH's
     /// `primitive_indices`; an error when it is deeper than [`MAX_DEPTH`].
-    pub fn from_bvh2(bvh: &Bvh2) -> Result<Self, String> {
+    pub fn from_bvh2(bvh: &Bvh2) -> Result<Self, WideBvhError> {
         let binary: Vec<BinaryNode> = bvh
             .nodes
             .iter()
@@ -146,12 +175,9 @@ impl WideTree {
         index: usize,
         depth: usize,
         leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
-    ) -> Result<u32, String> {
+    ) -> Result<u32, WideBvhError> {
         if depth > MAX_DEPTH {
-            return Err(format!(
-                "a BVH over {} nodes is deeper than {MAX_DEPTH} levels",
-                nodes.len()
-            ));
+            return Err(WideBvhError::TooDeep { nodes: nodes.len() });
         }
         let n = &nodes[index];
         let mut children = if n.count == 0 {
@@ -189,7 +215,7 @@ impl WideTree {
                 (self.collapse(nodes, c, depth + 1, leaf)?, 0)
             } else {
                 match leaf(node.first, node.count) {
-                    (_, 0) => return Err(format!("leaf node {c} was stored with no items")),
+                    (_, 0) => return Err(WideBvhError::EmptyLeaf { node: c }),
                     stored => stored,
                 }
             };
@@ -709,14 +735,18 @@ mod tests {
         let keep = |first, count| (first, count);
         // A child index past the end.
         let err = WideTree::new(&[node(1, 0), node(0, 1)], keep).unwrap_err();
-        assert!(err.contains("names children 1 and 2 of 2 nodes"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("names children 1 and 2 of 2 nodes"),
+            "{err}"
+        );
         // A cycle: node 1's children are the root and node 1 again.
         let err = WideTree::new(&[node(1, 0), node(0, 0), node(0, 1)], keep).unwrap_err();
-        assert!(err.contains("deeper than"), "{err}");
+        assert!(err.to_string().contains("deeper than"), "{err}");
         // A leaf stored with no items.
         let err = WideTree::new(&[node(1, 0), node(0, 1), node(1, 1)], |first, _| (first, 0))
             .unwrap_err();
-        assert!(err.contains("no items"), "{err}");
+        assert!(err.to_string().contains("no items"), "{err}");
         assert!(WideTree::new(&[node(1, 0), node(0, 1), node(1, 1)], keep).is_ok());
     }
 }

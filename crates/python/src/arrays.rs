@@ -1,6 +1,7 @@
 //! NumPy arrays in and out: rows of floats borrowed in place where their layout allows,
 //! checked with the command line's messages; results handed over without a copy.
 
+use hytrace_trace::error::report;
 use hytrace_trace::scan::{check_row_shape, not_float_rows, rays_from_rows, RayRow};
 use numpy::{
     Element, PyArray1, PyArrayDescrMethods, PyArrayMethods, PyReadonlyArray2, PyUntypedArray,
@@ -97,7 +98,7 @@ pub fn float_rows<'py, const W: usize>(
 /// Validated rays (finite origins, non-zero finite directions, finite `tmin < tmax`),
 /// errors naming the first bad ray as the command does.
 pub fn ray_rows(rows: &[[f64; 8]]) -> Result<Vec<RayRow>, Error> {
-    rays_from_rows(rows, "rays").map_err(|e| value_error(format!("{e:#}")))
+    rays_from_rows(rows, "rays").map_err(|e| value_error(report(&e)))
 }
 
 /// `values` as an `(n, width)` array, without a copy.

@@ -1,9 +1,11 @@
 //! Errors as Python exceptions: the classes of `hytrace/_errors.py`, carrying the messages
 //! the command line prints after `hytrace: error: `.
 
+use std::error::Error as StdError;
 use std::io::ErrorKind;
 use std::path::Path;
 
+use hytrace_trace::choice::Named;
 use hytrace_trace::photons::PhotonError;
 use pyo3::prelude::*;
 use pyo3::types::PyType;
@@ -40,25 +42,26 @@ impl From<Error> for PyErr {
 
 /// A library error: `HytraceFileNotFoundError` when a file is missing,
 /// `HytraceValueError` for bad photon run input or sources, else `HytraceError`.
-pub fn library_error(e: anyhow::Error) -> Error {
-    classify(e, false)
+pub fn library_error(e: impl Into<hytrace_trace::Error>) -> Error {
+    classify(e.into(), false)
 }
 
 /// The error of opening `input`, a file the caller named: as [`library_error`], and a
 /// `HytraceFileNotFoundError` whenever that file does not exist (the readers of GDML and
 /// volume files report it in their own words).
-pub fn open_error(input: &Path) -> impl Fn(anyhow::Error) -> Error + '_ {
+pub fn open_error(input: &Path) -> impl Fn(hytrace_trace::Error) -> Error + '_ {
     |e| classify(e, !input.exists())
 }
 
 /// [`library_error`], a missing file whenever `missing`.
-fn classify(e: anyhow::Error, missing: bool) -> Error {
+fn classify(e: hytrace_trace::Error, missing: bool) -> Error {
+    let causes = || std::iter::successors(Some(&e as &dyn StdError), |&c| c.source());
     let missing = missing
-        || e.chain().any(|c| {
+        || causes().any(|c| {
             c.downcast_ref::<std::io::Error>()
                 .is_some_and(|io| io.kind() == ErrorKind::NotFound)
         });
-    let bad_input = e.chain().any(|c| {
+    let bad_input = causes().any(|c| {
         matches!(
             c.downcast_ref::<PhotonError>(),
             Some(PhotonError::Input(_) | PhotonError::Source { .. })
@@ -71,7 +74,7 @@ fn classify(e: anyhow::Error, missing: bool) -> Error {
     };
     Error {
         class,
-        message: format!("{e:#}"),
+        message: hytrace_trace::error::report(&e),
     }
 }
 
@@ -93,16 +96,11 @@ pub fn type_error(message: String) -> Error {
 
 /// The value of option `name` among the command line's choices (the same names), or a
 /// `HytraceValueError` listing them.
-pub fn choice<T: clap::ValueEnum>(name: &str, value: &str) -> Result<T, Error> {
-    T::from_str(value, false).map_err(|_| {
-        let names: Vec<String> = T::value_variants()
-            .iter()
-            .filter_map(|v| v.to_possible_value())
-            .map(|p| p.get_name().to_string())
-            .collect();
+pub fn choice<T: Named>(name: &str, value: &str) -> Result<T, Error> {
+    T::from_name(value).ok_or_else(|| {
         value_error(format!(
             "invalid value '{value}' for '{name}' [possible values: {}]",
-            names.join(", ")
+            T::names().join(", ")
         ))
     })
 }

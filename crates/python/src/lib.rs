@@ -16,6 +16,7 @@ use std::sync::OnceLock;
 
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
+use hytrace_trace::error::report;
 use hytrace_trace::gpu::TexelStore;
 use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
@@ -246,7 +247,7 @@ impl Scene {
         let mut spec = self.render_spec.clone();
         settings
             .apply(f, &mut spec)
-            .map_err(|e| value_error(format!("{e:#}")))?;
+            .map_err(|e| value_error(report(&e)))?;
         let rendered = py
             .detach(|| render(f, &spec, backend, texels, &|_| {}))
             .map_err(library_error)?;
@@ -279,7 +280,7 @@ impl Scene {
         first: u64,
         histories: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let source = Source::parse(source).map_err(|e| library_error(e.into()))?;
+        let source = Source::parse(source).map_err(library_error)?;
         let options = RunOptions {
             source,
             wavelength: Wavelength::Fixed(wavelength),
@@ -395,7 +396,7 @@ impl Volume {
         let space: volume::Space = choice("space", space)?;
         let rows = float_rows::<3>(points, "points", "")?;
         let points = rows.rows();
-        volume::check_points(points, "points").map_err(|e| value_error(format!("{e:#}")))?;
+        volume::check_points(points, "points").map_err(|e| value_error(report(&e)))?;
         let grid = &self.grid;
         let values = py
             .detach(|| match majorant {

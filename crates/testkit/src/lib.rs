@@ -5,6 +5,8 @@
 //! The library's own generator (`hytrace_volume::Rng`, a counter-based stream the kernels
 //! share with the GPU) is not here: tests that compare against kernels use it directly.
 
+pub mod files;
+pub mod torus;
 pub mod vec3;
 
 /// How many inputs a fuzz or property test tries: `default` (sized for CI's time), or the

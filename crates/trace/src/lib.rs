@@ -5,11 +5,14 @@
 //! command line reads ([`scene`]).
 
 pub mod accuracy;
+pub mod choice;
 pub mod cpu;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod error;
 pub mod gpu;
 pub mod memory;
+pub mod number_list;
 pub mod outputs;
 pub mod photons;
 pub mod progress;
@@ -19,3 +22,5 @@ pub mod scan;
 pub mod scene;
 pub mod sweep;
 pub mod volume;
+
+pub use error::{Error, Result};

@@ -21,7 +21,10 @@ fn main() -> ExitCode {
     match cli::run(cli::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("hytrace: error: {e:#}");
+            eprintln!(
+                "hytrace: error: {}",
+                hytrace_trace::error::report(e.as_ref())
+            );
             ExitCode::FAILURE
         }
     }

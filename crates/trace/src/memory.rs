@@ -10,21 +10,39 @@ pub fn available_bytes() -> Option<u64> {
     kib.checked_mul(1024)
 }
 
+/// A request for more memory than is available, or a byte count that cannot be parsed.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum MemoryError {
+    /// `what` needs more memory than is available.
+    #[error("{what} needs about {} of memory, more than the {} available", human(*needed), human(*available))]
+    TooLarge {
+        /// What needs the memory.
+        what: String,
+        /// Bytes it needs.
+        needed: u64,
+        /// Bytes available.
+        available: u64,
+    },
+    /// The text is not a byte count.
+    #[error("`{0}`: not a byte count (e.g. 4096, 512M, 2G)")]
+    NotBytes(String),
+}
+
 /// An error when `bytes` (what `what` needs) exceed the available memory.
-pub fn check_fits(what: &str, bytes: u64) -> Result<(), String> {
+pub fn check_fits(what: &str, bytes: u64) -> Result<(), MemoryError> {
     match available_bytes() {
-        Some(free) if bytes > free => Err(format!(
-            "{what} needs about {} of memory, more than the {} available",
-            human(bytes),
-            human(free)
-        )),
+        Some(free) if bytes > free => Err(MemoryError::TooLarge {
+            what: what.to_string(),
+            needed: bytes,
+            available: free,
+        }),
         _ => Ok(()),
     }
 }
 
 /// Parses a byte count: digits with an optional binary unit `K`, `M`, `G` or `T` (`KiB`,
 /// `MB`... also read as powers of 1024), e.g. `2G`, `512MiB`, `1048576`.
-pub fn parse_bytes(text: &str) -> Result<u64, String> {
+pub fn parse_bytes(text: &str) -> Result<u64, MemoryError> {
     let t = text.trim();
     let digits = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
     let (number, unit) = t.split_at(digits);
@@ -34,13 +52,13 @@ pub fn parse_bytes(text: &str) -> Result<u64, String> {
         "M" | "MB" | "MIB" => 20,
         "G" | "GB" | "GIB" => 30,
         "T" | "TB" | "TIB" => 40,
-        _ => return Err(format!("`{text}`: not a byte count (e.g. 4096, 512M, 2G)")),
+        _ => return Err(MemoryError::NotBytes(text.to_string())),
     };
     number
         .parse::<u64>()
         .ok()
         .and_then(|n| n.checked_mul(1u64 << shift))
-        .ok_or_else(|| format!("`{text}`: not a byte count (e.g. 4096, 512M, 2G)"))
+        .ok_or_else(|| MemoryError::NotBytes(text.to_string()))
 }
 
 /// A byte count with a binary unit.
@@ -67,7 +85,9 @@ mod tests {
     fn sizes_beyond_the_machine_are_refused_by_name() {
         assert!(check_fits("a small scan", 1024).is_ok());
         if available_bytes().is_some() {
-            let e = check_fits("--count 10^9", u64::MAX).unwrap_err();
+            let e = check_fits("--count 10^9", u64::MAX)
+                .unwrap_err()
+                .to_string();
             assert!(e.starts_with("--count 10^9 needs about 16.0 EiB"), "{e}");
         }
         assert_eq!(human(3 * 1024 * 1024 * 1024), "3.0 GiB");

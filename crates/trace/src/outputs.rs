@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_foundry::npy::{temporary_beside, TrackedTemporary};
 use tempfile::TempPath;
 
@@ -21,7 +21,7 @@ pub struct OutputSet {
 /// Checks before any work that every output can be written where asked: no path is an
 /// existing directory and no two outputs share a path. `outputs` pairs each path with the
 /// option that named it, for the message.
-pub fn check_destinations(outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+pub fn check_destinations(outputs: &[(&str, &Path)]) -> crate::Result<()> {
     for (i, (option, path)) in outputs.iter().enumerate() {
         if path.is_dir() {
             bail!("{option} {}: is a directory, not a file", path.display());
@@ -44,8 +44,8 @@ impl OutputSet {
     pub fn stage(
         &mut self,
         dest: &Path,
-        write: impl FnOnce(&Path) -> anyhow::Result<()>,
-    ) -> anyhow::Result<()> {
+        write: impl FnOnce(&Path) -> crate::Result<()>,
+    ) -> crate::Result<()> {
         let context = || format!("writing {}", dest.display());
         let tmp = temporary_beside(dest)
             .with_context(context)?
@@ -57,7 +57,7 @@ impl OutputSet {
     }
 
     /// Moves every staged output into place.
-    pub fn commit(self) -> anyhow::Result<()> {
+    pub fn commit(self) -> crate::Result<()> {
         for (tmp, dest, _tracked) in self.staged {
             tmp.persist(&dest)
                 .map_err(|e| e.error)

@@ -12,7 +12,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_csg::{Ray, Real};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
@@ -28,7 +28,7 @@ use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
 
 /// Which tracer answers a scan.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
     /// Our CPU tracer ([`CpuScene`]), in f32 or f64.
     #[default]
@@ -41,14 +41,26 @@ pub enum Backend {
     Auto,
 }
 
+crate::choice::named!(Backend {
+    (Backend::Cpu, "cpu", [], "Our CPU tracer ([`CpuScene`]), in f32 or f64"),
+    (Backend::Embree, "embree", [], "Embree 3 (f32; builds with the `embree` feature only)"),
+    (Backend::Gpu, "gpu", [], "Our GPU tracer through wgpu (f32): the scan kernel, twin of the CPU's f32 tracer"),
+    (Backend::Auto, "auto", [], "The GPU when one can be opened, else the CPU (with a note on stderr)"),
+});
+
 /// Arithmetic precision of the intersection kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Precision {
     /// Single precision (what the GPU runs).
     F32,
     /// Double precision.
     F64,
 }
+
+crate::choice::named!(Precision {
+    (Precision::F32, "f32", [], "Single precision (what the GPU runs)"),
+    (Precision::F64, "f64", [], "Double precision"),
+});
 
 /// One validated ray in f64: origin, unit direction, parameter range.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,7 +77,7 @@ pub struct RayRow {
 
 /// Validates raw `(N, 8)` rows (in parallel), naming `source` and the first bad row in
 /// errors.
-pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<RayRow>> {
+pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> crate::Result<Vec<RayRow>> {
     // Checked first, so that the rays are collected straight into place (an indexed
     // collect) and the error names the first bad row.
     if let Some(i) = rows.par_iter().position_first(|r| ray_of_row(r).is_err()) {
@@ -78,20 +90,33 @@ pub fn rays_from_rows(rows: &[[f64; 8]], source: &str) -> anyhow::Result<Vec<Ray
         .collect())
 }
 
+/// What is wrong with a ray row.
+#[derive(Debug, thiserror::Error)]
+enum RowError {
+    #[error("origin {0:?} is not finite")]
+    Origin([f64; 3]),
+    #[error("direction {0:?} is not finite")]
+    Direction([f64; 3]),
+    #[error("direction {0:?} has zero length")]
+    ZeroDirection([f64; 3]),
+    #[error("needs finite tmin < tmax, got {0} {1}")]
+    Interval(f64, f64),
+}
+
 /// One validated ray, or what is wrong with the row.
-fn ray_of_row(r: &[f64; 8]) -> Result<RayRow, String> {
+fn ray_of_row(r: &[f64; 8]) -> Result<RayRow, RowError> {
     let o = [r[0], r[1], r[2]];
     let d = [r[4], r[5], r[6]];
     let (tmin, tmax) = (r[3], r[7]);
     if !o.iter().all(|v| v.is_finite()) {
-        return Err(format!("origin {o:?} is not finite"));
+        return Err(RowError::Origin(o));
     }
     if !d.iter().all(|v| v.is_finite()) {
-        return Err(format!("direction {d:?} is not finite"));
+        return Err(RowError::Direction(d));
     }
     let largest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if largest == 0.0 {
-        return Err(format!("direction {d:?} has zero length"));
+        return Err(RowError::ZeroDirection(d));
     }
     let mut len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     // Squares of components like 1e200 or 1e-200 overflow or vanish: scaled by the largest
@@ -104,7 +129,7 @@ fn ray_of_row(r: &[f64; 8]) -> Result<RayRow, String> {
         d
     };
     if !tmin.is_finite() || tmax.is_nan() || tmin >= tmax {
-        return Err(format!("needs finite tmin < tmax, got {tmin} {tmax}"));
+        return Err(RowError::Interval(tmin, tmax));
     }
     Ok(RayRow {
         origin: o,
@@ -120,7 +145,7 @@ pub fn read_float_rows<const W: usize>(
     path: &Path,
     what: &str,
     columns: &str,
-) -> anyhow::Result<Vec<[f64; W]>> {
+) -> crate::Result<Vec<[f64; W]>> {
     let a = read_array(path)?;
     let source = path.display().to_string();
     check_row_shape::<W>(&a.shape, &source, what, columns)?;
@@ -145,7 +170,7 @@ pub fn check_row_shape<const W: usize>(
     source: &str,
     what: &str,
     columns: &str,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     if shape.len() != 2 || shape[1] != W as u64 {
         bail!("{source}: {what} need shape (N, {W}){columns}, got {shape:?}");
     }
@@ -154,21 +179,23 @@ pub fn check_row_shape<const W: usize>(
 
 /// The error of rows whose element type `got` is not float32 or float64 (the message of
 /// [`read_float_rows`], for arrays from elsewhere too).
-pub fn not_float_rows(source: &str, what: &str, got: &str) -> anyhow::Error {
-    anyhow::anyhow!("{source}: {what} must be float32 or float64, got {got}")
+pub fn not_float_rows(source: &str, what: &str, got: &str) -> crate::Error {
+    crate::Error::Invalid(format!(
+        "{source}: {what} must be float32 or float64, got {got}"
+    ))
 }
 
 /// The columns of a rays array, as errors describe them.
 pub const RAY_COLUMNS: &str = " (ox oy oz tmin dx dy dz tmax)";
 
 /// Reads and validates a rays file.
-pub fn read_rays(path: &Path) -> anyhow::Result<Vec<RayRow>> {
+pub fn read_rays(path: &Path) -> crate::Result<Vec<RayRow>> {
     let rows = read_float_rows::<8>(path, "rays", RAY_COLUMNS)?;
     rays_from_rows(&rows, &path.display().to_string())
 }
 
 /// Writes rays as an `(N, 8)` float64 array.
-pub fn write_rays(path: &Path, rays: &[RayRow]) -> anyhow::Result<()> {
+pub fn write_rays(path: &Path, rays: &[RayRow]) -> crate::Result<()> {
     let flat: Vec<f64> = rays
         .iter()
         .flat_map(|r| {
@@ -213,8 +240,8 @@ pub const ID_COLUMNS: usize = 3;
 fn trace_all<T: Real>(
     f: &Foundry,
     rays: &[RayRow],
-    trace: impl Fn(&Ray<f64>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
-) -> anyhow::Result<ScanResult> {
+    trace: impl Fn(&Ray<f64>, T, T) -> crate::Result<Option<Hit<T>>> + Sync,
+) -> crate::Result<ScanResult> {
     Ok(result_from(f, &answers(rays, trace)?))
 }
 
@@ -222,8 +249,8 @@ fn trace_all<T: Real>(
 #[cfg(feature = "embree")]
 fn answers<T: Real>(
     rays: &[RayRow],
-    trace: impl Fn(&Ray<f64>, T, T) -> anyhow::Result<Option<Hit<T>>> + Sync,
-) -> anyhow::Result<Vec<Answer>> {
+    trace: impl Fn(&Ray<f64>, T, T) -> crate::Result<Option<Hit<T>>> + Sync,
+) -> crate::Result<Vec<Answer>> {
     rays.par_iter()
         .map(|r| {
             let (ray, tmin, tmax) = query_of(r);
@@ -337,7 +364,7 @@ pub fn scan(
     foundry: &Foundry,
     rays: &[RayRow],
     precision: Precision,
-) -> anyhow::Result<(ScanResult, ScanTimes)> {
+) -> crate::Result<(ScanResult, ScanTimes)> {
     scan_with(foundry, rays, precision, Backend::Cpu)
 }
 
@@ -348,7 +375,7 @@ pub fn scan_with(
     rays: &[RayRow],
     precision: Precision,
     backend: Backend,
-) -> anyhow::Result<(ScanResult, ScanTimes)> {
+) -> crate::Result<(ScanResult, ScanTimes)> {
     scan_reporting(foundry, rays, precision, backend, &|_| ())
 }
 
@@ -360,13 +387,13 @@ pub fn scan_reporting(
     precision: Precision,
     backend: Backend,
     progress: &(dyn Fn(u64) + Sync),
-) -> anyhow::Result<(ScanResult, ScanTimes)> {
+) -> crate::Result<(ScanResult, ScanTimes)> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         progress: &(dyn Fn(u64) + Sync),
-        finish: impl FnOnce(&CpuScene<T>, &mut [Answer]) -> anyhow::Result<usize>,
-    ) -> anyhow::Result<(ScanResult, ScanTimes)> {
+        finish: impl FnOnce(&CpuScene<T>, &mut [Answer]) -> crate::Result<usize>,
+    ) -> crate::Result<(ScanResult, ScanTimes)> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let build_s = t0.elapsed().as_secs_f64();
@@ -433,7 +460,7 @@ pub(crate) fn redo_uncertain_in_f64(
     scene: &CpuScene<f32>,
     rays: &[RayRow],
     answers: &mut [Answer],
-) -> anyhow::Result<usize> {
+) -> crate::Result<usize> {
     let torus: Vec<bool> = (0..scene.instances() as u32)
         .map(|i| scene.has_torus(i))
         .collect();
@@ -494,7 +521,7 @@ fn gpu_scan(
     f: &Foundry,
     rays: &[RayRow],
     ctx: GpuContext,
-) -> anyhow::Result<(ScanResult, ScanTimes)> {
+) -> crate::Result<(ScanResult, ScanTimes)> {
     let t0 = Instant::now();
     let cpu = CpuScene::<f32>::new(f)?;
     let tracer = GpuTracer::new(&ctx, &cpu)?;
@@ -529,7 +556,7 @@ fn gpu_trace(
     tracer: &GpuTracer,
     cpu: &CpuScene<f32>,
     rays: &[RayRow],
-) -> anyhow::Result<(Vec<Answer>, GpuTimes)> {
+) -> crate::Result<(Vec<Answer>, GpuTimes)> {
     let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
     let (hits, mut times) = tracer.trace(ctx, &records)?;
     if let Some(i) = hits.iter().position(|h| h.status & STATUS_DEPTH_LIMIT != 0) {
@@ -599,7 +626,7 @@ pub fn scan_transmittance(
     rays: &[RayRow],
     precision: Precision,
     params: &TransmittanceParams,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     scan_transmittance_on(foundry, rays, precision, params, Backend::Cpu, 0)
 }
 
@@ -613,7 +640,7 @@ pub fn scan_transmittance_on(
     params: &TransmittanceParams,
     backend: Backend,
     first_ray: u32,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let (result, times) = scan_with(foundry, rays, precision, backend)?;
     let ends = ray_ends(&result, rays);
     let ran_on = match backend {
@@ -650,14 +677,14 @@ pub fn media_transmittance(
     params: &TransmittanceParams,
     backend: Backend,
     first_ray: u32,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         ends: &[f64],
         params: &TransmittanceParams,
         first_ray: u32,
-    ) -> anyhow::Result<TransmittanceRun> {
+    ) -> crate::Result<TransmittanceRun> {
         timed_transmittance(|opened| {
             let scene = CpuScene::<T>::new(f)?;
             let media = SceneMedia::new(&scene, f, params)?;
@@ -707,8 +734,8 @@ fn gpu_transmittance(
     ends: &[f64],
     params: &TransmittanceParams,
     ctx: GpuContext,
-) -> anyhow::Result<TransmittanceRun> {
-    anyhow::ensure!(
+) -> crate::Result<TransmittanceRun> {
+    crate::error::ensure!(
         rays.len() == ends.len(),
         "{} rays and {} ends",
         rays.len(),
@@ -719,7 +746,7 @@ fn gpu_transmittance(
     let media = SceneMedia::new(&cpu, f, params)?;
     let volumes = (0..media.medium_count() as u32)
         .map(|m| GpuVolume::new(&ctx, media.grid(m)).with_context(|| format!("medium {m}")))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<crate::Result<Vec<_>>>()?;
     let open_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let mut times = GpuTimes::default();
@@ -732,7 +759,7 @@ fn gpu_transmittance(
                 .segments(r.origin, r.direction, r.tmin, end)
                 .with_context(|| format!("ray {i}"))
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::Result<_>>()?;
     // (placement, medium) in order: per ray, the segments' order on the CPU.
     let batches: std::collections::BTreeSet<(u32, u32)> = segments
         .iter()
@@ -793,7 +820,7 @@ fn add_times(total: &mut GpuTimes, more: &GpuTimes) {
 
 /// The Embree backend's scan: build times include preparing the CPU scene it borrows.
 #[cfg(feature = "embree")]
-fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
+fn embree_scan(f: &Foundry, rays: &[RayRow]) -> crate::Result<(ScanResult, ScanTimes)> {
     let t0 = Instant::now();
     let cpu = CpuScene::<f32>::new(f)?;
     let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
@@ -817,8 +844,8 @@ fn embree_scan(f: &Foundry, rays: &[RayRow]) -> anyhow::Result<(ScanResult, Scan
 }
 
 #[cfg(not(feature = "embree"))]
-fn embree_scan(_: &Foundry, _: &[RayRow]) -> anyhow::Result<(ScanResult, ScanTimes)> {
-    bail!(NO_EMBREE)
+fn embree_scan(_: &Foundry, _: &[RayRow]) -> crate::Result<(ScanResult, ScanTimes)> {
+    bail!("{NO_EMBREE}")
 }
 
 /// Why a build without the `embree` feature refuses `--backend embree`.
@@ -835,7 +862,7 @@ fn embree_transmittance(
     ends: &[f64],
     params: &TransmittanceParams,
     first_ray: u32,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     timed_transmittance(|opened| {
         let cpu = CpuScene::<f32>::new(f)?;
         let media = SceneMedia::new(&cpu, f, params)?;
@@ -851,8 +878,8 @@ fn embree_transmittance(
 /// A transmittance run on the CPU side: `run` opens the scene and its media, sets
 /// `opened` to when it is done, and estimates; the two parts are timed apart.
 fn timed_transmittance(
-    run: impl FnOnce(&mut Instant) -> anyhow::Result<Vec<f64>>,
-) -> anyhow::Result<TransmittanceRun> {
+    run: impl FnOnce(&mut Instant) -> crate::Result<Vec<f64>>,
+) -> crate::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let mut opened = t0;
     let values = run(&mut opened)?;
@@ -871,12 +898,12 @@ fn embree_transmittance(
     _: &[f64],
     _: &TransmittanceParams,
     _: u32,
-) -> anyhow::Result<TransmittanceRun> {
-    bail!(NO_EMBREE)
+) -> crate::Result<TransmittanceRun> {
+    bail!("{NO_EMBREE}")
 }
 
 /// Writes the hits, `(N, 4)` float32 or float64 per the precision, atomically.
-pub fn write_hits(result: &ScanResult, precision: Precision, path: &Path) -> anyhow::Result<()> {
+pub fn write_hits(result: &ScanResult, precision: Precision, path: &Path) -> crate::Result<()> {
     let shape = [result.hits.len() as u64, 4];
     match precision {
         Precision::F32 => {
@@ -892,7 +919,7 @@ pub fn write_hits(result: &ScanResult, precision: Precision, path: &Path) -> any
 }
 
 /// Writes the identities of the crossings, `(N, 3)` int32, atomically.
-pub fn write_ids(result: &ScanResult, path: &Path) -> anyhow::Result<()> {
+pub fn write_ids(result: &ScanResult, path: &Path) -> crate::Result<()> {
     write_array(
         path,
         Scalar::I32,

@@ -7,7 +7,7 @@ use hytrace_foundry::Foundry;
 use crate::scan::RayRow;
 
 /// A family of generated rays.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Sweep {
     /// `count` origins along the x axis through the scene centre, each shooting along +-y
     /// and +-z (many start inside solids and find exits).
@@ -18,16 +18,11 @@ pub enum Sweep {
     Circle,
 }
 
-impl Sweep {
-    /// The sweep's name on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Sweep::Axis => "axis",
-            Sweep::Rect => "rect",
-            Sweep::Circle => "circle",
-        }
-    }
-}
+crate::choice::named!(Sweep {
+    (Sweep::Axis, "axis", [], "`count` origins along the x axis through the scene centre, each shooting along +-y and +-z (many start inside solids and find exits)"),
+    (Sweep::Rect, "rect", [], "A `count` x `count` grid of parallel rays along +z, from below the scene"),
+    (Sweep::Circle, "circle", [], "`count` origins on a circle around the scene (xz plane), aimed at the centre"),
+});
 
 /// World bounds of every placed solid, `[min xyz, max xyz]` (`None` for an empty scene).
 pub fn scene_bounds(f: &Foundry) -> Option<[f64; 6]> {
@@ -47,7 +42,7 @@ pub fn scene_bounds(f: &Foundry) -> Option<[f64; 6]> {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SweepError {
     /// The number of rays does not fit in memory's address space.
-    #[error("{} sweep of count {count} has more rays than memory can index", sweep.name())]
+    #[error("{sweep} sweep of count {count} has more rays than memory can index")]
     TooManyRays {
         /// The sweep.
         sweep: Sweep,
@@ -79,8 +74,8 @@ pub fn ray_count(sweep: Sweep, count: usize) -> Option<usize> {
 pub fn generate(sweep: Sweep, bounds: &[f64; 6], count: usize) -> Result<Vec<RayRow>, SweepError> {
     let total = ray_count(sweep, count).ok_or(SweepError::TooManyRays { sweep, count })?;
     let bytes = (total as u64).saturating_mul(SCAN_BYTES_PER_RAY);
-    crate::memory::check_fits(&format!("{} sweep of {total} rays", sweep.name()), bytes)
-        .map_err(SweepError::OutOfMemory)?;
+    crate::memory::check_fits(&format!("{sweep} sweep of {total} rays"), bytes)
+        .map_err(|e| SweepError::OutOfMemory(e.to_string()))?;
     let mut rays = Vec::new();
     rays.try_reserve_exact(total)
         .map_err(|e| SweepError::OutOfMemory(format!("{total} rays: {e}")))?;

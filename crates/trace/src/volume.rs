@@ -5,14 +5,14 @@ use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::bail;
+use crate::error::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::write_array;
 use hytrace_volume::{
     convert_grid, convert_raw, open_volume, open_volume_with, sample, select_grid, BrickStore,
     BrickedGrid, ConvertOptions, ConvertReport, Endian, Estimate, Estimator, Filter, GridSummary,
-    Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams, Volume,
-    VoxelGrid, DEFAULT_STORE_BUDGET,
+    Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat, TransmittanceParams,
+    Unsampleable, Volume, VoxelGrid, DEFAULT_STORE_BUDGET,
 };
 use rayon::prelude::*;
 use serde_json::json;
@@ -22,10 +22,11 @@ use crate::gpu::{
     gpu_or_cpu, warn_redone, GpuContext, GpuStreamedVolume, GpuTimes, GpuVolume, StreamStats,
     TexelStore,
 };
+use crate::number_list::parse_numbers;
 use crate::scan::{read_float_rows, RayRow};
 
 /// Coordinates of sample points.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Space {
     /// Index space: voxel centres at integer coordinates.
     Index,
@@ -33,8 +34,13 @@ pub enum Space {
     World,
 }
 
+crate::choice::named!(Space {
+    (Space::Index, "index", [], "Index space: voxel centres at integer coordinates"),
+    (Space::World, "world", [], "World space, through the grid's index-to-world map"),
+});
+
 /// Lookup filter (see `hytrace_volume::Filter`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FilterArg {
     /// The voxel at floor(p + 0.5).
     Nearest,
@@ -43,6 +49,12 @@ pub enum FilterArg {
     /// One of those eight voxels, with probability equal to its trilinear weight.
     Stochastic,
 }
+
+crate::choice::named!(FilterArg {
+    (FilterArg::Nearest, "nearest", [], "The voxel at floor(p + 0.5)"),
+    (FilterArg::Trilinear, "trilinear", [], "OpenVDB's box sampler: the trilinear blend of the eight voxels around p"),
+    (FilterArg::Stochastic, "stochastic", [], "One of those eight voxels, with probability equal to its trilinear weight"),
+});
 
 impl From<FilterArg> for Filter {
     fn from(f: FilterArg) -> Filter {
@@ -55,11 +67,10 @@ impl From<FilterArg> for Filter {
 }
 
 /// Representation sampled: the grid as read, or a bricked grid of one texel format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Repr {
     /// The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as
     /// read).
-    #[value(alias = "source")]
     Nanovdb,
     /// Bricked grid, BC4 texels.
     Bc4,
@@ -72,6 +83,15 @@ pub enum Repr {
     /// Bricked grid, single-precision texels.
     F32,
 }
+
+crate::choice::named!(Repr {
+    (Repr::Nanovdb, "nanovdb", ["source"], "The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as read)"),
+    (Repr::Bc4, "bc4", [], "Bricked grid, BC4 texels"),
+    (Repr::Unorm8, "unorm8", [], "Bricked grid, 8-bit normalized texels"),
+    (Repr::Unorm16, "unorm16", [], "Bricked grid, 16-bit normalized texels"),
+    (Repr::F16, "f16", [], "Bricked grid, half-precision texels"),
+    (Repr::F32, "f32", [], "Bricked grid, single-precision texels"),
+});
 
 impl Repr {
     fn texel_format(self) -> Option<TexelFormat> {
@@ -87,7 +107,7 @@ impl Repr {
 }
 
 /// Transmittance estimator on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EstimatorArg {
     /// The optical depth integrated exactly (per voxel cell, in f64).
     Exact,
@@ -100,6 +120,14 @@ pub enum EstimatorArg {
     /// Residual ratio tracking (control density = local minorant).
     Residual,
 }
+
+crate::choice::named!(EstimatorArg {
+    (EstimatorArg::Exact, "exact", [], "The optical depth integrated exactly (per voxel cell, in f64)"),
+    (EstimatorArg::March, "march", [], "Fixed-step midpoint ray marching (--step)"),
+    (EstimatorArg::Delta, "delta", [], "Delta tracking with local majorants"),
+    (EstimatorArg::Ratio, "ratio", [], "Ratio tracking with local majorants"),
+    (EstimatorArg::Residual, "residual", [], "Residual ratio tracking (control density = local minorant)"),
+});
 
 /// A grid in the representation asked for.
 pub enum Represented {
@@ -120,7 +148,7 @@ impl Represented {
 
     /// The range mips of what lookups on this representation read: the bricked grid's or
     /// brick store's own, or built from the grid as read.
-    pub fn range_mips(&self) -> anyhow::Result<Cow<'_, RangeMips>> {
+    pub fn range_mips(&self) -> crate::Result<Cow<'_, RangeMips>> {
         Ok(match self {
             Represented::Bricked(b) => Cow::Borrowed(b.ranges()),
             Represented::Source(v) => v.range_mips()?,
@@ -129,7 +157,7 @@ impl Represented {
 
     /// An error when lookups could not read what they needed (see
     /// [`Volume::check_reads`]); results computed meanwhile must not be written.
-    pub fn check_reads(&self) -> anyhow::Result<()> {
+    pub fn check_reads(&self) -> crate::Result<()> {
         match self {
             Represented::Source(v) => Ok(v.check_reads()?),
             Represented::Bricked(_) => Ok(()),
@@ -144,7 +172,7 @@ impl Represented {
 
 /// Opens grid `name` (or the first) of `spec`: a .nvdb or .vdb file, a brick store (with
 /// [`DEFAULT_STORE_BUDGET`]) or a procedural grid.
-pub fn open(spec: &str, name: Option<&str>) -> anyhow::Result<(GridSummary, Volume)> {
+pub fn open(spec: &str, name: Option<&str>) -> crate::Result<(GridSummary, Volume)> {
     open_within(spec, name, DEFAULT_STORE_BUDGET)
 }
 
@@ -154,12 +182,12 @@ pub fn open_within(
     spec: &str,
     name: Option<&str>,
     memory: u64,
-) -> anyhow::Result<(GridSummary, Volume)> {
+) -> crate::Result<(GridSummary, Volume)> {
     Ok(select_grid(spec, open_volume_with(spec, memory)?, name)?)
 }
 
 /// The grid in representation `repr`.
-pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
+pub fn represent(volume: Volume, repr: Repr) -> crate::Result<Represented> {
     Ok(match repr.texel_format() {
         None => Represented::Source(volume),
         Some(_) if matches!(volume, Volume::Store(_)) => bail!(
@@ -170,14 +198,14 @@ pub fn represent(volume: Volume, repr: Repr) -> anyhow::Result<Represented> {
 }
 
 /// Reads `(N, 3)` float32 or float64 points; errors name the file and the first bad row.
-pub fn read_points(path: &Path) -> anyhow::Result<Vec<[f64; 3]>> {
+pub fn read_points(path: &Path) -> crate::Result<Vec<[f64; 3]>> {
     let rows = read_float_rows::<3>(path, "points", "")?;
     check_points(&rows, &path.display().to_string())?;
     Ok(rows)
 }
 
 /// Errors on the first point that is not finite, naming `source`.
-pub fn check_points(points: &[[f64; 3]], source: &str) -> anyhow::Result<()> {
+pub fn check_points(points: &[[f64; 3]], source: &str) -> crate::Result<()> {
     if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
         bail!("{source}: point {i}: {:?} is not finite", points[i]);
     }
@@ -215,7 +243,7 @@ pub fn majorants(
     points: &[[f64; 3]],
     space: Space,
     level: usize,
-) -> anyhow::Result<Vec<f32>> {
+) -> crate::Result<Vec<f32>> {
     let mips = grid.range_mips()?;
     if level >= mips.levels.len() {
         bail!(
@@ -237,7 +265,7 @@ pub fn majorants(
 }
 
 /// Writes `(N,)` values atomically.
-pub fn write_f32(path: &Path, values: &[f32]) -> anyhow::Result<()> {
+pub fn write_f32(path: &Path, values: &[f32]) -> crate::Result<()> {
     write_array(
         path,
         Scalar::F32,
@@ -248,7 +276,7 @@ pub fn write_f32(path: &Path, values: &[f32]) -> anyhow::Result<()> {
 }
 
 /// Writes `(N,)` values atomically.
-pub fn write_f64(path: &Path, values: &[f64]) -> anyhow::Result<()> {
+pub fn write_f64(path: &Path, values: &[f64]) -> crate::Result<()> {
     write_array(
         path,
         Scalar::F64,
@@ -260,31 +288,23 @@ pub fn write_f64(path: &Path, values: &[f64]) -> anyhow::Result<()> {
 
 /// The estimator options of `hytrace volume transmittance` and `hytrace scan
 /// --transmittance`.
-#[derive(Clone, Copy, Debug, clap::Args)]
+#[derive(Clone, Copy, Debug)]
 pub struct EstimatorOptions {
     /// Estimator.
-    #[arg(long, value_enum, default_value_t = EstimatorArg::Exact)]
     pub estimator: EstimatorArg,
     /// Step of `march`, world units.
-    #[arg(long, default_value_t = 0.5)]
     pub step: f64,
     /// Samples per ray of the trackers (delta, ratio, residual).
-    #[arg(long, default_value_t = 1)]
     pub spp: u32,
     /// Seed of the random streams (ray i uses stream i).
-    #[arg(long, default_value_t = 0)]
     pub seed: u32,
     /// Density per unit of grid value (for scene media: a factor on each medium's own).
-    #[arg(long, default_value_t = 1.0)]
     pub density_scale: f64,
     /// Lookup filter.
-    #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
     pub filter: FilterArg,
     /// Finest mip level of the local majorants (0: 8^3 bricks ... 3: 64^3).
-    #[arg(long, default_value_t = 0)]
     pub level: usize,
     /// One majorant for the whole grid instead of local ones.
-    #[arg(long)]
     pub global_majorant: bool,
 }
 
@@ -358,7 +378,7 @@ pub fn transmittances(
     grid: &Represented,
     rays: &[RayRow],
     args: &TransmittanceArgs,
-) -> anyhow::Result<(Vec<Estimate>, f64, f64)> {
+) -> crate::Result<(Vec<Estimate>, f64, f64)> {
     let t0 = Instant::now();
     let mips = grid.range_mips()?;
     let t1 = Instant::now();
@@ -369,7 +389,7 @@ pub fn transmittances(
 }
 
 /// Where `hytrace volume transmittance` runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum VolumeBackend {
     /// The CPU estimators in f64, on any representation.
     #[default]
@@ -381,6 +401,12 @@ pub enum VolumeBackend {
     /// The GPU when an adapter opens, else the CPU (with a note on stderr).
     Auto,
 }
+
+crate::choice::named!(VolumeBackend {
+    (VolumeBackend::Cpu, "cpu", [], "The CPU estimators in f64, on any representation"),
+    (VolumeBackend::Gpu, "gpu", [], "The GPU kernel in f32: on the bricked grid, or with `--repr nanovdb` on the raw NanoVDB buffer (other grids as read, and NanoVDB types the GPU does not read, are converted to f32 bricks)"),
+    (VolumeBackend::Auto, "auto", [], "The GPU when an adapter opens, else the CPU (with a note on stderr)"),
+});
 
 /// Where a GPU transmittance ran and where its time went.
 #[derive(Clone, Debug)]
@@ -424,7 +450,7 @@ pub fn transmittances_on(
     backend: VolumeBackend,
     texels: TexelStore,
     gpu_memory: u64,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let cpu = || {
         let (estimates, mips_s, trace_s) = transmittances(grid, rays, args)?;
         Ok(TransmittanceRun {
@@ -458,7 +484,7 @@ fn gpu_store_transmittances(
     rays: &[RayRow],
     args: &TransmittanceArgs,
     memory: u64,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let mut volume = GpuStreamedVolume::new(&ctx, store, memory)?;
     let setup_s = t0.elapsed().as_secs_f64();
@@ -487,7 +513,7 @@ fn gpu_transmittances(
     rays: &[RayRow],
     args: &TransmittanceArgs,
     texels: TexelStore,
-) -> anyhow::Result<TransmittanceRun> {
+) -> crate::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let in_texture = |repr: String| match texels {
         TexelStore::Storage => repr,
@@ -578,7 +604,7 @@ fn memory_row(name: &str, bytes: usize, bound: Option<f64>) -> serde_json::Value
 /// converting it), and why a representation is missing.
 fn representations(
     s: &GridSummary,
-    grid: &Result<Volume, String>,
+    grid: &Result<Volume, Unsampleable>,
 ) -> (Vec<serde_json::Value>, Option<String>) {
     let mut memory = vec![memory_row(
         s.source_kind,
@@ -604,7 +630,7 @@ fn representations(
                 }
             }
         }
-        Err(why) => note = Some(why.clone()),
+        Err(why) => note = Some(why.to_string()),
     }
     (memory, note)
 }
@@ -612,7 +638,7 @@ fn representations(
 /// The summary `hytrace volume info` prints: every grid of `spec` with its bounding boxes,
 /// voxel counts and the memory of each representation (bricked ones measured by
 /// converting the scalar grids).
-pub fn info(spec: &str) -> anyhow::Result<serde_json::Value> {
+pub fn info(spec: &str) -> crate::Result<serde_json::Value> {
     let mut grids = Vec::new();
     for named in open_volume(spec)? {
         let s = &named.summary;
@@ -672,7 +698,7 @@ pub fn info_text(info: &serde_json::Value) -> String {
 }
 
 /// Element type of a raw volume file on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RawTypeArg {
     /// Unsigned 8-bit.
     U8,
@@ -682,8 +708,14 @@ pub enum RawTypeArg {
     F32,
 }
 
+crate::choice::named!(RawTypeArg {
+    (RawTypeArg::U8, "u8", [], "Unsigned 8-bit"),
+    (RawTypeArg::U16, "u16", [], "Unsigned 16-bit"),
+    (RawTypeArg::F32, "f32", [], "32-bit float"),
+});
+
 /// Byte order of a raw volume file on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EndianArg {
     /// Least significant byte first.
     Little,
@@ -691,48 +723,43 @@ pub enum EndianArg {
     Big,
 }
 
+crate::choice::named!(EndianArg {
+    (EndianArg::Little, "little", [], "Least significant byte first"),
+    (EndianArg::Big, "big", [], "Most significant byte first"),
+});
+
 /// The options of `hytrace volume convert --store`.
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct StoreOptions {
     /// Voxels of a raw file along x, y, z (`X,Y,Z`; x fastest in the file, no header).
-    #[arg(long)]
     pub dims: Option<String>,
     /// Element type of a raw file.
-    #[arg(long, value_enum)]
     pub dtype: Option<RawTypeArg>,
     /// Byte order of a raw file.
-    #[arg(long, value_enum, default_value_t = EndianArg::Little)]
     pub endian: EndianArg,
     /// World size of a raw file's voxel along x, y, z (`SX,SY,SZ`).
-    #[arg(long, default_value = "1,1,1")]
     pub spacing: String,
     /// World position of a raw file's first voxel (`X,Y,Z`).
-    #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub origin: String,
     /// Value outside the volume and of dropped bricks.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub background: f32,
     /// Bricks whose values all lie within this of the background are dropped.
-    #[arg(long, default_value_t = 0.0)]
     pub threshold: f32,
     /// The range the 16-bit codes span (`MIN,MAX`); the data's own range by default (a
     /// first pass over the file finds it).
-    #[arg(long, allow_hyphen_values = true)]
     pub range: Option<String>,
     /// Memory the converter may hold resident (e.g. 2G): its window of brick layers and
     /// its tables; refused when that does not fit.
-    #[arg(long, value_parser = crate::memory::parse_bytes, default_value = "2G")]
     pub memory: u64,
 }
 
 /// `N` comma-separated finite numbers of option `what`.
-fn numbers<const N: usize>(text: &str, what: &str) -> anyhow::Result<[f64; N]> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
-    if parts.len() != N || values.len() != N || !values.iter().all(|v| v.is_finite()) {
-        bail!("{what} `{text}`: expected {N} comma-separated finite numbers");
-    }
-    Ok(std::array::from_fn(|k| values[k]))
+fn numbers<const N: usize>(text: &str, what: &str) -> crate::Result<[f64; N]> {
+    parse_numbers(text).map_err(|_| {
+        crate::Error::invalid(format!(
+            "{what} `{text}`: expected {N} comma-separated finite numbers"
+        ))
+    })
 }
 
 /// `hytrace volume convert --store`: a raw file (`.raw`) or any volume `spec` (grid `name`)
@@ -742,7 +769,7 @@ pub fn convert_store(
     name: Option<&str>,
     out: &Path,
     options: &StoreOptions,
-) -> anyhow::Result<ConvertReport> {
+) -> crate::Result<ConvertReport> {
     let convert = ConvertOptions {
         background: options.background,
         threshold: options.threshold,

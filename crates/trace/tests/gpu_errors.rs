@@ -13,7 +13,7 @@ fn assert_lost<T>(what: &str, result: Result<T, impl Into<anyhow::Error>>) {
         Ok(_) => panic!("{what} answered on a lost device"),
         Err(e) => e.into(),
     };
-    match err.downcast_ref::<GpuError>() {
+    match err.chain().find_map(|c| c.downcast_ref::<GpuError>()) {
         Some(GpuError::DeviceLost(reason)) => {
             assert!(reason.contains("Destroyed"), "{what}: {reason}");
             assert!(err.to_string().contains("device was lost"), "{err}");
@@ -55,13 +55,17 @@ fn a_lost_device_fails_scans_and_transmittances_clearly() {
 fn auto_falls_back_on_gpu_failures_only() {
     let lost = gpu_or_cpu(
         "scans",
-        |_| -> anyhow::Result<u32> { Err(GpuError::DeviceLost("Unknown: reset".into()).into()) },
+        |_| -> hytrace_trace::Result<u32> {
+            Err(GpuError::DeviceLost("Unknown: reset".into()).into())
+        },
         || Ok(7),
     );
     assert_eq!(lost.unwrap(), 7);
     let bad_input = gpu_or_cpu(
         "scans",
-        |_| -> anyhow::Result<u32> { Err(anyhow::anyhow!("rays.npy: wrong shape")) },
+        |_| -> hytrace_trace::Result<u32> {
+            Err(hytrace_trace::Error::invalid("rays.npy: wrong shape"))
+        },
         || Ok(7),
     );
     // Without an adapter the GPU closure never runs and the CPU answers.

@@ -17,7 +17,8 @@ use common::{PcgDraws as Rng, Random};
 use hytrace_csg::kernel::{primitive_sdf, primitive_spans};
 use hytrace_csg::V3;
 use hytrace_foundry::TypeCode;
-use hytrace_testkit::vec3::{add, dot, scale as mul, sub};
+use hytrace_testkit::torus::{tube_point, TorusRays};
+use hytrace_testkit::vec3::{add, dot, normalized as unit, scale as mul, sub};
 use hytrace_trace::gpu::oneshot::{run, Buffer};
 use hytrace_trace::gpu::GpuContext;
 
@@ -55,38 +56,11 @@ trait TorusDraws: Random {
         };
         (rmin, rmax, rtor)
     }
-    /// A point in the torus's bounding box scaled by `k`.
-    fn near(&mut self, rmax: f64, rtor: f64, k: f64) -> P {
-        let s = k * (rtor + rmax);
-        [
-            self.range(-s, s),
-            self.range(-s, s),
-            self.range(-k * rmax, k * rmax),
-        ]
-    }
 }
 
 impl TorusDraws for Rng {}
 
 type P = [f64; 3];
-
-fn unit(a: P) -> P {
-    mul(a, 1.0 / dot(a, a).sqrt())
-}
-
-/// The core circle's point at azimuth `phi` plus `rad` along the tube direction
-/// `(theta, phi)`, and that unit direction.
-fn tube_point(rtor: f64, phi: f64, theta: f64, rad: f64) -> (P, P) {
-    let n = [
-        theta.cos() * phi.cos(),
-        theta.cos() * phi.sin(),
-        theta.sin(),
-    ];
-    (
-        add([rtor * phi.cos(), rtor * phi.sin(), 0.0], mul(n, rad)),
-        n,
-    )
-}
 
 /// One probe: a torus `[rmin, rmax, rtor]` and a ray, in f32.
 #[derive(Clone, Copy, Debug)]
@@ -132,9 +106,9 @@ fn families() -> Vec<Item> {
     for i in 0..PER_FAMILY {
         // Random rays near the torus.
         let t = rng.torus(i);
-        let o = rng.near(t.1, t.2, 3.0);
+        let o = rng.torus_near(t.1, t.2, 3.0);
         let d = if rng.uniform() < 0.7 {
-            unit(sub(rng.near(t.1, t.2, 1.0), o))
+            unit(sub(rng.torus_near(t.1, t.2, 1.0), o))
         } else {
             rng.direction()
         };
@@ -161,50 +135,19 @@ fn families() -> Vec<Item> {
 
         // Axis-aligned directions and zero components.
         let t = rng.torus(i);
-        let mut o = rng.near(t.1, t.2, 2.0);
-        let k = rng.below(3);
-        let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
-        let mut d = [0.0; 3];
-        match i % 5 {
-            0 => d[k] = sign,
-            1 => {
-                d = rng.direction();
-                d[k] = 0.0;
-            }
-            2 => {
-                d = rng.direction();
-                d[k] = 0.0;
-                o[(k + 1) % 3] = 0.0;
-            }
-            3 => {
-                // Parallel to the axis: on it, or through the tube.
-                d[2] = sign;
-                o[0] = if rng.uniform() < 0.2 {
-                    0.0
-                } else {
-                    rng.range(0.0, 1.2 * (t.1 + t.2))
-                };
-                o[1] = 0.0;
-            }
-            _ => {
-                // In the equatorial plane through the axis.
-                d[k.min(1)] = sign;
-                o = [0.0; 3];
-                o[k.min(1)] = -sign * rng.range(0.0, 3.0) * (t.1 + t.2);
-            }
-        }
+        let (o, d) = rng.torus_axis_ray(t.1, t.2, i);
         items.push(Item::new("axis_aligned", t, o, d));
 
         // Origins 1e5 mm away.
         let t = rng.torus(i);
-        let target = rng.near(t.1, t.2, 1.0);
+        let target = rng.torus_near(t.1, t.2, 1.0);
         let d = rng.direction();
         items.push(Item::new("far_1e5", t, sub(target, mul(d, 1e5)), d));
 
         // Non-unit directions.
         let t = rng.torus(i);
-        let o = rng.near(t.1, t.2, 3.0);
-        let d = unit(sub(rng.near(t.1, t.2, 1.0), o));
+        let o = rng.torus_near(t.1, t.2, 3.0);
+        let d = unit(sub(rng.torus_near(t.1, t.2, 1.0), o));
         let k = [1e-2, 1e2, 3.7][i % 3];
         items.push(Item::new("non_unit", t, o, mul(d, k)));
 
@@ -223,14 +166,14 @@ fn families() -> Vec<Item> {
         // Horn torus, rays aimed within 1e-3 of the size at the pinch point.
         let (_, _, rtor) = rng.torus(i);
         let t = (0.0, rtor, rtor);
-        let o = rng.near(rtor, rtor, 3.0);
-        let d = unit(sub(rng.near(rtor, rtor, 1e-3), o));
+        let o = rng.torus_near(rtor, rtor, 3.0);
+        let d = unit(sub(rng.torus_near(rtor, rtor, 1e-3), o));
         items.push(Item::new("horn_pinch", t, o, d));
 
         // Spindle torus, rays near the dimples on the axis.
         let (_, _, rtor) = rng.torus(i);
         let r = rtor * rng.range(1.0, 2.0);
-        let o = rng.near(r, rtor, 3.0);
+        let o = rng.torus_near(r, rtor, 3.0);
         let (z, e) = ((r * r - rtor * rtor).sqrt(), 1e-3 * r);
         let target = [rng.range(-e, e), rng.range(-e, e), z + rng.range(-e, e)];
         items.push(Item::new(

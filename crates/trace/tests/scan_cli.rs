@@ -7,15 +7,11 @@ use std::process::{Command, Output};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
 
-fn hytrace(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytrace"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod common;
+use common::stderr;
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+fn hytrace(args: &[&str]) -> Output {
+    common::hytrace(args, &[])
 }
 
 /// A sphere of radius 100 placed 20 m out and a box at the origin.

@@ -3,20 +3,16 @@
 //! cleanly, naming what is wrong, without leaving an output file.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
 
-fn hytrace(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytrace"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod common;
+use common::stderr;
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+fn hytrace(args: &[&str]) -> Output {
+    common::hytrace(args, &[])
 }
 
 fn data(path: &str) -> String {

@@ -8,6 +8,8 @@
 //! allocation. Messages say what is wrong with the data; the callers add which file, grid
 //! and frame it is.
 
+use crate::decode_error::DecodeError;
+
 /// Upper bound of deflate's output per input byte (its format allows about 1032).
 const ZLIB_MAX_RATIO: u64 = 1100;
 
@@ -18,26 +20,26 @@ pub(crate) const LZ4_MAX_RATIO: u64 = 256;
 pub(crate) const RATIO_SLACK: u64 = 1024;
 
 /// Decodes a zlib stream that must hold exactly `expected` bytes.
-pub(crate) fn inflate_zlib(data: &[u8], expected: usize) -> Result<Vec<u8>, String> {
+pub(crate) fn inflate_zlib(data: &[u8], expected: usize) -> Result<Vec<u8>, DecodeError> {
     if expected as u64 > ZLIB_MAX_RATIO * data.len() as u64 + RATIO_SLACK {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "{} bytes of zlib data cannot hold {expected} bytes",
             data.len()
-        ));
+        )));
     }
     // The output grows with the data actually decoded, up to `expected` bytes.
     let out =
         miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(data, expected).map_err(|e| {
-            format!(
+            DecodeError(format!(
                 "zlib data is corrupt or exceeds {expected} bytes ({:?})",
                 e.status
-            )
+            ))
         })?;
     if out.len() != expected {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "zlib data holds {} bytes, expected {expected}",
             out.len()
-        ));
+        )));
     }
     Ok(out)
 }
@@ -70,39 +72,50 @@ fn le32(b: &[u8], off: usize) -> Option<[u8; 4]> {
 /// streams, each an i32 length and LZ4 data (or raw bytes when the length equals the
 /// stream's size). With the shuffle flag a block's bytes are grouped by byte position
 /// within the `typesize`-byte elements. Other compressors and bit shuffle give an error.
-pub(crate) fn blosc_frame(frame: &[u8], expected: usize, out: &mut Vec<u8>) -> Result<(), String> {
+pub(crate) fn blosc_frame(
+    frame: &[u8],
+    expected: usize,
+    out: &mut Vec<u8>,
+) -> Result<(), DecodeError> {
     if frame.len() < HEADER {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "{} bytes, shorter than its {HEADER}-byte header",
             frame.len()
-        ));
+        )));
     }
     let (version, flags, typesize) = (frame[0], frame[2], frame[3] as usize);
     let header = |off| le32(frame, off).map_or(0, |v| u32::from_le_bytes(v) as usize);
     let (nbytes, blocksize, cbytes) = (header(4), header(8), header(12));
     if version != 2 {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "Blosc format version {version} is not supported (expected 2)"
-        ));
+        )));
     }
     if nbytes != expected {
-        return Err(format!("holds {nbytes} bytes, expected {expected}"));
+        return Err(DecodeError(format!(
+            "holds {nbytes} bytes, expected {expected}"
+        )));
     }
     if cbytes != frame.len() {
-        return Err(format!("states {cbytes} bytes but has {}", frame.len()));
+        return Err(DecodeError(format!(
+            "states {cbytes} bytes but has {}",
+            frame.len()
+        )));
     }
     if flags & RESERVED != 0 {
-        return Err(format!("reserved flag bit set (flags {flags:#x})"));
+        return Err(DecodeError(format!(
+            "reserved flag bit set (flags {flags:#x})"
+        )));
     }
     if nbytes == 0 {
         return Ok(());
     }
     if flags & MEMCPYED != 0 {
         if frame.len() != HEADER + nbytes {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "stored frame of {} bytes for {nbytes} bytes",
                 frame.len()
-            ));
+            )));
         }
         out.extend_from_slice(&frame[HEADER..]);
         return Ok(());
@@ -112,27 +125,31 @@ pub(crate) fn blosc_frame(frame: &[u8], expected: usize, out: &mut Vec<u8>) -> R
         let name = COMPRESSOR_NAMES
             .get(compressor as usize)
             .map_or_else(|| format!("code {compressor}"), |n| n.to_string());
-        return Err(format!(
+        return Err(DecodeError(format!(
             "Blosc compressor {name} is not supported (OpenVDB and NanoVDB write LZ4)"
-        ));
+        )));
     }
     if typesize == 0 || blocksize == 0 {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "corrupt header: type size {typesize}, block size {blocksize}"
-        ));
+        )));
     }
     if flags & DOBITSHUFFLE != 0 && blocksize >= typesize {
-        return Err(
+        return Err(DecodeError(
             "Blosc bit shuffle is not supported (OpenVDB and NanoVDB write byte shuffle)".into(),
-        );
+        ));
     }
     if nbytes as u64 > LZ4_MAX_RATIO * cbytes as u64 + RATIO_SLACK {
-        return Err(format!("{cbytes} bytes cannot hold {nbytes} bytes"));
+        return Err(DecodeError(format!(
+            "{cbytes} bytes cannot hold {nbytes} bytes"
+        )));
     }
     let shuffle = flags & DOSHUFFLE != 0 && typesize > 1;
     let blocks = nbytes.div_ceil(blocksize);
     if blocks > (frame.len() - HEADER) / 4 {
-        return Err(format!("{blocks} blocks do not fit their start table"));
+        return Err(DecodeError(format!(
+            "{blocks} blocks do not fit their start table"
+        )));
     }
     let table_end = HEADER + 4 * blocks;
     let start = out.len();
@@ -159,10 +176,11 @@ pub(crate) fn blosc_frame(frame: &[u8], expected: usize, out: &mut Vec<u8>) -> R
         let src = usize::try_from(bstart)
             .ok()
             .filter(|&s| s >= table_end)
-            .ok_or_else(|| format!("block {j} starts at {bstart}"))?;
+            .ok_or_else(|| DecodeError(format!("block {j} starts at {bstart}")))?;
         let dest = &mut out[start + first..start + first + size];
         let target = if shuffle { &mut shuffled[..size] } else { dest };
-        decode_block(frame, src, splits, target).map_err(|e| format!("block {j}: {e}"))?;
+        decode_block(frame, src, splits, target)
+            .map_err(|e| DecodeError(format!("block {j}: {e}")))?;
         if shuffle {
             let dest = &mut out[start + first..start + first + size];
             unshuffle(&shuffled[..size], typesize, dest);
@@ -177,31 +195,35 @@ fn decode_block(
     mut src: usize,
     splits: usize,
     target: &mut [u8],
-) -> Result<(), String> {
+) -> Result<(), DecodeError> {
     let part = target.len() / splits;
     if part == 0 || part * splits != target.len() {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "{} bytes do not split into {splits} streams",
             target.len()
-        ));
+        )));
     }
     for (s, dest) in target.chunks_exact_mut(part).enumerate() {
         let length = le32(frame, src)
             .map(i32::from_le_bytes)
-            .ok_or_else(|| format!("stream {s} length missing"))?;
+            .ok_or_else(|| DecodeError(format!("stream {s} length missing")))?;
         src += 4;
         let data = usize::try_from(length)
             .ok()
             .and_then(|n| frame.get(src..src.checked_add(n)?))
-            .ok_or_else(|| format!("stream {s} of {length} bytes overruns the frame"))?;
+            .ok_or_else(|| {
+                DecodeError(format!("stream {s} of {length} bytes overruns the frame"))
+            })?;
         src += data.len();
         if data.len() == part {
             dest.copy_from_slice(data);
         } else {
             let n = lz4_flex::block::decompress_into(data, dest)
-                .map_err(|e| format!("stream {s}: LZ4 data is corrupt: {e}"))?;
+                .map_err(|e| DecodeError(format!("stream {s}: LZ4 data is corrupt: {e}")))?;
             if n != part {
-                return Err(format!("stream {s}: LZ4 gave {n} bytes, expected {part}"));
+                return Err(DecodeError(format!(
+                    "stream {s}: LZ4 gave {n} bytes, expected {part}"
+                )));
             }
         }
     }
@@ -327,7 +349,7 @@ pub(crate) mod tests {
     }
 
     /// The bytes of one Blosc frame, decoded on their own.
-    fn unblosc(frame: &[u8], expected: usize) -> Result<Vec<u8>, String> {
+    fn unblosc(frame: &[u8], expected: usize) -> Result<Vec<u8>, DecodeError> {
         let mut out = Vec::new();
         blosc_frame(frame, expected, &mut out)?;
         Ok(out)
@@ -345,22 +367,23 @@ pub(crate) mod tests {
         let mut out = b"say ".to_vec();
         blosc_frame(&frame, 5, &mut out).unwrap();
         assert_eq!(out, b"say hello");
-        assert!(unblosc(&frame, 6).unwrap_err().contains("expected 6"));
+        assert!(unblosc(&frame, 6).unwrap_err().0.contains("expected 6"));
         assert!(unblosc(&frame[..20], 5)
             .unwrap_err()
+            .0
             .contains("states 21 bytes"));
-        assert!(unblosc(&frame[..10], 5).unwrap_err().contains("header"));
+        assert!(unblosc(&frame[..10], 5).unwrap_err().0.contains("header"));
         let mut future = frame.clone();
         future[0] = 3;
-        assert!(unblosc(&future, 5).unwrap_err().contains("version 3"));
+        assert!(unblosc(&future, 5).unwrap_err().0.contains("version 3"));
         let mut reserved = frame.clone();
         reserved[2] |= RESERVED;
-        assert!(unblosc(&reserved, 5).unwrap_err().contains("reserved"));
+        assert!(unblosc(&reserved, 5).unwrap_err().0.contains("reserved"));
         // A stored frame whose stated size does not match its bytes.
         let mut short = frame.clone();
         short[12..16].copy_from_slice(&20u32.to_le_bytes());
         short.pop();
-        assert!(unblosc(&short, 5).unwrap_err().contains("stored frame"));
+        assert!(unblosc(&short, 5).unwrap_err().0.contains("stored frame"));
         // An empty frame decodes to nothing whatever its flags.
         let mut empty = vec![2, 1, !RESERVED, 0];
         empty.extend_from_slice(&[0; 8]);
@@ -439,34 +462,35 @@ pub(crate) mod tests {
         assert!(unblosc(&frame[..frame.len() - 1], 3000).is_err());
         let mut zstd = frame.clone();
         zstd[2] = (4 << 5) | DOSHUFFLE;
-        let err = unblosc(&zstd, 3000).unwrap_err();
+        let err = unblosc(&zstd, 3000).unwrap_err().0;
         assert!(err.contains("zstd") && err.contains("LZ4"), "{err}");
         zstd[2] = (6 << 5) | DOSHUFFLE;
-        assert!(unblosc(&zstd, 3000).unwrap_err().contains("code 6"));
+        assert!(unblosc(&zstd, 3000).unwrap_err().0.contains("code 6"));
         let mut bits = frame.clone();
         bits[2] |= DOBITSHUFFLE;
-        assert!(unblosc(&bits, 3000).unwrap_err().contains("bit shuffle"));
+        assert!(unblosc(&bits, 3000).unwrap_err().0.contains("bit shuffle"));
         let mut typeless = frame.clone();
         typeless[3] = 0;
         assert!(unblosc(&typeless, 3000)
             .unwrap_err()
+            .0
             .contains("type size 0"));
         // A block starting inside the start table, or before the frame.
         for start in [4i32, -4] {
             let mut bad = frame.clone();
             bad[20..24].copy_from_slice(&start.to_le_bytes());
-            let err = unblosc(&bad, 3000).unwrap_err();
+            let err = unblosc(&bad, 3000).unwrap_err().0;
             assert!(err.contains(&format!("block 1 starts at {start}")), "{err}");
         }
         // More blocks than the frame has room to list.
         let mut tiny = frame.clone();
         tiny[8..12].copy_from_slice(&1u32.to_le_bytes());
-        assert!(unblosc(&tiny, 3000).unwrap_err().contains("start table"));
+        assert!(unblosc(&tiny, 3000).unwrap_err().0.contains("start table"));
         // A frame too small for the bytes it claims is refused before allocating them.
         let mut huge = frame[..64].to_vec();
         huge[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
         huge[12..16].copy_from_slice(&64u32.to_le_bytes());
-        let err = unblosc(&huge, u32::MAX as usize).unwrap_err();
+        let err = unblosc(&huge, u32::MAX as usize).unwrap_err().0;
         assert!(err.contains("cannot hold"), "{err}");
         for pos in 0..frame.len() {
             let mut bad = frame.clone();
@@ -481,9 +505,9 @@ pub(crate) mod tests {
         let data = sample_data(10_000);
         let packed = miniz_oxide::deflate::compress_to_vec_zlib(&data, 6);
         assert_eq!(inflate_zlib(&packed, data.len()).unwrap(), data);
-        let err = inflate_zlib(&packed, data.len() + 1).unwrap_err();
+        let err = inflate_zlib(&packed, data.len() + 1).unwrap_err().0;
         assert!(err.contains("holds 10000 bytes, expected 10001"), "{err}");
-        let err = inflate_zlib(&packed, data.len() - 1).unwrap_err();
+        let err = inflate_zlib(&packed, data.len() - 1).unwrap_err().0;
         assert!(err.contains("exceeds 9999 bytes"), "{err}");
         assert!(inflate_zlib(&packed[..packed.len() / 2], data.len()).is_err());
         assert!(inflate_zlib(&[0; 4], 10).is_err());
@@ -492,7 +516,9 @@ pub(crate) mod tests {
         let packed = miniz_oxide::deflate::compress_to_vec_zlib(&zeros, 9);
         assert_eq!(inflate_zlib(&packed, zeros.len()).unwrap(), zeros);
         // A tiny stream claiming a huge output is refused before any allocation.
-        let err = inflate_zlib(&[0x78, 0x9c, 3, 0, 0, 0, 0, 1, 0, 0], 1 << 30).unwrap_err();
+        let err = inflate_zlib(&[0x78, 0x9c, 3, 0, 0, 0, 0, 1, 0, 0], 1 << 30)
+            .unwrap_err()
+            .0;
         assert!(err.contains("cannot hold"), "{err}");
     }
 }

@@ -15,6 +15,7 @@ mod bricked;
 mod bricks;
 mod codec;
 mod dda;
+mod decode_error;
 mod dense;
 mod grid;
 mod nanovdb;
@@ -51,8 +52,8 @@ pub use procedural_spec::{is_procedural, procedural_grid};
 pub use ranges::{RangeLevel, RangeMips, ValueRange, MAX_RANGE_BLOCKS, RANGE_LEVELS};
 pub use rng::{pcg4d, Rng};
 pub use source::{
-    open_volume, open_volume_with, select_grid, world_bbox, GridSummary, NamedVolume, Volume,
-    DEFAULT_STORE_BUDGET,
+    open_volume, open_volume_with, select_grid, world_bbox, GridSummary, NamedVolume, Unsampleable,
+    Volume, DEFAULT_STORE_BUDGET,
 };
 pub use transmittance::{
     transmittance, transmittance_batch, Collision, Estimate, Estimator, IndexTransmittance,

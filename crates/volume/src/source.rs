@@ -110,12 +110,18 @@ pub struct GridSummary {
     pub brick_store: Option<StoreMeta>,
 }
 
+/// Why a grid of an opened volume cannot be sampled (a vector grid, say), without the
+/// file's name.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct Unsampleable(pub String);
+
 /// One grid of an opened volume: its summary and, for scalar grids, the grid itself.
 pub struct NamedVolume {
     /// The summary.
     pub summary: GridSummary,
     /// The grid, or why it cannot be sampled (a vector grid, say).
-    pub grid: Result<Volume, String>,
+    pub grid: Result<Volume, Unsampleable>,
 }
 
 /// World bounding box of the index box `[lo - 0.5, hi + 0.5]` (the voxels' extent).
@@ -233,7 +239,7 @@ fn open_nanovdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
             },
             grid: match g.check_sampleable() {
                 Ok(()) => Ok(Volume::Nano(Box::new(g))),
-                Err(e) => Err(e.message().to_string()),
+                Err(e) => Err(Unsampleable(e.message().to_string())),
             },
         })
         .collect())
@@ -261,7 +267,9 @@ fn open_vdb(path: &Path) -> Result<Vec<NamedVolume>, VolumeError> {
                     source_bytes: bytes as u64,
                     brick_store: None,
                 },
-                grid: grid.map(|g| Volume::Vdb(Box::new(g))).map_err(|e| e.0),
+                grid: grid
+                    .map(|g| Volume::Vdb(Box::new(g)))
+                    .map_err(|e| Unsampleable(e.0)),
             }
         })
         .collect())

@@ -15,7 +15,9 @@ use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
-use crate::wide_bvh::{point_f32, prefetch_lines, BinaryNode, Walker, WideSlabs, WideTree};
+use crate::wide_bvh::{
+    point_f32, prefetch_lines, BinaryNode, Walker, WideBvhError, WideSlabs, WideTree,
+};
 
 /// Triangles per block.
 const LANES: usize = 4;
@@ -42,7 +44,10 @@ impl WideBvh {
     /// The wide form of a mesh's binary BVH (`nodes`, root first, children of an inner node
     /// at `first, first + 1`) over its reordered triangles; an error when the binary tree
     /// is deeper than [`crate::wide_bvh::MAX_DEPTH`].
-    pub(crate) fn new(nodes: &[BinaryNode], triangles: &[[V3<f32>; 3]]) -> Result<Self, String> {
+    pub(crate) fn new(
+        nodes: &[BinaryNode],
+        triangles: &[[V3<f32>; 3]],
+    ) -> Result<Self, WideBvhError> {
         let mut blocks = Vec::with_capacity(triangles.len() / 2 + 1);
         let tree = WideTree::new(nodes, |first, count| {
             Self::push_leaf(

@@ -265,7 +265,7 @@ fn primitive_rows(
 }
 
 /// Union of spheres as one list node or as a balanced binary tree, f32 and f64.
-fn tree_rows(settings: Settings) -> Result<Vec<Row>, String> {
+fn tree_rows(settings: Settings) -> crate::Result<Vec<Row>> {
     const PARTS: usize = 24;
     const PART_RADIUS: f64 = 15.0;
     let mut rng = Rng::new(11, 0, 0);
@@ -276,8 +276,7 @@ fn tree_rows(settings: Settings) -> Result<Vec<Row>, String> {
         .iter()
         .map(|c| sphere(PART_RADIUS).map(|s| s.translate(c[0], c[1], c[2])))
         .reduce(|a, b| Ok(a? + b?))
-        .expect("parts")
-        .map_err(|e| e.to_string())?;
+        .expect("parts")?;
     let cases: Vec<Case> = (0..settings.size(4000, 300))
         .map(|_| {
             let c = centres[(rng.next_u32() as usize) % PARTS];
@@ -300,8 +299,8 @@ fn tree_rows(settings: Settings) -> Result<Vec<Row>, String> {
         let options = TreeOptions { lists };
         let form = if lists { "list node" } else { "binary tree" };
         let memory = tree_bytes(&shape, options)?;
-        let p32 = PrimTree::<f32>::from_shape_with(&shape, options).map_err(|e| e.to_string())?;
-        let p64 = PrimTree::<f64>::from_shape_with(&shape, options).map_err(|e| e.to_string())?;
+        let p32 = PrimTree::<f32>::from_shape_with(&shape, options)?;
+        let p64 = PrimTree::<f64>::from_shape_with(&shape, options)?;
         let hit = |step: hytrace_csg::kernel::Step<f64>| step.is_hit().then_some(step.t);
         let (got, ns) = measure(&timer, &cases, |c| {
             let s = p32.first_crossing(&c.ray(), 0.0);
@@ -315,8 +314,8 @@ fn tree_rows(settings: Settings) -> Result<Vec<Row>, String> {
 }
 
 /// Bytes of the Foundry tree a shape becomes (nodes and list members).
-fn tree_bytes(shape: &Shape, options: TreeOptions) -> Result<u64, String> {
-    let tree = to_tree_with(shape, options).map_err(|e| e.to_string())?;
+fn tree_bytes(shape: &Shape, options: TreeOptions) -> crate::Result<u64> {
+    let tree = to_tree_with(shape, options)?;
     Ok(((tree.nodes.len() + tree.members.len()) * std::mem::size_of::<Node>()) as u64)
 }
 
@@ -340,7 +339,7 @@ fn tree_row(
 }
 
 /// Every CSG row.
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let mut rows = primitive_rows(
         settings,
         [

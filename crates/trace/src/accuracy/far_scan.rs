@@ -16,6 +16,7 @@ use super::csg::{in_ball, sphere_reference, torus_reference, Case, RADIUS, TUBE}
 use super::dd::Dd;
 use super::{Row, Settings, Timer};
 use crate::cpu::CpuScene;
+use crate::error::Context;
 use crate::scan::{cpu_answers, redo_uncertain_in_f64, Answer, RayRow};
 
 /// How far the solids are from the world origin (mm).
@@ -43,22 +44,21 @@ fn group_centre(distance: f64) -> [f64; 3] {
 }
 
 /// The scene: the three solids placed around `centre`.
-fn scene(centre: [f64; 3]) -> Result<Foundry, String> {
-    let err = |e: &dyn std::fmt::Display| format!("far-scan scene: {e}");
+fn scene(centre: [f64; 3]) -> crate::Result<Foundry> {
     let shapes: [Shape; 3] = [
-        sphere(RADIUS).map_err(|e| err(&e))?,
-        torus(0.0, TUBE, RADIUS).map_err(|e| err(&e))?,
-        box3(2.0 * BOX[0], 2.0 * BOX[1], 2.0 * BOX[2]).map_err(|e| err(&e))?,
+        sphere(RADIUS).context("far-scan scene")?,
+        torus(0.0, TUBE, RADIUS).context("far-scan scene")?,
+        box3(2.0 * BOX[0], 2.0 * BOX[1], 2.0 * BOX[2]).context("far-scan scene")?,
     ];
     let mut f = Foundry::new();
     for (k, shape) in shapes.iter().enumerate() {
         let mut s = f.begin_solid(&format!("solid{k}"));
-        let tree = to_tree(shape).map_err(|e| err(&e))?;
-        s.add_csg(tree, 0, UNSET).map_err(|e| err(&e))?;
-        let solid = s.finish(0).map_err(|e| err(&e))?;
+        let tree = to_tree(shape).context("far-scan scene")?;
+        s.add_csg(tree, 0, UNSET).context("far-scan scene")?;
+        let solid = s.finish(0).context("far-scan scene")?;
         let at = std::array::from_fn(|i| centre[i] + OFFSETS[k][i]);
         f.add_instance(solid, Transform64::translation(at), 0, 0)
-            .map_err(|e| err(&e))?;
+            .context("far-scan scene")?;
     }
     Ok(f)
 }
@@ -201,8 +201,7 @@ fn distance_rows(
     component: &'static str,
     distance: f64,
     seed: u32,
-) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("{component}: {e}");
+) -> crate::Result<Vec<Row>> {
     let centre = group_centre(distance);
     let f = scene(centre)?;
     let mut rng = Rng::new(13, seed, 0);
@@ -226,11 +225,11 @@ fn distance_rows(
             ..*r
         })
         .collect();
-    let f32_scene = CpuScene::<f32>::new(&f).map_err(|e| err(&e))?;
-    let f64_scene = CpuScene::<f64>::new(&f).map_err(|e| err(&e))?;
-    let with_fallback = || -> Result<Vec<Answer>, String> {
+    let f32_scene = CpuScene::<f32>::new(&f).context(component)?;
+    let f64_scene = CpuScene::<f64>::new(&f).context(component)?;
+    let with_fallback = || -> crate::Result<Vec<Answer>> {
         let mut answers = cpu_answers(&f32_scene, &rays);
-        redo_uncertain_in_f64(&f, &f32_scene, &rays, &mut answers).map_err(|e| err(&e))?;
+        redo_uncertain_in_f64(&f, &f32_scene, &rays, &mut answers).context(component)?;
         Ok(answers)
     };
     let timer = Timer::new(settings);
@@ -269,11 +268,11 @@ fn distance_rows(
 
 /// Every far-scan row, timed on one thread (the scan's rayon loops run in a one-thread
 /// pool, as every other row of the benchmark is timed).
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .map_err(|e| format!("far-scan rows: {e}"))?;
+        .map_err(|e| crate::Error::Invalid(format!("far-scan rows: {e}")))?;
     pool.install(|| {
         let mut rows = Vec::new();
         for (k, (&distance, component)) in DISTANCES.iter().zip(COMPONENTS).enumerate() {

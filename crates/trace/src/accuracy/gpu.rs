@@ -9,6 +9,7 @@ use hytrace_csg::Ray;
 use hytrace_volume::{BrickedGrid, Estimator, Majorant, TexelFormat};
 
 use crate::cpu::CpuScene;
+use crate::error::Context;
 use crate::gpu::{GpuContext, GpuTracer, GpuVolume, GPU_INF};
 use crate::scan::{ray_record, RayRow};
 use crate::scene::default_scene;
@@ -58,7 +59,7 @@ fn functional(ctx: &GpuContext) -> &'static str {
 
 /// The scan rows and the transmittance rows; without an adapter the GPU rows are left out
 /// with a note on stderr.
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let ctx = match GpuContext::new() {
         Ok(ctx) => Some(ctx),
         Err(e) => {
@@ -72,14 +73,13 @@ pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
 }
 
 /// The CPU f32 scan row and, with `ctx`, the GPU's.
-fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("{COMPONENT}: {e}");
-    let foundry = default_scene().map_err(|e| err(&e))?;
-    let bounds = scene_bounds(&foundry).ok_or_else(|| err(&"the default scene is empty"))?;
-    let rays =
-        generate(Sweep::Circle, &bounds, settings.size(20_000, 1000)).map_err(|e| err(&e))?;
-    let f64_scene = CpuScene::<f64>::new(&foundry).map_err(|e| err(&e))?;
-    let f32_scene = CpuScene::<f32>::new(&foundry).map_err(|e| err(&e))?;
+fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> crate::Result<Vec<Row>> {
+    let foundry = default_scene().context(COMPONENT)?;
+    let bounds =
+        scene_bounds(&foundry).context(format!("{COMPONENT}: the default scene is empty"))?;
+    let rays = generate(Sweep::Circle, &bounds, settings.size(20_000, 1000)).context(COMPONENT)?;
+    let f64_scene = CpuScene::<f64>::new(&foundry).context(COMPONENT)?;
+    let f32_scene = CpuScene::<f32>::new(&foundry).context(COMPONENT)?;
     let want = cpu_answers(&f64_scene, &rays);
     let timer = Timer::new(settings);
     let mut rows = vec![Row {
@@ -94,9 +94,9 @@ fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, S
     let Some(ctx) = ctx else {
         return Ok(rows);
     };
-    let tracer = GpuTracer::new(ctx, &f32_scene).map_err(|e| err(&e))?;
+    let tracer = GpuTracer::new(ctx, &f32_scene).context(COMPONENT)?;
     let records: Vec<_> = rays.iter().map(ray_record).collect();
-    let (hits, _) = tracer.trace(ctx, &records).map_err(|e| err(&e))?;
+    let (hits, _) = tracer.trace(ctx, &records).context(COMPONENT)?;
     let got: Vec<Answer> = hits
         .iter()
         .map(|h| (h.t < GPU_INF).then(|| (f64::from(h.t), h.instance)))
@@ -125,13 +125,13 @@ fn scan_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, S
 
 /// Exact and ratio-tracking transmittance on the CPU (f64, one thread) and, with `ctx`, on
 /// the GPU (f32, the grid as f32 bricks, which hold its values exactly).
-fn transmittance_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Vec<Row>, String> {
-    let err = |e: &dyn std::fmt::Display| format!("gpu vs cpu transmittance: {e}");
+fn transmittance_rows(settings: Settings, ctx: Option<&GpuContext>) -> crate::Result<Vec<Row>> {
+    const CONTEXT: &str = "gpu vs cpu transmittance";
     let fog = Fog::new(settings)?;
     let timer = Timer::new(settings);
-    let bricks = BrickedGrid::convert(&fog.grid, TexelFormat::F32).map_err(|e| err(&e))?;
+    let bricks = BrickedGrid::convert(&fog.grid, TexelFormat::F32).context(CONTEXT)?;
     let gpu = match ctx {
-        Some(ctx) => Some((ctx, GpuVolume::new(ctx, &bricks).map_err(|e| err(&e))?)),
+        Some(ctx) => Some((ctx, GpuVolume::new(ctx, &bricks).context(CONTEXT)?)),
         None => None,
     };
     // The fog's grid has the identity map: its index rays are its world rays.
@@ -165,7 +165,7 @@ fn transmittance_rows(settings: Settings, ctx: Option<&GpuContext>) -> Result<Ve
         rows.push(row(format!("{name}, CPU f64, 1 thread"), error, ns));
         if let Some((ctx, volume)) = &gpu {
             let run = || volume.transmittance(ctx, &rays, &params);
-            let (estimates, _) = run().map_err(|e| err(&e))?;
+            let (estimates, _) = run().context(CONTEXT)?;
             let error = rms(&mut estimates.iter().map(|e| e.transmittance));
             let ns = timer.ns_per_op(rays.len(), run);
             let variant = format!(

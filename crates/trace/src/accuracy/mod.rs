@@ -56,8 +56,8 @@ impl Settings {
 }
 
 /// Measures every component's rows, in a fixed order.
-pub fn measure(settings: Settings) -> Result<Vec<Row>, String> {
-    type Measure = fn(Settings) -> Result<Vec<Row>, String>;
+pub fn measure(settings: Settings) -> crate::Result<Vec<Row>> {
+    type Measure = fn(Settings) -> crate::Result<Vec<Row>>;
     let components: [(&str, Measure); 5] = [
         ("CSG", csg::rows),
         ("CSG scans far from the origin", far_scan::rows),
@@ -72,17 +72,17 @@ pub fn measure(settings: Settings) -> Result<Vec<Row>, String> {
     }
     for row in &rows {
         if !(row.error.is_finite() && row.error >= 0.0 && row.ns_per_op.is_finite()) {
-            return Err(format!(
+            return Err(crate::Error::Invalid(format!(
                 "{} / {}: error {} and time {} ns must be finite",
                 row.component, row.variant, row.error, row.ns_per_op
-            ));
+            )));
         }
     }
     Ok(rows)
 }
 
 /// Measures every row and writes the reports into `dir` (see [`write_reports`]).
-pub fn run(settings: Settings, dir: &Path) -> Result<Vec<Row>, String> {
+pub fn run(settings: Settings, dir: &Path) -> crate::Result<Vec<Row>> {
     check_output_dir(dir)?;
     let rows = measure(settings)?;
     write_reports(&rows, settings, dir)?;

@@ -179,7 +179,7 @@ fn markdown(groups: &[Group], settings: Settings) -> String {
 /// One component's plot: error against time per operation, both logarithmic, points
 /// numbered as in the Markdown table, the Pareto front joined by a line. Errors of 0 sit
 /// on the bottom edge.
-fn plot(g: &Group) -> Result<String, String> {
+fn plot(g: &Group) -> crate::Result<String> {
     let positive = g.rows.iter().map(|r| r.error).filter(|e| *e > 0.0);
     let lo_err = positive.clone().fold(f64::INFINITY, f64::min);
     let hi_err = positive.fold(0.0, f64::max);
@@ -199,7 +199,9 @@ fn plot(g: &Group) -> Result<String, String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (900, 600)).into_drawing_area();
-        let draw = |e: &dyn std::fmt::Display| format!("plot of {}: {e}", g.component);
+        let draw = |e: &dyn std::fmt::Display| {
+            crate::Error::invalid(format!("plot of {}: {e}", g.component))
+        };
         root.fill(&WHITE).map_err(|e| draw(&e))?;
         let mut chart = ChartBuilder::on(&root)
             .caption(
@@ -251,20 +253,23 @@ fn plot(g: &Group) -> Result<String, String> {
 
 /// Errors when `dir` exists and is not a directory (checked before measuring, so a run
 /// that could not write its reports fails at once).
-pub fn check_output_dir(dir: &Path) -> Result<(), String> {
+pub fn check_output_dir(dir: &Path) -> crate::Result<()> {
     if dir.exists() && !dir.is_dir() {
-        return Err(format!("{}: exists and is not a directory", dir.display()));
+        return Err(crate::Error::Invalid(format!(
+            "{}: exists and is not a directory",
+            dir.display()
+        )));
     }
     Ok(())
 }
 
 /// Writes `accuracy.csv`, `accuracy.md` and the plots into `dir` (created if missing).
-pub fn write_reports(rows: &[Row], settings: Settings, dir: &Path) -> Result<(), String> {
+pub fn write_reports(rows: &[Row], settings: Settings, dir: &Path) -> crate::Result<()> {
     check_output_dir(dir)?;
     let groups = groups(rows);
     let write = |name: String, text: String| {
         write_atomically(&dir.join(name), |w| w.write_all(text.as_bytes()))
-            .map_err(|e| e.to_string())
+            .map_err(crate::Error::from)
     };
     for g in &groups {
         write(format!("accuracy-{}.svg", slug(g.component)), plot(g)?)?;

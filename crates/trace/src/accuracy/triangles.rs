@@ -153,7 +153,7 @@ fn test_rows(settings: Settings) -> Vec<Row> {
 
 /// The obvhs build presets of a mesh's BVH: build time, trace time and the answers, which
 /// must not depend on the preset.
-fn bvh_rows(settings: Settings) -> Result<Vec<Row>, String> {
+fn bvh_rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let centre = [0.0; 3];
     let tris = icosphere(settings.size(6, 4), 100.0, centre);
     let mut rng = Rng::new(5, 0, 0);
@@ -190,7 +190,7 @@ fn bvh_rows(settings: Settings) -> Result<Vec<Row>, String> {
     ];
     let mut rows = Vec::new();
     for (name, params) in presets {
-        let mesh = MeshPrim::<f32>::with_bvh_build(&tris, params).map_err(|e| e.to_string())?;
+        let mesh = MeshPrim::<f32>::with_bvh_build(&tris, params)?;
         let build_ms = timer.ns_per_op(1, || MeshPrim::<f32>::with_bvh_build(&tris, params)) * 1e-6;
         let answer = |r: &Ray<f32>| {
             let s = mesh.first_crossing(r, 0.0);
@@ -223,7 +223,7 @@ fn bvh_rows(settings: Settings) -> Result<Vec<Row>, String> {
 }
 
 /// Every triangle row.
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let mut rows = test_rows(settings);
     rows.extend(bvh_rows(settings)?);
     Ok(rows)

@@ -66,7 +66,7 @@ const DENSITY_SCALE: f64 = 0.15;
 const SEED: u32 = 0x5eed;
 
 /// The rows of this component.
-pub(super) fn rows(settings: Settings) -> Result<Vec<Row>, String> {
+pub(super) fn rows(settings: Settings) -> crate::Result<Vec<Row>> {
     let timer = Timer::new(settings);
     let mut rows = texel_format_rows(settings, timer)?;
     rows.extend(filter_rows(settings, timer)?);
@@ -162,8 +162,8 @@ fn random_points(count: usize, lo: [f64; 3], hi: [f64; 3], stream: u32) -> Vec<[
 }
 
 /// The source values of the density fixtures, from the embedded `density.npy`.
-fn density_lattice() -> Result<Lattice, String> {
-    let fail = |why: String| format!("embedded density.npy: {why}");
+fn density_lattice() -> crate::Result<Lattice> {
+    let fail = |why: String| crate::Error::Invalid(format!("embedded density.npy: {why}"));
     let npy = npyz::NpyFile::new(DENSITY_NPY).map_err(|e| fail(e.to_string()))?;
     let n = DENSITY_SIDE;
     if npy.shape() != [n as u64; 3] || npy.order() != npyz::Order::C {
@@ -191,14 +191,13 @@ fn density_lattice() -> Result<Lattice, String> {
 }
 
 /// The `density` grid of a NanoVDB fixture.
-fn density_grid(file: &str, bytes: &[u8]) -> Result<NanoGrid, String> {
-    let grid = parse_nanovdb(bytes, file)
-        .map_err(|e| e.to_string())?
+fn density_grid(file: &str, bytes: &[u8]) -> crate::Result<NanoGrid> {
+    let grid = parse_nanovdb(bytes, file)?
         .grids
         .into_iter()
         .find(|g| g.name() == "density")
-        .ok_or_else(|| format!("{file}: no grid `density`"))?;
-    grid.check_sampleable().map_err(|e| e.to_string())?;
+        .ok_or_else(|| crate::Error::Invalid(format!("{file}: no grid `density`")))?;
+    grid.check_sampleable()?;
     Ok(grid)
 }
 
@@ -225,7 +224,7 @@ fn lookup_error<G: VoxelGrid>(
 
 /// Texel formats: the bricked formats converted from the fixture's Float grid, and the
 /// NanoVDB codecs as the fixtures store them; one grid, one reference for all.
-fn texel_format_rows(settings: Settings, timer: Timer) -> Result<Vec<Row>, String> {
+fn texel_format_rows(settings: Settings, timer: Timer) -> crate::Result<Vec<Row>> {
     let reference = density_lattice()?;
     // The interpolant's support: voxel centres plus one voxel of fall-off to the background.
     let lo = reference.origin.map(|c| c as f64 - 1.0);
@@ -253,7 +252,7 @@ fn texel_format_rows(settings: Settings, timer: Timer) -> Result<Vec<Row>, Strin
         TexelFormat::Unorm8,
         TexelFormat::Bc4,
     ] {
-        let bricked = BrickedGrid::convert(float, format).map_err(|e| e.to_string())?;
+        let bricked = BrickedGrid::convert(float, format)?;
         rows.push(row(
             format!("bricked {format}"),
             lookup_error(&bricked, &reference, &points, timer),
@@ -282,9 +281,9 @@ fn field(p: [f64; 3]) -> f64 {
 }
 
 /// [`field`] sampled at the voxel centres of a [`FIELD_SIDE`]^3 grid at the origin.
-fn field_grid() -> Result<DenseGrid, String> {
+fn field_grid() -> crate::Result<DenseGrid> {
     let n = FIELD_SIDE;
-    let mut grid = DenseGrid::new([0; 3], [n; 3], 0.0).map_err(|e| e.to_string())?;
+    let mut grid = DenseGrid::new([0; 3], [n; 3], 0.0)?;
     for z in 0..i64::from(n) {
         for y in 0..i64::from(n) {
             for x in 0..i64::from(n) {
@@ -297,7 +296,7 @@ fn field_grid() -> Result<DenseGrid, String> {
 
 /// Lookup filters on the sampled field, against the field itself, inside the voxel
 /// centres' hull (where no lookup reads the background).
-fn filter_rows(settings: Settings, timer: Timer) -> Result<Vec<Row>, String> {
+fn filter_rows(settings: Settings, timer: Timer) -> crate::Result<Vec<Row>> {
     let grid = field_grid()?;
     let count = settings.size(200_000, 20_000);
     let hi = (FIELD_SIDE - 1) as f64;
@@ -347,9 +346,9 @@ pub(super) struct Fog {
 
 impl Fog {
     /// The grid, its range mips, the rays and their references.
-    pub(super) fn new(settings: Settings) -> Result<Fog, String> {
+    pub(super) fn new(settings: Settings) -> crate::Result<Fog> {
         let grid = field_grid()?;
-        let mips = RangeMips::build(&grid).map_err(|e| e.to_string())?;
+        let mips = RangeMips::build(&grid)?;
         let rays = fog_rays(settings.size(16_000, 400))?;
         let lattice = Lattice::from_dense(&grid);
         let reference = rays
@@ -369,9 +368,8 @@ impl Fog {
         &self,
         params: &TransmittanceParams,
         timer: Timer,
-    ) -> Result<(Vec<Estimate>, f64), String> {
-        let tracer =
-            IndexTransmittance::new(&self.grid, &self.mips, params).map_err(|e| e.to_string())?;
+    ) -> crate::Result<(Vec<Estimate>, f64)> {
+        let tracer = IndexTransmittance::new(&self.grid, &self.mips, params)?;
         let run = || {
             self.rays
                 .iter()
@@ -379,7 +377,7 @@ impl Fog {
                 .map(|(i, r)| tracer.estimate(r, i as u32))
                 .collect::<Result<Vec<_>, _>>()
         };
-        let estimates = run().map_err(|e| e.to_string())?;
+        let estimates = run()?;
         Ok((estimates, timer.ns_per_op(self.rays.len(), run)))
     }
 }
@@ -387,7 +385,7 @@ impl Fog {
 /// Rays from 40 voxels before to 40 voxels past an aim point uniform in the ball of radius
 /// 10 around the grid's centre, in uniform random directions: both ends lie outside the
 /// grid, so the rays cross the whole blob.
-fn fog_rays(count: usize) -> Result<Vec<IndexRay>, String> {
+fn fog_rays(count: usize) -> crate::Result<Vec<IndexRay>> {
     let centre = (FIELD_SIDE as f64 - 1.0) / 2.0;
     let mut rng = Rng::new(SEED, 4, 0);
     (0..count)
@@ -403,7 +401,7 @@ fn fog_rays(count: usize) -> Result<Vec<IndexRay>, String> {
             let s = (1.0 - z * z).max(0.0).sqrt();
             let dir = [s * phi.cos(), s * phi.sin(), z];
             let origin = std::array::from_fn(|k| aim[k] - 40.0 * dir[k]);
-            IndexRay::new(origin, dir, 0.0, 80.0).map_err(|e| e.to_string())
+            IndexRay::new(origin, dir, 0.0, 80.0).map_err(crate::Error::from)
         })
         .collect()
 }
@@ -425,7 +423,7 @@ pub(super) fn fog_params(
 }
 
 /// Transmittance estimators with local majorants of the 8^3 blocks.
-fn estimator_rows(fog: &Fog, timer: Timer) -> Result<Vec<Row>, String> {
+fn estimator_rows(fog: &Fog, timer: Timer) -> crate::Result<Vec<Row>> {
     let local = Majorant::Local { level: 0 };
     let mut variants = vec![(fog_params(Estimator::Exact, 1, local), "exact".to_string())];
     for step in [2.0, 1.0, 0.5, 0.25] {
@@ -479,7 +477,7 @@ fn estimator_rows(fog: &Fog, timer: Timer) -> Result<Vec<Row>, String> {
 
 /// Ratio tracking (4 spp) under local majorants of mip levels 0 to 2 and one global one:
 /// the density lookups (tentative collisions) each needs per ray.
-fn majorant_rows(fog: &Fog, timer: Timer) -> Result<Vec<Row>, String> {
+fn majorant_rows(fog: &Fog, timer: Timer) -> crate::Result<Vec<Row>> {
     let variants = [
         (Majorant::Local { level: 0 }, "local, 8^3 blocks (level 0)"),
         (Majorant::Local { level: 1 }, "local, 16^3 blocks (level 1)"),

@@ -27,7 +27,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Accuracy { out, quick } => {
             let settings = accuracy::Settings { quick };
             eprintln!("measuring on {}", accuracy::machine_line(settings));
-            let rows = accuracy::run(settings, &out).map_err(anyhow::Error::msg)?;
+            let rows = accuracy::run(settings, &out)?;
             eprintln!(
                 "{} rows; wrote {}/accuracy.csv, accuracy.md and the plots",
                 rows.len(),

@@ -2,6 +2,8 @@
 //! the library's (`hytrace_trace`).
 
 mod bench;
+mod choice;
+mod options;
 mod photons;
 mod render;
 mod scan;

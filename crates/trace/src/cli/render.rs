@@ -12,6 +12,9 @@ use hytrace_trace::render::run::{render, RenderBackend, RenderSettings, Rendered
 use hytrace_trace::render::{write_image, Effects, ExrPrecision, IMAGE_EXTENSIONS};
 use hytrace_trace::scene::load_render_scene;
 
+use super::choice::choice;
+use super::options::RenderSettingsArgs;
+
 /// The options of `hytrace render`; each overrides the scene file's `[render]` table.
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -23,18 +26,18 @@ pub struct RenderArgs {
     #[arg(short, long, default_value = "out/render.png")]
     pub out: PathBuf,
     /// The sample type of an .exr image: float (32-bit, the radiance exactly) or half.
-    #[arg(long, value_enum, value_name = "TYPE", default_value_t = ExrPrecision::Float)]
+    #[arg(long, value_parser = choice::<ExrPrecision>(), value_name = "TYPE", default_value_t = ExrPrecision::Float)]
     pub exr: ExrPrecision,
     /// Where it renders.
-    #[arg(long, value_enum, default_value_t = RenderBackend::Cpu)]
+    #[arg(long, value_parser = choice::<RenderBackend>(), default_value_t = RenderBackend::Cpu)]
     pub backend: RenderBackend,
     /// Where the GPU reads the media's texels from: a storage buffer, decoded as on the CPU,
     /// or one 3D texture of their texel format (BC4 then decoded by the device; every
     /// medium in one format).
-    #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
+    #[arg(long, value_parser = choice::<TexelStore>(), default_value_t = TexelStore::Storage)]
     pub gpu_texels: TexelStore,
     #[command(flatten)]
-    pub settings: RenderSettings,
+    pub settings: RenderSettingsArgs,
     /// Print which effects and kernels the scene uses, and render nothing.
     #[arg(long)]
     pub explain: bool,
@@ -60,7 +63,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     }
     let t0 = Instant::now();
     let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
-    let legend = args.settings.apply(&f, &mut spec)?;
+    let legend = RenderSettings::from(args.settings.clone()).apply(&f, &mut spec)?;
     if args.explain {
         for line in Effects::of(&f, &spec).explain() {
             println!("{line}");

@@ -9,6 +9,9 @@ use hytrace_trace::scan::{self, Backend, Precision};
 use hytrace_trace::sweep::{self, Sweep};
 use hytrace_trace::{outputs, scene, volume};
 
+use super::choice::choice;
+use super::options::EstimatorArgs;
+
 /// Options of `hytrace scan`.
 #[derive(clap::Args)]
 pub struct ScanArgs {
@@ -19,7 +22,7 @@ pub struct ScanArgs {
     #[arg(long)]
     pub rays: Option<PathBuf>,
     /// Generate a sweep around the scene instead of reading rays.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::<Sweep>())]
     pub sweep: Option<Sweep>,
     /// Rays in the sweep (origins for `axis` and `circle`, per side for `rect`).
     #[arg(long, default_value_t = 1000)]
@@ -32,21 +35,21 @@ pub struct ScanArgs {
     #[arg(long)]
     pub ids: Option<PathBuf>,
     /// Arithmetic precision (and dtype of the hits).
-    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    #[arg(long, value_parser = choice::<Precision>(), default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Print one JSON line of counts and timings.
     #[arg(long)]
     pub stats: bool,
     /// Tracer: our CPU tracer; Embree (f32; needs a build with `--features embree`); our
     /// GPU tracer through wgpu (f32); or `auto`: the GPU when one opens, else the CPU.
-    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    #[arg(long, value_parser = choice::<Backend>(), default_value_t = Backend::Cpu)]
     pub backend: Backend,
     /// Also write the transmittance of the scene's media along each ray up to its first
     /// surface crossing (to tmax on a miss), (N,) float64 (not with Embree).
     #[arg(long)]
     pub transmittance: Option<PathBuf>,
     #[command(flatten)]
-    pub estimate: volume::EstimatorOptions,
+    pub estimate: EstimatorArgs,
 }
 
 /// Runs `hytrace scan`.
@@ -102,7 +105,7 @@ pub fn run(args: ScanArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             &ray_rows,
             &scan::ray_ends(&result, &ray_rows),
             precision,
-            &estimate.args().params(),
+            &volume::EstimatorOptions::from(estimate).args().params(),
             media_backend,
             0,
         )?),

@@ -9,6 +9,9 @@ use hytrace_trace::scan;
 use hytrace_trace::volume::{self, FilterArg, Repr, Space};
 use hytrace_volume::TexelFormat;
 
+use super::choice::choice;
+use super::options::{EstimatorArgs, StoreArgs};
+
 /// The subcommands of `hytrace volume`.
 #[derive(Subcommand)]
 pub enum VolumeCommand {
@@ -31,13 +34,13 @@ pub enum VolumeCommand {
         #[arg(long)]
         out: PathBuf,
         /// Coordinates of the points.
-        #[arg(long, value_enum, default_value_t = Space::World)]
+        #[arg(long, value_parser = choice::<Space>(), default_value_t = Space::World)]
         space: Space,
         /// Lookup filter.
-        #[arg(long, value_enum, default_value_t = FilterArg::Trilinear)]
+        #[arg(long, value_parser = choice::<FilterArg>(), default_value_t = FilterArg::Trilinear)]
         filter: FilterArg,
         /// Representation looked up.
-        #[arg(long, value_enum, default_value_t = Repr::Nanovdb)]
+        #[arg(long, value_parser = choice::<Repr>(), default_value_t = Repr::Nanovdb)]
         repr: Repr,
         /// Grid name (default: the first grid).
         #[arg(long)]
@@ -65,10 +68,10 @@ pub enum VolumeCommand {
         #[arg(long)]
         out: PathBuf,
         /// Representation traced.
-        #[arg(long, value_enum, default_value_t = Repr::Nanovdb)]
+        #[arg(long, value_parser = choice::<Repr>(), default_value_t = Repr::Nanovdb)]
         repr: Repr,
         #[command(flatten)]
-        estimate: volume::EstimatorOptions,
+        estimate: EstimatorArgs,
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
@@ -76,11 +79,11 @@ pub enum VolumeCommand {
         /// nanovdb` a NanoVDB file's raw buffer; other grids are converted to f32 bricks; a
         /// brick store streams through a brick pool of --memory bytes) or the GPU when one
         /// opens, else the CPU.
-        #[arg(long, value_enum, default_value_t = volume::VolumeBackend::Cpu)]
+        #[arg(long, value_parser = choice::<volume::VolumeBackend>(), default_value_t = volume::VolumeBackend::Cpu)]
         backend: volume::VolumeBackend,
         /// Where the GPU reads a bricked grid's texels from: a storage buffer, decoded as on
         /// the CPU, or a 3D texture (BC4 then decoded by the device).
-        #[arg(long, value_enum, default_value_t = TexelStore::Storage)]
+        #[arg(long, value_parser = choice::<TexelStore>(), default_value_t = TexelStore::Storage)]
         gpu_texels: TexelStore,
         /// Print one JSON line of counts and timings.
         #[arg(long)]
@@ -111,7 +114,7 @@ pub enum VolumeCommand {
         #[arg(long)]
         grid: Option<String>,
         #[command(flatten)]
-        store_options: volume::StoreOptions,
+        store_options: StoreArgs,
     },
 }
 
@@ -169,7 +172,7 @@ pub fn run(command: VolumeCommand) -> anyhow::Result<()> {
             let run = volume::transmittances_on(
                 &g,
                 &rays,
-                &estimate.args(),
+                &volume::EstimatorOptions::from(estimate).args(),
                 backend,
                 gpu_texels,
                 memory,
@@ -197,7 +200,7 @@ pub fn run(command: VolumeCommand) -> anyhow::Result<()> {
             store_options,
         } => {
             if store {
-                let r = volume::convert_store(&file, grid.as_deref(), &out, &store_options)?;
+                let r = volume::convert_store(&file, grid.as_deref(), &out, &store_options.into())?;
                 eprintln!(
                     "{}x{}x{} voxels: {} bricks kept, {} dropped; {} bytes written in {:.1} s (range {:.1} s); wrote {}",
                     r.meta.dims[0],

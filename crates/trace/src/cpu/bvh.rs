@@ -21,7 +21,7 @@
 
 use glam::Vec3A;
 use hytrace_csg::bvh_build::shallow_bvh2;
-use hytrace_csg::wide_bvh::{ray_f32, WideSlabs, WideTree};
+use hytrace_csg::wide_bvh::{ray_f32, WideBvhError, WideSlabs, WideTree};
 use hytrace_csg::{Bounds, Ray, Real, SlabRay, V3};
 use obvhs::aabb::Aabb;
 use obvhs::BvhBuildParams;
@@ -135,7 +135,7 @@ impl<T: Real> BoxBvh<T> {
     /// A BVH over items given as `(id, bounds)`, within the traversal stacks however the
     /// boxes lie ([`shallow_bvh2`]); an error only where the f32 wide tree cannot be formed
     /// from it.
-    pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Result<Self, String> {
+    pub(super) fn new(members: &[(u32, Bounds<T>)]) -> Result<Self, WideBvhError> {
         let finite =
             |b: &Bounds<T>| (0..3).all(|k| b[0].get(k).is_finite() && b[1].get(k).is_finite());
         let (bounded, unbounded): (Vec<_>, Vec<_>) = members.iter().partition(|(_, b)| finite(b));

@@ -70,7 +70,7 @@ impl SceneArrays {
 
 impl CpuScene<f32> {
     /// Every array the GPU tracer binds.
-    pub fn gpu_arrays(&self) -> anyhow::Result<SceneArrays> {
+    pub fn gpu_arrays(&self) -> crate::Result<SceneArrays> {
         let mut out = SceneArrays::default();
         for solid in &self.solids {
             let first = out.surface_prims.len() as u32;

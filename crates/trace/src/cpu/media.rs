@@ -18,7 +18,7 @@
 use std::collections::BTreeMap;
 use std::str::FromStr;
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
@@ -87,7 +87,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         scene: &'a CpuScene<T>,
         f: &Foundry,
         params: &TransmittanceParams,
-    ) -> anyhow::Result<Self> {
+    ) -> crate::Result<Self> {
         let mut grids = Vec::with_capacity(f.optics.media.len());
         for (i, m) in f.optics.media.iter().enumerate() {
             let spec = MediumSpec {
@@ -152,7 +152,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmin: f64,
         tmax: f64,
         ray_index: u32,
-    ) -> anyhow::Result<Transmitted<T>> {
+    ) -> crate::Result<Transmitted<T>> {
         let ray = Ray::from_f64(origin, direction);
         let hit = self.scene.trace(&ray, T::from_f64(tmin), T::from_f64(tmax));
         let end = hit.map_or(tmax, |h| h.t.to_f64());
@@ -175,7 +175,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         tmin: f64,
         end: f64,
         ray_index: u32,
-    ) -> anyhow::Result<(f64, u64)> {
+    ) -> crate::Result<(f64, u64)> {
         let spans = self.spans(&Ray::from_f64(origin, direction), tmin, end);
         self.transmittance_over(origin, direction, spans, ray_index)
     }
@@ -192,7 +192,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         end: f64,
         visits: impl IntoIterator<Item = (u32, u32, f64, f64)>,
         ray_index: u32,
-    ) -> anyhow::Result<(f64, u64)> {
+    ) -> crate::Result<(f64, u64)> {
         let ray: Ray<T> = Ray::from_f64(origin, direction);
         let mut spans = ClusterSpans::default();
         for (instance, medium, t0, t1) in visits {
@@ -210,7 +210,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         direction: [f64; 3],
         spans: Vec<((u32, u32), (f64, f64))>,
         ray_index: u32,
-    ) -> anyhow::Result<(f64, u64)> {
+    ) -> crate::Result<(f64, u64)> {
         let mut transmittance = 1.0;
         let mut lookups = 0;
         for s in self.segments_of(origin, direction, spans)? {
@@ -226,8 +226,8 @@ impl<'a, T: Real> SceneMedia<'a, T> {
 
     /// [`Self::trace_transmittance`] of every ray in parallel, ray `i` with the random
     /// streams of index `i`; an error names the first ray that fails.
-    pub fn trace_all(&self, rays: &[RayRow]) -> anyhow::Result<Vec<Transmitted<T>>> {
-        anyhow::ensure!(
+    pub fn trace_all(&self, rays: &[RayRow]) -> crate::Result<Vec<Transmitted<T>>> {
+        crate::error::ensure!(
             u32::try_from(rays.len()).is_ok(),
             "{} rays, at most {} in one batch",
             rays.len(),
@@ -251,7 +251,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         rays: &[RayRow],
         ends: &[f64],
         first_ray: u32,
-    ) -> anyhow::Result<Vec<f64>> {
+    ) -> crate::Result<Vec<f64>> {
         self.each_ray(rays, ends, first_ray, |r, end, i| {
             self.transmittance_to(r.origin, r.direction, r.tmin, end, i)
         })
@@ -264,8 +264,8 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         rays: &[RayRow],
         ends: &[f64],
         first_ray: u32,
-        visits: impl Fn(&RayRow, f64) -> anyhow::Result<Vec<(u32, u32, f64, f64)>> + Sync,
-    ) -> anyhow::Result<Vec<f64>> {
+        visits: impl Fn(&RayRow, f64) -> crate::Result<Vec<(u32, u32, f64, f64)>> + Sync,
+    ) -> crate::Result<Vec<f64>> {
         self.each_ray(rays, ends, first_ray, |r, end, i| {
             let found = visits(r, end)?;
             self.transmittance_with(r.origin, r.direction, r.tmin, end, found, i)
@@ -279,9 +279,9 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         rays: &[RayRow],
         ends: &[f64],
         first_ray: u32,
-        estimate: impl Fn(&RayRow, f64, u32) -> anyhow::Result<(f64, u64)> + Sync,
-    ) -> anyhow::Result<Vec<f64>> {
-        anyhow::ensure!(
+        estimate: impl Fn(&RayRow, f64, u32) -> crate::Result<(f64, u64)> + Sync,
+    ) -> crate::Result<Vec<f64>> {
+        crate::error::ensure!(
             rays.len() == ends.len()
                 && u64::from(first_ray) + rays.len() as u64 <= u64::from(u32::MAX) + 1,
             "{} rays from index {first_ray} and {} ends: need as many, at most {} indices",
@@ -334,7 +334,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         direction: [f64; 3],
         tmin: f64,
         end: f64,
-    ) -> anyhow::Result<Vec<MediumSegment>> {
+    ) -> crate::Result<Vec<MediumSegment>> {
         let spans = self.spans(&Ray::from_f64(origin, direction), tmin, end);
         self.segments_of(origin, direction, spans)
     }
@@ -345,7 +345,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         origin: [f64; 3],
         direction: [f64; 3],
         spans: Vec<((u32, u32), (f64, f64))>,
-    ) -> anyhow::Result<Vec<MediumSegment>> {
+    ) -> crate::Result<Vec<MediumSegment>> {
         spans
             .into_iter()
             .enumerate()

@@ -38,7 +38,7 @@
 //! up to its first surface crossing, finding them through a BVH over the instances that hold
 //! media and each solid's brick clusters.
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, V3};
 use hytrace_foundry::{Foundry, TypeCode, UNSET};
@@ -252,13 +252,13 @@ impl<T: Real> Placement<T> {
 }
 
 impl<T: Real> Group<T> {
-    fn new(members: Vec<u32>, placements: &[Placement<T>]) -> anyhow::Result<Self> {
+    fn new(members: Vec<u32>, placements: &[Placement<T>]) -> crate::Result<Self> {
         let bvh = if members.len() > BVH_MIN_MEMBERS {
             let boxed: Vec<_> = members
                 .iter()
                 .map(|&i| (i, placements[i as usize].bounds))
                 .collect();
-            Some(Box::new(BoxBvh::new(&boxed).map_err(anyhow::Error::msg)?))
+            Some(Box::new(BoxBvh::new(&boxed)?))
         } else {
             None
         };
@@ -345,14 +345,14 @@ fn widened_bounds<T: Real>(b: &hytrace_csg::Aabb) -> Bounds<T> {
 
 impl<T: Real> CpuScene<T> {
     /// Prepares every instance of a validated Foundry.
-    pub fn new(f: &Foundry) -> anyhow::Result<Self> {
+    pub fn new(f: &Foundry) -> crate::Result<Self> {
         let solids = (0..f.solid.len())
             .map(|i| {
                 SolidAccel::new(f, i).with_context(|| {
                     format!("solid {i} `{}`", f.solid_names.get(i).map_or("", |n| n))
                 })
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<crate::Result<Vec<_>>>()?;
         let mut placements = Vec::with_capacity(f.inst.len());
         for (i, (inst, tran)) in f.inst.iter().zip(&f.inst_tran).enumerate() {
             let tran = &tran.to_transform();
@@ -390,7 +390,7 @@ impl<T: Real> CpuScene<T> {
                 daughters: daughters
                     .into_iter()
                     .map(|d| Group::new(d, &placements))
-                    .collect::<anyhow::Result<_>>()?,
+                    .collect::<crate::Result<_>>()?,
             })
         } else {
             // Instances of solids without surface prims (media only) have nothing to cross.

@@ -9,7 +9,7 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_csg::kernel::Step;
 use hytrace_csg::{
     ray_bounds_span, transform_bounds, Bounds, PreparedPrim, Ray, Real, SlabRay, EMPTY_AABB, V3,
@@ -81,7 +81,7 @@ fn prim_transform(f: &Foundry, prim: usize) -> Transform64 {
 }
 
 /// Clusters of volume prim `prim`, boxes in the solid's frame.
-fn clusters_of<T: Real>(f: &Foundry, prim: usize) -> anyhow::Result<Vec<Cluster<T>>> {
+fn clusters_of<T: Real>(f: &Foundry, prim: usize) -> crate::Result<Vec<Cluster<T>>> {
     let medium = f
         .optics
         .media
@@ -110,7 +110,7 @@ fn clusters_of<T: Real>(f: &Foundry, prim: usize) -> anyhow::Result<Vec<Cluster<
 
 impl<T: Real> SolidAccel<T> {
     /// Prepares solid `solid` of a validated Foundry.
-    pub fn new(f: &Foundry, solid: usize) -> anyhow::Result<Self> {
+    pub fn new(f: &Foundry, solid: usize) -> crate::Result<Self> {
         let s = &f.solid[solid];
         let (mut prims, mut prim_ids, mut clusters) = (Vec::new(), Vec::new(), Vec::new());
         for p in s.prim_offset as usize..(s.prim_offset + s.num_prim) as usize {
@@ -130,7 +130,7 @@ impl<T: Real> SolidAccel<T> {
                 .enumerate()
                 .map(|(i, b)| (i as u32, b))
                 .collect();
-            Some(BoxBvh::new(&boxes).map_err(anyhow::Error::msg)?)
+            Some(BoxBvh::new(&boxes)?)
         } else {
             None
         };

@@ -1,9 +1,9 @@
 //! Owned Embree handles (device, scene, geometry), released on drop, and device errors as
-//! `anyhow` errors.
+//! the library's errors.
 
 use std::ptr;
 
-use anyhow::bail;
+use crate::error::bail;
 
 use super::ffi;
 
@@ -12,7 +12,7 @@ pub(crate) struct Device(ffi::RTCDevice);
 
 impl Device {
     /// A device with Embree's default configuration.
-    pub(crate) fn new() -> anyhow::Result<Self> {
+    pub(crate) fn new() -> crate::Result<Self> {
         // SAFETY: a null configuration string selects the defaults.
         let raw = unsafe { ffi::rtcNewDevice(ptr::null()) };
         if raw.is_null() {
@@ -29,7 +29,7 @@ impl Device {
     }
 
     /// Fails, naming `what`, if Embree reported an error since the last check.
-    pub(crate) fn check(&self, what: impl FnOnce() -> String) -> anyhow::Result<()> {
+    pub(crate) fn check(&self, what: impl FnOnce() -> String) -> crate::Result<()> {
         // SAFETY: the device is alive; the call only reads and clears its error slot.
         let code = unsafe { ffi::rtcGetDeviceError(self.0) };
         if code != 0 {
@@ -51,7 +51,7 @@ pub(crate) struct Scene(ffi::RTCScene, u32);
 
 impl Scene {
     /// An empty robust scene (see `RTC_SCENE_FLAG_ROBUST`).
-    pub(crate) fn new(device: &Device) -> anyhow::Result<Self> {
+    pub(crate) fn new(device: &Device) -> crate::Result<Self> {
         // SAFETY: the device is alive.
         let raw = unsafe { ffi::rtcNewScene(device.raw()) };
         if raw.is_null() {
@@ -70,7 +70,7 @@ impl Scene {
 
     /// Commits `geometry` and attaches it. Geometry ids are attachment indices: Embree
     /// numbers a scene's geometries from 0 up when none is detached (checked).
-    pub(crate) fn attach(&mut self, geometry: Geometry) -> anyhow::Result<()> {
+    pub(crate) fn attach(&mut self, geometry: Geometry) -> crate::Result<()> {
         // SAFETY: both handles are alive; the scene takes its own reference to the
         // geometry, ours is released when `geometry` drops.
         let id = unsafe {
@@ -103,7 +103,7 @@ pub(crate) struct Geometry(ffi::RTCGeometry);
 
 impl Geometry {
     /// A new geometry of type `kind` (`RTC_GEOMETRY_TYPE_*`).
-    pub(crate) fn new(device: &Device, kind: u32) -> anyhow::Result<Self> {
+    pub(crate) fn new(device: &Device, kind: u32) -> crate::Result<Self> {
         // SAFETY: the device is alive.
         let raw = unsafe { ffi::rtcNewGeometry(device.raw(), kind) };
         if raw.is_null() {

@@ -28,7 +28,7 @@ mod user_geometry;
 use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_csg::{Ray, V3};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
@@ -85,7 +85,7 @@ unsafe impl Sync for EmbreeScene<'_> {}
 impl<'a> EmbreeScene<'a> {
     /// Builds Embree's structures for the scene `cpu` was prepared from (`foundry`, for the
     /// mesh triangles and the instance transforms).
-    pub fn new(foundry: &Foundry, cpu: &'a CpuScene<f32>) -> anyhow::Result<Self> {
+    pub fn new(foundry: &Foundry, cpu: &'a CpuScene<f32>) -> crate::Result<Self> {
         if foundry.inst.len() != cpu.instances() {
             bail!(
                 "Embree: the Foundry has {} instances, the CPU scene {}",
@@ -101,7 +101,7 @@ impl<'a> EmbreeScene<'a> {
                 CsgPrims::new(foundry, s, cpu.solid_prims(s))
                     .with_context(|| format!("Embree: solid {s}"))
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<crate::Result<Vec<_>>>()?;
         let solids = csg
             .iter()
             .enumerate()
@@ -109,14 +109,14 @@ impl<'a> EmbreeScene<'a> {
                 solid_scene(&device, foundry, s, prims)
                     .with_context(|| format!("Embree: solid {s}"))
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<crate::Result<Vec<_>>>()?;
         let clusters: Vec<ClusterBoxes> = (0..foundry.solid.len())
             .map(|s| ClusterBoxes::new(cpu.solid_clusters(s)))
             .collect();
         let cluster_scenes = clusters
             .iter()
             .map(|boxes| cluster_scene(&device, boxes))
-            .collect::<anyhow::Result<Vec<_>>>()
+            .collect::<crate::Result<Vec<_>>>()
             .context("Embree: brick clusters")?;
         let surfaces = |s: usize| solids[s].as_ref().map(|solid| &solid.scene);
         let group = |members: &[u32]| group_scene(&device, foundry, cpu, &surfaces, members);
@@ -126,7 +126,7 @@ impl<'a> EmbreeScene<'a> {
                 group(cpu.daughter_members(i))
                     .with_context(|| format!("Embree: daughters of instance {i}"))
             })
-            .collect::<anyhow::Result<_>>()?;
+            .collect::<crate::Result<_>>()?;
         let media_of = |s: usize| cluster_scenes[s].as_ref();
         let media = group_scene(&device, foundry, cpu, &media_of, cpu.media_members())
             .context("Embree: media scene")?;
@@ -146,7 +146,7 @@ impl<'a> EmbreeScene<'a> {
     /// The first surface crossing with `tmin < t < tmax` of a ray with a unit direction,
     /// as [`CpuScene::trace`] answers it (up to ties and rounding). Fails only if one of
     /// our intersection callbacks panicked.
-    pub fn trace(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> anyhow::Result<Option<Hit<f32>>> {
+    pub fn trace(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> crate::Result<Option<Hit<f32>>> {
         let exact = Ray::<f64>::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
         let located = self.cpu.locate_origin(exact.origin);
         let exit = located.and_then(|c| self.cpu.exit_from(c, &exact, tmin, tmax));
@@ -171,7 +171,7 @@ impl<'a> EmbreeScene<'a> {
     /// stops at the first crossing found) over the top-level instances, or, from inside an
     /// instance of a hierarchy, whether [`Self::trace`] finds a crossing. Fails only if one
     /// of our intersection callbacks panicked.
-    pub fn occluded(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> anyhow::Result<bool> {
+    pub fn occluded(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> crate::Result<bool> {
         if self
             .cpu
             .locate_origin(V3::from_f64(ray.origin.to_f64()))
@@ -217,7 +217,7 @@ impl<'a> EmbreeScene<'a> {
         tmin: f64,
         tmax: f64,
         ray_index: u32,
-    ) -> anyhow::Result<Transmitted<f32>> {
+    ) -> crate::Result<Transmitted<f32>> {
         let ray = Ray::from_f64(origin, direction);
         let hit = self.trace(&ray, tmin as f32, tmax as f32)?;
         let end = hit.map_or(tmax, |h| f64::from(h.t));
@@ -238,7 +238,7 @@ impl<'a> EmbreeScene<'a> {
         ray: &Ray<f32>,
         tmin: f64,
         end: f64,
-    ) -> anyhow::Result<Vec<(u32, u32, f64, f64)>> {
+    ) -> crate::Result<Vec<(u32, u32, f64, f64)>> {
         let Some(group) = self.media.as_ref() else {
             return Ok(Vec::new());
         };
@@ -285,7 +285,7 @@ impl<'a> EmbreeScene<'a> {
         ray: &Ray<f32>,
         tmin: f32,
         tmax: f32,
-    ) -> anyhow::Result<Option<Hit<f32>>> {
+    ) -> crate::Result<Option<Hit<f32>>> {
         let mut rayhit = ray_hit(ray, tmin, tmax);
         let mut ctx = self.context(group, ray);
         // SAFETY: the scene is committed and alive; `ctx` starts with the
@@ -357,7 +357,7 @@ fn ray_hit(ray: &Ray<f32>, tnear: f32, tfar: f32) -> ffi::RTCRayHit {
 }
 
 /// The scene of a solid's brick clusters (one user geometry); `None` without clusters.
-fn cluster_scene(device: &Device, boxes: &ClusterBoxes) -> anyhow::Result<Option<Scene>> {
+fn cluster_scene(device: &Device, boxes: &ClusterBoxes) -> crate::Result<Option<Scene>> {
     if boxes.is_empty() {
         return Ok(None);
     }
@@ -375,7 +375,7 @@ fn solid_scene(
     foundry: &Foundry,
     solid: usize,
     csg: &CsgPrims,
-) -> anyhow::Result<Option<SolidScene>> {
+) -> crate::Result<Option<SolidScene>> {
     let s = &foundry.solid[solid];
     let meshes: Vec<u32> = (s.prim_offset..s.prim_offset + s.num_prim)
         .filter(|&p| foundry.prim[p as usize].kind == PrimKind::Mesh as u32)
@@ -405,7 +405,7 @@ fn solid_scene(
 
 /// The triangles of mesh prim `prim` in its solid's frame (the prim's own transform applied
 /// in f64, as [`hytrace_csg::MeshPrim::from_foundry`] does), in f32.
-fn mesh_triangles(foundry: &Foundry, prim: usize) -> anyhow::Result<Vec<[[f32; 3]; 3]>> {
+fn mesh_triangles(foundry: &Foundry, prim: usize) -> crate::Result<Vec<[[f32; 3]; 3]>> {
     let p = &foundry.prim[prim];
     let transform = match p.transform {
         0 => Transform64::IDENTITY,
@@ -433,7 +433,7 @@ fn mesh_triangles(foundry: &Foundry, prim: usize) -> anyhow::Result<Vec<[[f32; 3
 
 /// An Embree triangle geometry (unshared vertices; Embree's geometric normal is
 /// `(v1 - v0) x (v2 - v0)`, as ours).
-fn triangle_geometry(device: &Device, triangles: &[[[f32; 3]; 3]]) -> anyhow::Result<Geometry> {
+fn triangle_geometry(device: &Device, triangles: &[[[f32; 3]; 3]]) -> crate::Result<Geometry> {
     let g = Geometry::new(device, ffi::RTC_GEOMETRY_TYPE_TRIANGLE)?;
     let n = triangles.len();
     if n > (u32::MAX / 3) as usize {
@@ -489,7 +489,7 @@ fn group_scene<'s>(
     cpu: &CpuScene<f32>,
     scene_of: &dyn Fn(usize) -> Option<&'s Scene>,
     members: &[u32],
-) -> anyhow::Result<Option<GroupScene>> {
+) -> crate::Result<Option<GroupScene>> {
     if members.is_empty() {
         return Ok(None);
     }

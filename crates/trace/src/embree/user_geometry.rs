@@ -21,7 +21,7 @@ use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use anyhow::bail;
+use crate::error::bail;
 use hytrace_csg::{ray_bounds_span, PreparedPrim, Ray, V3};
 use hytrace_foundry::{Foundry, PrimKind};
 
@@ -43,7 +43,7 @@ impl<'a> CsgPrims<'a> {
         foundry: &Foundry,
         solid: usize,
         prims: &'a [PreparedPrim<f32>],
-    ) -> anyhow::Result<Self> {
+    ) -> crate::Result<Self> {
         let s = &foundry.solid[solid];
         let surfaces: Vec<u32> = (s.prim_offset..s.prim_offset + s.num_prim)
             .filter(|&p| {
@@ -74,7 +74,7 @@ impl<'a> CsgPrims<'a> {
 
     /// A user geometry over these prims. `self` must outlive the geometry and stay at its
     /// address (the caller keeps it, unmoved, as long as the Embree scenes).
-    pub(crate) fn geometry(&self, device: &Device) -> anyhow::Result<Geometry> {
+    pub(crate) fn geometry(&self, device: &Device) -> crate::Result<Geometry> {
         let g = Geometry::new(device, ffi::RTC_GEOMETRY_TYPE_USER)?;
         let user = self as *const CsgPrims as *mut c_void;
         // SAFETY: `g` is a new user geometry; `user` stays valid for as long as the
@@ -256,7 +256,7 @@ impl<'a> ClusterBoxes<'a> {
     /// (as for [`CsgPrims::geometry`]). Its intersect callback records every cluster the
     /// ray crosses in the [`MediaContext`] and accepts no hit, so one `rtcIntersect1`
     /// visits them all.
-    pub(crate) fn geometry(&self, device: &Device) -> anyhow::Result<Geometry> {
+    pub(crate) fn geometry(&self, device: &Device) -> crate::Result<Geometry> {
         let g = Geometry::new(device, ffi::RTC_GEOMETRY_TYPE_USER)?;
         let user = self as *const ClusterBoxes as *mut c_void;
         // SAFETY: as in `CsgPrims::geometry`, for `ClusterBoxes`.

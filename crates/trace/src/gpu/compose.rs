@@ -14,6 +14,12 @@
 //! `MORE + 1`, `MORE + 2` the next ones, as many each (an `override` constant the host
 //! sets when it builds the pipeline: [`chunk_constant`]).
 
+/// A WGSL module that cannot be composed (unknown module, import cycle, malformed
+/// directive), in words naming the module.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct ComposeError(String);
+
 /// Buffers a chunked array is split into (`#chunked`).
 pub const CHUNKS: usize = 4;
 
@@ -52,16 +58,19 @@ pub struct ChunkedArray<'a> {
 
 impl<'a> ChunkedArray<'a> {
     /// Parses a `#chunked` line's fields; an error names what is malformed.
-    fn parse(fields: &'a str) -> Result<ChunkedArray<'a>, String> {
+    fn parse(fields: &'a str) -> Result<ChunkedArray<'a>, ComposeError> {
         let f: Vec<&str> = fields.split_whitespace().collect();
         let [array, ty, group, binding, more, accessor] = f[..] else {
-            return Err(format!(
+            return Err(ComposeError(format!(
                 "`#chunked {fields}`: expected ARRAY TYPE GROUP BINDING MORE ACCESSOR"
-            ));
+            )));
         };
         let number = |v: &str| {
-            v.parse::<u32>()
-                .map_err(|_| format!("`#chunked {fields}`: `{v}` is not a binding number"))
+            v.parse::<u32>().map_err(|_| {
+                ComposeError(format!(
+                    "`#chunked {fields}`: `{v}` is not a binding number"
+                ))
+            })
         };
         Ok(ChunkedArray {
             array,
@@ -141,16 +150,20 @@ pub fn imports(source: &str) -> impl Iterator<Item = &str> {
 }
 
 /// `source` without the `#if` blocks of features that are off.
-fn preprocess(name: &str, source: &str, enabled: &dyn Fn(&str) -> bool) -> Result<String, String> {
+fn preprocess(
+    name: &str,
+    source: &str,
+    enabled: &dyn Fn(&str) -> bool,
+) -> Result<String, ComposeError> {
     let mut out = String::with_capacity(source.len());
     let mut block: Option<(&str, bool)> = None;
     for line in source.lines() {
         let trimmed = line.trim();
         if let Some(feature) = trimmed.strip_prefix("// #if ") {
             if let Some((open, _)) = block {
-                return Err(format!(
+                return Err(ComposeError(format!(
                     "module `{name}`: `#if {feature}` inside `#if {open}`"
-                ));
+                )));
             }
             let feature = feature.trim();
             block = Some((feature, enabled(feature)));
@@ -158,15 +171,17 @@ fn preprocess(name: &str, source: &str, enabled: &dyn Fn(&str) -> bool) -> Resul
         }
         if trimmed == "// #endif" {
             if block.take().is_none() {
-                return Err(format!("module `{name}`: `#endif` without `#if`"));
+                return Err(ComposeError(format!(
+                    "module `{name}`: `#endif` without `#if`"
+                )));
             }
             continue;
         }
         if block.is_none_or(|(_, on)| on) {
             match trimmed.strip_prefix("// #chunked ") {
                 Some(fields) => {
-                    let c =
-                        ChunkedArray::parse(fields).map_err(|e| format!("module `{name}`: {e}"))?;
+                    let c = ChunkedArray::parse(fields)
+                        .map_err(|e| ComposeError(format!("module `{name}`: {e}")))?;
                     out.push_str(&c.wgsl(enabled(&format!("chunked_{}", c.array))));
                 }
                 None => {
@@ -177,38 +192,43 @@ fn preprocess(name: &str, source: &str, enabled: &dyn Fn(&str) -> bool) -> Resul
         }
     }
     match block {
-        Some((open, _)) => Err(format!("module `{name}`: `#if {open}` is never closed")),
+        Some((open, _)) => Err(ComposeError(format!(
+            "module `{name}`: `#if {open}` is never closed"
+        ))),
         None => Ok(out),
     }
 }
 
 /// The composed source of module `root` with every feature on: its imports (transitively,
 /// each once, dependencies first), then the module itself.
-pub fn compose(root: &str) -> Result<String, String> {
+pub fn compose(root: &str) -> Result<String, ComposeError> {
     compose_with(root, &|_| true)
 }
 
 /// The composed source of module `root` with the `#if` blocks of features for which
 /// `enabled` is false left out (their imports too).
-pub fn compose_with(root: &str, enabled: &dyn Fn(&str) -> bool) -> Result<String, String> {
+pub fn compose_with(root: &str, enabled: &dyn Fn(&str) -> bool) -> Result<String, ComposeError> {
     fn visit<'a>(
         name: &'a str,
         enabled: &dyn Fn(&str) -> bool,
         chain: &mut Vec<String>,
         done: &mut Vec<String>,
         out: &mut String,
-    ) -> Result<(), String> {
+    ) -> Result<(), ComposeError> {
         if done.iter().any(|d| d == name) {
             return Ok(());
         }
         if chain.iter().any(|c| c == name) {
-            return Err(format!("import cycle: {} -> {name}", chain.join(" -> ")));
+            return Err(ComposeError(format!(
+                "import cycle: {} -> {name}",
+                chain.join(" -> ")
+            )));
         }
         let (name, source) = MODULES.iter().find(|(n, _)| *n == name).ok_or_else(|| {
-            format!(
+            ComposeError(format!(
                 "unknown module `{name}` (imported by `{}`)",
                 chain.last().map_or("?", |c| c.as_str())
-            )
+            ))
         })?;
         let source = preprocess(name, source, enabled)?;
         chain.push(name.to_string());
@@ -243,6 +263,7 @@ mod tests {
         );
         assert!(compose("no_such_module")
             .unwrap_err()
+            .to_string()
             .contains("unknown module"));
     }
 

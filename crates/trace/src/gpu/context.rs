@@ -358,11 +358,11 @@ impl GpuContext {
 /// returned as they are.
 pub fn gpu_or_cpu<R>(
     doing: &str,
-    gpu: impl FnOnce(GpuContext) -> anyhow::Result<R>,
-    cpu: impl FnOnce() -> anyhow::Result<R>,
-) -> anyhow::Result<R> {
-    match GpuContext::new().map_err(anyhow::Error::from).and_then(gpu) {
-        Err(e) if e.downcast_ref::<GpuError>().is_some() => {
+    gpu: impl FnOnce(GpuContext) -> crate::Result<R>,
+    cpu: impl FnOnce() -> crate::Result<R>,
+) -> crate::Result<R> {
+    match GpuContext::new().map_err(crate::Error::from).and_then(gpu) {
+        Err(e) if matches!(e.without_context(), crate::Error::Gpu(_)) => {
             eprintln!("hytrace: not on the GPU ({e:#}); --backend auto {doing} on the CPU");
             cpu()
         }

@@ -30,7 +30,7 @@ pub fn run(
     let source = compose_with(module, &|f| !f.starts_with("chunked_")).map_err(|problem| {
         GpuError::Shader {
             name: module.to_string(),
-            problem,
+            problem: problem.to_string(),
         }
     })?;
     let (buffers, outputs) = ctx.checked(module, || {

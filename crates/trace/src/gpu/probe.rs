@@ -93,7 +93,7 @@ impl ProbeKernels {
     pub fn new(ctx: &GpuContext, scene: &GpuScene) -> Result<ProbeKernels, GpuError> {
         let source = compose(KERNEL).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
-            problem,
+            problem: problem.to_string(),
         })?;
         ctx.checked("compiling the probe kernels", || {
             let module = ctx.wgsl_module(KERNEL, &source);

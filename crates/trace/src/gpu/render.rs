@@ -51,7 +51,7 @@ impl GpuImage {
     /// Renders the pixels cut short again with `renderer` (the CPU twin of the kernel:
     /// the same samples of the same streams), so the image is right everywhere, and
     /// counts them in the times.
-    pub fn redo_cut_short(&mut self, renderer: &Renderer) -> anyhow::Result<()> {
+    pub fn redo_cut_short(&mut self, renderer: &Renderer) -> crate::Result<()> {
         let again = renderer.render_pixels(&self.cut_short)?;
         for (&p, value) in self.cut_short.iter().zip(again) {
             self.image.pixels[p as usize] = value;

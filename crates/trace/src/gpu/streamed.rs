@@ -212,7 +212,7 @@ impl<'a> GpuStreamedVolume<'a> {
         }
         let source = transmittance_source(&["streamed"]).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
-            problem,
+            problem: problem.to_string(),
         })?;
         let pages: Vec<u32> = (records.iter())
             .map(|r| r.map_or(NO_BRICK, |_| VOLUME_ABSENT_BRICK))
@@ -407,7 +407,7 @@ impl<'a> GpuStreamedVolume<'a> {
         ctx: &GpuContext,
         rays: &[Ray],
         params: &TransmittanceParams,
-    ) -> anyhow::Result<(Vec<Estimate>, GpuTimes)> {
+    ) -> crate::Result<(Vec<Estimate>, GpuTimes)> {
         let store: &dyn VoxelGrid = self.store;
         let mips = self.store.mips();
         let records = kernel_rays(store, mips, &self.grid, rays, params)?;

@@ -11,7 +11,7 @@ use hytrace_volume::{BrickedGrid, TexelFormat};
 use super::context::{GpuContext, GpuError};
 
 /// Where the volume kernels read a bricked grid's texels from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TexelStore {
     /// A storage buffer of words, decoded by the kernel (every format, bit for bit the
     /// CPU's).
@@ -20,6 +20,11 @@ pub enum TexelStore {
     /// A 3D texture of the format's own texture format.
     Texture,
 }
+
+crate::choice::named!(TexelStore {
+    (TexelStore::Storage, "storage", [], "A storage buffer of words, decoded by the kernel (every format, bit for bit the CPU's)"),
+    (TexelStore::Texture, "texture", [], "A 3D texture of the format's own texture format"),
+});
 
 /// Binding (group 0) of the texels' 3D texture (`shaders/volume/bindings.wgsl`).
 pub(super) const ATLAS_TEXTURE_BINDING: u32 = 8;

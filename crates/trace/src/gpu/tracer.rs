@@ -154,7 +154,7 @@ impl SceneUpload {
 pub(super) fn kernel_source(kernel: &str, features: &[&str]) -> Result<String, GpuError> {
     compose_with(kernel, &|f| features.contains(&f)).map_err(|problem| GpuError::Shader {
         name: kernel.to_string(),
-        problem,
+        problem: problem.to_string(),
     })
 }
 

@@ -21,7 +21,7 @@ use hytrace_volume::{
 };
 
 use super::chunks::{chunked_capacity, ChunkedUpload, NamedArray};
-use super::compose::compose_with;
+use super::compose::{compose_with, ComposeError};
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::nanovdb::{nanovdb_gpu_bytes, NanoGpuError};
 use super::records::{
@@ -49,7 +49,7 @@ const NEAR: f64 = 65_536.0;
 /// NanoVDB lookup, for such grids), `chunked_atlas` (an atlas split over several buffers)
 /// and `atlas_texture` (texels in a 3D texture); without them it reads bricks from one
 /// buffer.
-pub fn transmittance_source(features: &[&str]) -> Result<String, String> {
+pub fn transmittance_source(features: &[&str]) -> Result<String, ComposeError> {
     compose_with(KERNEL, &|feature| features.contains(&feature))
 }
 
@@ -418,10 +418,10 @@ pub(super) fn kernel_rays(
     uploaded: &UploadedGrid,
     rays: &[Ray],
     params: &TransmittanceParams,
-) -> anyhow::Result<Vec<RayRecord>> {
+) -> crate::Result<Vec<RayRecord>> {
     params.validate(grid, mips)?;
     if u32::try_from(rays.len()).is_err() {
-        anyhow::bail!(
+        crate::error::bail!(
             "transmittance: {} rays in one batch, at most {}",
             rays.len(),
             u32::MAX
@@ -479,9 +479,9 @@ pub(super) fn record_estimate(
     (grid, mips): (&dyn VoxelGrid, &RangeMips),
     params: &TransmittanceParams,
     times: &mut GpuTimes,
-) -> anyhow::Result<Estimate> {
+) -> crate::Result<Estimate> {
     if r.status & VOLUME_STATUS_NEGATIVE != 0 {
-        anyhow::bail!(
+        crate::error::bail!(
             "transmittance: ray {i} meets values below 0; delta, ratio and residual \
              tracking need a density >= 0"
         );
@@ -491,7 +491,7 @@ pub(super) fn record_estimate(
             Estimator::March { step } => step,
             _ => 0.0,
         };
-        anyhow::bail!(
+        crate::error::bail!(
             "transmittance: ray {i}: a march step of {step} needs more than {} steps",
             u32::MAX
         );
@@ -601,7 +601,7 @@ impl<'a> GpuVolume<'a> {
         }
         let source = transmittance_source(&features).map_err(|problem| GpuError::Shader {
             name: KERNEL.to_string(),
-            problem,
+            problem: problem.to_string(),
         })?;
         let (pipeline, volume_layout, ray_layout) =
             ctx.checked("building the transmittance kernel", || {
@@ -666,7 +666,7 @@ impl<'a> GpuVolume<'a> {
         ctx: &GpuContext,
         rays: &[Ray],
         params: &TransmittanceParams,
-    ) -> anyhow::Result<(Vec<Estimate>, GpuTimes)> {
+    ) -> crate::Result<(Vec<Estimate>, GpuTimes)> {
         let records = kernel_rays(self.grid, &self.mips, &self.grid_upload, rays, params)?;
         let mut p = kernel_params(&self.grid_upload.base, params);
         let batch = ray_batch(ctx);

@@ -22,7 +22,7 @@ pub mod surfaces;
 
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_csg::V3;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
@@ -76,7 +76,7 @@ pub enum PhotonError {
 pub fn load_photon_scene(
     path: &Path,
     options: &GdmlOptions,
-) -> anyhow::Result<(Foundry, Option<VolumeSurfaces>)> {
+) -> crate::Result<(Foundry, Option<VolumeSurfaces>)> {
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gdml"))

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_foundry::Foundry;
 
 use super::{propagate_reporting, PhotonRun, PhotonScene, RunOptions};
@@ -15,7 +15,7 @@ pub fn prepare(
     f: &Foundry,
     surfaces: Option<VolumeSurfaces>,
     path: &Path,
-) -> anyhow::Result<PhotonScene> {
+) -> crate::Result<PhotonScene> {
     PhotonScene::new(f, surfaces)
         .with_context(|| format!("{}: preparing for photons", path.display()))
 }
@@ -27,7 +27,7 @@ pub fn propagate_in(
     path: &Path,
     run: &RunOptions,
     progress: &dyn Fn(u64),
-) -> anyhow::Result<PhotonRun> {
+) -> crate::Result<PhotonRun> {
     propagate_reporting(scene, run, progress)
         .with_context(|| format!("{}: propagating photons", path.display()))
 }

@@ -15,6 +15,7 @@ use hytrace_volume::Rng;
 
 use super::bulk::rotate_uz;
 use super::{PhotonError, V};
+use crate::number_list::{parse_numbers, NumberListError};
 
 /// A photon source.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,7 +64,8 @@ pub enum Wavelength {
 }
 
 impl Wavelength {
-    /// Parses `NM` (a positive number of nanometres) or `MATERIAL:PROPERTY`.
+    /// Parses `NM` (a number of nanometres, checked when a run starts) or
+    /// `MATERIAL:PROPERTY`.
     pub fn parse(text: &str) -> Result<Wavelength, PhotonError> {
         let bad = |problem: String| PhotonError::Input(format!("--wavelength `{text}`: {problem}"));
         if let Some((material, property)) = text.rsplit_once(':') {
@@ -75,11 +77,10 @@ impl Wavelength {
                 property: property.trim().to_string(),
             });
         }
+        // A number is checked where the run starts, as one given through the library.
         match text.trim().parse::<f64>() {
-            Ok(nm) if nm.is_finite() && nm > 0.0 => Ok(Wavelength::Fixed(nm)),
-            _ => Err(bad(
-                "not a positive number of nanometres or MATERIAL:PROPERTY".into(),
-            )),
+            Ok(nm) => Ok(Wavelength::Fixed(nm)),
+            Err(_) => Err(bad("not a number of nanometres or MATERIAL:PROPERTY".into())),
         }
     }
 }
@@ -96,24 +97,13 @@ pub struct Start {
 }
 
 fn numbers<const N: usize>(text: &str, spec: &str, what: &str) -> Result<[f64; N], PhotonError> {
-    let bad = |problem: String| PhotonError::Source {
+    parse_numbers(text).map_err(|e| PhotonError::Source {
         spec: spec.to_string(),
-        problem,
-    };
-    let parts: Vec<&str> = text.split(',').collect();
-    if parts.len() != N {
-        return Err(bad(format!("{what} needs {N} numbers, got `{text}`")));
-    }
-    let mut out = [0.0; N];
-    for (o, p) in out.iter_mut().zip(&parts) {
-        *o = p
-            .trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| bad(format!("{what}: `{}` is not a finite number", p.trim())))?;
-    }
-    Ok(out)
+        problem: match e {
+            NumberListError::Count { .. } => format!("{what} needs {N} numbers, got `{text}`"),
+            NumberListError::NotFinite(item) => format!("{what}: `{item}` is not a finite number"),
+        },
+    })
 }
 
 impl Source {

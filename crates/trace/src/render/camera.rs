@@ -9,7 +9,7 @@
 //!   `normalize(w + tan(fov / 2) (x u + y v))`.
 //! - Orthographic (view height `h`): origin `eye + (h / 2) (x u + y v)`, direction `w`.
 
-use anyhow::{bail, ensure};
+use crate::error::{bail, ensure};
 use glam::DVec3;
 use serde::Deserialize;
 
@@ -70,7 +70,7 @@ pub struct Camera {
 
 impl Camera {
     /// Checks `spec` and builds the camera for an image of `size` pixels.
-    pub fn new(spec: &CameraSpec, size: [u32; 2]) -> anyhow::Result<Camera> {
+    pub fn new(spec: &CameraSpec, size: [u32; 2]) -> crate::Result<Camera> {
         let finite = |v: [f64; 3]| v.iter().all(|c| c.is_finite());
         ensure!(
             finite(spec.eye) && finite(spec.target) && finite(spec.up),

@@ -22,7 +22,7 @@ pub struct CutPlane {
 }
 
 /// How the kept sides of several planes combine (Geant4's cutaway modes).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum CutMode {
     /// A point is drawn when any plane keeps it (the planes remove only what all remove).
     #[default]
@@ -30,6 +30,11 @@ pub enum CutMode {
     /// A point is drawn only when every plane keeps it.
     Intersection,
 }
+
+crate::choice::named!(CutMode {
+    (CutMode::Union, "union", [], "A point is drawn when any plane keeps it"),
+    (CutMode::Intersection, "intersection", [], "A point is drawn only when every plane keeps it"),
+});
 
 /// The cut planes of a render (none: nothing is cut).
 #[derive(Clone, Debug, Default, PartialEq)]

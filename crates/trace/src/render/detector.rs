@@ -15,7 +15,7 @@ use super::spec::{Material, VolumeLabel};
 pub const SHELL_OPACITY: f64 = 0.12;
 
 /// What the colours of a detector view tell apart.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ColorBy {
     /// The volume's material.
     #[default]
@@ -31,6 +31,15 @@ pub enum ColorBy {
     /// The copy number.
     Copy,
 }
+
+crate::choice::named!(ColorBy {
+    (ColorBy::Material, "material", [], "The volume's material"),
+    (ColorBy::Volume, "volume", [], "The logical volume"),
+    (ColorBy::Solid, "solid", [], "The solid"),
+    (ColorBy::Depth, "depth", [], "The depth in the placement tree (the world's daughters are 1)"),
+    (ColorBy::Boundary, "boundary", [], "The boundary: the pair of materials (mother's and own) its surface separates"),
+    (ColorBy::Copy, "copy", [], "The copy number"),
+});
 
 /// What a detector view draws and how it colours it.
 #[derive(Clone, Debug, Default, PartialEq)]

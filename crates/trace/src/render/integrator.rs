@@ -155,8 +155,8 @@ impl Renderer<'_> {
         dir: DVec3,
         dist: f64,
         rng: &mut Rng,
-    ) -> anyhow::Result<f64> {
-        let media_t = |o: DVec3, t1: f64, rng: &mut Rng| -> anyhow::Result<f64> {
+    ) -> crate::Result<f64> {
+        let media_t = |o: DVec3, t1: f64, rng: &mut Rng| -> crate::Result<f64> {
             match &self.media {
                 Some(m) if VM != NO_VOLUMES => m.transmittance(o, dir, 0.0, t1, rng),
                 _ => Ok(1.0),
@@ -225,7 +225,7 @@ impl Renderer<'_> {
         env_direction: Option<DVec3>,
         spawn_from: impl Fn(DVec3) -> DVec3,
         rng: &mut Rng,
-    ) -> anyhow::Result<DVec3> {
+    ) -> crate::Result<DVec3> {
         let mut sum = DVec3::ZERO;
         for light in &self.lights {
             let (w, dist, power) = match *light {
@@ -279,7 +279,7 @@ impl Renderer<'_> {
         mut origin: DVec3,
         mut dir: DVec3,
         rng: &mut Rng,
-    ) -> anyhow::Result<DVec3> {
+    ) -> crate::Result<DVec3> {
         let (mut radiance, mut beta) = (DVec3::ZERO, DVec3::ONE);
         // Absorption length of the dielectric the path is inside, if any.
         let mut inside: Option<f64> = None;

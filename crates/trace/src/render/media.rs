@@ -1,7 +1,7 @@
 //! The media along a ray, as the renderer needs them: the emission-absorption integral and
 //! the first real collision (delta tracking), over every placed medium the ray crosses.
 
-use anyhow::Context;
+use crate::error::Context;
 use glam::DVec3;
 use hytrace_volume::{
     global_range, sample_trilinear, IndexRay, IndexTransmittance, Rng, SegmentWalk, LEVEL_GLOBAL,
@@ -46,7 +46,7 @@ impl Media<'_> {
         dir: DVec3,
         t0: f64,
         t1: f64,
-    ) -> anyhow::Result<(DVec3, f64)> {
+    ) -> crate::Result<(DVec3, f64)> {
         let segments = self
             .scene
             .segments(origin.into(), dir.into(), t0, t1)
@@ -76,7 +76,7 @@ impl Media<'_> {
             return Ok((DVec3::ZERO, 1.0));
         }
         let n = ((b - a) / h).ceil().max(1.0);
-        anyhow::ensure!(
+        crate::error::ensure!(
             n <= 1e8,
             "emission-absorption: {n} steps of {h} over [{a}, {b}]: the step is too small"
         );
@@ -116,7 +116,7 @@ impl Media<'_> {
         t0: f64,
         t1: f64,
         rng: &mut Rng,
-    ) -> anyhow::Result<Option<MediumEvent>> {
+    ) -> crate::Result<Option<MediumEvent>> {
         let mut best: Option<MediumEvent> = None;
         for s in self.scene.segments(origin.into(), dir.into(), t0, t1)? {
             let grid = self.scene.grid(s.medium);
@@ -145,7 +145,7 @@ impl Media<'_> {
         t0: f64,
         t1: f64,
         rng: &mut Rng,
-    ) -> anyhow::Result<f64> {
+    ) -> crate::Result<f64> {
         if t1 <= t0 {
             return Ok(1.0);
         }

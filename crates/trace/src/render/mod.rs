@@ -21,7 +21,7 @@ mod views;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use anyhow::{bail, ensure, Context};
+use crate::error::{bail, ensure, Context};
 use glam::DVec3;
 use hytrace_foundry::{Foundry, PrimKind, UNSET};
 use hytrace_volume::{Estimator, Rng, TransmittanceParams};
@@ -249,11 +249,11 @@ enum Pixels<'p> {
 
 impl<'a> Renderer<'a> {
     /// Prepares a render of `f` (traced through `scene`, prepared from it) under `spec`.
-    pub fn new(scene: &'a CpuScene<f32>, f: &Foundry, spec: &RenderSpec) -> anyhow::Result<Self> {
+    pub fn new(scene: &'a CpuScene<f32>, f: &Foundry, spec: &RenderSpec) -> crate::Result<Self> {
         spec.validate()?;
         let settings = spec.settings.clone();
         let effects = Effects::of(f, spec);
-        anyhow::ensure!(
+        crate::error::ensure!(
             cfg!(feature = "media") || effects.volumes.is_none(),
             "{NO_MEDIA_BUILD}"
         );
@@ -327,7 +327,7 @@ impl<'a> Renderer<'a> {
                         let name = &f.solid_names[solid];
                         Ok(spec.media.get(name).copied().unwrap_or_default())
                     })
-                    .collect::<anyhow::Result<Vec<MediumOptics>>>()?;
+                    .collect::<crate::Result<Vec<MediumOptics>>>()?;
                 Some(Media {
                     scene: scene_media,
                     optics,
@@ -389,7 +389,7 @@ impl<'a> Renderer<'a> {
 
     /// Renders the image on the CPU (rayon over rows); `progress` is called with the
     /// number of rows finished so far. Errors name the pixel that failed.
-    pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> anyhow::Result<Image> {
+    pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> crate::Result<Image> {
         let [width, height] = self.settings.size;
         Ok(Image {
             width,
@@ -400,7 +400,7 @@ impl<'a> Renderer<'a> {
 
     /// The values of some pixels of the image (row-major indices below width x height),
     /// each as [`Renderer::render`] gives it: the same samples of the same streams.
-    pub fn render_pixels(&self, pixels: &[u32]) -> anyhow::Result<Vec<[f32; 3]>> {
+    pub fn render_pixels(&self, pixels: &[u32]) -> crate::Result<Vec<[f32; 3]>> {
         let [width, height] = self.settings.size;
         if let Some(p) = pixels
             .iter()
@@ -412,7 +412,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// The values of `pixels` under this render's effects.
-    fn shade(&self, pixels: Pixels<'_>) -> anyhow::Result<Vec<[f32; 3]>> {
+    fn shade(&self, pixels: Pixels<'_>) -> crate::Result<Vec<[f32; 3]>> {
         let fx = self.effects;
         let vm = match fx.volumes {
             None | Some(VolumeMode::Off) => NO_VOLUMES,
@@ -435,7 +435,7 @@ impl<'a> Renderer<'a> {
                     ($ms, $mp, $mv) => self.render_with(pixels, |o, d, rng| {
                         self.radiance::<$ms, $mp, $mv>(o, d, rng)
                     }),)*
-                    _ => anyhow::bail!("{NO_MEDIA_BUILD}"),
+                    _ => crate::error::bail!("{NO_MEDIA_BUILD}"),
                 }
             };
         }
@@ -454,16 +454,16 @@ impl<'a> Renderer<'a> {
     }
 
     /// The values of `pixels`, each the mean of its samples that `sample` gives.
-    fn render_with<F>(&self, pixels: Pixels<'_>, sample: F) -> anyhow::Result<Vec<[f32; 3]>>
+    fn render_with<F>(&self, pixels: Pixels<'_>, sample: F) -> crate::Result<Vec<[f32; 3]>>
     where
-        F: Fn(DVec3, DVec3, &mut Rng) -> anyhow::Result<DVec3> + Sync,
+        F: Fn(DVec3, DVec3, &mut Rng) -> crate::Result<DVec3> + Sync,
     {
         let [width, height] = self.settings.size;
         ensure!(
             (width as u64) * (height as u64) <= u32::MAX as u64,
             "{width}x{height} pixels: at most 2^32 - 1"
         );
-        let pixel = |i: u32, j: u32| -> anyhow::Result<[f32; 3]> {
+        let pixel = |i: u32, j: u32| -> crate::Result<[f32; 3]> {
             let mut sum = DVec3::ZERO;
             for s in 0..self.settings.spp {
                 let mut rng = Rng::new(self.settings.seed, j * width + i, s);
@@ -485,11 +485,11 @@ impl<'a> Renderer<'a> {
                     .map(|j| {
                         let row = (0..width)
                             .map(|i| pixel(i, j))
-                            .collect::<anyhow::Result<Vec<_>>>()?;
+                            .collect::<crate::Result<Vec<_>>>()?;
                         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                         Ok(row)
                     })
-                    .collect::<anyhow::Result<_>>()?;
+                    .collect::<crate::Result<_>>()?;
                 Ok(rows.into_iter().flatten().collect())
             }
         }

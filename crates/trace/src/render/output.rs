@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::bail;
+use crate::error::bail;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{write_array, write_atomically};
 
@@ -35,7 +35,7 @@ pub fn srgb8(linear: f32) -> u8 {
 }
 
 /// The sample type of an OpenEXR image.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ExrPrecision {
     /// 32-bit float: the radiance exactly as rendered.
     #[default]
@@ -44,10 +44,15 @@ pub enum ExrPrecision {
     Half,
 }
 
+crate::choice::named!(ExrPrecision {
+    (ExrPrecision::Float, "float", [], "32-bit float: the radiance exactly as rendered"),
+    (ExrPrecision::Half, "half", [], "16-bit half float, rounded to nearest"),
+});
+
 impl Image {
     /// The OpenEXR file's bytes: one scan-line part with linear R, G and B channels of
     /// `precision`, ZIP-compressed in blocks of 16 lines.
-    pub fn exr_bytes(&self, precision: ExrPrecision) -> anyhow::Result<Vec<u8>> {
+    pub fn exr_bytes(&self, precision: ExrPrecision) -> crate::Result<Vec<u8>> {
         use exr::prelude::{Encoding, Image as ExrImage, SpecificChannels, Vec2, WritableImage};
         let (w, h) = (self.width as usize, self.height as usize);
         let at = |x: usize, y: usize| self.pixels[y * w + x];
@@ -77,7 +82,7 @@ impl Image {
     }
 
     /// The PNG file's bytes: 8-bit sRGB.
-    pub fn png_bytes(&self) -> anyhow::Result<Vec<u8>> {
+    pub fn png_bytes(&self) -> crate::Result<Vec<u8>> {
         let mut bytes = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
@@ -98,7 +103,7 @@ pub const IMAGE_EXTENSIONS: &str = ".png, .npy or .exr";
 /// Writes `image` to `path` as PNG (`.png`), NumPy (`.npy`, float32 `(height, width, 3)`)
 /// or OpenEXR (`.exr`, of `exr` precision), through a temporary file in the same folder
 /// renamed into place, so no partial file is ever left.
-pub fn write_image(image: &Image, path: &Path, exr: ExrPrecision) -> anyhow::Result<()> {
+pub fn write_image(image: &Image, path: &Path, exr: ExrPrecision) -> crate::Result<()> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())

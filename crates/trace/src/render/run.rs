@@ -2,19 +2,18 @@
 
 use std::time::Instant;
 
-use anyhow::{bail, Context};
-use clap::Args;
+use crate::error::{bail, Context};
 use hytrace_foundry::Foundry;
 
-use super::cutaway::{CutMode, CutPlane, Cutaway};
-use super::detector::{ColorBy, DetectorError, DetectorStyle, Legend};
+use super::cutaway::Cutaway;
+use super::detector::{DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
 use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore};
 
 /// Where a render runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RenderBackend {
     /// Our CPU path (rayon over rows).
     Cpu,
@@ -24,6 +23,12 @@ pub enum RenderBackend {
     /// The GPU when one opens and the render is one it does, else the CPU.
     Auto,
 }
+
+crate::choice::named!(RenderBackend {
+    (RenderBackend::Cpu, "cpu", [], "Our CPU path (rayon over rows)"),
+    (RenderBackend::Gpu, "gpu", [], "Our WGSL render kernel through wgpu (f32): every effect, media of up to 16 placements"),
+    (RenderBackend::Auto, "auto", [], "The GPU when one opens and the render is one it does, else the CPU"),
+});
 
 /// What the GPU side of a render reports.
 pub struct GpuRun {
@@ -44,7 +49,7 @@ fn render_gpu(
     renderer: &Renderer,
     texels: TexelStore,
     progress: &dyn Fn(u64),
-) -> anyhow::Result<(Image, GpuRun)> {
+) -> crate::Result<(Image, GpuRun)> {
     let gpu = GpuRenderer::with_texels(ctx, renderer, texels)?;
     let mut run = gpu.render(ctx, renderer, progress)?;
     run.redo_cut_short(renderer)?;
@@ -66,98 +71,36 @@ fn render_gpu(
 
 /// The render settings a caller may set; each overrides the scene's own (its `[render]`
 /// table, or the defaults).
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RenderSettings {
     /// Image size, WIDTHxHEIGHT.
-    #[arg(long, value_parser = parse_size)]
     pub size: Option<[u32; 2]>,
     /// Samples per pixel (1: pixel centres).
-    #[arg(long)]
     pub spp: Option<u32>,
     /// What the image shows.
-    #[arg(long, value_enum)]
     pub view: Option<View>,
     /// How media are rendered.
-    #[arg(long, value_enum)]
     pub volumes: Option<VolumeMode>,
     /// Longest path (surface and medium scattering events).
-    #[arg(long)]
     pub max_bounces: Option<u32>,
     /// Emission-absorption march step in voxels.
-    #[arg(long)]
     pub step: Option<f64>,
     /// Seed of the random streams.
-    #[arg(long)]
     pub seed: Option<u32>,
     /// Render the solid of this name transparent (repeatable): to see inside a detector's
     /// enclosures (`hytrace info` lists the solids).
-    #[arg(long)]
     pub transparent: Vec<String>,
-    #[command(flatten)]
-    pub cutaway: CutArgs,
-    #[command(flatten)]
-    pub detector: DetectorArgs,
-}
-
-/// The cut planes of a render.
-#[derive(Args, Clone, Debug, Default)]
-pub struct CutArgs {
-    /// Cut away what lies beyond this plane (repeatable, at most 3): `x=C`, `y=C`, `z=C`
-    /// remove the side above C (`-x=C` the side below), `NX,NY,NZ:D` the side of the plane
-    /// n.p = D that n points to. Volumes drawn solid show their sections on the plane
-    /// (hierarchical scenes: GDML detectors).
-    #[arg(long = "cut", value_name = "PLANE", allow_hyphen_values = true)]
-    pub planes: Vec<CutPlane>,
-    /// How several planes combine, as Geant4's cutaway modes: union draws what any plane
-    /// keeps, intersection only what every plane keeps.
-    #[arg(long = "cut-mode", value_enum, value_name = "MODE", default_value_t = CutMode::Union)]
-    pub mode: CutMode,
-}
-
-/// The options of detector views (GDML and other hierarchical scenes).
-#[derive(Args, Clone, Debug, Default)]
-#[command(next_help_heading = "GDML detectors (hierarchical scenes only)")]
-pub struct DetectorArgs {
-    /// Draw down to this depth of the placement tree (the world is 0, its daughters 1;
-    /// with --show, the shown volumes are 0), as Geant4's drawing depth [default: all].
-    #[arg(long, value_name = "N")]
-    pub depth: Option<u32>,
-    /// Draw only the volumes whose logical or physical name matches this glob (`*`, `?`;
-    /// case-insensitive) and their contents (repeatable).
-    #[arg(long, value_name = "PATTERN")]
-    pub show: Vec<String>,
-    /// Do not draw the volumes whose logical or physical name matches this glob (their
-    /// daughters still are; repeatable).
-    #[arg(long, value_name = "PATTERN")]
-    pub hide: Vec<String>,
-    /// What the colours tell apart [default: material, with the colours the file gives].
-    /// Every detector view writes its legend beside the image (IMAGE.legend.json).
-    #[arg(long, value_enum, value_name = "KEY")]
-    pub color_by: Option<ColorBy>,
-}
-
-impl DetectorArgs {
-    /// The style these options ask for.
-    pub fn style(&self) -> DetectorStyle {
-        DetectorStyle {
-            depth: self.depth,
-            show: self.show.clone(),
-            hide: self.hide.clone(),
-            color_by: self.color_by,
-        }
-    }
-
-    /// Whether any option is given.
-    pub fn any(&self) -> bool {
-        self.style() != DetectorStyle::default()
-    }
+    /// Cut planes (none: the scene's own, which has none unless set in code).
+    pub cutaway: Cutaway,
+    /// The detector view's style (GDML and other hierarchical scenes).
+    pub detector: DetectorStyle,
 }
 
 impl RenderSettings {
     /// Sets these settings on the scene's render description, checks that every
     /// transparent solid exists, and validates the result. A hierarchical scene gets its
     /// detector view, whose legend is returned.
-    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> anyhow::Result<Option<Legend>> {
+    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> crate::Result<Option<Legend>> {
         let s = &mut spec.settings;
         s.size = self.size.unwrap_or(s.size);
         s.spp = self.spp.unwrap_or(s.spp);
@@ -173,18 +116,15 @@ impl RenderSettings {
             spec.transparent_solids.push(name.clone());
         }
         if !self.cutaway.planes.is_empty() {
-            spec.cutaway = Cutaway {
-                planes: self.cutaway.planes.clone(),
-                mode: self.cutaway.mode,
-            };
+            spec.cutaway = self.cutaway.clone();
         }
         let mut legend = None;
         if spec.volumes.is_empty() {
-            if self.detector.any() {
+            if self.detector != DetectorStyle::default() {
                 return Err(DetectorError::NotHierarchical.into());
             }
         } else {
-            let view = self.detector.style().apply(f, &spec.volumes)?;
+            let view = self.detector.apply(f, &spec.volumes)?;
             spec.instance_materials = view.materials;
             legend = Some(view.legend);
         }
@@ -215,7 +155,7 @@ pub fn render(
     backend: RenderBackend,
     texels: TexelStore,
     progress: &(dyn Fn(u64) + Sync),
-) -> anyhow::Result<Rendered> {
+) -> crate::Result<Rendered> {
     let t1 = Instant::now();
     let scene = CpuScene::<f32>::new(f)?;
     let renderer = Renderer::new(&scene, f, spec)?;
@@ -239,17 +179,26 @@ pub fn render(
     })
 }
 
+/// An image size that cannot be parsed.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum SizeError {
+    /// No `x` between the width and the height.
+    #[error("`{0}`: expected WIDTHxHEIGHT, e.g. 1280x720")]
+    NoSeparator(String),
+    /// The width or the height is not a positive integer.
+    #[error("`{0}`: expected WIDTHxHEIGHT, both positive integers")]
+    NotPositive(String),
+}
+
 /// Parses `WIDTHxHEIGHT`.
-pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
+pub fn parse_size(text: &str) -> Result<[u32; 2], SizeError> {
     let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|v| *v > 0);
     match text.split_once(['x', 'X']) {
         Some((w, h)) => match (parse(w), parse(h)) {
             (Some(w), Some(h)) => Ok([w, h]),
-            _ => Err(format!(
-                "`{text}`: expected WIDTHxHEIGHT, both positive integers"
-            )),
+            _ => Err(SizeError::NotPositive(text.to_string())),
         },
-        None => Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 1280x720")),
+        None => Err(SizeError::NoSeparator(text.to_string())),
     }
 }
 

@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{bail, ensure};
+use crate::error::{bail, ensure};
 use serde::Deserialize;
 
 use super::camera::{Camera, CameraSpec};
@@ -59,7 +59,7 @@ pub const DEFAULT_MATERIAL: Material = Material::Diffuse {
 impl Material {
     /// Errors on colours outside [0, 1], an index of refraction below 1, or a
     /// non-positive absorption length.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let unit = |c: &[f64; 3]| c.iter().all(|v| (0.0..=1.0).contains(v));
         match self {
             Material::Diffuse { colour } | Material::Mirror { colour } => ensure!(
@@ -135,7 +135,7 @@ pub enum Light {
 
 impl Light {
     /// Errors on non-finite or negative values and a zero direction.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let finite = |v: &[f64; 3]| v.iter().all(|c| c.is_finite());
         let power = |v: &[f64; 3]| v.iter().all(|c| c.is_finite() && *c >= 0.0);
         match self {
@@ -187,7 +187,7 @@ impl Default for MediumOptics {
 
 impl MediumOptics {
     /// Errors on an albedo outside [0, 1], `|g| >= 1` or a negative emission.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         ensure!(
             (0.0..=1.0).contains(&self.albedo),
             "albedo must be in [0, 1], got {}",
@@ -208,7 +208,7 @@ impl MediumOptics {
 }
 
 /// What the image shows.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum View {
     /// Light transport: materials, lights, media.
@@ -228,8 +228,18 @@ pub enum View {
     Boundary,
 }
 
+crate::choice::named!(View {
+    (View::Shaded, "shaded", [], "Light transport: materials, lights, media"),
+    (View::Depth, "depth", [], "Distance to the first surface, near white to far black"),
+    (View::Normal, "normal", [], "Outward normal of the first surface, `0.5 (n + 1)` as RGB"),
+    (View::Solid, "solid", [], "A colour per solid"),
+    (View::Prim, "prim", [], "A colour per prim"),
+    (View::Instance, "instance", [], "A colour per instance (placement)"),
+    (View::Boundary, "boundary", [], "A colour per boundary (GDML's material pairs and optical surfaces)"),
+});
+
 /// How media are rendered.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum VolumeMode {
     /// Media are left out: the render sees the surfaces only.
@@ -241,6 +251,13 @@ pub enum VolumeMode {
     /// Light scattered any number of times (delta tracking with the local majorants).
     MultipleScattering,
 }
+
+crate::choice::named!(VolumeMode {
+    (VolumeMode::Off, "off", [], "Media are left out: the render sees the surfaces only"),
+    (VolumeMode::EmissionAbsorption, "emission-absorption", [], "Emission and absorption only (no scattering): exact transmittance, marched emission"),
+    (VolumeMode::SingleScattering, "single-scattering", [], "Light scattered once toward the lights (transmittance to them by ratio tracking)"),
+    (VolumeMode::MultipleScattering, "multiple-scattering", [], "Light scattered any number of times (delta tracking with the local majorants)"),
+});
 
 /// The `[render]` table of a scene file; command-line options override it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -302,7 +319,7 @@ pub const MAX_IMAGE_SIDE: u32 = 16384;
 
 impl RenderSettings {
     /// Errors on impossible sizes, sample counts or steps.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> crate::Result<()> {
         let [w, h] = self.size;
         ensure!(
             (1..=MAX_IMAGE_SIDE).contains(&w) && (1..=MAX_IMAGE_SIDE).contains(&h),
@@ -371,8 +388,8 @@ pub struct VolumeLabel {
 impl RenderSpec {
     /// Checks every material, light and medium, the settings, and that every material a
     /// solid names exists.
-    pub fn validate(&self) -> anyhow::Result<()> {
-        self.cutaway.validate().map_err(anyhow::Error::msg)?;
+    pub fn validate(&self) -> crate::Result<()> {
+        self.cutaway.validate().map_err(crate::Error::Invalid)?;
         for (name, m) in &self.materials {
             m.validate()
                 .map_err(|e| e.context(format!("material `{name}`")))?;

@@ -6,7 +6,7 @@
 
 use std::f64::consts::PI;
 
-use anyhow::Context;
+use crate::error::Context;
 use hytrace_csg::{box3, cylinder, sphere, to_tree, torus, Shape};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
 use hytrace_volume::TexelFormat;
@@ -21,7 +21,7 @@ pub const DEFAULT_PMT_COUNT: usize = 48;
 /// Extinction of the default scene's fog per mm at grid value 1.
 pub const DEFAULT_FOG_DENSITY: f64 = 0.002;
 
-fn add_csg_solid(f: &mut Foundry, name: &str, shape: &Shape, identity: u32) -> anyhow::Result<u32> {
+fn add_csg_solid(f: &mut Foundry, name: &str, shape: &Shape, identity: u32) -> crate::Result<u32> {
     let tree = to_tree(shape).with_context(|| format!("solid `{name}`"))?;
     let mut s = f.begin_solid(name);
     s.add_csg(tree, identity, UNSET)?;
@@ -60,7 +60,7 @@ fn facing(dir: [f64; 3], at: [f64; 3]) -> Transform64 {
 }
 
 /// Builds the default scene.
-pub fn default_scene() -> anyhow::Result<Foundry> {
+pub fn default_scene() -> crate::Result<Foundry> {
     let mut f = Foundry::new();
     let shell = sphere(1000.0)? - sphere(980.0)?;
     let chimney = cylinder(150.0, 900.0, 1400.0)? - cylinder(130.0, 890.0, 1410.0)?;

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_csg::add_geometry;
 use hytrace_csg::geant4::G4Mapping;
 use hytrace_foundry::gdml::{read_gdml, strip_name, Gdml, GdmlOptions, SurfaceLink};
@@ -76,7 +76,7 @@ pub(crate) fn world_solids(f: &Foundry) -> Vec<String> {
 }
 
 /// Reads a GDML file into a Foundry.
-pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Foundry> {
+pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> crate::Result<Foundry> {
     Ok(load_gdml_scene_with_surfaces(path, options)?.0)
 }
 
@@ -85,7 +85,7 @@ pub fn load_gdml_scene(path: &Path, options: &GdmlOptions) -> anyhow::Result<Fou
 pub fn load_gdml_scene_with_surfaces(
     path: &Path,
     options: &GdmlOptions,
-) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
+) -> crate::Result<(Foundry, VolumeSurfaces)> {
     let gdml = read_gdml(path, options)?;
     for w in &gdml.warnings {
         eprintln!("warning: skipped {w}");
@@ -100,7 +100,7 @@ pub fn load_gdml_scene_with_surfaces(
 pub fn load_gdml_render_scene(
     path: &Path,
     options: &GdmlOptions,
-) -> anyhow::Result<(Foundry, Vec<VolumeLabel>)> {
+) -> crate::Result<(Foundry, Vec<VolumeLabel>)> {
     let gdml = read_gdml(path, options)?;
     for w in &gdml.warnings {
         eprintln!("warning: skipped {w}");
@@ -129,7 +129,7 @@ pub fn load_gdml_render_scene(
 /// The colour (linear RGB) and visibility a volume's auxiliary entries give: `Color` (or
 /// `Colour`) as three or four numbers in [0, 1] (sRGB, alpha ignored) or `#RRGGBB`,
 /// `Visibility` (or `Visible`) as true/false/1/0.
-fn volume_display(aux: &[(String, String)]) -> anyhow::Result<(Option<[f64; 3]>, Option<bool>)> {
+fn volume_display(aux: &[(String, String)]) -> crate::Result<(Option<[f64; 3]>, Option<bool>)> {
     let (mut colour, mut visible) = (None, None);
     for (kind, value) in aux {
         match kind.to_ascii_lowercase().as_str() {
@@ -148,11 +148,11 @@ fn volume_display(aux: &[(String, String)]) -> anyhow::Result<(Option<[f64; 3]>,
 }
 
 /// An sRGB colour as `R G B [A]` (or comma-separated) in [0, 1], or `#RRGGBB`, in linear RGB.
-fn parse_colour(text: &str) -> anyhow::Result<[f64; 3]> {
+fn parse_colour(text: &str) -> crate::Result<[f64; 3]> {
     let bad = || {
-        anyhow::anyhow!(
+        crate::Error::Invalid(format!(
             "auxiliary Color `{text}`: expected three or four numbers in [0, 1] or #RRGGBB"
-        )
+        ))
     };
     let t = text.trim();
     let srgb: Vec<f64> = if let Some(hex) = t.strip_prefix('#') {
@@ -167,7 +167,7 @@ fn parse_colour(text: &str) -> anyhow::Result<[f64; 3]> {
         t.split(|c: char| c == ',' || c.is_whitespace())
             .filter(|s| !s.is_empty())
             .map(|s| s.parse::<f64>().map_err(|_| bad()))
-            .collect::<anyhow::Result<_>>()?
+            .collect::<crate::Result<_>>()?
     };
     if !(3..=4).contains(&srgb.len()) || !srgb.iter().all(|v| (0.0..=1.0).contains(v)) {
         return Err(bad());
@@ -299,12 +299,12 @@ fn material_index(m: Option<usize>) -> u32 {
 }
 
 /// Builds the Foundry of a read GDML file.
-pub fn gdml_to_foundry(g: &Gdml) -> anyhow::Result<Foundry> {
+pub fn gdml_to_foundry(g: &Gdml) -> crate::Result<Foundry> {
     Ok(gdml_to_foundry_with_surfaces(g)?.0)
 }
 
 /// Builds the Foundry of a read GDML file and its [`VolumeSurfaces`].
-pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> anyhow::Result<(Foundry, VolumeSurfaces)> {
+pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> crate::Result<(Foundry, VolumeSurfaces)> {
     let total = subtree_sizes(g)[g.world];
     if total > MAX_INSTANCES {
         bail!("the hierarchy expands into {total} placements, more than {MAX_INSTANCES}");
@@ -312,7 +312,7 @@ pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> anyhow::Result<(Foundry, Volum
     let mut f = Foundry::new();
     // One Foundry solid per GDML solid that a placed volume uses, built on first use.
     let mut solid_of: HashMap<usize, u32> = HashMap::new();
-    let mut foundry_solid = |f: &mut Foundry, solid: usize| -> anyhow::Result<u32> {
+    let mut foundry_solid = |f: &mut Foundry, solid: usize| -> crate::Result<u32> {
         if let Some(&s) = solid_of.get(&solid) {
             return Ok(s);
         }

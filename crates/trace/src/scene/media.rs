@@ -1,7 +1,7 @@
 //! Participating media in scenes: a voxel grid (NanoVDB, OpenVDB or procedural) placed in a
 //! solid's frame as a volume prim of 8^3 bricks, with its [`Medium`] record.
 
-use anyhow::{ensure, Context};
+use crate::error::{ensure, Context};
 use hytrace_foundry::optics::Medium;
 use hytrace_foundry::{Foundry, Transform64};
 use hytrace_volume::{BrickedGrid, GridMap, TexelFormat, VoxelGrid};
@@ -35,7 +35,7 @@ pub fn grid_map_transform(map: &GridMap) -> Transform64 {
 }
 
 /// Opens the grid of `spec` as a bricked grid in its texel format; errors name the source.
-pub fn open_medium(spec: &MediumSpec) -> anyhow::Result<BrickedGrid> {
+pub fn open_medium(spec: &MediumSpec) -> crate::Result<BrickedGrid> {
     let (_, volume) = crate::volume::open(&spec.source, spec.grid.as_deref())?;
     // Outside its bricks a medium is the background everywhere: only 0 keeps it finite.
     ensure!(
@@ -55,7 +55,7 @@ pub fn add_medium_solid(
     name: &str,
     spec: &MediumSpec,
     identity: u32,
-) -> anyhow::Result<u32> {
+) -> crate::Result<u32> {
     ensure!(
         spec.density_scale.is_finite() && spec.density_scale >= 0.0,
         "medium `{name}`: the density scale must be finite and >= 0, got {}",

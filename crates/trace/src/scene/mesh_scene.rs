@@ -21,14 +21,14 @@
 use std::collections::hash_map::{Entry, HashMap};
 use std::path::Path;
 
-use anyhow::{bail, ensure, Context};
+use crate::error::{bail, ensure, Context};
 use hytrace_foundry::{Foundry, Transform64, Triangle, UNSET};
 
 /// Most nodes a glTF hierarchy walk may visit (shared subtrees are walked once per use).
 const MAX_GLTF_NODES: usize = 10_000_000;
 
 /// Reads an `.obj`, `.gltf` or `.glb` file into a Foundry; errors name the file.
-pub fn load_mesh_scene(path: &Path) -> anyhow::Result<Foundry> {
+pub fn load_mesh_scene(path: &Path) -> crate::Result<Foundry> {
     let source = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("reading {source}"))?;
     let ext = path
@@ -92,7 +92,7 @@ fn add_mesh_solid(
     name: &str,
     positions: &[[f64; 3]],
     indices: &[[usize; 3]],
-) -> anyhow::Result<CentredSolid> {
+) -> crate::Result<CentredSolid> {
     ensure!(!indices.is_empty(), "mesh `{name}` has no triangles");
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
@@ -142,7 +142,7 @@ pub fn add_mesh_file_solid(
     f: &mut Foundry,
     name: &str,
     path: &Path,
-) -> anyhow::Result<(u32, [f64; 3])> {
+) -> crate::Result<(u32, [f64; 3])> {
     let g = load_mesh_scene(path)?;
     let mut positions = Vec::new();
     for (inst, placement) in g.inst.iter().zip(&g.inst_tran) {
@@ -224,7 +224,7 @@ fn obj_error_line(bytes: &[u8], error: &tobj::LoadError) -> Option<(usize, Strin
 
 /// Builds a Foundry from the bytes of an OBJ file: one solid per object or group with
 /// faces, each placed once. Material libraries are not read.
-pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
+pub fn obj_to_foundry(bytes: &[u8]) -> crate::Result<Foundry> {
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -235,8 +235,10 @@ pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
         Ok((Vec::new(), Default::default()))
     })
     .map_err(|e| match obj_error_line(bytes, &e) {
-        Some((n, line)) => anyhow::anyhow!("not a valid OBJ file: line {n}: {e}: `{line}`"),
-        None => anyhow::anyhow!("not a valid OBJ file: {e}"),
+        Some((n, line)) => {
+            crate::Error::Invalid(format!("not a valid OBJ file: line {n}: {e}: `{line}`"))
+        }
+        None => crate::Error::Invalid(format!("not a valid OBJ file: {e}")),
     })?;
     let mut f = Foundry::new();
     for (k, model) in models.iter().enumerate() {
@@ -275,7 +277,7 @@ pub fn obj_to_foundry(bytes: &[u8]) -> anyhow::Result<Foundry> {
 
 /// The bytes of every buffer: the GLB's binary chunk, a base64 `data:` URI, or a file
 /// beside the `.gltf` (`dir`).
-fn gltf_buffers(doc: &gltf::Gltf, dir: Option<&Path>) -> anyhow::Result<Vec<Vec<u8>>> {
+fn gltf_buffers(doc: &gltf::Gltf, dir: Option<&Path>) -> crate::Result<Vec<Vec<u8>>> {
     doc.buffers()
         .map(|b| {
             let data = match b.source() {
@@ -341,7 +343,7 @@ fn base64_decode(text: &str) -> Option<Vec<u8>> {
 fn accessor_elements<'a>(
     acc: &gltf::Accessor,
     buffers: &'a [Vec<u8>],
-) -> anyhow::Result<Vec<&'a [u8]>> {
+) -> crate::Result<Vec<&'a [u8]>> {
     ensure!(
         acc.sparse().is_none(),
         "accessor {}: sparse accessors are not supported",
@@ -373,7 +375,7 @@ fn accessor_elements<'a>(
 }
 
 /// Positions and triangles of the `TRIANGLES` primitives of a glTF mesh.
-fn gltf_mesh_triangles(mesh: &gltf::Mesh, buffers: &[Vec<u8>]) -> anyhow::Result<IndexedTriangles> {
+fn gltf_mesh_triangles(mesh: &gltf::Mesh, buffers: &[Vec<u8>]) -> crate::Result<IndexedTriangles> {
     use gltf::accessor::{DataType, Dimensions};
     let (mut positions, mut triangles) = (Vec::new(), Vec::new());
     for prim in mesh.primitives() {
@@ -437,7 +439,7 @@ fn gltf_mesh_triangles(mesh: &gltf::Mesh, buffers: &[Vec<u8>]) -> anyhow::Result
 }
 
 /// A node's local transform (glTF matrices are column-major).
-fn node_transform(node: &gltf::Node) -> anyhow::Result<Transform64> {
+fn node_transform(node: &gltf::Node) -> crate::Result<Transform64> {
     let m = node.transform().matrix();
     let rows: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|c| m[c][r] as f64));
     ensure!(
@@ -450,10 +452,10 @@ fn node_transform(node: &gltf::Node) -> anyhow::Result<Transform64> {
 
 /// Parses and validates a `.gltf` or `.glb` file. gltf-json's validation indexes a
 /// primitive's POSITION accessor before checking that it exists, so that is checked first.
-fn parse_gltf(bytes: &[u8]) -> anyhow::Result<gltf::Gltf> {
+fn parse_gltf(bytes: &[u8]) -> crate::Result<gltf::Gltf> {
     use gltf::json::mesh::Semantic;
     use gltf::json::validation::Checked;
-    let invalid = |e: gltf::Error| anyhow::anyhow!("not valid glTF: {e}");
+    let invalid = |e: gltf::Error| crate::Error::Invalid(format!("not valid glTF: {e}"));
     let unchecked = gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
     let root = unchecked.document.as_json();
     for (m, mesh) in root.meshes.iter().enumerate() {
@@ -477,7 +479,7 @@ fn parse_gltf(bytes: &[u8]) -> anyhow::Result<gltf::Gltf> {
 
 /// Builds a Foundry from the bytes of a `.gltf` or `.glb` file; `dir` holds its external
 /// buffers.
-pub fn gltf_to_foundry(bytes: &[u8], dir: Option<&Path>) -> anyhow::Result<Foundry> {
+pub fn gltf_to_foundry(bytes: &[u8], dir: Option<&Path>) -> crate::Result<Foundry> {
     let doc = parse_gltf(bytes)?;
     let buffers = gltf_buffers(&doc, dir)?;
     let scene = doc

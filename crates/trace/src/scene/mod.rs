@@ -8,7 +8,7 @@ mod toml_scene;
 
 use std::path::Path;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 
@@ -31,7 +31,7 @@ pub use toml_scene::{
 /// scene file of CSG expressions (see [`scene_from_toml`]); a `.gdml` file is read with
 /// Geant4's semantics (see [`load_gdml_scene`]); an `.obj`, `.gltf` or `.glb` file is a
 /// triangle-mesh scene (see [`load_mesh_scene`]).
-pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<Foundry> {
+pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> crate::Result<Foundry> {
     match arg {
         None => default_scene(),
         Some(p) if p.as_os_str() == "default" => default_scene(),
@@ -69,7 +69,7 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<F
 pub fn load_render_scene(
     arg: Option<&Path>,
     options: &GdmlOptions,
-) -> anyhow::Result<(Foundry, RenderSpec)> {
+) -> crate::Result<(Foundry, RenderSpec)> {
     let is_default = arg.is_none_or(|p| p.as_os_str() == "default");
     if is_default {
         return Ok((default_scene()?, default_render_spec()));

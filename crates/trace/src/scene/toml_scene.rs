@@ -53,7 +53,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::str::FromStr;
 
-use anyhow::{bail, Context};
+use crate::error::{bail, Context};
 use hytrace_csg::{parse_shape, to_tree};
 use hytrace_foundry::gdml::{read_gdml, GdmlOptions};
 use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
@@ -144,7 +144,7 @@ struct Placement {
     copy: Option<i32>,
 }
 
-fn placement_transform(p: &Placement) -> anyhow::Result<Transform64> {
+fn placement_transform(p: &Placement) -> crate::Result<Transform64> {
     let mut t = Transform64::IDENTITY;
     if let Some([x, y, z, deg]) = p.rotate {
         if [x, y, z] == [0.0; 3] || ![x, y, z, deg].iter().all(|v| v.is_finite()) {
@@ -177,12 +177,12 @@ fn abridged(text: &str) -> String {
 
 /// Builds a Foundry from the text of a scene file; `source` names it in errors and `dir` is
 /// where relative mesh and grid paths start.
-pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> anyhow::Result<Foundry> {
+pub fn scene_from_toml(text: &str, source: &str, dir: &Path) -> crate::Result<Foundry> {
     render_scene_from_toml(text, source, dir).map(|(f, _)| f)
 }
 
 /// The render description of a parsed scene file, checked.
-fn render_spec(file: &SceneFile, source: &str) -> anyhow::Result<RenderSpec> {
+fn render_spec(file: &SceneFile, source: &str) -> crate::Result<RenderSpec> {
     let mut solid_materials = BTreeMap::new();
     let named = file
         .solids
@@ -234,7 +234,7 @@ pub fn render_scene_from_toml(
     text: &str,
     source: &str,
     dir: &Path,
-) -> anyhow::Result<(Foundry, RenderSpec)> {
+) -> crate::Result<(Foundry, RenderSpec)> {
     let file: SceneFile =
         toml::from_str(text).with_context(|| format!("{source}: not a valid scene file"))?;
     let mut spec = render_spec(&file, source)?;
@@ -352,7 +352,7 @@ fn gdml_part(
     entry: &GdmlEntry,
     materials: &BTreeMap<String, Material>,
     dir: &Path,
-) -> anyhow::Result<GdmlPart> {
+) -> crate::Result<GdmlPart> {
     for m in entry.material.iter().chain(entry.materials.values()) {
         if !materials.contains_key(m) {
             bail!("unknown material `{m}`");
@@ -420,7 +420,7 @@ fn gdml_part(
 
 /// Fails when a GDML entry's solid, once prefixed, has the name of another entry's solid
 /// (materials and transparency are assigned by solid name).
-fn check_solid_names(f: &Foundry, gdml: &[GdmlPart]) -> anyhow::Result<()> {
+fn check_solid_names(f: &Foundry, gdml: &[GdmlPart]) -> crate::Result<()> {
     // Solid name -> entry name; a solid, mesh or volume entry names its one solid.
     let mut owner: BTreeMap<&str, &str> = f
         .solid_names
@@ -442,7 +442,7 @@ fn check_solid_names(f: &Foundry, gdml: &[GdmlPart]) -> anyhow::Result<()> {
 }
 
 /// A volume entry as a medium: file sources resolved against `dir`.
-fn volume_spec(entry: &VolumeEntry, dir: &Path) -> anyhow::Result<MediumSpec> {
+fn volume_spec(entry: &VolumeEntry, dir: &Path) -> crate::Result<MediumSpec> {
     let source = if is_procedural(&entry.source) {
         entry.source.clone()
     } else {
@@ -462,12 +462,12 @@ fn volume_spec(entry: &VolumeEntry, dir: &Path) -> anyhow::Result<MediumSpec> {
 }
 
 /// Reads a scene file.
-pub fn load_toml_scene(path: &Path) -> anyhow::Result<Foundry> {
+pub fn load_toml_scene(path: &Path) -> crate::Result<Foundry> {
     load_toml_render_scene(path).map(|(f, _)| f)
 }
 
 /// Reads a scene file with its render description.
-pub fn load_toml_render_scene(path: &Path) -> anyhow::Result<(Foundry, RenderSpec)> {
+pub fn load_toml_render_scene(path: &Path) -> crate::Result<(Foundry, RenderSpec)> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let dir = path.parent().unwrap_or(Path::new("."));

@@ -69,6 +69,11 @@ pub fn hytrace(args: &[&str], env: &[(&str, &str)]) -> Output {
         .unwrap()
 }
 
+/// The standard error of a command, as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 /// The `--stats` line of a GPU run, after checking that the command succeeded (its stderr
 /// shown otherwise) and reported what every GPU command reports: backend `gpu`, the
 /// adapter, host kernel seconds and the timestamp field (null where a device has no
@@ -456,18 +461,5 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
 
 /// Every `.gdml` file under `dir`, sorted.
 pub fn gdml_files(dir: &Path) -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "gdml") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(dir, &mut files);
-    files.sort();
-    files
+    hytrace_testkit::files::files_with_extension(dir, "gdml")
 }

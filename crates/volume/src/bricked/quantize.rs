@@ -20,6 +20,11 @@ use half::f16;
 use super::bc4;
 use super::format::TexelFormat;
 
+/// Values one brick's texel format cannot encode, in words; the caller adds the brick.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct EncodeError(String);
+
 /// Voxels per brick.
 pub const VOXELS: usize = 512;
 
@@ -85,7 +90,7 @@ pub fn encode(
     format: TexelFormat,
     values: &[f32; VOXELS],
     out: &mut Vec<u8>,
-) -> Result<Encoded, String> {
+) -> Result<Encoded, EncodeError> {
     let min = values.iter().copied().fold(f32::INFINITY, f32::min);
     let max = values.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     if min == max {
@@ -121,9 +126,9 @@ pub fn encode(
         let d = decode(offset, scale, texel(format, texels, i));
         let e = (f64::from(d) - f64::from(*v)).abs();
         if !e.is_finite() {
-            return Err(format!(
+            return Err(EncodeError(format!(
                 "voxel {v} decodes to {d} (values span [{min}, {max}])"
-            ));
+            )));
         }
         max_error = max_error.max(e);
     }
@@ -149,13 +154,13 @@ struct Span {
 impl Span {
     /// The decode scale for `codes` steps over the range; errors where `offset + t * scale`
     /// could overflow f32.
-    fn scale(&self, codes: f64, format: TexelFormat) -> Result<f32, String> {
+    fn scale(&self, codes: f64, format: TexelFormat) -> Result<f32, EncodeError> {
         if self.range * (1.0 + SLACK) > f64::from(f32::MAX) {
-            return Err(format!(
+            return Err(EncodeError(format!(
                 "values span [{}, {}], wider than the largest f32: {format} decodes \
                  `min + t * scale` in f32, which would overflow; use the f32 format",
                 self.min, self.max
-            ));
+            )));
         }
         Ok((self.range / codes) as f32)
     }
@@ -176,7 +181,7 @@ fn encode_unorm(
     span: &Span,
     format: TexelFormat,
     out: &mut Vec<u8>,
-) -> Result<(f32, f32, f64), String> {
+) -> Result<(f32, f32, f64), EncodeError> {
     let codes = if format == TexelFormat::Unorm8 {
         255.0
     } else {
@@ -201,7 +206,7 @@ fn encode_bc4(
     values: &[f32; VOXELS],
     span: &Span,
     out: &mut Vec<u8>,
-) -> Result<(f32, f32, f64), String> {
+) -> Result<(f32, f32, f64), EncodeError> {
     let scale = span.scale(255.0, TexelFormat::Bc4)?;
     for z in 0..8 {
         for by in 0..2 {
@@ -250,7 +255,7 @@ fn encode_f16(
     values: &[f32; VOXELS],
     span: &Span,
     out: &mut Vec<u8>,
-) -> Result<(f32, f32, f64), String> {
+) -> Result<(f32, f32, f64), EncodeError> {
     let largest = f16::MAX.to_f64();
     // Raw values decode exactly in f32 (0 + t * 1); values relative to the minimum pay the
     // f32 sum.
@@ -263,11 +268,11 @@ fn encode_f16(
         (Some(r), _) => (0.0, r),
         (None, Some(d)) => (span.min, d),
         (None, None) => {
-            return Err(format!(
+            return Err(EncodeError(format!(
                 "values span [{}, {}]: beyond the f16 range (|t| <= 65504) both raw and \
                  relative to the brick minimum; use the f32 format",
                 span.min, span.max
-            ))
+            )))
         }
     };
     for v in values {

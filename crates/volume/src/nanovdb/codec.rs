@@ -6,6 +6,7 @@
 //! streams and Blosc frames themselves are decoded by [`crate::codec`].
 
 use crate::codec::{blosc_frame, inflate_zlib, LZ4_MAX_RATIO, RATIO_SLACK};
+use crate::decode_error::DecodeError;
 
 use super::bytes::u64_at;
 use super::layout::NanoCodec;
@@ -20,19 +21,23 @@ const BLOSC_CHUNK: u64 = 1 << 30;
 const INITIAL_CAPACITY: u64 = 1 << 26;
 
 /// Decodes `payload` (exactly the bytes the file gives the grid) into `grid_size` bytes.
-pub(crate) fn decode(codec: NanoCodec, payload: &[u8], grid_size: u64) -> Result<Vec<u8>, String> {
+pub(crate) fn decode(
+    codec: NanoCodec,
+    payload: &[u8],
+    grid_size: u64,
+) -> Result<Vec<u8>, DecodeError> {
     if grid_size > MAX_GRID_BYTES {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "grid size {grid_size} bytes exceeds the reader's limit of {MAX_GRID_BYTES}"
-        ));
+        )));
     }
     match codec {
         NanoCodec::None => {
             if payload.len() as u64 != grid_size {
-                return Err(format!(
+                return Err(DecodeError(format!(
                     "uncompressed grid of {grid_size} bytes stored in {} bytes",
                     payload.len()
-                ));
+                )));
             }
             Ok(payload.to_vec())
         }
@@ -41,26 +46,30 @@ pub(crate) fn decode(codec: NanoCodec, payload: &[u8], grid_size: u64) -> Result
     }
 }
 
-fn unzip(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, String> {
-    let size = u64_at(payload, 0).ok_or("ZIP payload shorter than its 8-byte size")?;
+fn unzip(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, DecodeError> {
+    let size = u64_at(payload, 0)
+        .ok_or_else(|| DecodeError("ZIP payload shorter than its 8-byte size".into()))?;
     let data = &payload[8..];
     if size != data.len() as u64 {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "ZIP payload states {size} compressed bytes but holds {}",
             data.len()
-        ));
+        )));
     }
-    let expected = usize::try_from(grid_size)
-        .map_err(|_| format!("grid size {grid_size} bytes does not fit in memory"))?;
-    inflate_zlib(data, expected).map_err(|e| format!("ZIP payload: {e}"))
+    let expected = usize::try_from(grid_size).map_err(|_| {
+        DecodeError(format!(
+            "grid size {grid_size} bytes does not fit in memory"
+        ))
+    })?;
+    inflate_zlib(data, expected).map_err(|e| DecodeError(format!("ZIP payload: {e}")))
 }
 
-fn unblosc(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, String> {
+fn unblosc(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, DecodeError> {
     if grid_size > LZ4_MAX_RATIO * payload.len() as u64 + RATIO_SLACK {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "BLOSC payload of {} bytes cannot hold a grid of {grid_size} bytes",
             payload.len()
-        ));
+        )));
     }
     let mut out = Vec::with_capacity(grid_size.min(INITIAL_CAPACITY) as usize);
     let mut pos = 0usize;
@@ -69,21 +78,24 @@ fn unblosc(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, String> {
     // NanoVDB writes one frame per started GiB of grid bytes.
     loop {
         let chunk = residual.min(BLOSC_CHUNK);
-        let size = u64_at(payload, pos)
-            .ok_or_else(|| format!("BLOSC frame {frame_index}: size missing at byte {pos}"))?;
+        let size = u64_at(payload, pos).ok_or_else(|| {
+            DecodeError(format!(
+                "BLOSC frame {frame_index}: size missing at byte {pos}"
+            ))
+        })?;
         pos += 8;
         let frame = usize::try_from(size)
             .ok()
             .and_then(|s| payload.get(pos..pos.checked_add(s)?))
             .ok_or_else(|| {
-                format!(
+                DecodeError(format!(
                     "BLOSC frame {frame_index}: {size} bytes stated, {} left",
                     payload.len() - pos
-                )
+                ))
             })?;
         pos += frame.len();
         blosc_frame(frame, chunk as usize, &mut out)
-            .map_err(|e| format!("BLOSC frame {frame_index}: {e}"))?;
+            .map_err(|e| DecodeError(format!("BLOSC frame {frame_index}: {e}")))?;
         residual -= chunk;
         frame_index += 1;
         if residual == 0 {
@@ -91,10 +103,10 @@ fn unblosc(payload: &[u8], grid_size: u64) -> Result<Vec<u8>, String> {
         }
     }
     if pos != payload.len() {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "BLOSC payload has {} bytes after its last frame",
             payload.len() - pos
-        ));
+        )));
     }
     Ok(out)
 }
@@ -121,7 +133,7 @@ mod tests {
 
     /// Decoding fails with a message naming every one of `parts`.
     fn expect_error(codec: NanoCodec, payload: &[u8], grid_size: u64, parts: &[&str]) {
-        let err = decode(codec, payload, grid_size).unwrap_err();
+        let err = decode(codec, payload, grid_size).unwrap_err().0;
         assert!(
             parts.iter().all(|p| err.contains(p)),
             "{parts:?} not in {err}"

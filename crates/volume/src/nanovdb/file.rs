@@ -10,6 +10,7 @@ use super::codec::decode;
 use super::layout::{
     grid, NanoCodec, NanoVersion, MAGIC_FILE, MAGIC_GRID, MAGIC_NUMB, MAJOR, OPENVDB_MAGIC_LOW,
 };
+use crate::decode_error::DecodeError;
 
 /// A grid's decoded buffer and what the container says about it.
 pub(crate) struct RawGrid {
@@ -31,12 +32,12 @@ mod meta {
 }
 
 /// Splits a file into its grids' decoded buffers.
-pub(crate) fn split(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
+pub(crate) fn split(bytes: &[u8]) -> Result<Vec<RawGrid>, DecodeError> {
     let Some(magic) = u64_at(bytes, 0) else {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "{} bytes are too few for a NanoVDB file",
             bytes.len()
-        ));
+        )));
     };
     match magic {
         MAGIC_FILE => segments(bytes),
@@ -54,16 +55,16 @@ pub(crate) fn split(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
                 segments(bytes)
             }
         }
-        m if [MAGIC_NUMB, MAGIC_GRID, MAGIC_FILE].contains(&m.swap_bytes()) => {
-            Err("big-endian NanoVDB files are not supported".into())
-        }
-        m if m as u32 == OPENVDB_MAGIC_LOW => {
-            Err("this is an OpenVDB file, not a NanoVDB file".into())
-        }
-        m => Err(format!(
+        m if [MAGIC_NUMB, MAGIC_GRID, MAGIC_FILE].contains(&m.swap_bytes()) => Err(DecodeError(
+            "big-endian NanoVDB files are not supported".into(),
+        )),
+        m if m as u32 == OPENVDB_MAGIC_LOW => Err(DecodeError(
+            "this is an OpenVDB file, not a NanoVDB file".into(),
+        )),
+        m => Err(DecodeError(format!(
             "not a NanoVDB file (starts with {:?})",
             String::from_utf8_lossy(&m.to_le_bytes())
-        )),
+        ))),
     }
 }
 
@@ -74,33 +75,35 @@ struct Meta {
     name: String,
 }
 
-fn segments(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
+fn segments(bytes: &[u8]) -> Result<Vec<RawGrid>, DecodeError> {
     let mut grids = Vec::new();
     let mut pos = 0usize;
     while pos < bytes.len() {
         let at = pos;
         if bytes.len() - pos < HEADER_SIZE {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "segment header at byte {at} truncated ({} of {HEADER_SIZE} bytes)",
                 bytes.len() - pos
-            ));
+            )));
         }
         let magic = u64_at(bytes, pos).unwrap_or(0);
         if magic != MAGIC_NUMB && magic != MAGIC_FILE {
-            return Err(format!("segment at byte {at} has bad magic {magic:#018x}"));
+            return Err(DecodeError(format!(
+                "segment at byte {at} has bad magic {magic:#018x}"
+            )));
         }
         let version = NanoVersion::from_packed(u32_at(bytes, pos + 8).unwrap_or(0));
         if !version.is_supported() {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "segment at byte {at}: NanoVDB version {version} is not supported (this reader reads 32.3 and later 32.x)"
-            ));
+            )));
         }
         let count = u16_at(bytes, pos + 12).unwrap_or(0);
         let code = u16_at(bytes, pos + 14).unwrap_or(0);
         let codec = NanoCodec::from_code(code)
-            .ok_or_else(|| format!("segment at byte {at} has unknown codec {code}"))?;
+            .ok_or_else(|| DecodeError(format!("segment at byte {at} has unknown codec {code}")))?;
         if count == 0 {
-            return Err(format!("segment at byte {at} holds no grids"));
+            return Err(DecodeError(format!("segment at byte {at} holds no grids")));
         }
         pos += HEADER_SIZE;
 
@@ -113,19 +116,19 @@ fn segments(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
                 field(meta::FILE_SIZE),
                 u32_at(bytes, pos + meta::NAME_SIZE).filter(|_| pos + meta::SIZE <= bytes.len()),
             ) else {
-                return Err(format!(
+                return Err(DecodeError(format!(
                     "grid {number}: metadata at byte {pos} truncated (file of {} bytes)",
                     bytes.len()
-                ));
+                )));
             };
             let name_at = pos + meta::SIZE;
             let name = bytes
                 .get(name_at..name_at.saturating_add(name_size as usize))
                 .ok_or_else(|| {
-                    format!(
+                    DecodeError(format!(
                         "grid {number}: name of {name_size} bytes at byte {name_at} beyond the file ({} bytes)",
                         bytes.len()
-                    )
+                    ))
                 })?;
             metas.push(Meta {
                 grid_size,
@@ -141,15 +144,15 @@ fn segments(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
                 .ok()
                 .and_then(|n| bytes.get(pos..pos.checked_add(n)?))
                 .ok_or_else(|| {
-                    format!(
+                    DecodeError(format!(
                         "{label}: {} bytes of {codec} data at byte {pos} beyond the file ({} bytes)",
                         m.file_size,
                         bytes.len()
-                    )
+                    ))
                 })?;
             pos += payload.len();
-            let buffer =
-                decode(codec, payload, m.grid_size).map_err(|e| format!("{label}: {e}"))?;
+            let buffer = decode(codec, payload, m.grid_size)
+                .map_err(|e| DecodeError(format!("{label}: {e}")))?;
             grids.push(RawGrid {
                 buffer,
                 name: Some(m.name),
@@ -160,7 +163,7 @@ fn segments(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
     Ok(grids)
 }
 
-fn raw_grids(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
+fn raw_grids(bytes: &[u8]) -> Result<Vec<RawGrid>, DecodeError> {
     let mut grids = Vec::new();
     let mut pos = 0usize;
     while pos < bytes.len() {
@@ -168,10 +171,10 @@ fn raw_grids(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
         let rest = &bytes[pos..];
         let magic = u64_at(rest, 0).unwrap_or(0);
         if rest.len() < grid::SIZE || (magic != MAGIC_NUMB && magic != MAGIC_GRID) {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "grid {number}: no grid header at byte {pos} ({} bytes left)",
                 rest.len()
-            ));
+            )));
         }
         let size = u64_at(rest, grid::GRID_SIZE).unwrap_or(0);
         let buffer = usize::try_from(size)
@@ -179,10 +182,10 @@ fn raw_grids(bytes: &[u8]) -> Result<Vec<RawGrid>, String> {
             .filter(|s| *s >= grid::SIZE)
             .and_then(|s| rest.get(..s))
             .ok_or_else(|| {
-                format!(
+                DecodeError(format!(
                     "grid {number}: grid size {size} at byte {pos} does not fit the {} bytes left",
                     rest.len()
-                )
+                ))
             })?;
         pos += buffer.len();
         grids.push(RawGrid {

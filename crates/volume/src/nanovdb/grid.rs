@@ -154,7 +154,7 @@ impl NanoGrid {
                     nodes,
                     voxels: voxel_count,
                 };
-                Some(Tree::load(b, kind, root_at, header).map_err(fail)?)
+                Some(Tree::load(b, kind, root_at, header).map_err(|e| fail(e.0))?)
             }
             None => None,
         };

@@ -46,7 +46,7 @@ pub fn read_nanovdb(path: &Path) -> Result<NanoFile, NanoError> {
 
 /// Parses the bytes of a NanoVDB file; `source` names it in errors.
 pub fn parse_nanovdb(bytes: &[u8], source: &str) -> Result<NanoFile, NanoError> {
-    let raw = file::split(bytes).map_err(|m| NanoError::new(source, m))?;
+    let raw = file::split(bytes).map_err(|m| NanoError::new(source, m.0))?;
     let grids = raw
         .into_iter()
         .enumerate()

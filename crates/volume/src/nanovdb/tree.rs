@@ -12,6 +12,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use super::bytes::{f32_at, f64_at, i64_at, offset_by, u32_at, u64_at, u8_at};
 use super::layout::{leaf, root, Internal, NanoGridType, LOWER, UPPER};
+use crate::decode_error::DecodeError;
 use crate::grid::Coord;
 
 /// How a grid stores its values.
@@ -207,11 +208,11 @@ impl Level {
         stated: u32,
         size: usize,
         buffer_len: usize,
-    ) -> Result<Level, String> {
+    ) -> Result<Level, DecodeError> {
         if (stated as usize).saturating_mul(size) > buffer_len {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "the tree header states {stated} {name} nodes of {size} bytes, more than fit in the grid buffer ({buffer_len} bytes)"
-            ));
+            )));
         }
         Ok(Level {
             name,
@@ -221,31 +222,31 @@ impl Level {
         })
     }
 
-    fn add(&mut self, off: usize, origin: Coord, parent: &str) -> Result<(), String> {
+    fn add(&mut self, off: usize, origin: Coord, parent: &str) -> Result<(), DecodeError> {
         if !self.seen.insert(off) {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "{parent} points at the {} at byte {off} a second time",
                 self.name
-            ));
+            )));
         }
         if self.nodes.len() >= self.stated as usize {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "the tree holds more than the {} {} nodes its header states",
                 self.stated, self.name
-            ));
+            )));
         }
         self.nodes.push((off, origin));
         Ok(())
     }
 
-    fn check_complete(&self) -> Result<(), String> {
+    fn check_complete(&self) -> Result<(), DecodeError> {
         if self.nodes.len() != self.stated as usize {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "the tree header states {} {} nodes, the tree holds {}",
                 self.stated,
                 self.name,
                 self.nodes.len()
-            ));
+            )));
         }
         Ok(())
     }
@@ -258,17 +259,22 @@ fn child_at(
     delta: i64,
     size: usize,
     what: &str,
-) -> Result<usize, String> {
-    let off = offset_by(parent, delta)
-        .ok_or_else(|| format!("{what} offset {delta} points before the grid buffer"))?;
+) -> Result<usize, DecodeError> {
+    let off = offset_by(parent, delta).ok_or_else(|| {
+        DecodeError(format!(
+            "{what} offset {delta} points before the grid buffer"
+        ))
+    })?;
     if off.checked_add(size).is_none_or(|end| end > buf.len()) {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "{what} offset {delta} (byte {off}, {size} bytes) beyond the grid buffer ({} bytes)",
             buf.len()
-        ));
+        )));
     }
     if off % 32 != 0 {
-        return Err(format!("{what} at byte {off} is not 32-byte aligned"));
+        return Err(DecodeError(format!(
+            "{what} at byte {off} is not 32-byte aligned"
+        )));
     }
     Ok(off)
 }
@@ -280,15 +286,16 @@ impl Tree {
         kind: ValueKind,
         root: usize,
         counts: HeaderCounts,
-    ) -> Result<Tree, String> {
-        let table_size = u32_at(buf, root + root::TABLE_SIZE)
-            .ok_or_else(|| format!("root node at byte {root} beyond the grid buffer"))?;
+    ) -> Result<Tree, DecodeError> {
+        let table_size = u32_at(buf, root + root::TABLE_SIZE).ok_or_else(|| {
+            DecodeError(format!("root node at byte {root} beyond the grid buffer"))
+        })?;
         let background = if kind == ValueKind::F64 {
             f64_at(buf, root + kind.root_background())
         } else {
             f32_at(buf, root + kind.root_background()).map(f64::from)
         }
-        .ok_or_else(|| format!("root node at byte {root} beyond the grid buffer"))?;
+        .ok_or_else(|| DecodeError(format!("root node at byte {root} beyond the grid buffer")))?;
         let first_tile = root + kind.root_size();
         // The table must fit before anything is allocated for it.
         (table_size as usize)
@@ -296,10 +303,10 @@ impl Tree {
             .and_then(|n| n.checked_add(first_tile))
             .filter(|end| *end <= buf.len())
             .ok_or_else(|| {
-                format!(
+                DecodeError(format!(
                     "root table of {table_size} tiles beyond the grid buffer ({} bytes)",
                     buf.len()
-                )
+                ))
             })?;
 
         let mut tree = Tree {
@@ -316,9 +323,11 @@ impl Tree {
             let word = |off| u64_at(buf, tile + off).unwrap_or(0);
             let key = word(root::TILE_KEY);
             let origin = key_origin(key)
-                .ok_or_else(|| format!("root tile {t} has an invalid key {key:#x}"))?;
+                .ok_or_else(|| DecodeError(format!("root tile {t} has an invalid key {key:#x}")))?;
             if tree.lookup.contains_key(&key) {
-                return Err(format!("root tile {t} repeats the key of an earlier tile"));
+                return Err(DecodeError(format!(
+                    "root tile {t} repeats the key of an earlier tile"
+                )));
             }
             let child = word(root::TILE_CHILD) as i64;
             let slot = if child != 0 {
@@ -365,9 +374,9 @@ impl Tree {
                     let head = child_at(buf, lower, delta, leaf::FP_CODES, &what)?;
                     let log2_bits = u32::from(u8_at(buf, head + leaf::FLAGS).unwrap_or(0) >> 5);
                     if log2_bits > 4 {
-                        return Err(format!(
+                        return Err(DecodeError(format!(
                             "FpN leaf at byte {head} ({what}) has bit-width code {log2_bits} (at most 4: 16 bits)"
-                        ));
+                        )));
                     }
                     log2_bits
                 } else {
@@ -386,10 +395,10 @@ impl Tree {
         tree.blocks = tree.blocks.saturating_add(leaves.nodes.len() as u64);
 
         if voxels != u128::from(counts.voxels) {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "the tree header states {} active voxels, the tree holds {voxels}",
                 counts.voxels
-            ));
+            )));
         }
         Ok(tree)
     }

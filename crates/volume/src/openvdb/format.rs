@@ -10,6 +10,7 @@
 //! yields an error message, never a panic, and no allocation exceeds what the file holds
 //! (or a node's fixed size).
 
+use crate::decode_error::DecodeError;
 use crate::grid::{Coord, GridMap};
 
 use super::codec::read_data;
@@ -39,69 +40,69 @@ impl<'a> Cursor<'a> {
         Cursor { data, pos }
     }
 
-    pub(super) fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+    pub(super) fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
         let end = self.pos.checked_add(n).filter(|&e| e <= self.data.len());
         let end = end.ok_or_else(|| {
-            format!(
+            DecodeError(format!(
                 "unexpected end of file: {n} bytes needed at byte {} of {}",
                 self.pos,
                 self.data.len()
-            )
+            ))
         })?;
         let s = &self.data[self.pos..end];
         self.pos = end;
         Ok(s)
     }
 
-    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], DecodeError> {
         let mut a = [0; N];
         a.copy_from_slice(self.take(N)?);
         Ok(a)
     }
 
-    fn u8(&mut self) -> Result<u8, String> {
+    fn u8(&mut self) -> Result<u8, DecodeError> {
         Ok(self.array::<1>()?[0])
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    fn u32(&mut self) -> Result<u32, DecodeError> {
         self.array().map(u32::from_le_bytes)
     }
 
-    fn i32(&mut self) -> Result<i32, String> {
+    fn i32(&mut self) -> Result<i32, DecodeError> {
         self.array().map(i32::from_le_bytes)
     }
 
-    pub(super) fn i64(&mut self) -> Result<i64, String> {
+    pub(super) fn i64(&mut self) -> Result<i64, DecodeError> {
         self.array().map(i64::from_le_bytes)
     }
 
-    fn f64(&mut self) -> Result<f64, String> {
+    fn f64(&mut self) -> Result<f64, DecodeError> {
         self.array().map(f64::from_le_bytes)
     }
 
-    fn vec3(&mut self) -> Result<[f64; 3], String> {
+    fn vec3(&mut self) -> Result<[f64; 3], DecodeError> {
         Ok([self.f64()?, self.f64()?, self.f64()?])
     }
 
-    fn coord(&mut self) -> Result<Coord, String> {
+    fn coord(&mut self) -> Result<Coord, DecodeError> {
         Ok([self.i32()?, self.i32()?, self.i32()?])
     }
 
-    fn string(&mut self) -> Result<String, String> {
+    fn string(&mut self) -> Result<String, DecodeError> {
         let n = self.u32()? as usize;
         Ok(String::from_utf8_lossy(self.take(n)?).into_owned())
     }
 
     /// A file offset stored as i64, checked to lie inside the file.
-    fn offset(&mut self) -> Result<usize, String> {
+    fn offset(&mut self) -> Result<usize, DecodeError> {
         let v = self.i64()?;
         usize::try_from(v)
             .ok()
             .filter(|&o| o <= self.data.len())
-            .ok_or_else(|| format!("offset {v} lies outside the file"))
+            .ok_or_else(|| DecodeError(format!("offset {v} lies outside the file")))
     }
 
-    fn mask(&mut self, bits: usize) -> Result<Vec<u64>, String> {
+    fn mask(&mut self, bits: usize) -> Result<Vec<u64>, DecodeError> {
         let bytes = self.take(bits / 8)?;
         Ok(bytes
             .chunks_exact(8)
@@ -132,33 +133,35 @@ pub(super) struct Descriptor {
     pub bbox: Option<[Coord; 2]>,
     pub voxel_count: Option<u64>,
     pub map_type: String,
-    pub map: Result<GridMap, String>,
+    pub map: Result<GridMap, DecodeError>,
     /// Where the tree topology starts (unknown when the transform could not be read).
     pub topology_pos: Option<usize>,
     pub block_pos: usize,
 }
 
 /// The grid descriptors of a whole file.
-pub(super) fn descriptors(data: &[u8]) -> Result<Vec<Descriptor>, String> {
+pub(super) fn descriptors(data: &[u8]) -> Result<Vec<Descriptor>, DecodeError> {
     let mut cur = Cursor::new(data, 0);
     if cur.take(8).ok() != Some(&MAGIC[..]) {
-        return Err("not an OpenVDB file (bad magic number)".into());
+        return Err(DecodeError("not an OpenVDB file (bad magic number)".into()));
     }
     let version = cur.u32()?;
     if version < MIN_VERSION {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "file format version {version} predates {MIN_VERSION} (OpenVDB 3.0); \
              re-save the file with a newer OpenVDB"
-        ));
+        )));
     }
     if version > MAX_VERSION {
-        return Err(format!(
+        return Err(DecodeError(format!(
             "file format version {version} is newer than {MAX_VERSION}, the newest this reader knows"
-        ));
+        )));
     }
     let _library_version = (cur.u32()?, cur.u32()?);
     if cur.u8()? == 0 {
-        return Err("the file was written as a stream without grid offsets".into());
+        return Err(DecodeError(
+            "the file was written as a stream without grid offsets".into(),
+        ));
     }
     let _uuid = cur.take(36)?;
     metadata(&mut cur)?;
@@ -174,16 +177,16 @@ pub(super) fn descriptors(data: &[u8]) -> Result<Vec<Descriptor>, String> {
         let blocks_ok = (grid_pos..=end_pos).contains(&block_pos)
             || (!instance_parent.is_empty() && block_pos == 0);
         if !(cur.pos <= grid_pos && grid_pos <= end_pos && blocks_ok) {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "corrupt offsets of grid '{unique_name}': {grid_pos}, {block_pos}, {end_pos}"
-            ));
+            )));
         }
         let mut g = Cursor::new(data, grid_pos);
         let compression = g.u32()?;
         if compression > (COMPRESS_ZIP | COMPRESS_ACTIVE_MASK | COMPRESS_BLOSC) {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "grid '{unique_name}': unknown compression flags {compression:#x}"
-            ));
+            )));
         }
         let meta = metadata(&mut g)?;
         let map_type = g.string()?;
@@ -226,7 +229,7 @@ struct Meta {
 }
 
 /// Reads a metadata map, keeping the entries the reader uses.
-fn metadata(cur: &mut Cursor) -> Result<Meta, String> {
+fn metadata(cur: &mut Cursor) -> Result<Meta, DecodeError> {
     let mut m = Meta::default();
     for _ in 0..cur.u32()? {
         let name = cur.string()?;
@@ -246,7 +249,7 @@ fn metadata(cur: &mut Cursor) -> Result<Meta, String> {
 }
 
 /// Reads the map of type `name` (math/Maps.h); only affine maps become a [`GridMap`].
-fn transform(cur: &mut Cursor, name: &str) -> Result<GridMap, String> {
+fn transform(cur: &mut Cursor, name: &str) -> Result<GridMap, DecodeError> {
     const I: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let diag = |s: [f64; 3]| std::array::from_fn(|r| std::array::from_fn(|c| I[r][c] * s[r]));
     let (linear, translation) = match name {
@@ -270,24 +273,24 @@ fn transform(cur: &mut Cursor, name: &str) -> Result<GridMap, String> {
                 *v = cur.f64()?;
             }
             if m[0][3] != 0.0 || m[1][3] != 0.0 || m[2][3] != 0.0 || m[3][3] != 1.0 {
-                return Err(format!(
+                return Err(DecodeError(format!(
                     "{name} has a projective last column {:?}",
                     [m[0][3], m[1][3], m[2][3], m[3][3]]
-                ));
+                )));
             }
             let linear = std::array::from_fn(|r| std::array::from_fn(|c| m[c][r]));
             (linear, [m[3][0], m[3][1], m[3][2]])
         }
         "NonlinearFrustumMap" => {
-            return Err(
+            return Err(DecodeError(
                 "the transform is a frustum (NonlinearFrustumMap), which is not affine; \
                  only affine transforms are supported"
                     .into(),
-            )
+            ))
         }
-        other => return Err(format!("unknown transform type '{other}'")),
+        other => return Err(DecodeError(format!("unknown transform type '{other}'"))),
     };
-    GridMap::new(linear, translation).map_err(|e| e.0)
+    GridMap::new(linear, translation).map_err(|e| DecodeError(e.0))
 }
 
 /// Scalar value types the reader loads.
@@ -325,7 +328,7 @@ impl Scalar {
     }
 
     /// The value at the start of `b`, as f32; errors on values f32 cannot hold.
-    fn decode(self, b: &[u8]) -> Result<f32, String> {
+    fn decode(self, b: &[u8]) -> Result<f32, DecodeError> {
         let v = match self {
             Scalar::F16 => half::f16::from_le_bytes([b[0], b[1]]).to_f32(),
             Scalar::F32 => f32::from_le_bytes(b[..4].try_into().expect("4 bytes")),
@@ -333,7 +336,7 @@ impl Scalar {
                 let d = f64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
                 let f = d as f32;
                 if d.is_finite() && !f.is_finite() {
-                    return Err(format!("double value {d} does not fit in f32"));
+                    return Err(DecodeError(format!("double value {d} does not fit in f32")));
                 }
                 f
             }
@@ -341,7 +344,7 @@ impl Scalar {
         Ok(v)
     }
 
-    fn read(self, cur: &mut Cursor) -> Result<f32, String> {
+    fn read(self, cur: &mut Cursor) -> Result<f32, DecodeError> {
         self.decode(cur.take(self.size())?)
     }
 }
@@ -370,12 +373,14 @@ pub(super) fn tree(
     topology_pos: usize,
     block_pos: usize,
     st: Storage,
-) -> Result<Tree, String> {
+) -> Result<Tree, DecodeError> {
     let mut cur = Cursor::new(data, topology_pos);
     let _buffer_count = cur.i32()?;
     let background = st.scalar.read(&mut cur)?;
     if !background.is_finite() {
-        return Err(format!("background {background} is not finite"));
+        return Err(DecodeError(format!(
+            "background {background} is not finite"
+        )));
     }
     let mut tree = Tree {
         background,
@@ -383,11 +388,11 @@ pub(super) fn tree(
         tiles: Vec::new(),
     };
     let (num_tiles, num_children) = (cur.u32()?, cur.u32()?);
-    let aligned = |c: Coord, side: i32| -> Result<Coord, String> {
+    let aligned = |c: Coord, side: i32| -> Result<Coord, DecodeError> {
         if c.iter().all(|v| v & (side - 1) == 0) {
             Ok(c)
         } else {
-            Err(format!("corrupt root entry at {c:?}"))
+            Err(DecodeError(format!("corrupt root entry at {c:?}")))
         }
     };
     for _ in 0..num_tiles {
@@ -433,9 +438,11 @@ pub(super) fn tree(
 }
 
 impl Tree {
-    fn add_tile(&mut self, origin: Coord, side: i32, value: f32) -> Result<(), String> {
+    fn add_tile(&mut self, origin: Coord, side: i32, value: f32) -> Result<(), DecodeError> {
         if !value.is_finite() {
-            return Err(format!("tile at {origin:?} has non-finite value {value}"));
+            return Err(DecodeError(format!(
+                "tile at {origin:?} has non-finite value {value}"
+            )));
         }
         if value != self.background {
             self.tiles.push((origin, side, value));
@@ -460,7 +467,7 @@ fn internal(
     st: Storage,
     log2: u32,
     background: f32,
-) -> Result<NodeTopology, String> {
+) -> Result<NodeTopology, DecodeError> {
     let size = 1 << (3 * log2);
     let child_mask = cur.mask(size)?;
     let value_mask = cur.mask(size)?;
@@ -480,13 +487,15 @@ fn compressed_values(
     count: usize,
     value_mask: &[u64],
     background: f32,
-) -> Result<Vec<f32>, String> {
+) -> Result<Vec<f32>, DecodeError> {
     // 0: no inactive values or all +background; 1: all -background; 2: one other value;
     // 3: mask picks -/+background; 4: mask picks background or one value; 5: mask picks
     // one of two values; 6: every value is stored.
     let meta = cur.u8()?;
     if meta > 6 {
-        return Err(format!("corrupt node: inactive-value code {meta}"));
+        return Err(DecodeError(format!(
+            "corrupt node: inactive-value code {meta}"
+        )));
     }
     if matches!(meta, 2 | 4 | 5) {
         cur.take(st.scalar.size())?;
@@ -523,7 +532,7 @@ fn compressed_values(
             k += 1;
             if active {
                 if !v.is_finite() {
-                    return Err(format!("non-finite voxel value {v}"));
+                    return Err(DecodeError(format!("non-finite voxel value {v}")));
                 }
                 *slot = v;
             }

@@ -24,6 +24,7 @@ use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::path::{Path, PathBuf};
 
+use crate::decode_error::DecodeError;
 use crate::dense::VolumeError;
 use crate::grid::{Coord, GridMap, VoxelGrid, BLOCK_SIDE};
 use crate::ranges::MAX_RANGE_BLOCKS;
@@ -77,7 +78,7 @@ impl VdbFile {
     /// Reads the grid list of a file's contents already in memory; `path` names it in
     /// errors.
     pub fn from_bytes(path: &Path, data: Vec<u8>) -> Result<VdbFile, VolumeError> {
-        let fail = |msg: String| VolumeError(format!("{}: {msg}", path.display()));
+        let fail = |msg: DecodeError| VolumeError(format!("{}: {msg}", path.display()));
         let descriptors = format::descriptors(&data).map_err(fail)?;
         let grids = descriptors.iter().map(info).collect();
         Ok(VdbFile {
@@ -99,15 +100,16 @@ impl VdbFile {
                 self.descriptors.len()
             ))
         })?;
-        let fail =
-            |msg: String| VolumeError(format!("{}: grid '{}': {msg}", self.path.display(), d.name));
+        let fail = |msg: DecodeError| {
+            VolumeError(format!("{}: grid '{}': {msg}", self.path.display(), d.name))
+        };
         let map = d.map.clone().map_err(fail)?;
         let owner = self.tree_owner(d).map_err(fail)?;
         let scalar = Scalar::of_tree(&owner.tree_type).ok_or_else(|| {
-            fail(format!(
+            fail(DecodeError(format!(
                 "holds {} values ({}); only float, double and half grids are voxel sources",
                 self.grids[index].value_type, owner.tree_type
-            ))
+            )))
         })?;
         let storage = Storage {
             scalar,
@@ -115,17 +117,17 @@ impl VdbFile {
             compression: owner.compression,
         };
         let topology = owner.topology_pos.ok_or_else(|| {
-            fail(format!(
+            fail(DecodeError(format!(
                 "the transform of its tree's grid '{}' is unreadable",
                 owner.name
-            ))
+            )))
         })?;
         let tree = format::tree(&self.data, topology, owner.block_pos, storage).map_err(fail)?;
         VdbGrid::build(self.grids[index].clone(), map, tree).map_err(fail)
     }
 
     /// The descriptor whose tree `d` uses: `d` itself or its instance parent.
-    fn tree_owner<'a>(&'a self, mut d: &'a Descriptor) -> Result<&'a Descriptor, String> {
+    fn tree_owner<'a>(&'a self, mut d: &'a Descriptor) -> Result<&'a Descriptor, DecodeError> {
         for _ in 0..=self.descriptors.len() {
             if d.instance_parent.is_empty() {
                 return Ok(d);
@@ -134,9 +136,11 @@ impl VdbFile {
                 .descriptors
                 .iter()
                 .find(|p| p.unique_name == d.instance_parent)
-                .ok_or_else(|| format!("missing instance parent '{}'", d.instance_parent))?;
+                .ok_or_else(|| {
+                    DecodeError(format!("missing instance parent '{}'", d.instance_parent))
+                })?;
         }
-        Err("instance parents form a cycle".into())
+        Err(DecodeError("instance parents form a cycle".into()))
     }
 }
 
@@ -231,7 +235,7 @@ pub struct VdbGrid {
 }
 
 impl VdbGrid {
-    fn build(info: VdbGridInfo, map: GridMap, tree: format::Tree) -> Result<VdbGrid, String> {
+    fn build(info: VdbGridInfo, map: GridMap, tree: format::Tree) -> Result<VdbGrid, DecodeError> {
         let mut g = VdbGrid {
             info,
             background: tree.background,
@@ -240,7 +244,7 @@ impl VdbGrid {
             leaves: Vec::with_capacity(tree.leaves.len()),
             wide: Default::default(),
         };
-        let duplicate = |c: Coord| format!("corrupt tree: two nodes at {c:?}");
+        let duplicate = |c: Coord| DecodeError(format!("corrupt tree: two nodes at {c:?}"));
         for (origin, values) in tree.leaves {
             let block = Block::Leaf(g.leaves.len() as u32);
             if g.blocks.insert(origin, block).is_some() {
@@ -263,9 +267,9 @@ impl VdbGrid {
                 .map(|w| g.wide[w].len() as u64 * per_tile[w])
                 .sum::<u64>();
         if count > MAX_RANGE_BLOCKS {
-            return Err(format!(
+            return Err(DecodeError(format!(
                 "its tiles and leaves cover {count} blocks of 8^3 voxels, more than {MAX_RANGE_BLOCKS}"
-            ));
+            )));
         }
         Ok(g)
     }

@@ -1,14 +1,13 @@
 //! Tests of `torus.rs`.
 
 use super::*;
-use hytrace_testkit::vec3::{add, cross, dot, length as norm, scale as mul, sub};
+use hytrace_testkit::torus::{tube_point, TorusRays};
+use hytrace_testkit::vec3::{
+    add, cross, dot, length as norm, normalized as unit, scale as mul, sub,
+};
 use hytrace_testkit::{Random, SplitMix64 as Rng};
 
 type P = [f64; 3];
-
-fn unit(a: P) -> P {
-    mul(a, 1.0 / norm(a))
-}
 
 /// The torus tests' draws, on the shared generator.
 trait TorusDraws: Random {
@@ -22,32 +21,9 @@ trait TorusDraws: Random {
         };
         (rtor * ratio, rtor)
     }
-    /// A point in the torus's bounding box scaled by `k`.
-    fn near(&mut self, r: f64, rtor: f64, k: f64) -> P {
-        let s = k * (rtor + r);
-        [
-            self.range(-s, s),
-            self.range(-s, s),
-            self.range(-k * r, k * r),
-        ]
-    }
 }
 
 impl TorusDraws for Rng {}
-
-/// The point of the core circle at azimuth `phi` plus `rad` along the tube direction
-/// `(theta, phi)`, and that unit direction.
-fn tube_point(rtor: f64, phi: f64, theta: f64, rad: f64) -> (P, P) {
-    let n = [
-        theta.cos() * phi.cos(),
-        theta.cos() * phi.sin(),
-        theta.sin(),
-    ];
-    (
-        add([rtor * phi.cos(), rtor * phi.sin(), 0.0], mul(n, rad)),
-        n,
-    )
-}
 
 /// A ray and torus, rounded to f32 so that one f64 reference serves both precisions.
 #[derive(Clone, Copy, Debug)]
@@ -389,9 +365,9 @@ fn random_rays_near_torus() {
     let cases: Vec<Case> = (0..RAYS)
         .map(|_| {
             let (r, rtor) = rng.torus();
-            let o = rng.near(r, rtor, 3.0);
+            let o = rng.torus_near(r, rtor, 3.0);
             let d = if rng.uniform() < 0.7 {
-                unit(sub(rng.near(r, rtor, 1.0), o))
+                unit(sub(rng.torus_near(r, rtor, 1.0), o))
             } else {
                 rng.direction()
             };
@@ -444,42 +420,7 @@ fn axis_aligned_and_zero_components() {
     let cases: Vec<Case> = (0..RAYS)
         .map(|i| {
             let (r, rtor) = rng.torus();
-            let mut o = rng.near(r, rtor, 2.0);
-            let k = rng.below(3);
-            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
-            let mut d = [0.0; 3];
-            match i % 5 {
-                // Along a coordinate axis.
-                0 => d[k] = sign,
-                // One zero component.
-                1 => {
-                    d = rng.direction();
-                    d[k] = 0.0;
-                }
-                // Zero components in both origin and direction.
-                2 => {
-                    d = rng.direction();
-                    d[k] = 0.0;
-                    o[(k + 1) % 3] = 0.0;
-                }
-                // Parallel to the z axis, on it or through the tube.
-                3 => {
-                    d[2] = sign;
-                    let rho = if rng.uniform() < 0.2 {
-                        0.0
-                    } else {
-                        rng.range(0.0, 1.2 * (rtor + r))
-                    };
-                    o[0] = rho;
-                    o[1] = 0.0;
-                }
-                // In the equatorial plane through the axis.
-                _ => {
-                    d[k.min(1)] = sign;
-                    o = [0.0; 3];
-                    o[k.min(1)] = -sign * rng.range(0.0, 3.0) * (rtor + r);
-                }
-            }
+            let (o, d) = rng.torus_axis_ray(r, rtor, i);
             Case::new(o, d, r, rtor)
         })
         .collect();
@@ -492,7 +433,7 @@ fn far_origin() {
     let cases: Vec<Case> = (0..RAYS)
         .map(|_| {
             let (r, rtor) = rng.torus();
-            let target = rng.near(r, rtor, 1.0);
+            let target = rng.torus_near(r, rtor, 1.0);
             let d = rng.direction();
             let o = sub(target, mul(d, rng.range(1e4, 2e4) * (rtor + r)));
             Case::new(o, d, r, rtor)
@@ -507,8 +448,8 @@ fn non_unit_directions() {
     let cases: Vec<Case> = (0..RAYS)
         .map(|i| {
             let (r, rtor) = rng.torus();
-            let o = rng.near(r, rtor, 3.0);
-            let d = unit(sub(rng.near(r, rtor, 1.0), o));
+            let o = rng.torus_near(r, rtor, 3.0);
+            let d = unit(sub(rng.torus_near(r, rtor, 1.0), o));
             let k = if i % 2 == 0 { 0.01 } else { 100.0 };
             Case::new(o, mul(d, k), r, rtor)
         })
@@ -563,9 +504,9 @@ fn horn_torus_rtor_equals_r() {
     let cases: Vec<Case> = (0..RAYS)
         .map(|_| {
             let (_, rtor) = rng.torus();
-            let o = rng.near(rtor, rtor, 3.0);
+            let o = rng.torus_near(rtor, rtor, 3.0);
             let d = if rng.uniform() < 0.5 {
-                unit(sub(rng.near(rtor, rtor, 1e-3), o))
+                unit(sub(rng.torus_near(rtor, rtor, 1e-3), o))
             } else {
                 rng.direction()
             };
@@ -585,9 +526,9 @@ fn spindle_torus_outer_surface() {
         .map(|i| {
             let (_, rtor) = rng.torus();
             let r = rtor * rng.range(1.0, 2.0);
-            let o = rng.near(r, rtor, 3.0);
+            let o = rng.torus_near(r, rtor, 3.0);
             let target = if i % 2 == 0 {
-                rng.near(r, rtor, 0.5)
+                rng.torus_near(r, rtor, 0.5)
             } else {
                 let (z, e) = ((r * r - rtor * rtor).sqrt(), 1e-3 * r);
                 [rng.range(-e, e), rng.range(-e, e), z + rng.range(-e, e)]
@@ -715,7 +656,7 @@ fn normal_matches_sdf_gradient() {
     for _ in 0..RAYS {
         let (r, rtor) = rng.torus();
         let size = rtor + r;
-        let p = rng.near(r, rtor, 2.0);
+        let p = rng.torus_near(r, rtor, 2.0);
         let (rho, core) = (p[0].hypot(p[1]), (p[0].hypot(p[1]) - rtor).hypot(p[2]));
         if rho < 1e-3 * size || core < 1e-3 * size {
             continue;
