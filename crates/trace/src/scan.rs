@@ -30,7 +30,7 @@ use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVo
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
-    /// Our CPU tracer ([`CpuScene`]), in f32 or f64.
+    /// Our CPU tracer, in f32 or f64.
     #[default]
     Cpu,
     /// Embree 3 (f32; builds with the `embree` feature only).
@@ -42,9 +42,9 @@ pub enum Backend {
 }
 
 crate::choice::named!(Backend {
-    (Backend::Cpu, "cpu", [], "Our CPU tracer ([`CpuScene`]), in f32 or f64"),
-    (Backend::Embree, "embree", [], "Embree 3 (f32; builds with the `embree` feature only)"),
-    (Backend::Gpu, "gpu", [], "Our GPU tracer through wgpu (f32): the scan kernel, twin of the CPU's f32 tracer"),
+    (Backend::Cpu, "cpu", [], "Our CPU tracer (CSG, meshes, media), in f32 or f64"),
+    (Backend::Embree, "embree", [], "Embree 3 (f32): meshes as Embree triangles, CSG solids as its user geometry; builds with the `embree` feature only"),
+    (Backend::Gpu, "gpu", [], "Our GPU tracer through wgpu (f32; Vulkan, Metal, DX12): the scan kernel, twin of the CPU's f32 tracer, meshes included"),
     (Backend::Auto, "auto", [], "The GPU when one can be opened, else the CPU (with a note on stderr)"),
 });
 

@@ -45,7 +45,7 @@ fn default_scene_renders_to_png_and_npy_with_stats() {
     ]);
     let stats: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(stats["backend"], "cpu");
-    assert_eq!(stats["volumes"], "MultipleScattering");
+    assert_eq!(stats["volumes"], "multiple-scattering");
     assert_eq!(stats["specular"], true);
     assert!(stats["samples_per_s"].as_f64().unwrap() > 0.0);
     let (w, h, rgb) = read_png(&png_path);
@@ -205,4 +205,44 @@ fn bad_input_is_refused_with_a_clear_error_and_no_image() {
         err.contains("x.jpg") && err.contains(".npy or .exr"),
         "{err}"
     );
+}
+
+/// The help texts: the top level says what the tool does, `scan --help` covers meshes,
+/// Embree and the GPU, and `render --help` shows the defaults the library uses for
+/// `--size`, `--spp` and `--view`.
+#[test]
+fn help_texts_say_what_the_tool_does_and_show_the_defaults() {
+    let text = |args: &[&str]| String::from_utf8(run_ok(args).stdout).unwrap();
+    let top = text(&["--help"]);
+    for words in [
+        "CSG solids",
+        "GDML",
+        "meshes",
+        "sparse volumes",
+        "GPU",
+        "render",
+        "scan",
+    ] {
+        assert!(
+            top.contains(words),
+            "top-level help lacks `{words}`:\n{top}"
+        );
+    }
+    let scan = text(&["scan", "--help"]);
+    for words in ["meshes", "Embree", "GPU", "wgpu"] {
+        assert!(scan.contains(words), "scan --help lacks `{words}`:\n{scan}");
+    }
+    let render = text(&["render", "--help"]);
+    let d = hytrace_trace::render::spec::RenderSettings::default();
+    for default in [
+        format!("[default: {}x{}", d.size[0], d.size[1]),
+        format!("[default: {},", d.spp),
+        format!("[default: {},", d.view),
+    ] {
+        assert!(
+            render.contains(&default),
+            "render --help lacks `{default}`:\n{render}"
+        );
+    }
+    assert!(render.contains("--cut <PLANE>") && render.contains("--exr <TYPE>"));
 }

@@ -17,9 +17,16 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::{report, scene};
 
-/// Hybrid ray tracing of analytic CSG solids, triangle meshes and sparse volumes.
+/// Hybrid ray tracing of analytic CSG solids (every Geant4 solid, GDML detectors), triangle
+/// meshes and sparse volumes (NanoVDB, OpenVDB), on the CPU and on GPUs.
+///
+/// hytrace traces rays through detector geometry as Geant4's navigator sees it: `scan`
+/// finds the first boundary crossing of each ray (and the media's transmittance),
+/// `render` draws images of scenes and GDML detectors, `photons` propagates optical
+/// photons, `volume` converts and queries sparse volumes. A scene is `default` (an
+/// embedded example), a .toml scene file, a .gdml file, a mesh or a Foundry directory.
 #[derive(Parser)]
-#[command(name = "hytrace", version, about)]
+#[command(name = "hytrace", version)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -47,11 +54,13 @@ pub enum Command {
         #[arg(short, long)]
         out: PathBuf,
     },
-    /// Trace rays against the scene's CSG solids on the CPU: the first boundary crossing of
-    /// each ray (Geant4's distance to the next boundary), written as NumPy arrays.
+    /// Trace rays through a scene (CSG solids, GDML volumes and triangle meshes) on our CPU
+    /// tracer, Embree or the GPU: the first boundary crossing of each ray (Geant4's
+    /// distance to the next boundary), written as NumPy arrays.
     Scan(scan::ScanArgs),
-    /// Render a scene (the embedded default scene when SCENE is omitted) to a PNG or NumPy
-    /// image, simulating only the effects the scene calls for.
+    /// Render a scene (the embedded default scene when SCENE is omitted) on the CPU or the
+    /// GPU to a PNG, NumPy or OpenEXR image, simulating only the effects the scene calls
+    /// for; a GDML file as a detector view (cutaways, colours, legend).
     Render(render::RenderArgs),
     /// Propagate optical photons from a source through a scene with Geant4's optical
     /// physics (Fresnel, total internal reflection, absorption, Rayleigh scattering,

@@ -111,16 +111,17 @@ impl From<StoreArgs> for StoreOptions {
 /// table, or the defaults).
 #[derive(Args, Clone, Debug, Default)]
 pub struct RenderSettingsArgs {
-    /// Image size, WIDTHxHEIGHT.
-    #[arg(long, value_parser = parse_size)]
+    /// Image size, WIDTHxHEIGHT [default: 640x360, or the scene file's `[render]` size].
+    #[arg(long, value_parser = parse_size, value_name = "WxH")]
     pub size: Option<[u32; 2]>,
-    /// Samples per pixel (1: pixel centres).
-    #[arg(long)]
+    /// Samples per pixel (1: pixel centres) [default: 16, or the scene file's].
+    #[arg(long, value_name = "N")]
     pub spp: Option<u32>,
-    /// What the image shows.
+    /// What the image shows [default: shaded, or the scene file's].
     #[arg(long, value_parser = choice::<View>())]
     pub view: Option<View>,
-    /// How media are rendered.
+    /// How media are rendered [default: multiple-scattering when a medium scatters, else
+    /// emission-absorption].
     #[arg(long, value_parser = choice::<VolumeMode>())]
     pub volumes: Option<VolumeMode>,
     /// Longest path (surface and medium scattering events).
