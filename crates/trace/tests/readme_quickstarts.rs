@@ -1,7 +1,8 @@
 //! The README's quickstarts, run as written: every fenced `sh` block under its
-//! `## Quickstart` heading runs in `bash -euo pipefail` with this build's `hytrace` first on
-//! `PATH`, in a fresh directory that holds only the repository's `scenes/` and `tests/`
-//! (what a clone has). A block fails the test when any command exits non-zero or when an
+//! `## Quickstart` and `## Detector pictures` headings runs in `bash -euo pipefail` with
+//! this build's `hytrace` first on `PATH`, in a fresh directory that holds only the
+//! repository's `scenes/` and `tests/` (what a clone has), with the shared GDML corpus
+//! beside it as `../shared` (where the README says a clone finds it). A block fails the test when any command exits non-zero or when an
 //! output it names (`-o`, `--out`, `--ids`, `--rays`, `--transmittance`, `--history=`) is
 //! missing or empty afterwards.
 
@@ -12,8 +13,8 @@ fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// The fenced `sh` blocks of the README section headed `## Quickstart`.
-fn quickstart_blocks(readme: &str) -> Vec<String> {
+/// The fenced `sh` blocks of the README section headed `heading` (`## ...`).
+fn section_blocks(readme: &str, heading: &str) -> Vec<String> {
     let mut in_section = false;
     let mut block: Option<String> = None;
     let mut blocks = Vec::new();
@@ -28,14 +29,14 @@ fn quickstart_blocks(readme: &str) -> Vec<String> {
             continue;
         }
         if line.starts_with("## ") {
-            in_section = line.trim() == "## Quickstart";
+            in_section = line.trim() == heading;
         } else if in_section && line.trim() == "```sh" {
             block = Some(String::new());
         }
     }
     assert!(
         block.is_none(),
-        "unterminated code block in the Quickstart section"
+        "unterminated code block in the section {heading}"
     );
     blocks
 }
@@ -69,7 +70,7 @@ fn non_empty(path: &Path) -> bool {
 #[test]
 fn the_block_parser_finds_commands_and_outputs() {
     let readme = "# x\n```sh\nnot this\n```\n## Quickstart\ntext\n```sh\nhytrace a -o out/a.png\nhytrace b --history=out/h.npy --out out/b.npy\n```\n```python\nno\n```\n## Next\n```sh\nnor this\n```\n";
-    let blocks = quickstart_blocks(readme);
+    let blocks = section_blocks(readme, "## Quickstart");
     assert_eq!(
         blocks,
         ["hytrace a -o out/a.png\nhytrace b --history=out/h.npy --out out/b.npy\n"]
@@ -82,17 +83,30 @@ fn the_block_parser_finds_commands_and_outputs() {
 fn readme_quickstarts_run_as_written() {
     let root = repo_root();
     let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
-    let blocks = quickstart_blocks(&readme);
+    let mut blocks = section_blocks(&readme, "## Quickstart");
     assert!(
         blocks.len() >= 4,
         "the README's Quickstart section should hold at least 4 sh blocks, found {}",
         blocks.len()
     );
+    let pictures = section_blocks(&readme, "## Detector pictures");
+    assert!(!pictures.is_empty(), "the README shows no picture commands");
+    blocks.extend(pictures);
 
-    // A directory with what a clone has; outputs go to its `out/`.
-    let tmp = tempfile::tempdir().unwrap();
+    // A directory with what a clone has, the shared corpus beside it; outputs go to the
+    // clone's `out/` (and `docs/pictures/`).
+    let top = tempfile::tempdir().unwrap();
+    let clone = top.path().join("clone");
+    std::fs::create_dir(&clone).unwrap();
+    let shared = root.join("../shared");
+    assert!(
+        shared.join("gdml").is_dir(),
+        "the shared corpus {} is missing",
+        shared.display()
+    );
+    std::os::unix::fs::symlink(shared.canonicalize().unwrap(), top.path().join("shared")).unwrap();
     for dir in ["scenes", "tests"] {
-        std::os::unix::fs::symlink(root.join(dir).canonicalize().unwrap(), tmp.path().join(dir))
+        std::os::unix::fs::symlink(root.join(dir).canonicalize().unwrap(), clone.join(dir))
             .unwrap();
     }
     let bin = PathBuf::from(env!("CARGO_BIN_EXE_hytrace"));
@@ -111,7 +125,7 @@ fn readme_quickstarts_run_as_written() {
         );
         let o = Command::new("bash")
             .args(["-euo", "pipefail", "-c", block])
-            .current_dir(tmp.path())
+            .current_dir(&clone)
             .env("PATH", &path)
             .output()
             .unwrap();
@@ -125,7 +139,7 @@ fn readme_quickstarts_run_as_written() {
         );
         for out in outputs(block) {
             assert!(
-                non_empty(&tmp.path().join(&out)),
+                non_empty(&clone.join(&out)),
                 "quickstart block {} did not write {out}:\n{block}",
                 i + 1
             );
