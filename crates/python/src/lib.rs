@@ -231,6 +231,7 @@ impl Scene {
             max_bounces,
             step,
             seed,
+            memory: None,
             transparent,
         };
         let backend: RenderBackend = choice("backend", backend)?;
