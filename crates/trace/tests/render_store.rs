@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use common::{hytrace, read_values};
 use hytrace_volume::{convert_grid, ConvertOptions, DenseGrid, Rng};
 
-/// Voxels along each side of the test volume: 32^3 bricks, about 5800 of them kept (6 MiB
+/// Voxels along each side of the test volume: 32^3 bricks, about 6800 of them kept (7 MiB
 /// of 16-bit bricks), more than the cache of the least budget (one superchunk, 4096 bricks)
 /// holds.
 const SIDE: i32 = 256;
