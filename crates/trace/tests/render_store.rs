@@ -125,18 +125,22 @@ fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The error of a render of `scene` into `out` with `args` that must fail and write nothing.
+fn refused(scene: &Path, out: &Path, args: &[&str]) -> String {
+    let o = render(scene, out, args);
+    assert!(!o.status.success());
+    assert!(!out.exists());
+    stderr(&o)
+}
+
 /// The least `--memory` the store accepts, from the error refusing a budget of one byte
 /// (which must name it and write nothing).
 fn least_memory(scene: &Path, dir: &Path) -> u64 {
-    let out = dir.join("refused.npy");
-    let o = render(scene, &out, &["--memory", "1"]);
-    assert!(!o.status.success());
-    let text = stderr(&o);
+    let text = refused(scene, &dir.join("refused.npy"), &["--memory", "1"]);
     assert!(
         text.contains("cloud.bricks") && text.contains("too small"),
         "{text}"
     );
-    assert!(!out.exists());
     let least = text
         .split("give at least ")
         .nth(1)
@@ -193,12 +197,9 @@ fn a_store_read_as_stored_is_refused_by_the_gpu_renderer() {
     let tmp = tempfile::tempdir().unwrap();
     let (stored, _) = scenes(tmp.path());
     let out = tmp.path().join("gpu.npy");
-    let o = render(&stored, &out, &["--backend", "gpu", "--spp", "1"]);
-    assert!(!o.status.success());
-    let text = stderr(&o);
+    let text = refused(&stored, &out, &["--backend", "gpu", "--spp", "1"]);
     assert!(
         text.contains("brick store read as stored") && text.contains("--backend cpu"),
         "{text}"
     );
-    assert!(!out.exists());
 }

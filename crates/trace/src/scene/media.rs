@@ -109,7 +109,11 @@ impl VoxelGrid for MediumGrid {
     }
 
     fn voxel(&self, ijk: Coord) -> f32 {
-        self.grid().voxel(ijk)
+        // The lookups' hot path: each grid's own, without a virtual call.
+        match self {
+            MediumGrid::Bricked(g) => g.voxel(ijk),
+            MediumGrid::Store(s, _) => s.voxel(ijk),
+        }
     }
 
     fn block_origins(&self) -> Result<Vec<Coord>, VolumeError> {
