@@ -236,7 +236,7 @@ struct RenderInstance {
     material: u32,
     solid: u32,
     boundary: u32,
-    pad: u32,
+    covering: u32,
 }
 
 struct RenderMedium {
@@ -303,6 +303,7 @@ const RENDER_MATERIAL_MIRROR: u32 = 1u;
 const RENDER_MATERIAL_DIELECTRIC: u32 = 2u;
 const RENDER_MATERIAL_EMITTER: u32 = 3u;
 const RENDER_MATERIAL_TRANSPARENT: u32 = 4u;
+const RENDER_MATERIAL_SHELL: u32 = 5u;
 const RENDER_LIGHT_POINT: u32 = 16u;
 const RENDER_LIGHT_DIRECTIONAL: u32 = 17u;
 // Infinity of the volume kernels (hytrace_trace::gpu::GPU_INF).

@@ -36,6 +36,8 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
     s.g = 0.0;
     s.use_env = false;
     s.resume = false;
+    s.crossed = false;
+    s.shell_found = false;
     let shaded = rparams.view == RENDER_VIEW_SHADED;
     loop {
         if s.mode == MODE_DONE || (shaded && s.mode == MODE_PATH && s.events > rparams.max_bounces) {
@@ -49,7 +51,10 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
             rd = s.sd;
             tmax = s.left;
         }
-        let h = trace_scene(ro, rd, tmax);
+        var h = trace_scene(ro, rd, tmax);
+        if s.mode != MODE_SHADOW {
+            h = after_crossing(&s, h);
+        }
         if !shaded {
             view_step(&s, h);
             continue;
@@ -63,7 +68,7 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
         var opaque = false;
         if h.found {
             let kind = items[instances[h.instance].material].kind;
-            opaque = kind != RENDER_MATERIAL_TRANSPARENT && kind != RENDER_MATERIAL_DIELECTRIC;
+            opaque = kind != RENDER_MATERIAL_TRANSPARENT && kind != RENDER_MATERIAL_SHELL && kind != RENDER_MATERIAL_DIELECTRIC;
         }
         let wanted = !(shadow && (opaque || end <= 0.0));
         // #endif

@@ -26,6 +26,15 @@ struct Sample {
     inside: f32,
     events: u32,
     travelled: f32,
+    // The see-through surface the path has just passed (point, normal), when `crossed`
+    // (twin of render::integrator::Crossed).
+    crossed: bool,
+    cross_p: vec3<f32>,
+    cross_n: vec3<f32>,
+    // Geometry views: the first shell passed and its distance, when `shell_found`.
+    shell_found: bool,
+    shell: Hit,
+    shell_dist: f32,
     // The point being lit (a diffuse surface's, or a collision in a medium: `scatter`,
     // lit through the phase function of asymmetry `g` around the travel direction `din`),
     // its lights'

@@ -16,6 +16,9 @@ fn spawn(p: vec3<f32>, n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
     return p + side * (64.0 * 1.1920929e-7 * scale) * n;
 }
 
+// The instance the last traced ray's origin was located in (UNSET: none, or a flat scene).
+var<private> traced_from: u32;
+
 // The scene's first crossing along a ray from its origin (the one traversal call site).
 fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
     var located = UNSET;
@@ -23,8 +26,36 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> Hit {
         var status = 0u;
         located = locate_point(o, vec3<f32>(0.0), &status);
     }
+    traced_from = located;
     // Render rays are f32 throughout: their origins have no rest.
     return cross_from(located, o, vec3<f32>(0.0), d, 0.0, tmax);
+}
+
+// The path (or view ray) has just passed a see-through surface: if its origin lies in an
+// instance drawn solid, that instance is hit where the surface was passed (twin of
+// Renderer::trace_after); otherwise `h`, the crossing traced.
+fn after_crossing(s: ptr<function, Sample>, h: Hit) -> Hit {
+    if !(*s).crossed {
+        return h;
+    }
+    (*s).crossed = false;
+    if traced_from == UNSET {
+        return h;
+    }
+    let cover = instances[traced_from].covering;
+    if cover == UNSET {
+        return h;
+    }
+    (*s).o = (*s).cross_p;
+    return Hit(true, 0.0, (*s).cross_n, cover, UNSET);
+}
+
+// The path passes the see-through surface of `h` at `p` (normal `n`).
+fn pass_surface(s: ptr<function, Sample>, p: vec3<f32>, n: vec3<f32>) {
+    (*s).o = spawn(p, n, (*s).d);
+    (*s).crossed = true;
+    (*s).cross_p = p;
+    (*s).cross_n = n;
 }
 
 // #if lights
@@ -126,7 +157,7 @@ fn shadow_step(s: ptr<function, Sample>, h: Hit, rng: ptr<function, VolumeRng>) 
         let eta = select(1.0 / ior, ior, entering);
         (*s).weight *= 1.0 - fresnel(abs(dot((*s).sd, h.normal)), eta);
         (*s).sinside = select(0.0, item_b(m).y, entering);
-    } else if kind != RENDER_MATERIAL_TRANSPARENT {
+    } else if kind != RENDER_MATERIAL_TRANSPARENT && kind != RENDER_MATERIAL_SHELL {
         next_shadow(s, rng);
         return;
     }
@@ -212,8 +243,14 @@ fn path_step(s: ptr<function, Sample>, h: Hit, m: MediumStep, rng: ptr<function,
         (*s).mode = MODE_DONE;
         return;
     }
-    if kind == RENDER_MATERIAL_TRANSPARENT {
-        (*s).o = spawn(p, n, d);
+    if kind == RENDER_MATERIAL_SHELL {
+        // Unlit: the colour by the cosine to the view, then the light behind.
+        let opacity = item_b(mat).x;
+        (*s).radiance += (*s).beta * opacity * abs(dot(d, n)) * v3(item_a(mat));
+        (*s).beta *= 1.0 - opacity;
+    }
+    if kind == RENDER_MATERIAL_TRANSPARENT || kind == RENDER_MATERIAL_SHELL {
+        pass_surface(s, p, n);
         return;
     }
     // #if specular

@@ -12,13 +12,18 @@ draw different random numbers).
 
 Command line::
 
-    optical_oracle.py GDML --source SPEC --wavelength NM -n N [--seed S] [--speed]
+    optical_oracle.py GDML --source SPEC --wavelength NM|MATERIAL:PROPERTY -n N
+        [--seed S] [--speed]
 
-``SPEC`` is ``point:X,Y,Z`` (isotropic) or ``beam:X,Y,Z:DX,DY,DZ:R`` (a
-parallel beam over a disk of radius R perpendicular to D), mm, as in
+``SPEC`` is ``point:X,Y,Z`` (isotropic), ``beam:X,Y,Z:DX,DY,DZ:R[:A]`` (a
+beam over a disk of radius R perpendicular to D, parallel or spread within a
+cone of half-angle A degrees) or ``sphere:X,Y,Z:R:in|out``, mm, as in
 ``hytrace photons``. Every photon starts at time 0 with a random linear
 polarization perpendicular to its direction and energy h c / lambda
-(h c = 1239.84198 eV nm). stdout carries one JSON document::
+(h c = 1239.84198 eV nm), or with ``MATERIAL:PROPERTY`` an energy drawn from
+that intensity table of the material as Geant4 builds it (the trapezoid
+integral over energy, inverted linearly between rows: written here with
+NumPy, not taken from hytrace). stdout carries one JSON document::
 
     {"geant4": VERSION, "photons": N, "detected": D,
      "histories": {"TO BT SD": count, ...},
@@ -36,8 +41,8 @@ action runs and nothing is recorded. The document holds the photon count,
 Physics
 -------
 A modular physics list with G4OpticalPhysics only (Geant4 adds
-transportation); of its processes only OpAbsorption, OpRayleigh and
-OpBoundary are active (Cerenkov, Scintillation, OpWLS, OpWLS2 and OpMieHG are
+transportation); of its processes only OpAbsorption, OpRayleigh, OpWLS and
+OpBoundary are active (Cerenkov, Scintillation, OpWLS2 and OpMieHG are
 switched off with /process/optical/processActivation). No Geant4 data set is
 needed: run with ``GEANT4_DATA_DIR`` pointing to an existing (possibly empty)
 directory (the script makes a temporary one when it is unset). The run
@@ -50,7 +55,9 @@ Labels
 ------
 Every step of a photon gives one label, in order after ``TO`` (the start):
 
-* ``AB``: the step ended in OpAbsorption; ``SC``: in OpRayleigh;
+* ``AB``: the step ended in OpAbsorption; ``SC``: in OpRayleigh; ``RE``: in
+  OpWLS (absorbed by a wavelength shifter): each photon it emits carries the
+  history on (``AB`` instead when it emits none);
 * ``MI``: the photon left the world (step status fWorldBoundary);
 * a step to a geometry boundary no longer than Geant4's surface tolerance
   (1e-9 mm) gets no label: G4OpBoundaryProcess does nothing there
@@ -90,14 +97,19 @@ SPECULAR_TOLERANCE = 1e-7
 
 
 def parse_source(spec):
+    """Source tuples: ("point", centre), ("beam", centre, axis, radius, cos of the
+    divergence half-angle), ("sphere", centre, radius, inward)."""
     parts = spec.split(":")
     nums = lambda s: [float(v) for v in s.split(",")]
     if parts[0] == "point" and len(parts) == 2:
         return ("point", np.array(nums(parts[1])))
-    if parts[0] == "beam" and len(parts) == 4:
+    if parts[0] == "beam" and len(parts) in (4, 5):
         d = np.array(nums(parts[2]))
+        half_angle = float(parts[4]) if len(parts) == 5 else 0.0
         return ("beam", np.array(nums(parts[1])), d / np.linalg.norm(d),
-                float(parts[3]))
+                float(parts[3]), np.cos(np.radians(half_angle)))
+    if parts[0] == "sphere" and len(parts) == 4 and parts[3] in ("in", "out"):
+        return ("sphere", np.array(nums(parts[1])), float(parts[2]), parts[3] == "in")
     raise SystemExit("unknown source %r" % spec)
 
 
@@ -109,29 +121,57 @@ def orthonormal(d):
     return e1, np.cross(d, e1)
 
 
+def isotropic(rng):
+    c = 1.0 - 2.0 * rng.random()
+    s = np.sqrt(max(0.0, 1.0 - c * c))
+    phi = 2.0 * np.pi * rng.random()
+    return np.array([s * np.cos(phi), s * np.sin(phi), c])
+
+
 def sample(source, rng):
     """Position, direction, polarization of one photon."""
     if source[0] == "point":
-        c = 1.0 - 2.0 * rng.random()
-        s = np.sqrt(max(0.0, 1.0 - c * c))
-        phi = 2.0 * np.pi * rng.random()
-        pos, d = source[1], np.array([s * np.cos(phi), s * np.sin(phi), c])
+        pos, d = source[1], isotropic(rng)
+    elif source[0] == "sphere":
+        _, centre, radius, inward = source
+        n = isotropic(rng)
+        pos, d = centre + radius * n, (-n if inward else n)
     else:
-        _, centre, d, radius = source
-        e1, e2 = orthonormal(d)
+        _, centre, axis, radius, cos_div = source
+        e1, e2 = orthonormal(axis)
         r = radius * np.sqrt(rng.random())
         phi = 2.0 * np.pi * rng.random()
         pos = centre + r * (np.cos(phi) * e1 + np.sin(phi) * e2)
+        # Uniform in solid angle within the cone: the cosine uniform in [cos A, 1].
+        c = 1.0 - (1.0 - cos_div) * rng.random()
+        s = np.sqrt(max(0.0, 1.0 - c * c))
+        psi = 2.0 * np.pi * rng.random()
+        d = c * axis + s * (np.cos(psi) * e1 + np.sin(psi) * e2)
     e1, e2 = orthonormal(d)
     a = 2.0 * np.pi * rng.random()
     return pos, d, np.cos(a) * e1 + np.sin(a) * e2
+
+
+def spectrum_table(g4, material, prop):
+    """Photon energies and the running trapezoid integral of a material's intensity
+    table, read from Geant4's material (energies in Geant4's internal units)."""
+    m = g4.G4Material.GetMaterial(material)
+    if m is None or m.GetMaterialPropertiesTable() is None:
+        raise SystemExit("no material %r with properties" % material)
+    v = m.GetMaterialPropertiesTable().GetProperty(prop)
+    if v is None:
+        raise SystemExit("material %r has no property %r" % (material, prop))
+    es = np.array([v.Energy(i) for i in range(v.GetVectorLength())])
+    ys = np.array([v.Value(e) for e in es])
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * np.diff(es) * (ys[1:] + ys[:-1]))])
+    return es, cum
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("gdml")
     ap.add_argument("--source", required=True)
-    ap.add_argument("--wavelength", type=float, default=420.0)
+    ap.add_argument("--wavelength", default="420")
     ap.add_argument("-n", type=int, required=True)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--speed", action="store_true",
@@ -166,7 +206,8 @@ def main():
             self.RegisterPhysics(g4.G4OpticalPhysics())
 
     rng = np.random.default_rng(args.seed)
-    energy = HC_EV_NM / args.wavelength * g4.eV
+    spectrum_of = args.wavelength.rsplit(":", 1) if ":" in args.wavelength else None
+    energy = None if spectrum_of else HC_EV_NM / float(args.wavelength) * g4.eV
 
     class SpeedGun(g4.G4VUserPrimaryGeneratorAction):
         """The source as a G4GeneralParticleSource: no Python per photon."""
@@ -182,13 +223,17 @@ def main():
             self.gps.GeneratePrimaryVertex(event)
 
     def gps_commands():
+        if energy is None:
+            raise SystemExit("--speed runs fixed wavelengths only")
         x, y, z = source[1]
         cmds = ["/gps/particle opticalphoton",
-                "/gps/energy %.9g eV" % (HC_EV_NM / args.wavelength),
+                "/gps/energy %.9g eV" % (energy / g4.eV),
                 "/gps/pos/centre %r %r %r mm" % (x, y, z)]
         if source[0] == "point":
             return cmds + ["/gps/pos/type Point", "/gps/ang/type iso"]
-        _, _, d, radius = source
+        if source[0] != "beam" or source[4] < 1.0:
+            raise SystemExit("--speed runs point sources and parallel beams only")
+        _, _, d, radius, _ = source
         e1, e2 = orthonormal(d)
         return cmds + ["/gps/pos/type Plane", "/gps/pos/shape Circle",
                        "/gps/pos/radius %r mm" % radius,
@@ -201,13 +246,20 @@ def main():
             super().__init__()
             self.gun = g4.G4ParticleGun(1)
             self.gun.SetParticleDefinition(g4.G4OpticalPhoton.Definition())
-            self.gun.SetParticleEnergy(energy)
+            if energy is not None:
+                self.gun.SetParticleEnergy(energy)
             self.gun.SetParticleTime(0.0)
             self.left = args.n
+            self.spectrum = None
 
         def GeneratePrimaries(self, event):
+            if spectrum_of and self.spectrum is None:
+                self.spectrum = spectrum_table(g4, *spectrum_of)
             for _ in range(min(PHOTONS_PER_EVENT, self.left)):
                 pos, d, pol = sample(source, rng)
+                if self.spectrum is not None:
+                    es, cum = self.spectrum
+                    self.gun.SetParticleEnergy(float(np.interp(rng.random() * cum[-1], cum, es)))
                 self.gun.SetParticlePosition(g4.G4ThreeVector(*pos))
                 self.gun.SetParticleMomentumDirection(g4.G4ThreeVector(*d))
                 self.gun.SetParticlePolarization(g4.G4ThreeVector(*pol))
@@ -217,6 +269,7 @@ def main():
     histories = {}
     hit_times = []
     hit_positions = []
+    hit_wavelengths = []
     state = {"labels": None}
     navigator = [None]
 
@@ -250,12 +303,24 @@ def main():
         return polished_dd and pre.GetMaterial() != post.GetMaterial() \
             and not has_rindex(post.GetMaterial())
 
+    # Labels of photons absorbed by a wavelength shifter, by track ID: the photons it
+    # emits carry them on (hytrace keeps one history through a re-emission).
+    shifted = {}
+
     class Tracking(g4.G4UserTrackingAction):
         def PreUserTrackingAction(self, track):
-            state["labels"] = ["TO"]
+            parent = shifted.get(track.GetParentID())
+            state["labels"] = list(parent) if parent is not None else ["TO"]
 
         def PostUserTrackingAction(self, track):
-            key = " ".join(state["labels"][:MAX_LABELS])
+            labels = state["labels"]
+            if labels[-1] == "RE":
+                if track.GetStep().GetNumberOfSecondariesInCurrentStep() > 0:
+                    shifted[track.GetTrackID()] = labels
+                    return
+                # Absorbed by the shifter with nothing emitted.
+                labels[-1] = "AB"
+            key = " ".join(labels[:MAX_LABELS])
             histories[key] = histories.get(key, 0) + 1
 
     class Stepping(g4.G4UserSteppingAction):
@@ -271,6 +336,8 @@ def main():
                 labels.append("AB")
             elif name == "OpRayleigh":
                 labels.append("SC")
+            elif name == "OpWLS":
+                labels.append("RE")
             elif status == g4.G4StepStatus.fGeomBoundary:
                 if step.GetStepLength() <= STEP_TOO_SMALL:
                     # G4OpBoundaryProcess's StepTooSmall: no boundary action. Geant4
@@ -281,6 +348,7 @@ def main():
                     if step.GetTotalEnergyDeposit() > 0 and not no_rindex_kill(pre, post):
                         labels.append("SD")
                         hit_times.append(post.GetGlobalTime() / g4.ns)
+                        hit_wavelengths.append(HC_EV_NM / (pre.GetTotalEnergy() / g4.eV))
                         p = post.GetPosition()
                         hit_positions.append([p.x / g4.mm, p.y / g4.mm, p.z / g4.mm])
                     else:
@@ -310,7 +378,7 @@ def main():
     rm = g4.G4RunManagerFactory.CreateRunManager(g4.G4RunManagerType.Serial)
     detector, physics = Detector(), Physics()
     ui = g4.G4UImanager.GetUIpointer()
-    for process in ("Cerenkov", "Scintillation", "OpWLS", "OpWLS2", "OpMieHG"):
+    for process in ("Cerenkov", "Scintillation", "OpWLS2", "OpMieHG"):
         ui.ApplyCommand("/process/optical/processActivation %s false" % process)
     rm.SetUserInitialization(detector)
     rm.SetUserInitialization(physics)
@@ -345,6 +413,7 @@ def main():
         "histories": histories,
         "hit_times": hit_times,
         "hit_positions": hit_positions,
+        "hit_wavelengths": hit_wavelengths,
         "seconds": time.time() - t0,
     }
     real_out.write(json.dumps(out) + "\n")

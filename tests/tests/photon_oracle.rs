@@ -16,7 +16,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_tests::gdml::gdml_dir;
 use hytrace_tests::{geant4_data_dir, oracle_python};
 use hytrace_trace::photons::output::compare_histories;
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, propagate, PhotonScene, RunOptions};
 use serde::Deserialize;
 
@@ -36,6 +36,18 @@ struct Geant4Run {
     histories: HashMap<String, u64>,
     hit_times: Vec<f64>,
     hit_positions: Vec<[f64; 3]>,
+    hit_wavelengths: Vec<f64>,
+}
+
+/// Hit wavelengths as counts per 5 nm bin, named for [`compare_histories`].
+fn wavelength_bins(wavelengths: impl Iterator<Item = f64>) -> Vec<(String, u64)> {
+    let mut counts: HashMap<String, u64> = HashMap::new();
+    for w in wavelengths {
+        *counts
+            .entry(format!("{} nm", (w / 5.0).floor() * 5.0))
+            .or_default() += 1;
+    }
+    counts.into_iter().collect()
 }
 
 /// Where hits landed, as counts per direction bin seen from the origin: 10 bins of the
@@ -54,17 +66,12 @@ fn position_bins(positions: impl Iterator<Item = [f64; 3]>) -> Vec<(String, u64)
     counts.into_iter().collect()
 }
 
-fn geant4(python: &Path, gdml: &Path, source: &str) -> Geant4Run {
+fn geant4(python: &Path, gdml: &Path, source: &str, wavelength: &str) -> Geant4Run {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("oracle/optical_oracle.py");
     let out = Command::new(python)
         .arg(&script)
         .arg(gdml)
-        .args([
-            "--source",
-            source,
-            "--wavelength",
-            &WAVELENGTH_NM.to_string(),
-        ])
+        .args(["--source", source, "--wavelength", wavelength])
         .args(["-n", &PHOTONS.to_string(), "--seed", "5"])
         .env("GEANT4_DATA_DIR", geant4_data_dir())
         .output()
@@ -85,21 +92,29 @@ fn mean_and_error(x: &[f64]) -> (f64, f64) {
     (mean, (var / n).sqrt())
 }
 
-/// Runs both programs on one file and source; returns a failure description, if any.
+/// Runs both programs on one file and source at [`WAVELENGTH_NM`]; returns a failure
+/// description, if any.
 fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
+    compare_at(python, file, source, &WAVELENGTH_NM.to_string())
+}
+
+/// [`compare`] at a wavelength given as `--wavelength` takes it (nm or MATERIAL:PROPERTY).
+fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Option<String> {
     let gdml = match file.strip_prefix("data/") {
         Some(own) => Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(own),
         None => gdml_dir().join(file),
     };
-    let g4 = geant4(python, &gdml, source);
-    assert_eq!(g4.photons, PHOTONS);
+    let g4 = geant4(python, &gdml, source, wavelength);
+    // One history per photon, and one more for each further photon a wavelength shifter
+    // emitted.
+    assert!(g4.photons >= PHOTONS, "{} histories", g4.photons);
     let (f, surfaces) = load_photon_scene(&gdml, &GdmlOptions::default()).unwrap();
     let scene = PhotonScene::new(&f, surfaces).unwrap();
     let run = propagate(
         &scene,
         &RunOptions {
             source: Source::parse(source).unwrap(),
-            wavelength_nm: WAVELENGTH_NM,
+            wavelength: Wavelength::parse(wavelength).unwrap(),
             photons: PHOTONS,
             first: 0,
             seed: 1,
@@ -118,8 +133,14 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
     let ours_at = position_bins(run.hits.iter().map(|h| [h.0[0], h.0[1], h.0[2]]));
     let theirs_at = position_bins(g4.hit_positions.iter().copied());
     let at = compare_histories(&ours_at, &theirs_at, MIN_COUNT);
+    let ours_nm = wavelength_bins(run.hits.iter().map(|h| h.0[7]));
+    let nm = compare_histories(
+        &ours_nm,
+        &wavelength_bins(g4.hit_wavelengths.into_iter()),
+        MIN_COUNT,
+    );
     eprintln!(
-        "{file} {source} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}",
+        "{file} {source} {wavelength} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}; hit wavelengths chi2/ndf {:.2}/{}, p {:.3}",
         g4.geant4,
         c.chi2,
         c.ndf,
@@ -130,7 +151,10 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
         (a - b).abs() / sigma,
         at.chi2,
         at.ndf,
-        at.p_value
+        at.p_value,
+        nm.chi2,
+        nm.ndf,
+        nm.p_value
     );
     for (h, x, y) in c.rows.iter().take(5) {
         eprintln!("    {x:>6} {y:>6}  {h}");
@@ -148,10 +172,13 @@ fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
     if at.ndf > 0 && at.p_value < MIN_P_VALUE {
         problems.push(format!("hit direction chi2 p-value {:.2e}", at.p_value));
     }
+    if nm.ndf > 1 && nm.p_value < MIN_P_VALUE {
+        problems.push(format!("hit wavelength chi2 p-value {:.2e}", nm.p_value));
+    }
     if time_sigmas > 4.0 {
         problems.push(format!("mean hit time {ta} vs {tb} ns"));
     }
-    (!problems.is_empty()).then(|| format!("{file} {source}: {}", problems.join("; ")))
+    (!problems.is_empty()).then(|| format!("{file} {source} {wavelength}: {}", problems.join("; ")))
 }
 
 #[test]
@@ -184,6 +211,13 @@ fn photon_histories_and_detections_agree_with_geant4() {
         // surface (dielectric_metal, REFLECTIVITY 0.9) and a block without RINDEX.
         ("data/photons/every_process.gdml", "point:0,0,0"),
         ("data/photons/every_process.gdml", "beam:-90,0,5:1,0,0:20"),
+        // The other sources: a beam diverging 20 degrees into the drop, a sphere in the
+        // tank shining inward.
+        (
+            "eic-opticks/opticks_raindrop.gdml",
+            "beam:-90,0,60:1,0,-0.4:30:20",
+        ),
+        ("data/photons/every_process.gdml", "sphere:0,0,0:90:in"),
     ];
     let failures: Vec<String> = cases
         .iter()
@@ -225,6 +259,46 @@ fn rough_and_painted_surfaces_agree_with_geant4() {
     let failures: Vec<String> = cases
         .iter()
         .filter_map(|source| compare(&python, file, source))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Wavelength shifting (Geant4's OpWLS): a beam into each plate of
+/// tests/data/photons/wavelength_shifter.gdml, one re-emitted photon per absorption in the
+/// first, a Poisson number (mean 2) in the second; the hit wavelengths compare the
+/// re-emission spectrum, the hit times its delay.
+#[test]
+fn wavelength_shifting_agrees_with_geant4() {
+    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
+        return;
+    };
+    let file = "data/photons/wavelength_shifter.gdml";
+    let failures: Vec<String> = ["beam:-80,0,50:0.2,0,-1:10", "beam:80,0,50:0.2,0,-1:10"]
+        .iter()
+        .filter_map(|source| compare(&python, file, source))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Wavelengths drawn from a material's emission spectrum (the liquid's
+/// SCINTILLATIONCOMPONENT1 in tests/data/photons/every_process.gdml), through absorption
+/// and Rayleigh lengths and a RINDEX that vary with energy: the hit wavelengths weigh the
+/// spectrum as the liquid filters it.
+#[test]
+fn wavelengths_drawn_from_a_spectrum_agree_with_geant4() {
+    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
+        return;
+    };
+    let failures: Vec<String> = ["beam:0,0,50:0,0,-1:20", "point:0,0,0"]
+        .iter()
+        .filter_map(|source| {
+            compare_at(
+                &python,
+                "data/photons/every_process.gdml",
+                source,
+                "Liquid:SCINTILLATIONCOMPONENT1",
+            )
+        })
         .collect();
     assert!(failures.is_empty(), "{failures:#?}");
 }

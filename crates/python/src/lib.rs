@@ -18,7 +18,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::gpu::TexelStore;
 use hytrace_trace::photons::run::{prepare, propagate_in};
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, PhotonScene, RunOptions};
 use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
 use hytrace_trace::render::spec::RenderSpec;
@@ -233,6 +233,7 @@ impl Scene {
             seed,
             memory: None,
             transparent,
+            detector: Default::default(),
         };
         let backend: RenderBackend = choice("backend", backend)?;
         let texels: TexelStore = choice("gpu_texels", gpu_texels)?;
@@ -276,7 +277,7 @@ impl Scene {
         let source = Source::parse(source).map_err(|e| library_error(e.into()))?;
         let options = RunOptions {
             source,
-            wavelength_nm: wavelength,
+            wavelength: Wavelength::Fixed(wavelength),
             photons,
             first,
             seed,

@@ -12,7 +12,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use common::{compare, gpu_run, rays_for};
+use common::{compare, gdml_files, gpu_run, rays_for};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scene::load_scene;
@@ -21,24 +21,6 @@ use hytrace_trace::scene::load_scene;
 const SWEEP: usize = 40;
 /// ... and this many random rays.
 const RANDOM: usize = 3000;
-
-/// Every `.gdml` file under `dir`, sorted.
-fn gdml_files(dir: &Path) -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "gdml") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(dir, &mut files);
-    files.sort();
-    files
-}
 
 #[test]
 fn gpu_matches_cpu_on_every_shared_gdml_file() {

@@ -11,7 +11,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_trace::photons::properties::energy_of_wavelength;
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{
     load_photon_scene, propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions,
 };
@@ -28,7 +28,7 @@ fn scene() -> PhotonScene {
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
         source: Source::parse(source).unwrap(),
-        wavelength_nm: 420.0,
+        wavelength: Wavelength::Fixed(420.0),
         photons,
         first: 0,
         seed: 3,
@@ -302,6 +302,39 @@ fn bad_input_fails_naming_the_problem_without_output() {
         (
             vec!["--source", "point:0,0,0", "-n", "10", "--wavelength", "0"],
             vec!["wavelength"],
+        ),
+        (
+            vec![
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "10",
+                "--wavelength",
+                "Lava:RINDEX",
+            ],
+            vec!["no material `Lava`", "Liquid"],
+        ),
+        (
+            vec![
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "10",
+                "--wavelength",
+                "Liquid:GLOW",
+            ],
+            vec!["no property `GLOW`", "SCINTILLATIONCOMPONENT1"],
+        ),
+        (
+            vec![
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "10",
+                "--wavelength",
+                "blue",
+            ],
+            vec!["`blue`", "nanometres"],
         ),
     ] {
         let mut all = vec!["photons", scene_arg];

@@ -53,8 +53,9 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Propagate optical photons from a source through a scene with Geant4's optical
     /// physics (Fresnel, total internal reflection, absorption, Rayleigh scattering,
-    /// dielectric_metal and dielectric_dielectric surfaces of the glisur and unified models:
-    /// polished, ground and painted) on the CPU; write the detected photons.
+    /// wavelength shifting, dielectric_metal and dielectric_dielectric surfaces of the
+    /// glisur and unified models: polished, ground and painted) on the CPU; write the
+    /// detected photons.
     Photons(photons::PhotonsArgs),
     /// Describe the GPU adapter wgpu finds (lavapipe on machines without a GPU).
     GpuInfo,

@@ -8,7 +8,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::outputs::{check_destinations, OutputSet};
 use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
 use hytrace_trace::photons::run::{prepare, propagate_in};
-use hytrace_trace::photons::sources::Source;
+use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, RunOptions};
 use serde_json::json;
 
@@ -18,15 +18,19 @@ pub struct PhotonsArgs {
     /// A .gdml file (optical surfaces found as Geant4 finds them), a Foundry directory or a
     /// .toml scene file (surfaces from the boundary table).
     pub scene: PathBuf,
-    /// Photon source: `point:X,Y,Z` (isotropic from a point) or `beam:X,Y,Z:DX,DY,DZ:R`
-    /// (parallel along D over the disk of radius R centred on X,Y,Z, perpendicular to
-    /// D); mm. Photons start at time 0 with a random linear polarization perpendicular to
-    /// their direction.
+    /// Photon source: `point:X,Y,Z` (isotropic from a point), `beam:X,Y,Z:DX,DY,DZ:R[:A]`
+    /// (along D over the disk of radius R centred on X,Y,Z, perpendicular to D; parallel,
+    /// or spread uniformly within a cone of half-angle A degrees) or `sphere:X,Y,Z:R:in`
+    /// / `...:out` (from the sphere's surface along its inward or outward normal); mm.
+    /// Photons start at time 0 with a random linear polarization perpendicular to their
+    /// direction.
     #[arg(long)]
     pub source: String,
-    /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm).
-    #[arg(long, default_value_t = 420.0)]
-    pub wavelength: f64,
+    /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm),
+    /// or MATERIAL:PROPERTY: drawn for each photon from that intensity table (per photon
+    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1.
+    #[arg(long, default_value = "420")]
+    pub wavelength: String,
     /// Number of photons.
     #[arg(short = 'n', long)]
     pub photons: u64,
@@ -80,7 +84,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         &args.scene,
         &RunOptions {
             source,
-            wavelength_nm: args.wavelength,
+            wavelength: Wavelength::parse(&args.wavelength)?,
             photons: args.photons,
             first: args.first,
             seed: args.seed,

@@ -1,11 +1,12 @@
 //! `hytrace render`: options, the progress bar and the report.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::bail;
+use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::npy::write_atomically;
 use hytrace_trace::gpu::{add_gpu_stats, TexelStore};
 use hytrace_trace::render::run::{render, RenderBackend, RenderSettings, Rendered};
 use hytrace_trace::render::{write_image, Effects};
@@ -38,6 +39,12 @@ pub struct RenderArgs {
     pub stats: bool,
 }
 
+/// Where the legend of the image `out` goes: `IMAGE.legend.json` beside it.
+fn legend_path(out: &Path) -> PathBuf {
+    let stem = out.file_stem().unwrap_or_default().to_string_lossy();
+    out.with_file_name(format!("{stem}.legend.json"))
+}
+
 /// Runs `hytrace render`.
 pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let ext = args.out.extension().and_then(|e| e.to_str());
@@ -49,7 +56,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     }
     let t0 = Instant::now();
     let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
-    args.settings.apply(&f, &mut spec)?;
+    let legend = args.settings.apply(&f, &mut spec)?;
     if args.explain {
         for line in Effects::of(&f, &spec).explain() {
             println!("{line}");
@@ -75,6 +82,12 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
     bar.finish_and_clear();
     write_image(&image, &args.out)?;
+    if let Some(legend) = &legend {
+        let path = legend_path(&args.out);
+        let text = serde_json::to_string_pretty(&legend.to_json())?;
+        write_atomically(&path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing the legend {}", path.display()))?;
+    }
     let samples = width as f64 * height as f64 * spec.settings.spp as f64;
     if args.stats {
         let mut line = serde_json::json!({

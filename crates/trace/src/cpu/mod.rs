@@ -816,6 +816,12 @@ impl<T: Real> CpuScene<T> {
         self.bounds_of(|_| true)
     }
 
+    /// World bounds (min, max) of instance `instance`.
+    pub fn instance_bounds(&self, instance: usize) -> [[f64; 3]; 2] {
+        let b = &self.placements[instance].bounds;
+        [b[0].to_f64(), b[1].to_f64()]
+    }
+
     /// World bounds (min, max) of the instances `keep` accepts, `None` without any.
     pub fn bounds_of(&self, keep: impl Fn(usize) -> bool) -> Option<[[f64; 3]; 2]> {
         let kept = self.placements.iter().enumerate().filter(|(i, _)| keep(*i));

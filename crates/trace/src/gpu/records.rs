@@ -342,8 +342,8 @@ record! {
 }
 
 record! {
-    /// What a render needs of an instance: its material (index into the items), solid and
-    /// boundary (`u32::MAX`: none).
+    /// What a render needs of an instance: its material (index into the items), solid,
+    /// boundary and covering instance (`u32::MAX`: none; see the renderer's `covering`).
     pub struct RenderInstance {
         /// Material item.
         pub material: u32,
@@ -351,8 +351,8 @@ record! {
         pub solid: u32,
         /// Boundary.
         pub boundary: u32,
-        /// Padding.
-        pub pad: u32,
+        /// The outermost of itself and its ancestors drawn solid.
+        pub covering: u32,
     }
 }
 
@@ -394,6 +394,8 @@ pub const RENDER_MATERIAL_DIELECTRIC: u32 = 2;
 pub const RENDER_MATERIAL_EMITTER: u32 = 3;
 /// Transparent.
 pub const RENDER_MATERIAL_TRANSPARENT: u32 = 4;
+/// Shell (an envelope: colour in `a`, opacity in `b.x`).
+pub const RENDER_MATERIAL_SHELL: u32 = 5;
 /// [`RenderItem::kind`] of lights: point.
 pub const RENDER_LIGHT_POINT: u32 = 16;
 /// Directional.
@@ -555,6 +557,7 @@ pub fn generate() -> String {
         ("RENDER_MATERIAL_DIELECTRIC", RENDER_MATERIAL_DIELECTRIC),
         ("RENDER_MATERIAL_EMITTER", RENDER_MATERIAL_EMITTER),
         ("RENDER_MATERIAL_TRANSPARENT", RENDER_MATERIAL_TRANSPARENT),
+        ("RENDER_MATERIAL_SHELL", RENDER_MATERIAL_SHELL),
         ("RENDER_LIGHT_POINT", RENDER_LIGHT_POINT),
         ("RENDER_LIGHT_DIRECTIONAL", RENDER_LIGHT_DIRECTIONAL),
     ];

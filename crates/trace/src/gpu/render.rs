@@ -13,7 +13,7 @@ use super::records::{
     RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_EFFECT_SHADING,
     RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL, RENDER_LIGHT_POINT,
     RENDER_MATERIAL_DIELECTRIC, RENDER_MATERIAL_DIFFUSE, RENDER_MATERIAL_EMITTER,
-    RENDER_MATERIAL_MIRROR, RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA,
+    RENDER_MATERIAL_MIRROR, RENDER_MATERIAL_SHELL, RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA,
     RENDER_VOLUMES_ABSORPTION, RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE,
     VOLUME_FILTER_TRILINEAR,
 };
@@ -118,6 +118,11 @@ fn material_item(m: &Material) -> RenderItem {
             item(RENDER_MATERIAL_EMITTER, rgb(radiance, 0.0), [0.0; 4])
         }
         Material::Transparent => item(RENDER_MATERIAL_TRANSPARENT, [0.0; 4], [0.0; 4]),
+        Material::Shell { colour, opacity } => item(
+            RENDER_MATERIAL_SHELL,
+            rgb(colour, 0.0),
+            [opacity as f32, 0.0, 0.0, 0.0],
+        ),
     }
 }
 
@@ -215,7 +220,7 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shifts: &[[f64; 3]]) -> Rende
             material: index as u32,
             solid: renderer.instance_solid[i],
             boundary: renderer.instance_boundary[i],
-            pad: 0,
+            covering: renderer.covering[i],
         });
     }
     let light_first = items.len() as u32;

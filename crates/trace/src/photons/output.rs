@@ -37,6 +37,8 @@ pub enum Label {
     Mi = 3,
     /// Absorbed in the bulk.
     Ab = 4,
+    /// Absorbed by a wavelength shifter and re-emitted.
+    Re = 5,
     /// Rayleigh scattered.
     Sc = 6,
     /// Detected at a surface.
@@ -57,9 +59,10 @@ pub enum Label {
     Tr = 15,
 }
 
-const LABELS: [(u8, &str); 11] = [
+const LABELS: [(u8, &str); 12] = [
     (3, "MI"),
     (4, "AB"),
+    (5, "RE"),
     (6, "SC"),
     (7, "SD"),
     (8, "SA"),

@@ -8,7 +8,8 @@
 //! ([`CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
 //! the far side is the daughter entered, or where the photon goes on leaving the volume
 //! (a touching sibling, else the mother); the two materials and the optical surface of the
-//! crossing decide what the photon does ([`cross`]).
+//! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
+//! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there.
 
 use std::time::Instant;
 
@@ -17,10 +18,12 @@ use hytrace_foundry::{Foundry, UNSET};
 use hytrace_volume::Rng;
 use rayon::prelude::*;
 
-use super::bulk::{rayleigh_scatter, sample_distance};
+use super::bulk::{rayleigh_scatter, rotate_uz, sample_distance};
 use super::output::{sorted_counts, History, HitRow, Label};
-use super::properties::{energy_of_wavelength, OpticsTables, Property, C_LIGHT_MM_PER_NS};
-use super::sources::Source;
+use super::properties::{
+    energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
+};
+use super::sources::{Source, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
 use super::{PhotonError, V};
 use crate::cpu::{CpuScene, Hit};
@@ -33,6 +36,8 @@ const BATCH: u64 = 1 << 16;
 pub struct PhotonScene {
     tracer: CpuScene<f64>,
     tables: OpticsTables,
+    /// The scene's materials as read (their tables, for spectra a run draws from).
+    materials: Vec<hytrace_foundry::optics::Material>,
     /// Material inside every instance ([`UNSET`] for none).
     material: Vec<u32>,
     mother: Vec<u32>,
@@ -85,12 +90,47 @@ impl PhotonScene {
         Ok(PhotonScene {
             tracer,
             tables,
+            materials: f.optics.materials.clone(),
             material,
             hierarchical: mother.iter().any(|&m| m != UNSET),
             mother,
             copy: f.inst.iter().map(|i| i.copy_number).collect(),
             surfaces,
         })
+    }
+
+    /// Resolves a run's wavelength: a fixed one checked, a spectrum looked up among the
+    /// scene's materials.
+    fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
+        match wavelength {
+            Wavelength::Fixed(nm) if nm.is_finite() && *nm > 0.0 => Ok(Emission::Fixed {
+                energy: energy_of_wavelength(*nm),
+                nm: *nm,
+            }),
+            Wavelength::Fixed(nm) => Err(PhotonError::Input(format!(
+                "the wavelength {nm} nm is not a positive number"
+            ))),
+            Wavelength::Spectrum { material, property } => {
+                let names = |v: Vec<&str>| v.join(", ");
+                let Some(m) = self.materials.iter().find(|m| &m.name == material) else {
+                    return Err(PhotonError::Input(format!(
+                        "--wavelength: no material `{material}` in the scene (materials: {})",
+                        names(self.materials.iter().map(|m| m.name.as_str()).collect())
+                    )));
+                };
+                let Some((_, table)) = m.properties.iter().find(|(n, _)| n == property) else {
+                    return Err(PhotonError::Input(format!(
+                        "--wavelength: material `{material}` has no property `{property}` (its properties: {})",
+                        names(m.properties.iter().map(|(n, _)| n.as_str()).collect())
+                    )));
+                };
+                let intensity = Property::new(
+                    table,
+                    &format!("material `{material}`: property {property}"),
+                )?;
+                Ok(Emission::Spectrum(Spectrum::new(&intensity)))
+            }
+        }
     }
 
     /// The next boundary from `pos` along `dir` inside instance `current`. A crossing of
@@ -137,18 +177,70 @@ impl PhotonScene {
         }
     }
 
-    /// Propagates photon `index` to its end: its history, and its hit row when detected.
-    fn photon(&self, index: u64, run: &RunOptions, energy: f64) -> (History, Option<HitRow>) {
+    /// Propagates photon `index` to its end: the histories of its lineages (the photon
+    /// itself first, then the further photons its wavelength-shifting absorptions
+    /// emitted) and the hit rows of those detected.
+    fn photon(
+        &self,
+        index: u64,
+        run: &RunOptions,
+        emission: &Emission,
+    ) -> (Vec<History>, Vec<HitRow>) {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
         let start = run.source.sample(&mut rng);
-        let (mut pos, mut dir, mut pol) = (start.position, start.direction, start.polarization);
-        let mut time = 0.0;
+        let (energy, wavelength_nm) = match emission {
+            Emission::Fixed { energy, nm } => (*energy, *nm),
+            Emission::Spectrum(s) => {
+                let e = s.sample(&mut rng);
+                (e, wavelength_of_energy(e))
+            }
+        };
         let mut history = History::default();
         history.push(Label::To);
-        let Some(mut current) = self.tracer.locate_point(pos.to_f64()) else {
+        let Some(current) = self.tracer.locate_point(start.position.to_f64()) else {
             history.push(Label::Mi);
-            return (history, None);
+            return (vec![history], vec![]);
         };
+        let mut pending = vec![Lineage {
+            pos: start.position,
+            dir: start.direction,
+            pol: start.polarization,
+            time: 0.0,
+            energy,
+            wavelength_nm,
+            current,
+            history,
+        }];
+        let (mut histories, mut hits) = (Vec::new(), Vec::new());
+        // Depth first: the photon's own lineage ends first.
+        while let Some(photon) = pending.pop() {
+            let (history, hit) = self.lineage(photon, index, run, &mut rng, &mut pending);
+            histories.push(history);
+            hits.extend(hit);
+        }
+        (histories, hits)
+    }
+
+    /// Propagates one photon to its end; photons emitted by wavelength-shifting
+    /// absorptions beyond the one that carries on are pushed onto `pending`.
+    fn lineage(
+        &self,
+        photon: Lineage,
+        index: u64,
+        run: &RunOptions,
+        rng: &mut Rng,
+        pending: &mut Vec<Lineage>,
+    ) -> (History, Option<HitRow>) {
+        let Lineage {
+            mut pos,
+            mut dir,
+            mut pol,
+            mut time,
+            mut energy,
+            mut wavelength_nm,
+            mut current,
+            mut history,
+        } = photon;
         for steps in 1..=run.max_steps {
             let m = self.material[current as usize];
             let mat = self.tables.material(m);
@@ -157,11 +249,12 @@ impl PhotonScene {
                     sample_distance(p.value(energy), rng.next_f64())
                 })
             };
-            let d_abs = draw(mat.and_then(|m| m.abslength.as_ref()), &mut rng);
-            let d_sc = draw(mat.and_then(|m| m.rayleigh.as_ref()), &mut rng);
+            let d_abs = draw(mat.and_then(|m| m.abslength.as_ref()), rng);
+            let d_sc = draw(mat.and_then(|m| m.rayleigh.as_ref()), rng);
+            let d_wls = draw(mat.and_then(|m| m.wlsabslength.as_ref()), rng);
             let hit = self.next_boundary(pos, dir, current);
             let t_b = hit.map_or(f64::INFINITY, |h| h.t);
-            let step = t_b.min(d_abs).min(d_sc);
+            let step = t_b.min(d_abs).min(d_sc).min(d_wls);
             if !step.is_finite() {
                 history.push(Label::Mi);
                 return (history, None);
@@ -173,8 +266,43 @@ impl PhotonScene {
                 return (history, None);
             }
             if d_sc == step && d_sc < t_b {
-                (dir, pol) = rayleigh_scatter(dir, pol, &mut rng);
+                (dir, pol) = rayleigh_scatter(dir, pol, rng);
                 history.push(Label::Sc);
+                continue;
+            }
+            if d_wls == step && d_wls < t_b {
+                // Absorbed by the shifter; what it emits starts here, isotropic, with a
+                // random transverse polarization, after the material's delay.
+                let Some(wls) = mat.and_then(|m| m.wls.as_ref()) else {
+                    history.push(Label::Ab);
+                    return (history, None);
+                };
+                let count = wls.sample_count(rng);
+                let energies: Vec<f64> = (0..count)
+                    .filter_map(|_| wls.sample_energy(energy, rng))
+                    .collect();
+                let Some((&first, rest)) = energies.split_first() else {
+                    history.push(Label::Ab);
+                    return (history, None);
+                };
+                history.push(Label::Re);
+                time += wls.time_constant;
+                for &e in rest.iter().rev() {
+                    let (d, p) = isotropic(rng);
+                    pending.push(Lineage {
+                        pos,
+                        dir: d,
+                        pol: p,
+                        time,
+                        energy: e,
+                        wavelength_nm: wavelength_of_energy(e),
+                        current,
+                        history,
+                    });
+                }
+                (dir, pol) = isotropic(rng);
+                energy = first;
+                wavelength_nm = wavelength_of_energy(first);
                 continue;
             }
             let hit = hit.expect("a finite step that is no interaction is a boundary");
@@ -194,7 +322,7 @@ impl PhotonScene {
                 energy,
             };
             let materials = (m, self.material[post as usize]);
-            match cross(&self.tables, materials, surface, photon, normal, &mut rng) {
+            match cross(&self.tables, materials, surface, photon, normal, rng) {
                 Crossing::Transmitted => {
                     history.push(Label::Bt);
                     current = post;
@@ -216,7 +344,7 @@ impl PhotonScene {
                         dir.x,
                         dir.y,
                         dir.z,
-                        run.wavelength_nm,
+                        wavelength_nm,
                         pol.x,
                         pol.y,
                         pol.z,
@@ -235,13 +363,46 @@ impl PhotonScene {
     }
 }
 
+/// The wavelength of a run, resolved: fixed (energy in MeV and nm) or a spectrum.
+enum Emission {
+    Fixed { energy: f64, nm: f64 },
+    Spectrum(Spectrum),
+}
+
+/// A photon on its way: where, which way, its polarization, time (ns), energy (MeV) and
+/// wavelength (nm), the instance it is in and its history so far.
+struct Lineage {
+    pos: V,
+    dir: V,
+    pol: V,
+    time: f64,
+    energy: f64,
+    wavelength_nm: f64,
+    current: u32,
+    history: History,
+}
+
+/// A direction uniform over the sphere and a polarization uniform among those
+/// perpendicular to it (Geant4's draw for re-emitted photons).
+fn isotropic(rng: &mut Rng) -> (V, V) {
+    let cos = 1.0 - 2.0 * rng.next_f64();
+    let sin = ((1.0 - cos) * (1.0 + cos)).sqrt();
+    let phi = std::f64::consts::TAU * rng.next_f64();
+    let dir = V::new(sin * phi.cos(), sin * phi.sin(), cos);
+    let a = std::f64::consts::TAU * rng.next_f64();
+    (
+        dir,
+        rotate_uz(V::new(a.cos(), a.sin(), 0.0), dir).normalized(),
+    )
+}
+
 /// What to propagate.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
     /// Where photons start.
     pub source: Source,
-    /// Wavelength of every photon (nm).
-    pub wavelength_nm: f64,
+    /// The photons' wavelength: fixed or drawn from a material's spectrum.
+    pub wavelength: Wavelength,
     /// Number of photons.
     pub photons: u64,
     /// Index of the first photon: the run propagates photons `first .. first + photons`,
@@ -261,9 +422,11 @@ pub struct RunOptions {
 pub struct PhotonRun {
     /// One row per detected photon, in photon order.
     pub hits: Vec<HitRow>,
-    /// Packed history of every photon (empty unless asked for).
+    /// Packed history of every photon (empty unless asked for): its own lineage, through
+    /// any re-emissions.
     pub histories: Vec<u64>,
-    /// Count of each history, most frequent first.
+    /// Count of each history, most frequent first, over every lineage (photons emitted by
+    /// a wavelength shifter beyond the first count as lineages of their own).
     pub counts: Vec<(String, u64)>,
     /// Seconds spent propagating.
     pub propagate_s: f64,
@@ -286,12 +449,7 @@ pub fn propagate_reporting(
             "the number of photons (-n) must be at least 1".into(),
         ));
     }
-    if !(run.wavelength_nm.is_finite() && run.wavelength_nm > 0.0) {
-        return Err(PhotonError::Input(format!(
-            "the wavelength {} nm is not a positive number",
-            run.wavelength_nm
-        )));
-    }
+    let emission = scene.emission(&run.wavelength)?;
     let Some(end) = run.first.checked_add(run.photons) else {
         return Err(PhotonError::Input(format!(
             "photons {} .. {} + {}: past the last photon index",
@@ -305,7 +463,7 @@ pub fn propagate_reporting(
     }
     let origin = match run.source {
         Source::Point { position } => position,
-        Source::Beam { centre, .. } => centre,
+        Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
     };
     if scene.tracer.locate_point(origin.to_f64()).is_none() {
         return Err(PhotonError::Input(format!(
@@ -313,7 +471,6 @@ pub fn propagate_reporting(
             origin.x, origin.y, origin.z
         )));
     }
-    let energy = energy_of_wavelength(run.wavelength_nm);
     let start = Instant::now();
     let mut hits = Vec::new();
     let mut histories = Vec::new();
@@ -321,16 +478,18 @@ pub fn propagate_reporting(
     let mut first = run.first;
     while first < end {
         let last = first.saturating_add(BATCH).min(end);
-        let batch: Vec<(History, Option<HitRow>)> = (first..last)
+        let batch: Vec<(Vec<History>, Vec<HitRow>)> = (first..last)
             .into_par_iter()
-            .map(|i| scene.photon(i, run, energy))
+            .map(|i| scene.photon(i, run, &emission))
             .collect();
-        for (h, hit) in batch {
-            *codes.entry(h.code).or_default() += 1;
-            if run.keep_histories {
-                histories.push(h.code);
+        for (lineages, photon_hits) in batch {
+            for h in &lineages {
+                *codes.entry(h.code).or_default() += 1;
             }
-            hits.extend(hit);
+            if run.keep_histories {
+                histories.push(lineages[0].code);
+            }
+            hits.extend(photon_hits);
         }
         first = last;
         progress(first - run.first);

@@ -9,6 +9,8 @@
 use hytrace_foundry::optics::{Material, OpticalSurface, Table};
 use hytrace_foundry::UNSET;
 
+use hytrace_volume::Rng;
+
 use super::PhotonError;
 
 /// `h c` in eV nm: photon energy (eV) times wavelength (nm).
@@ -120,7 +122,146 @@ pub struct MaterialOptics {
     /// Group velocity (mm/ns): Geant4's, from RINDEX ([`group_velocity`]) unless the
     /// material gives GROUPVEL after RINDEX; none without either.
     pub groupvel: Option<Property>,
+    /// Absorption length of wavelength shifting (WLSABSLENGTH, mm); none: no shifting.
+    pub wlsabslength: Option<Property>,
+    /// What a wavelength-shifting absorption emits (WLSCOMPONENT and its constants); none:
+    /// the absorbed photon ends there.
+    pub wls: Option<Wls>,
 }
+
+/// An emission spectrum to draw photon energies from, as Geant4 draws its scintillation and
+/// wavelength-shifting spectra: the trapezoid integral of the intensity over photon energy,
+/// inverted linearly between rows (G4PhysicsVector::GetEnergy).
+#[derive(Clone, Debug)]
+pub struct Spectrum {
+    /// `(energy, integral)` rows, the integral not decreasing.
+    energies: Vec<f64>,
+    cumulative: Vec<f64>,
+}
+
+impl Spectrum {
+    /// The spectrum of an intensity table (intensity per photon energy).
+    pub fn new(intensity: &Property) -> Self {
+        let (es, vs) = (&intensity.energies, &intensity.values);
+        let mut cumulative = vec![0.0];
+        for i in 1..es.len() {
+            let last = cumulative[i - 1];
+            cumulative.push(last + 0.5 * (es[i] - es[i - 1]) * (vs[i - 1] + vs[i]));
+        }
+        Spectrum {
+            energies: es.clone(),
+            cumulative,
+        }
+    }
+
+    /// The energy at which the cumulative integral reaches `c`.
+    fn energy_at(&self, c: f64) -> f64 {
+        let (es, cs) = (&self.energies, &self.cumulative);
+        let last = cs.len() - 1;
+        if last == 0 || c <= cs[0] {
+            return es[0];
+        }
+        if c >= cs[last] {
+            return es[last];
+        }
+        // The row below the first value not below c.
+        let i = cs.partition_point(|&x| x < c) - 1;
+        let del = cs[i + 1] - cs[i];
+        if del > 0.0 {
+            es[i] + (c - cs[i]) * (es[i + 1] - es[i]) / del
+        } else {
+            es[i]
+        }
+    }
+
+    /// One photon energy (MeV) drawn from the spectrum.
+    pub fn sample(&self, rng: &mut Rng) -> f64 {
+        self.energy_at(rng.next_f64() * self.cumulative[self.cumulative.len() - 1])
+    }
+}
+
+/// Re-emission by a wavelength shifter (Geant4's G4OpWLS): how many photons, at which
+/// energies, after which delay.
+#[derive(Clone, Debug)]
+pub struct Wls {
+    /// WLSCOMPONENT.
+    spectrum: Spectrum,
+    /// WLSTIMECONSTANT (ns): the delay of every re-emitted photon (Geant4's default
+    /// `delta` time profile).
+    pub time_constant: f64,
+    /// WLSMEANNUMBERPHOTONS: photons emitted per absorption, Poisson distributed with
+    /// this mean; none: exactly one.
+    pub mean_photons: Option<f64>,
+}
+
+/// Draws past which the Poisson sampler stops counting (the tail beyond is below f64's
+/// resolution for the means Geant4 samples this way).
+const POISSON_MAX: u32 = 1000;
+
+impl Wls {
+    /// The re-emission of a material with WLSCOMPONENT `component`.
+    fn new(component: &Property, time_constant: f64, mean_photons: Option<f64>) -> Self {
+        Wls {
+            spectrum: Spectrum::new(component),
+            time_constant,
+            mean_photons,
+        }
+    }
+
+    /// The energy of one re-emitted photon, no higher than `primary` (MeV): up to 100
+    /// draws from the spectrum, as Geant4 tries; `None` when none is low enough.
+    pub fn sample_energy(&self, primary: f64, rng: &mut Rng) -> Option<f64> {
+        (0..100)
+            .map(|_| self.spectrum.sample(rng))
+            .find(|&e| e <= primary)
+    }
+
+    /// The number of photons one absorption emits (G4Poisson for WLSMEANNUMBERPHOTONS:
+    /// inversion up to a mean of 16, a rounded Gaussian above).
+    pub fn sample_count(&self, rng: &mut Rng) -> u32 {
+        let Some(mean) = self.mean_photons else {
+            return 1;
+        };
+        if mean <= 16.0 {
+            let u = rng.next_f64();
+            let mut term = (-mean).exp();
+            let mut sum = term;
+            let mut n = 0;
+            while sum <= u && n < POISSON_MAX {
+                n += 1;
+                term *= mean / f64::from(n);
+                sum += term;
+            }
+            return n;
+        }
+        let t = (-2.0 * (1.0 - rng.next_f64()).ln()).sqrt()
+            * (std::f64::consts::TAU * rng.next_f64()).cos();
+        let value = mean + t * mean.sqrt() + 0.5;
+        if value <= 0.0 {
+            0
+        } else {
+            value.min(f64::from(u32::MAX)) as u32
+        }
+    }
+}
+
+/// Looks up a named constant property (a one-value GDML matrix), checked.
+fn constant(list: &[(String, Table)], name: &str, owner: &str) -> Result<Option<f64>, PhotonError> {
+    let Some((_, t)) = list.iter().find(|(n, _)| n == name) else {
+        return Ok(None);
+    };
+    match t.values.as_slice() {
+        [v] if t.columns == 1 && v.is_finite() && *v >= 0.0 => Ok(Some(*v)),
+        _ => Err(PhotonError::Table {
+            table: format!("{owner}: property {name}"),
+            problem: "must be one constant, finite and not negative (a matrix with coldim=\"1\" and one value)".into(),
+        }),
+    }
+}
+
+/// Material properties of processes this propagator does not model; a material with one
+/// is refused rather than propagated without it.
+const UNMODELLED_MATERIAL_PROPERTIES: [&str; 3] = ["WLSABSLENGTH2", "WLSCOMPONENT2", "MIEHG"];
 
 /// Looks up a named two-column property of a list, checked.
 fn property(
@@ -148,12 +289,38 @@ impl MaterialOptics {
             (_, _, Some(n)) => Some(group_velocity(n)),
             _ => None,
         };
+        if let Some((name, _)) = m
+            .properties
+            .iter()
+            .find(|(n, _)| UNMODELLED_MATERIAL_PROPERTIES.contains(&n.as_str()))
+        {
+            return Err(PhotonError::Unsupported {
+                what: format!("{owner}: property `{name}`"),
+            });
+        }
+        let wls = match property(&m.properties, "WLSCOMPONENT", &owner)? {
+            None => None,
+            Some(component) => {
+                // Geant4 stops with a fatal error at the first re-emission without it.
+                let Some(tau) = constant(&m.properties, "WLSTIMECONSTANT", &owner)? else {
+                    return Err(PhotonError::Table {
+                        table: format!("{owner}: property WLSCOMPONENT"),
+                        problem: "needs the constant WLSTIMECONSTANT (the re-emission delay)"
+                            .into(),
+                    });
+                };
+                let mean = constant(&m.properties, "WLSMEANNUMBERPHOTONS", &owner)?;
+                Some(Wls::new(&component, tau, mean))
+            }
+        };
         Ok(MaterialOptics {
             name: m.name.clone(),
             rindex,
             abslength: property(&m.properties, "ABSLENGTH", &owner)?,
             rayleigh: property(&m.properties, "RAYLEIGH", &owner)?,
             groupvel,
+            wlsabslength: property(&m.properties, "WLSABSLENGTH", &owner)?,
+            wls,
         })
     }
 
@@ -542,5 +709,86 @@ mod tests {
             },
         )];
         refused(s, "SURFACEROUGHNESS");
+    }
+
+    fn shifter(mean_photons: Option<f64>) -> Wls {
+        // Intensity 0, 1, 1, 0 at 2, 2.5, 3, 3.5 eV: integral 0, 0.25, 0.75, 1.0 (x 1e-6).
+        let c = Property::new(
+            &table(&[2e-6, 0.0, 2.5e-6, 1.0, 3e-6, 1.0, 3.5e-6, 0.0]),
+            "w",
+        )
+        .unwrap();
+        Wls::new(&c, 1.5, mean_photons)
+    }
+
+    #[test]
+    fn re_emitted_energies_follow_the_integral_of_the_spectrum() {
+        let w = shifter(None);
+        let mut rng = Rng::new(8, 0, 0);
+        let n = 100_000;
+        let energies: Vec<f64> = (0..n)
+            .map(|_| w.sample_energy(1.0, &mut rng).unwrap())
+            .collect();
+        for (edge, expected) in [(2.5e-6, 0.25), (3e-6, 0.75)] {
+            let below = energies.iter().filter(|&&e| e < edge).count() as f64 / n as f64;
+            let sigma = (expected * (1.0 - expected) / n as f64).sqrt();
+            assert!((below - expected).abs() < 4.0 * sigma, "{edge}: {below}");
+        }
+        // Never above the absorbed photon's energy; none when the spectrum lies above it.
+        assert!((0..10_000).all(|_| w.sample_energy(2.6e-6, &mut rng).unwrap() <= 2.6e-6));
+        assert_eq!(w.sample_energy(1.9e-6, &mut rng), None);
+    }
+
+    #[test]
+    fn photons_per_absorption_are_one_or_poisson() {
+        let mut rng = Rng::new(9, 0, 0);
+        assert!((0..100).all(|_| shifter(None).sample_count(&mut rng) == 1));
+        for mean in [2.0, 30.0] {
+            let w = shifter(Some(mean));
+            let n = 100_000;
+            let counts: Vec<f64> = (0..n)
+                .map(|_| f64::from(w.sample_count(&mut rng)))
+                .collect();
+            let m = counts.iter().sum::<f64>() / n as f64;
+            let var = counts.iter().map(|c| (c - m).powi(2)).sum::<f64>() / n as f64;
+            assert!(
+                (m - mean).abs() < 4.0 * (mean / n as f64).sqrt(),
+                "{mean}: mean {m}"
+            );
+            assert!((var / mean - 1.0).abs() < 0.03, "{mean}: variance {var}");
+        }
+    }
+
+    #[test]
+    fn shifters_need_their_delay_and_unmodelled_processes_are_refused() {
+        let material = |props: &[(&str, Table)]| Material {
+            name: "plastic".into(),
+            properties: props
+                .iter()
+                .map(|(n, t)| (n.to_string(), t.clone()))
+                .collect(),
+        };
+        let spectrum = table(&[2e-6, 1.0, 3e-6, 1.0]);
+        let e = MaterialOptics::new(&material(&[("WLSCOMPONENT", spectrum.clone())]))
+            .expect_err("no delay")
+            .to_string();
+        assert!(
+            e.contains("`plastic`") && e.contains("WLSTIMECONSTANT"),
+            "{e}"
+        );
+        let e = MaterialOptics::new(&material(&[
+            ("WLSCOMPONENT", spectrum),
+            ("WLSTIMECONSTANT", table(&[1e-6, 2.0])),
+        ]))
+        .expect_err("a table, not a constant")
+        .to_string();
+        assert!(
+            e.contains("WLSTIMECONSTANT") && e.contains("constant"),
+            "{e}"
+        );
+        let e = MaterialOptics::new(&material(&[("MIEHG", table(&[2e-6, 1.0]))]))
+            .expect_err("Mie")
+            .to_string();
+        assert!(e.contains("MIEHG") && e.contains("not modelled"), "{e}");
     }
 }

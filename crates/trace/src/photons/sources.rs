@@ -4,9 +4,12 @@
 //!
 //! Source specifications (`--source`), lengths in mm:
 //! - `point:X,Y,Z`: isotropic from a point;
-//! - `beam:X,Y,Z:DX,DY,DZ:R`: parallel along (DX, DY, DZ) (normalized here), starting
-//!   uniformly over the disk of radius R centred on (X, Y, Z) perpendicular to it (R = 0:
-//!   a pencil beam).
+//! - `beam:X,Y,Z:DX,DY,DZ:R[:A]`: along (DX, DY, DZ) (normalized here), starting uniformly
+//!   over the disk of radius R centred on (X, Y, Z) perpendicular to it (R = 0: a pencil
+//!   beam); parallel, or with A, directions uniform in solid angle within the cone of
+//!   half-angle A degrees (0 to 180) about the axis;
+//! - `sphere:X,Y,Z:R:out` or `...:in`: starting uniformly over the sphere of radius R
+//!   centred on (X, Y, Z), along its outward or inward normal.
 
 use hytrace_volume::Rng;
 
@@ -29,7 +32,56 @@ pub enum Source {
         direction: V,
         /// Radius of the disk (mm).
         radius: f64,
+        /// Cosine of the divergence half-angle (1: parallel).
+        cos_divergence: f64,
     },
+    /// From a sphere's surface along its normal.
+    Sphere {
+        /// Centre (mm).
+        centre: V,
+        /// Radius (mm).
+        radius: f64,
+        /// Towards the centre (else away from it).
+        inward: bool,
+    },
+}
+
+/// The wavelength photons start with (`--wavelength`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Wavelength {
+    /// Every photon at this wavelength (nm).
+    Fixed(f64),
+    /// Drawn for each photon from an intensity table (intensity per photon energy) of a
+    /// material of the scene, as Geant4 draws its emission spectra, e.g.
+    /// `LAr:SCINTILLATIONCOMPONENT1`.
+    Spectrum {
+        /// Material name.
+        material: String,
+        /// Property name.
+        property: String,
+    },
+}
+
+impl Wavelength {
+    /// Parses `NM` (a positive number of nanometres) or `MATERIAL:PROPERTY`.
+    pub fn parse(text: &str) -> Result<Wavelength, PhotonError> {
+        let bad = |problem: String| PhotonError::Input(format!("--wavelength `{text}`: {problem}"));
+        if let Some((material, property)) = text.rsplit_once(':') {
+            if material.trim().is_empty() || property.trim().is_empty() {
+                return Err(bad("expected NM or MATERIAL:PROPERTY".into()));
+            }
+            return Ok(Wavelength::Spectrum {
+                material: material.trim().to_string(),
+                property: property.trim().to_string(),
+            });
+        }
+        match text.trim().parse::<f64>() {
+            Ok(nm) if nm.is_finite() && nm > 0.0 => Ok(Wavelength::Fixed(nm)),
+            _ => Err(bad(
+                "not a positive number of nanometres or MATERIAL:PROPERTY".into(),
+            )),
+        }
+    }
 }
 
 /// A photon's starting position, direction and polarization.
@@ -79,29 +131,69 @@ impl Source {
                     position: V::new(x, y, z),
                 })
             }
-            ["beam", xyz, dxyz, r] => {
+            ["beam", xyz, dxyz, r] => Self::beam(spec, xyz, dxyz, r, None),
+            ["beam", xyz, dxyz, r, a] => Self::beam(spec, xyz, dxyz, r, Some(a)),
+            ["sphere", xyz, r, side] => {
                 let [x, y, z] = numbers::<3>(xyz, spec, "the centre")?;
-                let [dx, dy, dz] = numbers::<3>(dxyz, spec, "the direction")?;
                 let [radius] = numbers::<1>(r, spec, "the radius")?;
-                let d = V::new(dx, dy, dz);
-                if d.length() == 0.0 {
-                    return Err(bad("the direction is zero"));
+                if radius <= 0.0 {
+                    return Err(bad("the radius must be positive"));
                 }
-                if radius < 0.0 {
-                    return Err(bad("the radius is negative"));
-                }
-                Ok(Source::Beam {
+                let inward = match side {
+                    "in" => true,
+                    "out" => false,
+                    _ => return Err(bad("the side must be `in` or `out`")),
+                };
+                Ok(Source::Sphere {
                     centre: V::new(x, y, z),
-                    direction: d.normalized(),
                     radius,
+                    inward,
                 })
             }
             ["point", ..] => Err(bad("expected point:X,Y,Z")),
-            ["beam", ..] => Err(bad("expected beam:X,Y,Z:DX,DY,DZ:R")),
+            ["beam", ..] => Err(bad("expected beam:X,Y,Z:DX,DY,DZ:R[:A]")),
+            ["sphere", ..] => Err(bad("expected sphere:X,Y,Z:R:in or sphere:X,Y,Z:R:out")),
             _ => Err(bad(
-                "unknown source (expected point:X,Y,Z or beam:X,Y,Z:DX,DY,DZ:R)",
+                "unknown source (expected point:X,Y,Z, beam:X,Y,Z:DX,DY,DZ:R[:A] or sphere:X,Y,Z:R:in|out)",
             )),
         }
+    }
+
+    /// A beam from its specification's parts.
+    fn beam(
+        spec: &str,
+        xyz: &str,
+        dxyz: &str,
+        r: &str,
+        divergence: Option<&str>,
+    ) -> Result<Source, PhotonError> {
+        let bad = |problem: &str| PhotonError::Source {
+            spec: spec.to_string(),
+            problem: problem.to_string(),
+        };
+        let [x, y, z] = numbers::<3>(xyz, spec, "the centre")?;
+        let [dx, dy, dz] = numbers::<3>(dxyz, spec, "the direction")?;
+        let [radius] = numbers::<1>(r, spec, "the radius")?;
+        let d = V::new(dx, dy, dz);
+        if d.length() == 0.0 {
+            return Err(bad("the direction is zero"));
+        }
+        if radius < 0.0 {
+            return Err(bad("the radius is negative"));
+        }
+        let half_angle = match divergence {
+            Some(a) => numbers::<1>(a, spec, "the divergence")?[0],
+            None => 0.0,
+        };
+        if !(0.0..=180.0).contains(&half_angle) {
+            return Err(bad("the divergence half-angle must be 0 to 180 degrees"));
+        }
+        Ok(Source::Beam {
+            centre: V::new(x, y, z),
+            direction: d.normalized(),
+            radius,
+            cos_divergence: half_angle.to_radians().cos(),
+        })
     }
 
     /// Draws one photon's start.
@@ -120,11 +212,32 @@ impl Source {
                 centre,
                 direction,
                 radius,
+                cos_divergence,
             } => {
                 let r = radius * rng.next_f64().sqrt();
                 let phi = std::f64::consts::TAU * rng.next_f64();
                 let offset = rotate_uz(V::new(r * phi.cos(), r * phi.sin(), 0.0), direction);
-                (centre + offset, direction)
+                let d = if cos_divergence < 1.0 {
+                    // Uniform in solid angle: the cosine uniform in [cos A, 1].
+                    let c = 1.0 - (1.0 - cos_divergence) * rng.next_f64();
+                    let s = (1.0 - c * c).max(0.0).sqrt();
+                    let psi = std::f64::consts::TAU * rng.next_f64();
+                    rotate_uz(V::new(s * psi.cos(), s * psi.sin(), c), direction).normalized()
+                } else {
+                    direction
+                };
+                (centre + offset, d)
+            }
+            Source::Sphere {
+                centre,
+                radius,
+                inward,
+            } => {
+                let cos_t = 1.0 - 2.0 * rng.next_f64();
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                let phi = std::f64::consts::TAU * rng.next_f64();
+                let n = V::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+                (centre + n * radius, if inward { -n } else { n })
             }
         };
         let a = std::f64::consts::TAU * rng.next_f64();
@@ -163,6 +276,11 @@ mod tests {
             ("beam:0,0,0:0,0,0:1", "zero"),
             ("beam:0,0,0:0,0,1:-1", "negative"),
             ("beam:0,0,0:0,0,1", "expected beam"),
+            ("beam:0,0,0:0,0,1:1:190", "0 to 180"),
+            ("beam:0,0,0:0,0,1:1:-5", "0 to 180"),
+            ("sphere:0,0,0:0:in", "positive"),
+            ("sphere:0,0,0:5:up", "`in` or `out`"),
+            ("sphere:0,0,0:5", "expected sphere"),
         ] {
             let e = Source::parse(spec).unwrap_err().to_string();
             assert!(e.contains(spec) && e.contains(needle), "{spec}: {e}");
@@ -198,5 +316,44 @@ mod tests {
         }
         // Uniform over the area: a quarter within half the radius.
         assert!((inner as f64 / n as f64 - 0.25).abs() < 0.01);
+    }
+
+    #[test]
+    fn divergent_beams_fill_their_cone_uniformly_in_solid_angle() {
+        // Half-angle 30 degrees: every direction within it, the cosine uniform on
+        // [cos 30, 1] (mean (1 + cos 30) / 2, standard deviation (1 - cos 30) / sqrt 12).
+        let mut rng = Rng::new(3, 0, 0);
+        let beam = Source::parse("beam:0,0,0:0,1,0:0:30").unwrap();
+        let c30 = 30f64.to_radians().cos();
+        let n = 100_000;
+        let mut sum = 0.0;
+        for _ in 0..n {
+            let s = beam.sample(&mut rng);
+            let c = s.direction.y;
+            assert!(c >= c30 - 1e-12 && s.direction.dot(s.polarization).abs() < 1e-12);
+            sum += c;
+        }
+        let sigma = (1.0 - c30) / 12f64.sqrt() / (n as f64).sqrt();
+        assert!((sum / n as f64 - (1.0 + c30) / 2.0).abs() < 4.0 * sigma);
+    }
+
+    #[test]
+    fn sphere_sources_start_on_the_sphere_along_its_normal() {
+        let mut rng = Rng::new(4, 0, 0);
+        let centre = V::new(1.0, -2.0, 3.0);
+        for (spec, sign) in [("sphere:1,-2,3:5:out", 1.0), ("sphere:1,-2,3:5:in", -1.0)] {
+            let source = Source::parse(spec).unwrap();
+            let n = 50_000;
+            let mut above = 0;
+            for _ in 0..n {
+                let s = source.sample(&mut rng);
+                let r = s.position - centre;
+                assert!((r.length() - 5.0).abs() < 1e-12);
+                assert!((s.direction - r * (sign / 5.0)).length() < 1e-12);
+                above += usize::from(r.z > 2.5);
+            }
+            // Uniform over the area: a quarter of it lies above z = R / 2.
+            assert!((above as f64 / n as f64 - 0.25).abs() < 0.01);
+        }
     }
 }

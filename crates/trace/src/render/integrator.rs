@@ -25,6 +25,8 @@ use super::optics::{
 use super::spec::{Light, Material, MediumOptics};
 use super::Renderer;
 use crate::cpu::Hit;
+use hytrace_csg::V3;
+use hytrace_foundry::UNSET;
 
 /// Volume rendering compiled in: none.
 pub const NO_VOLUMES: u8 = 0;
@@ -57,6 +59,15 @@ fn f32_ray(origin: DVec3, dir: DVec3) -> Ray<f64> {
     Ray::from_f64(f32_exactly(origin), f32_exactly(dir))
 }
 
+/// A see-through surface a ray has just passed (see [`Renderer::trace_after`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Crossed {
+    /// Where the ray crossed it.
+    pub point: DVec3,
+    /// Its outward normal there.
+    pub normal: DVec3,
+}
+
 fn uniforms2(rng: &mut Rng) -> [f64; 2] {
     [rng.next_f64(), rng.next_f64()]
 }
@@ -65,6 +76,37 @@ impl Renderer<'_> {
     /// The first surface crossing along the ray (f32, as the GPU traces).
     pub(super) fn trace(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit<f32>> {
         self.scene.trace(&f32_ray(origin, dir), 0.0, tmax as f32)
+    }
+
+    /// The first surface along a ray from `origin` that has just passed the see-through
+    /// surface `crossed` (if any), and the origin it is measured from. A ray that finds
+    /// itself inside an instance drawn solid (located as the navigator locates the f32
+    /// origin) entered it where its face coincides with the surface passed: that instance
+    /// is hit there, at distance 0 from the crossing point (returned as the origin), with
+    /// the crossed surface's normal. Otherwise [`Self::trace`] from `origin`.
+    pub(super) fn trace_after(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        crossed: Option<Crossed>,
+    ) -> (DVec3, Option<Hit<f32>>) {
+        if let Some(c) = crossed {
+            let located = self
+                .scene
+                .locate_point(<[f64; 3]>::from(origin).map(|x| f64::from(x as f32)));
+            if let Some(&cover) = located.and_then(|l| self.covering.get(l as usize)) {
+                if cover != UNSET {
+                    let hit = Hit {
+                        t: 0.0,
+                        normal: V3::from_f64(c.normal.to_array()),
+                        instance: cover,
+                        prim: UNSET,
+                    };
+                    return (c.point, Some(hit));
+                }
+            }
+        }
+        (origin, self.trace(origin, dir, f64::INFINITY))
     }
 
     /// The fraction of light arriving at `origin` along `-dir` from distance `dist`
@@ -99,7 +141,7 @@ impl Renderer<'_> {
             // An opaque surface blocks the light: no media are drawn for this piece (the GPU
             // draws none either, so both keep the same random streams).
             let see_through =
-                |m: Material| matches!(m, Material::Transparent | Material::Dielectric { .. });
+                |m: Material| m.is_see_through() || matches!(m, Material::Dielectric { .. });
             if hit.is_some_and(|h| !see_through(self.material(&h))) {
                 return Ok(0.0);
             }
@@ -113,7 +155,7 @@ impl Renderer<'_> {
             let p = o + t * dir;
             let n = DVec3::from(hit.normal.to_f64());
             match self.material(&hit) {
-                Material::Transparent => {}
+                Material::Transparent | Material::Shell { .. } => {}
                 Material::Dielectric {
                     ior,
                     absorption_length,
@@ -207,8 +249,10 @@ impl Renderer<'_> {
         // Absorption length of the dielectric the path is inside, if any.
         let mut inside: Option<f64> = None;
         let mut events = 0;
+        let mut crossed = None;
         while events <= self.settings.max_bounces {
-            let hit = self.trace(origin, dir, f64::INFINITY);
+            let (from, hit) = self.trace_after(origin, dir, crossed.take());
+            origin = from;
             let t_end = hit.map_or(f64::INFINITY, |h| h.t as f64);
             if VM != NO_VOLUMES {
                 if let Some(media) = &self.media {
@@ -265,6 +309,22 @@ impl Renderer<'_> {
                 }
                 Material::Transparent => {
                     origin = spawn(p, n, dir);
+                    crossed = Some(Crossed {
+                        point: p,
+                        normal: n,
+                    });
+                    events += 1;
+                    continue;
+                }
+                Material::Shell { colour, opacity } => {
+                    // Unlit: the colour by the cosine to the view, then the light behind.
+                    radiance += beta * opacity * dir.dot(n).abs() * DVec3::from(colour);
+                    beta *= 1.0 - opacity;
+                    origin = spawn(p, n, dir);
+                    crossed = Some(Crossed {
+                        point: p,
+                        normal: n,
+                    });
                     events += 1;
                     continue;
                 }

@@ -9,6 +9,7 @@
 //! sample per pixel the ray goes through the pixel centre.
 
 pub mod camera;
+pub mod detector;
 mod integrator;
 mod media;
 pub mod optics;
@@ -32,6 +33,7 @@ use integrator::{EMISSION_ABSORPTION, MULTIPLE_SCATTERING, NO_VOLUMES, SINGLE_SC
 use media::Media;
 pub use output::{write_image, Image};
 use spec::{Light, Material, MediumOptics, RenderSettings, RenderSpec, View, VolumeMode};
+pub use views::id_colour;
 
 /// Why a build without the `media` feature refuses a render with media.
 const NO_MEDIA_BUILD: &str =
@@ -145,6 +147,47 @@ fn solid_material(f: &Foundry, spec: &RenderSpec, solid: usize) -> Material {
         .unwrap_or(spec::DEFAULT_MATERIAL)
 }
 
+/// [`Renderer::covering`]: per instance, the outermost of itself and its ancestors drawn
+/// solid; all `UNSET` in a flat scene.
+fn covering_instances(f: &Foundry, materials: &[Material]) -> Vec<u32> {
+    let mut covering = vec![UNSET; f.inst.len()];
+    if f.inst_mother.iter().all(|m| m.index == UNSET) {
+        return covering;
+    }
+    // Mothers come before their daughters.
+    for i in 0..f.inst.len() {
+        let mother = f.inst_mother[i].index;
+        covering[i] = match mother {
+            UNSET => UNSET,
+            m => covering[m as usize],
+        };
+        if covering[i] == UNSET && !materials[i].is_see_through() {
+            covering[i] = i as u32;
+        }
+    }
+    covering
+}
+
+/// How many times the median diagonal of a detector view's solid volumes a volume may span
+/// and still count in the automatic camera's framing.
+const FRAMING_OUTLIER: f64 = 20.0;
+
+/// The median box diagonal of the instances `keep` accepts (infinite without any).
+fn median_diagonal(scene: &CpuScene<f32>, keep: impl Fn(usize) -> bool) -> f64 {
+    let mut d: Vec<f64> = (0..scene.instances())
+        .filter(|&i| keep(i))
+        .map(|i| {
+            let [lo, hi] = scene.instance_bounds(i);
+            (DVec3::from(hi) - DVec3::from(lo)).length()
+        })
+        .collect();
+    if d.is_empty() {
+        return f64::INFINITY;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
 /// A scene prepared for rendering with one set of effects.
 pub struct Renderer<'a> {
     pub(crate) scene: &'a CpuScene<f32>,
@@ -152,6 +195,11 @@ pub struct Renderer<'a> {
     pub(crate) camera: Camera,
     /// Material, solid and boundary of each instance.
     pub(crate) instance_material: Vec<Material>,
+    /// Per instance of a hierarchical scene: the outermost instance among itself and its
+    /// ancestors that is drawn solid (not see-through), `UNSET` for none. A ray that has
+    /// just passed a see-through surface and finds itself inside such an instance entered
+    /// it at that surface (their faces coincide): it shows that instance there.
+    pub(crate) covering: Vec<u32>,
     pub(crate) instance_solid: Vec<u32>,
     pub(crate) instance_boundary: Vec<u32>,
     /// Point and directional lights (the environment is kept apart).
@@ -206,14 +254,39 @@ impl<'a> Renderer<'a> {
             cfg!(feature = "media") || effects.volumes.is_none(),
             "{NO_MEDIA_BUILD}"
         );
+        ensure!(
+            spec.instance_materials.is_empty() || spec.instance_materials.len() == f.inst.len(),
+            "{} instance materials for {} instances",
+            spec.instance_materials.len(),
+            f.inst.len()
+        );
+        // A solid made transparent wins over a detector view's material.
         let instance_material: Vec<Material> = f
             .inst
             .iter()
-            .map(|i| solid_material(f, spec, i.solid as usize))
+            .enumerate()
+            .map(|(k, i)| match spec.instance_materials.get(k) {
+                Some(&m) if solid_material(f, spec, i.solid as usize) != Material::Transparent => m,
+                _ => solid_material(f, spec, i.solid as usize),
+            })
             .collect();
-        // What is seen: transparent instances (a GDML world) do not count.
+        let covering = covering_instances(f, &instance_material);
+        // What is seen: the surfaces drawn solid (a detector view's contents), else every
+        // surface drawn (its shells too); transparent instances (a GDML world) never count.
+        // A detector view leaves out of the framing what is far larger than its typical
+        // volume (beam pipes tens of metres long around a detector of a few).
+        let typical = if spec.instance_materials.is_empty() {
+            f64::INFINITY
+        } else {
+            FRAMING_OUTLIER * median_diagonal(scene, |i| !instance_material[i].is_see_through())
+        };
+        let diagonal = |i: usize| {
+            let [lo, hi] = scene.instance_bounds(i);
+            (DVec3::from(hi) - DVec3::from(lo)).length()
+        };
         let bounds = scene
-            .bounds_of(|i| instance_material[i] != Material::Transparent)
+            .bounds_of(|i| !instance_material[i].is_see_through() && diagonal(i) <= typical)
+            .or_else(|| scene.bounds_of(|i| instance_material[i] != Material::Transparent))
             .or_else(|| scene.world_bounds());
         let camera_spec = spec.camera.clone().unwrap_or_else(|| auto_camera(bounds));
         let camera = Camera::new(&camera_spec, settings.size)?;
@@ -227,7 +300,7 @@ impl<'a> Renderer<'a> {
         }
         let see_through = instance_material
             .iter()
-            .any(|m| matches!(m, Material::Transparent | Material::Dielectric { .. }));
+            .any(|m| m.is_see_through() || matches!(m, Material::Dielectric { .. }));
         let media = match effects.volumes {
             None => None,
             Some(mode) => {
@@ -274,6 +347,7 @@ impl<'a> Renderer<'a> {
             media,
             camera,
             instance_material,
+            covering,
             instance_solid: f.inst.iter().map(|i| i.solid).collect(),
             instance_boundary: f.inst.iter().map(|i| i.boundary).collect(),
             lights,

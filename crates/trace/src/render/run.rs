@@ -7,6 +7,7 @@ use clap::Args;
 use hytrace_foundry::Foundry;
 use hytrace_volume::CacheStats;
 
+use super::detector::{ColorBy, DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
@@ -96,12 +97,54 @@ pub struct RenderSettings {
     /// enclosures (`hytrace info` lists the solids).
     #[arg(long)]
     pub transparent: Vec<String>,
+    #[command(flatten)]
+    pub detector: DetectorArgs,
+}
+
+/// The options of detector views (GDML and other hierarchical scenes).
+#[derive(Args, Clone, Debug, Default)]
+#[command(next_help_heading = "GDML detectors (hierarchical scenes only)")]
+pub struct DetectorArgs {
+    /// Draw down to this depth of the placement tree (the world is 0, its daughters 1;
+    /// with --show, the shown volumes are 0), as Geant4's drawing depth [default: all].
+    #[arg(long, value_name = "N")]
+    pub depth: Option<u32>,
+    /// Draw only the volumes whose logical or physical name matches this glob (`*`, `?`;
+    /// case-insensitive) and their contents (repeatable).
+    #[arg(long, value_name = "PATTERN")]
+    pub show: Vec<String>,
+    /// Do not draw the volumes whose logical or physical name matches this glob (their
+    /// daughters still are; repeatable).
+    #[arg(long, value_name = "PATTERN")]
+    pub hide: Vec<String>,
+    /// What the colours tell apart [default: material, with the colours the file gives].
+    /// Every detector view writes its legend beside the image (IMAGE.legend.json).
+    #[arg(long, value_enum, value_name = "KEY")]
+    pub color_by: Option<ColorBy>,
+}
+
+impl DetectorArgs {
+    /// The style these options ask for.
+    pub fn style(&self) -> DetectorStyle {
+        DetectorStyle {
+            depth: self.depth,
+            show: self.show.clone(),
+            hide: self.hide.clone(),
+            color_by: self.color_by,
+        }
+    }
+
+    /// Whether any option is given.
+    pub fn any(&self) -> bool {
+        self.style() != DetectorStyle::default()
+    }
 }
 
 impl RenderSettings {
     /// Sets these settings on the scene's render description, checks that every
-    /// transparent solid exists, and validates the result.
-    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> anyhow::Result<()> {
+    /// transparent solid exists, and validates the result. A hierarchical scene gets its
+    /// detector view, whose legend is returned.
+    pub fn apply(&self, f: &Foundry, spec: &mut RenderSpec) -> anyhow::Result<Option<Legend>> {
         let s = &mut spec.settings;
         s.size = self.size.unwrap_or(s.size);
         s.spp = self.spp.unwrap_or(s.spp);
@@ -117,7 +160,18 @@ impl RenderSettings {
             }
             spec.transparent_solids.push(name.clone());
         }
-        spec.validate().context("render settings")
+        let mut legend = None;
+        if spec.volumes.is_empty() {
+            if self.detector.any() {
+                return Err(DetectorError::NotHierarchical.into());
+            }
+        } else {
+            let view = self.detector.style().apply(f, &spec.volumes)?;
+            spec.instance_materials = view.materials;
+            legend = Some(view.legend);
+        }
+        spec.validate().context("render settings")?;
+        Ok(legend)
     }
 }
 

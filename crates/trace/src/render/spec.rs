@@ -41,6 +41,15 @@ pub enum Material {
     },
     /// Invisible: rays pass through (a GDML world or an air volume).
     Transparent,
+    /// A faint see-through shell (a detector's envelope): it adds `opacity` of its
+    /// unlit `colour` (scaled by the cosine to the view direction) and lets the rest of
+    /// the light through; it casts no shadow.
+    Shell {
+        /// Colour, in [0, 1] per channel.
+        colour: [f64; 3],
+        /// The fraction of the light it stands for, in (0, 1].
+        opacity: f64,
+    },
 }
 
 /// The material of solids that name none.
@@ -74,9 +83,24 @@ impl Material {
                 radiance.iter().all(|v| v.is_finite() && *v >= 0.0),
                 "radiance {radiance:?} must be finite and >= 0"
             ),
+            Material::Shell { colour, opacity } => {
+                ensure!(
+                    unit(colour),
+                    "colour {colour:?}: every channel must be in [0, 1]"
+                );
+                ensure!(
+                    *opacity > 0.0 && *opacity <= 1.0,
+                    "shell opacity must be in (0, 1], got {opacity}"
+                );
+            }
             Material::Transparent => {}
         }
         Ok(())
+    }
+
+    /// Whether rays go on past the surface without stopping (transparent or a shell).
+    pub fn is_see_through(&self) -> bool {
+        matches!(self, Material::Transparent | Material::Shell { .. })
     }
 
     /// Whether the material reflects or refracts specularly.
@@ -329,6 +353,26 @@ pub struct RenderSpec {
     pub settings: RenderSettings,
     /// Solids rendered transparent because the scene says so (a GDML world).
     pub transparent_solids: Vec<String>,
+    /// One material per instance, overriding the solids' (empty: by solid): a detector
+    /// view's styling ([`crate::render::detector`]).
+    pub instance_materials: Vec<Material>,
+    /// What a detector view knows of each placed volume (empty for flat scenes).
+    pub volumes: Vec<VolumeLabel>,
+}
+
+/// The names and file attributes of one placed volume of a hierarchical scene.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VolumeLabel {
+    /// Physical volume name (stripped).
+    pub physical: String,
+    /// Logical volume name (stripped; the solid's name when the scene keeps none).
+    pub logical: String,
+    /// Material name (empty when none).
+    pub material: String,
+    /// Colour the file gives the volume (GDML's auxiliary `Color`), linear RGB.
+    pub colour: Option<[f64; 3]>,
+    /// Visibility the file gives the volume (GDML's auxiliary `Visibility`).
+    pub visible: Option<bool>,
 }
 
 impl RenderSpec {
@@ -343,6 +387,10 @@ impl RenderSpec {
             if !self.materials.contains_key(name) {
                 bail!("solid `{solid}`: unknown material `{name}`");
             }
+        }
+        for (k, m) in self.instance_materials.iter().enumerate() {
+            m.validate()
+                .map_err(|e| e.context(format!("material of instance {k}")))?;
         }
         for (k, l) in self.lights.iter().enumerate() {
             l.validate().map_err(|e| e.context(format!("light {k}")))?;

@@ -176,6 +176,6 @@ pub fn default_render_spec() -> RenderSpec {
         )]
         .into(),
         settings: RenderSettings::default(),
-        transparent_solids: Vec::new(),
+        ..RenderSpec::default()
     }
 }

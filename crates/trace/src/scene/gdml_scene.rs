@@ -18,6 +18,8 @@ use hytrace_foundry::gdml::{read_gdml, strip_name, Gdml, GdmlOptions, SurfaceLin
 use hytrace_foundry::optics::{Boundary, Optics};
 use hytrace_foundry::{Foundry, Transform64, UNSET};
 
+use crate::render::spec::VolumeLabel;
+
 /// Distance within which meshes of solids with no analytic form (twisted solids) follow
 /// the true surface, in mm.
 pub const GDML_MESH_TOLERANCE: f64 = 1e-3;
@@ -90,6 +92,94 @@ pub fn load_gdml_scene_with_surfaces(
     }
     gdml_to_foundry_with_surfaces(&gdml)
         .with_context(|| format!("{}: building the scene", path.display()))
+}
+
+/// Reads a GDML file into a Foundry with the labels of its placed volumes (one per
+/// instance): names, materials, and the colour and visibility its volumes' auxiliary
+/// `Color` and `Visibility` entries give.
+pub fn load_gdml_render_scene(
+    path: &Path,
+    options: &GdmlOptions,
+) -> anyhow::Result<(Foundry, Vec<VolumeLabel>)> {
+    let gdml = read_gdml(path, options)?;
+    for w in &gdml.warnings {
+        eprintln!("warning: skipped {w}");
+    }
+    let (f, surfaces) = gdml_to_foundry_with_surfaces(&gdml)
+        .with_context(|| format!("{}: building the scene", path.display()))?;
+    let mut labels = Vec::with_capacity(surfaces.placed.len());
+    for (pv, lv) in &surfaces.placed {
+        let v = &gdml.volumes[*lv];
+        let (colour, visible) = volume_display(&v.auxiliary)
+            .with_context(|| format!("{}: volume `{}`", path.display(), v.name))?;
+        labels.push(VolumeLabel {
+            physical: strip_name(pv).to_string(),
+            logical: v.name.clone(),
+            material: v
+                .material
+                .map(|m| gdml.materials[m].name.clone())
+                .unwrap_or_default(),
+            colour,
+            visible,
+        });
+    }
+    Ok((f, labels))
+}
+
+/// The colour (linear RGB) and visibility a volume's auxiliary entries give: `Color` (or
+/// `Colour`) as three or four numbers in [0, 1] (sRGB, alpha ignored) or `#RRGGBB`,
+/// `Visibility` (or `Visible`) as true/false/1/0.
+fn volume_display(aux: &[(String, String)]) -> anyhow::Result<(Option<[f64; 3]>, Option<bool>)> {
+    let (mut colour, mut visible) = (None, None);
+    for (kind, value) in aux {
+        match kind.to_ascii_lowercase().as_str() {
+            "color" | "colour" => colour = Some(parse_colour(value)?),
+            "visibility" | "visible" => {
+                visible = Some(match value.trim().to_ascii_lowercase().as_str() {
+                    "true" | "1" | "yes" => true,
+                    "false" | "0" | "no" => false,
+                    other => bail!("auxiliary {kind} `{other}`: expected true or false"),
+                })
+            }
+            _ => {}
+        }
+    }
+    Ok((colour, visible))
+}
+
+/// An sRGB colour as `R G B [A]` (or comma-separated) in [0, 1], or `#RRGGBB`, in linear RGB.
+fn parse_colour(text: &str) -> anyhow::Result<[f64; 3]> {
+    let bad = || {
+        anyhow::anyhow!(
+            "auxiliary Color `{text}`: expected three or four numbers in [0, 1] or #RRGGBB"
+        )
+    };
+    let t = text.trim();
+    let srgb: Vec<f64> = if let Some(hex) = t.strip_prefix('#') {
+        if hex.len() != 6 || !hex.is_ascii() {
+            return Err(bad());
+        }
+        (0..3)
+            .map(|k| u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|v| v as f64 / 255.0))
+            .collect::<Result<_, _>>()
+            .map_err(|_| bad())?
+    } else {
+        t.split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse::<f64>().map_err(|_| bad()))
+            .collect::<anyhow::Result<_>>()?
+    };
+    if !(3..=4).contains(&srgb.len()) || !srgb.iter().all(|v| (0.0..=1.0).contains(v)) {
+        return Err(bad());
+    }
+    Ok(std::array::from_fn(|k| {
+        let e = srgb[k];
+        if e <= 0.04045 {
+            e / 12.92
+        } else {
+            ((e + 0.055) / 1.055).powf(2.4)
+        }
+    }))
 }
 
 /// The border and skin surfaces of a GDML file, by physical volume name and logical volume.

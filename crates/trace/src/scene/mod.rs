@@ -12,6 +12,7 @@ use anyhow::{bail, Context};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 
+use crate::render::detector::{foundry_labels, DetectorStyle};
 use crate::render::spec::RenderSpec;
 
 pub use default::{default_render_spec, default_scene};
@@ -64,8 +65,9 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> anyhow::Result<F
 
 /// Loads a scene as [`load_scene`] does, with its render description: a scene file's own
 /// (camera, materials, lights, media, settings), the default scene's, or for other scenes
-/// the defaults (an automatic camera, grey diffuse solids, default lights), with a GDML
-/// world (the instances without a mother) rendered transparent so the detector shows.
+/// the defaults (an automatic camera, grey diffuse solids, default lights). A hierarchical
+/// scene (GDML) gets the default detector view ([`DetectorStyle`]): the world invisible,
+/// envelopes as faint shells, their contents solid, coloured by material.
 pub fn load_render_scene(
     arg: Option<&Path>,
     options: &GdmlOptions,
@@ -77,10 +79,26 @@ pub fn load_render_scene(
     if let Some(p) = arg.filter(|p| p.extension().is_some_and(|e| e == "toml") && !p.is_dir()) {
         return load_toml_render_scene(p);
     }
-    let f = load_scene(arg, options)?;
-    let spec = RenderSpec {
+    let is_gdml = arg.is_some_and(|p| {
+        !p.is_dir()
+            && p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("gdml"))
+    });
+    let (f, volumes) = match arg {
+        Some(p) if is_gdml => gdml_scene::load_gdml_render_scene(p, options)?,
+        _ => {
+            let f = load_scene(arg, options)?;
+            let labels = foundry_labels(&f);
+            (f, labels)
+        }
+    };
+    let mut spec = RenderSpec {
         transparent_solids: gdml_scene::world_solids(&f),
         ..RenderSpec::default()
     };
+    if !volumes.is_empty() {
+        spec.instance_materials = DetectorStyle::default().apply(&f, &volumes)?.materials;
+        spec.volumes = volumes;
+    }
     Ok((f, spec))
 }

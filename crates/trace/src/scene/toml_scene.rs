@@ -215,7 +215,7 @@ fn render_spec(file: &SceneFile, source: &str) -> anyhow::Result<RenderSpec> {
         lights: file.lights.clone(),
         media,
         settings: file.render.clone().unwrap_or_default(),
-        transparent_solids: Vec::new(),
+        ..RenderSpec::default()
     };
     spec.validate().with_context(|| source.to_string())?;
     Ok(spec)

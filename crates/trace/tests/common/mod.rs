@@ -453,3 +453,21 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
     }
     rays
 }
+
+/// Every `.gdml` file under `dir`, sorted.
+pub fn gdml_files(dir: &Path) -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "gdml") {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(dir, &mut files);
+    files.sort();
+    files
+}

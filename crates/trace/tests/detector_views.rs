@@ -1,0 +1,304 @@
+//! Detector views of GDML files (`render::detector`): what the default view, `--depth`,
+//! `--show`, `--hide` and the file's colours draw, checked against the placement tree;
+//! every file of the shared corpus showing its volumes; and coincident faces (a daughter
+//! sharing faces with its mother, abutting daughters) rendered as their twin with the faces
+//! 1e-3 mm apart is, with no black pixel, on the CPU and on the GPU.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::gdml_files;
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::Foundry;
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::gpu::{GpuContext, GpuRenderer};
+use hytrace_trace::render::detector::{ColorBy, DetectorError, DetectorStyle};
+use hytrace_trace::render::id_colour;
+use hytrace_trace::render::spec::{Material, RenderSpec, View};
+use hytrace_trace::render::{Image, Renderer};
+use hytrace_trace::scene::load_render_scene;
+
+/// A world holding an envelope (a 100 mm box) holding box A, which shares its +x and +z
+/// faces with the envelope, and box B, which shares the envelope's +z face and abuts A at
+/// x = 10 (B is red by the file's colour). `gap` shrinks A and B by that much on every
+/// side: 0 for coincident faces, 1e-3 for the separated twin.
+fn nested_boxes(gap: f64) -> String {
+    let (ax, bx) = (20.0 - gap, 10.0 - gap);
+    let az = 20.0 - gap;
+    format!(
+        r#"<?xml version="1.0"?>
+<gdml>
+  <materials>
+    <material name="Air" Z="7"><D value="0.0012"/><atom value="14"/></material>
+    <material name="Lead" Z="82"><D value="11.3"/><atom value="207"/></material>
+    <material name="Steel" Z="26"><D value="7.9"/><atom value="56"/></material>
+  </materials>
+  <solids>
+    <box name="WorldBox" x="400" y="400" z="400" lunit="mm"/>
+    <box name="EnvelopeBox" x="100" y="100" z="100" lunit="mm"/>
+    <box name="ABox" x="{}" y="40" z="{}" lunit="mm"/>
+    <box name="BBox" x="{}" y="40" z="{}" lunit="mm"/>
+  </solids>
+  <structure>
+    <volume name="BoxA"><materialref ref="Lead"/><solidref ref="ABox"/></volume>
+    <volume name="BoxB"><materialref ref="Steel"/><solidref ref="BBox"/>
+      <auxiliary auxtype="Color" auxvalue="1 0 0 1"/></volume>
+    <volume name="Envelope"><materialref ref="Air"/><solidref ref="EnvelopeBox"/>
+      <physvol name="A_pv"><volumeref ref="BoxA"/><position name="pa" x="30" y="0" z="30" unit="mm"/></physvol>
+      <physvol name="B_pv"><volumeref ref="BoxB"/><position name="pb" x="0" y="0" z="30" unit="mm"/></physvol>
+    </volume>
+    <volume name="World"><materialref ref="Air"/><solidref ref="WorldBox"/>
+      <physvol name="Envelope_pv"><volumeref ref="Envelope"/></physvol>
+    </volume>
+  </structure>
+  <setup name="Default" version="1.0"><world ref="World"/></setup>
+</gdml>
+"#,
+        2.0 * ax,
+        2.0 * az,
+        2.0 * bx,
+        2.0 * az
+    )
+}
+
+/// Writes `text` as a GDML file in `dir` and loads it for rendering.
+fn load_text(dir: &Path, name: &str, text: &str) -> (Foundry, RenderSpec) {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    load_render_scene(Some(&path), &GdmlOptions::default()).unwrap()
+}
+
+/// Instances in placement order: World, Envelope, A, B.
+const WORLD: usize = 0;
+const ENVELOPE: usize = 1;
+const A: usize = 2;
+const B: usize = 3;
+
+fn kinds(materials: &[Material]) -> Vec<&'static str> {
+    materials
+        .iter()
+        .map(|m| match m {
+            Material::Transparent => "hidden",
+            Material::Shell { .. } => "shell",
+            Material::Diffuse { .. } => "solid",
+            _ => "other",
+        })
+        .collect()
+}
+
+#[test]
+fn depth_show_hide_and_file_colours_follow_the_placement_tree() {
+    let dir = tempfile::tempdir().unwrap();
+    let (f, spec) = load_text(dir.path(), "boxes.gdml", &nested_boxes(0.0));
+    let labels = &spec.volumes;
+    assert_eq!(labels.len(), 4);
+    assert_eq!([A, B].map(|i| labels[i].logical.as_str()), ["BoxA", "BoxB"]);
+    assert_eq!(labels[A].material, "Lead");
+    let style = |s: DetectorStyle| kinds(&s.apply(&f, labels).unwrap().materials);
+    // The default: the world invisible, the envelope a shell, its contents solid.
+    assert_eq!(
+        style(DetectorStyle::default()),
+        ["hidden", "shell", "solid", "solid"]
+    );
+    assert_eq!(
+        kinds(&spec.instance_materials),
+        style(DetectorStyle::default())
+    );
+    // Depth 1: the envelope, drawn solid since nothing inside it is drawn.
+    let depth1 = DetectorStyle {
+        depth: Some(1),
+        ..Default::default()
+    };
+    assert_eq!(style(depth1), ["hidden", "solid", "hidden", "hidden"]);
+    // --show by physical or logical name, case-insensitive globs.
+    for pattern in ["a_PV", "boxa", "*A"] {
+        let show = DetectorStyle {
+            show: vec![pattern.into()],
+            ..Default::default()
+        };
+        assert_eq!(
+            style(show),
+            ["hidden", "hidden", "solid", "hidden"],
+            "{pattern}"
+        );
+    }
+    let show_envelope = DetectorStyle {
+        show: vec!["envelope".into()],
+        depth: Some(0),
+        ..Default::default()
+    };
+    assert_eq!(
+        style(show_envelope),
+        ["hidden", "solid", "hidden", "hidden"]
+    );
+    // --hide leaves the daughters drawn: a hidden envelope no longer holds a shell.
+    let hide = DetectorStyle {
+        hide: vec!["ENV*".into()],
+        ..Default::default()
+    };
+    assert_eq!(style(hide), ["hidden", "hidden", "solid", "solid"]);
+    // A pattern matching nothing names the nearest volumes.
+    let typo = DetectorStyle {
+        show: vec!["Envelop".into()],
+        ..Default::default()
+    };
+    match typo.apply(&f, labels) {
+        Err(DetectorError::NoMatch { suggestions, .. }) => {
+            assert!(
+                suggestions.iter().any(|s| s == "Envelope"),
+                "{suggestions:?}"
+            )
+        }
+        other => panic!("{other:?}"),
+    }
+    // The file's colour (sRGB 1 0 0 is linear 1 0 0) unless a colouring is asked for.
+    let view = DetectorStyle::default().apply(&f, labels).unwrap();
+    assert_eq!(
+        view.materials[B],
+        Material::Diffuse {
+            colour: [1.0, 0.0, 0.0]
+        }
+    );
+    let by_volume = DetectorStyle {
+        color_by: Some(ColorBy::Volume),
+        ..Default::default()
+    };
+    let view = by_volume.apply(&f, labels).unwrap();
+    let names: Vec<&str> = view
+        .legend
+        .entries
+        .iter()
+        .map(|e| e.name.as_str())
+        .collect();
+    assert_eq!(names, ["BoxA", "BoxB", "Envelope"]);
+    assert_ne!(view.materials[A], view.materials[B]);
+    assert_eq!(view.materials[WORLD], Material::Transparent);
+    let Material::Shell { colour, .. } = view.materials[ENVELOPE] else {
+        panic!("{:?}", view.materials[ENVELOPE]);
+    };
+    assert_eq!(colour, view.legend.entries[2].colour);
+}
+
+#[test]
+fn bad_auxiliary_colours_are_refused_naming_the_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = nested_boxes(0.0).replace("auxvalue=\"1 0 0 1\"", "auxvalue=\"red-ish\"");
+    let path = dir.path().join("bad.gdml");
+    std::fs::write(&path, text).unwrap();
+    let err = load_render_scene(Some(&path), &GdmlOptions::default()).unwrap_err();
+    let msg = format!("{err:#}");
+    assert!(msg.contains("BoxB") && msg.contains("red-ish"), "{msg}");
+}
+
+/// Renders `spec` of `f` on the CPU.
+fn render_cpu(f: &Foundry, spec: &RenderSpec) -> Image {
+    let scene = CpuScene::<f32>::new(f).unwrap();
+    Renderer::new(&scene, f, spec)
+        .unwrap()
+        .render(&|_| {})
+        .unwrap()
+}
+
+/// Renders `spec` of `f` on the GPU; `None` without one.
+fn render_gpu(f: &Foundry, spec: &RenderSpec) -> Option<Image> {
+    let ctx = GpuContext::for_tests()?;
+    let scene = CpuScene::<f32>::new(f).unwrap();
+    let renderer = Renderer::new(&scene, f, spec).unwrap();
+    let gpu = GpuRenderer::new(&ctx, &renderer).unwrap();
+    let mut run = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
+    assert!(run.cut_short.is_empty(), "pixels past the loop budget");
+    run.redo_cut_short(&renderer).unwrap();
+    Some(run.image)
+}
+
+fn black(p: &[f32; 3]) -> bool {
+    p.iter().all(|&c| c <= 1e-4)
+}
+
+#[test]
+fn coincident_faces_render_as_their_separated_twin_without_black_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let (f, mut touching) = load_text(dir.path(), "touching.gdml", &nested_boxes(0.0));
+    let (g, mut apart) = load_text(dir.path(), "apart.gdml", &nested_boxes(1e-3));
+    for view in [View::Shaded, View::Instance] {
+        for spec in [&mut touching, &mut apart] {
+            spec.settings.size = [64, 48];
+            spec.settings.spp = 1;
+            spec.settings.view = view;
+        }
+        let (a, b) = (render_cpu(&f, &touching), render_cpu(&g, &apart));
+        let mut gpu = vec![("cpu", a.clone())];
+        gpu.extend(render_gpu(&f, &touching).map(|i| ("gpu", i)));
+        for (side, image) in &gpu {
+            let mut differ = 0;
+            for (k, (p, q)) in image.pixels.iter().zip(&b.pixels).enumerate() {
+                let (i, j) = (k % 64, k / 64);
+                assert!(
+                    !black(p) || black(q),
+                    "{view:?} {side}: pixel ({i}, {j}) black, {q:?} with the faces apart"
+                );
+                if (0..3).any(|c| (p[c] - q[c]).abs() > 0.02) {
+                    differ += 1;
+                }
+            }
+            // The same picture but where a silhouette moved by 1e-3 mm.
+            assert!(
+                differ * 100 <= image.pixels.len(),
+                "{view:?} {side}: {differ} pixels differ from the twin"
+            );
+        }
+        // Both solid boxes show, through the envelope's coincident faces.
+        if view == View::Instance {
+            for i in [A as u32, B as u32] {
+                let c = id_colour(i).as_vec3().to_array();
+                assert!(a.pixels.contains(&c), "instance {i} not visible");
+            }
+        }
+    }
+}
+
+fn corpus() -> PathBuf {
+    std::env::var_os("HYTRACE_GDML_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/gdml"))
+}
+
+#[test]
+fn every_corpus_file_shows_more_than_one_volume_when_it_places_several() {
+    let dir = corpus();
+    let files = gdml_files(&dir);
+    assert!(!files.is_empty(), "{}: no GDML files", dir.display());
+    let mut failed = Vec::new();
+    for path in &files {
+        let name = path.strip_prefix(&dir).unwrap().display().to_string();
+        let (f, mut spec) = load_render_scene(Some(path), &GdmlOptions::default())
+            .unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        spec.settings.size = [128, 96];
+        spec.settings.spp = 1;
+        spec.settings.view = View::Instance;
+        let image = render_cpu(&f, &spec);
+        // The instance view colours each placement by its index: map colours back. At
+        // 128x96, the smallest size at which cmse.gdml's detector (20 m along a 900 m beam
+        // line) shows its parts.
+        let colours: std::collections::HashMap<[u32; 3], u32> = (0..f.inst.len() as u32)
+            .map(|i| (id_colour(i).as_vec3().to_array().map(f32::to_bits), i))
+            .collect();
+        let mut seen: Vec<u32> = image
+            .pixels
+            .iter()
+            .filter_map(|p| colours.get(&p.map(f32::to_bits)).copied())
+            .collect();
+        seen.sort_unstable();
+        seen.dedup();
+        let placed = f.inst.len() - 1;
+        eprintln!(
+            "{name:<60} {placed:>6} placed volumes, {:>4} visible",
+            seen.len()
+        );
+        if placed > 1 && seen.len() < 2 {
+            failed.push(name);
+        }
+    }
+    assert!(failed.is_empty(), "show one volume or none: {failed:?}");
+}
