@@ -80,9 +80,7 @@ impl Wavelength {
         // A number is checked where the run starts, as one given through the library.
         match text.trim().parse::<f64>() {
             Ok(nm) => Ok(Wavelength::Fixed(nm)),
-            Err(_) => Err(bad(
-                "not a number of nanometres or MATERIAL:PROPERTY".into(),
-            )),
+            Err(_) => Err(bad("not a number of nanometres or MATERIAL:PROPERTY".into())),
         }
     }
 }
