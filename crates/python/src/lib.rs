@@ -170,16 +170,11 @@ impl Scene {
         backend: &str,
         first: u32,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let options = EstimatorOptions {
-            estimator: choice("estimator", estimator)?,
-            step,
-            spp,
-            seed,
-            density_scale,
-            filter: choice("filter", filter)?,
-            level,
-            global_majorant,
-        };
+        let options = estimator_options(
+            (estimator, filter),
+            (step, spp, seed, density_scale),
+            (level, global_majorant),
+        )?;
         let precision: Precision = choice("precision", precision)?;
         let backend: Backend = choice("backend", backend)?;
         let rows = float_rows::<8>(rays, "rays", RAY_COLUMNS)?;
@@ -237,6 +232,7 @@ impl Scene {
             max_bounces,
             step,
             seed,
+            memory: None,
             transparent,
             cutaway: Default::default(),
             detector: Default::default(),
@@ -324,6 +320,26 @@ struct Volume {
     spec: String,
     grid: Represented,
     memory: u64,
+}
+
+/// The estimator options of a `transmittance` method's keywords (the commands' flags):
+/// the estimator and filter names, then step, spp, seed and density scale, then the
+/// majorants' level and whether one global majorant is used.
+fn estimator_options(
+    (estimator, filter): (&str, &str),
+    (step, spp, seed, density_scale): (f64, u32, u32, f64),
+    (level, global_majorant): (usize, bool),
+) -> PyResult<EstimatorOptions> {
+    Ok(EstimatorOptions {
+        estimator: choice("estimator", estimator)?,
+        step,
+        spp,
+        seed,
+        density_scale,
+        filter: choice("filter", filter)?,
+        level,
+        global_majorant,
+    })
 }
 
 /// Whether `spec` names a volume file (`.nvdb`, `.vdb`) rather than a procedural grid.
@@ -439,16 +455,11 @@ impl Volume {
         global_majorant: bool,
         backend: &str,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let options = EstimatorOptions {
-            estimator: choice("estimator", estimator)?,
-            step,
-            spp,
-            seed,
-            density_scale,
-            filter: choice("filter", filter)?,
-            level,
-            global_majorant,
-        };
+        let options = estimator_options(
+            (estimator, filter),
+            (step, spp, seed, density_scale),
+            (level, global_majorant),
+        )?;
         let backend: volume::VolumeBackend = choice("backend", backend)?;
         let rows = float_rows::<8>(rays, "rays", RAY_COLUMNS)?;
         let rows = rows.rows();

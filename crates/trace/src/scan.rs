@@ -745,7 +745,10 @@ fn gpu_transmittance(
     let cpu = CpuScene::<f32>::new(f)?;
     let media = SceneMedia::new(&cpu, f, params)?;
     let volumes = (0..media.medium_count() as u32)
-        .map(|m| GpuVolume::new(&ctx, media.grid(m)).with_context(|| format!("medium {m}")))
+        .map(|m| {
+            let grid = media.bricked_grid(m)?;
+            GpuVolume::new(&ctx, grid).with_context(|| format!("medium {m}"))
+        })
         .collect::<crate::Result<Vec<_>>>()?;
     let open_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();

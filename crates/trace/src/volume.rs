@@ -487,10 +487,29 @@ fn gpu_store_transmittances(
 ) -> crate::Result<TransmittanceRun> {
     let t0 = Instant::now();
     let mut volume = GpuStreamedVolume::new(&ctx, store, memory)?;
+    let repr = "brick store (16-bit codes streamed through a brick pool)".to_string();
+    let mut run = gpu_run(&ctx, t0, repr, rays, |rays| {
+        volume.transmittance(&ctx, rays, &args.params())
+    })?;
+    if let Some(info) = &mut run.gpu {
+        info.stream = Some(volume.stats());
+    }
+    Ok(run)
+}
+
+/// The run of a GPU volume set up since `t0` (`repr` names what it traces): `trace` on the
+/// world form of `rays`, timed, with a line on stderr for rays redone on the CPU.
+fn gpu_run(
+    ctx: &GpuContext,
+    t0: Instant,
+    repr: String,
+    rays: &[RayRow],
+    trace: impl FnOnce(&[Ray]) -> crate::Result<(Vec<Estimate>, GpuTimes)>,
+) -> crate::Result<TransmittanceRun> {
     let setup_s = t0.elapsed().as_secs_f64();
     let rays = world_rays(rays);
     let t1 = Instant::now();
-    let (estimates, times) = volume.transmittance(&ctx, &rays, &args.params())?;
+    let (estimates, times) = trace(&rays)?;
     warn_redone(&ctx.describe(), &times, rays.len(), "rays");
     Ok(TransmittanceRun {
         estimates,
@@ -498,10 +517,10 @@ fn gpu_store_transmittances(
         trace_s: t1.elapsed().as_secs_f64(),
         gpu: Some(GpuVolumeInfo {
             adapter: ctx.describe(),
-            repr: "brick store (16-bit codes streamed through a brick pool)".to_string(),
+            repr,
             setup_s,
             times,
-            stream: Some(volume.stats()),
+            stream: None,
         }),
     })
 }
@@ -545,22 +564,8 @@ fn gpu_transmittances(
             )
         }
     };
-    let setup_s = t0.elapsed().as_secs_f64();
-    let rays = world_rays(rays);
-    let t1 = Instant::now();
-    let (estimates, times) = volume.transmittance(&ctx, &rays, &args.params())?;
-    warn_redone(&ctx.describe(), &times, rays.len(), "rays");
-    Ok(TransmittanceRun {
-        estimates,
-        mips_s: 0.0,
-        trace_s: t1.elapsed().as_secs_f64(),
-        gpu: Some(GpuVolumeInfo {
-            adapter: ctx.describe(),
-            repr,
-            setup_s,
-            times,
-            stream: None,
-        }),
+    gpu_run(&ctx, t0, repr, rays, |rays| {
+        volume.transmittance(&ctx, rays, &args.params())
     })
 }
 

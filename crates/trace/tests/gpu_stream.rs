@@ -60,6 +60,16 @@ fn store_dir(dir: &Path) -> PathBuf {
     out
 }
 
+/// The GPU (`None` where `GpuContext::for_tests` skips), a temporary folder and the test
+/// store converted into it and opened with a 1 GiB cache.
+fn gpu_and_store() -> Option<(GpuContext, tempfile::TempDir, PathBuf, BrickStore)> {
+    let ctx = GpuContext::for_tests()?;
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = store_dir(tmp.path());
+    let store = BrickStore::open(&dir, 1 << 30).unwrap();
+    Some((ctx, tmp, dir, store))
+}
+
 /// Rays from outside the volume through random points of it, unit directions.
 fn rays(count: usize) -> Vec<Ray> {
     let mut rng = Rng::new(9, 0, 0);
@@ -98,12 +108,9 @@ fn bits(e: &[Estimate]) -> Vec<u64> {
 
 #[test]
 fn a_pool_smaller_than_the_store_doubles_evicts_defers_and_answers_bit_for_bit() {
-    let Some(ctx) = GpuContext::for_tests() else {
+    let Some((ctx, _tmp, _, store)) = gpu_and_store() else {
         return;
     };
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = store_dir(tmp.path());
-    let store = BrickStore::open(&dir, 1 << 30).unwrap();
     let kept = store.meta().kept_bricks;
     assert!(kept > SUPERCHUNK_BRICKS as u64, "{kept} bricks kept");
     let least = least_budget(&ctx, &store);
@@ -197,12 +204,9 @@ impl VoxelGrid for Recording<'_> {
 
 #[test]
 fn the_request_buffer_asks_for_the_bricks_the_cpu_twin_reads() {
-    let Some(ctx) = GpuContext::for_tests() else {
+    let Some((ctx, _tmp, _, store)) = gpu_and_store() else {
         return;
     };
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = store_dir(tmp.path());
-    let store = BrickStore::open(&dir, 1 << 30).unwrap();
     let rays = rays(200);
     let p = params(Estimator::Exact, Filter::Trilinear);
     // A pool holding the whole store: nothing is evicted, so what is resident after the
@@ -234,12 +238,9 @@ fn the_request_buffer_asks_for_the_bricks_the_cpu_twin_reads() {
 
 #[test]
 fn a_store_truncated_while_open_is_an_error_naming_its_file() {
-    let Some(ctx) = GpuContext::for_tests() else {
+    let Some((ctx, _tmp, dir, store)) = gpu_and_store() else {
         return;
     };
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = store_dir(tmp.path());
-    let store = BrickStore::open(&dir, 1 << 30).unwrap();
     let mut pool = GpuStreamedVolume::new(&ctx, &store, 1 << 30).unwrap();
     std::fs::OpenOptions::new()
         .write(true)
@@ -279,27 +280,32 @@ fn volume_transmittance_streams_a_store_on_the_gpu_as_the_cpu_answers() {
         bytemuck::cast_slice(&rows),
     )
     .unwrap();
-    let run = |backend: &str, memory: &str, out: &str| {
+    // `volume transmittance` of the store on `backend` with `memory`, written to `out`.
+    let command = |backend: &str, memory: &str, out: &str| {
+        let (dir, rays) = (dir.to_str().unwrap(), rays_path.to_str().unwrap());
         let out = tmp.path().join(out);
-        let o = hytrace(
-            &[
-                "volume",
-                "transmittance",
-                dir.to_str().unwrap(),
-                "--rays",
-                rays_path.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "--backend",
-                backend,
-                "--memory",
-                memory,
-                "--density-scale",
-                "0.01",
-                "--stats",
-            ],
-            &[],
-        );
+        let args = [
+            "volume",
+            "transmittance",
+            dir,
+            "--rays",
+            rays,
+            "--backend",
+            backend,
+            "--memory",
+            memory,
+            "--density-scale",
+            "0.01",
+            "--stats",
+            "--out",
+        ];
+        (
+            hytrace(&[&args[..], &[out.to_str().unwrap()]].concat(), &[]),
+            out,
+        )
+    };
+    let run = |backend: &str, memory: &str, out: &str| {
+        let (o, out) = command(backend, memory, out);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         (read_f64(&out), o)
     };
@@ -316,22 +322,7 @@ fn volume_transmittance_streams_a_store_on_the_gpu_as_the_cpu_answers() {
         .fold(0.0, f64::max);
     assert!(worst <= 1e-5, "{worst}");
     // A budget below one superchunk's bricks is refused, naming what it needs.
-    let bad = hytrace(
-        &[
-            "volume",
-            "transmittance",
-            dir.to_str().unwrap(),
-            "--rays",
-            rays_path.to_str().unwrap(),
-            "--out",
-            tmp.path().join("x.npy").to_str().unwrap(),
-            "--backend",
-            "gpu",
-            "--memory",
-            "2M",
-        ],
-        &[],
-    );
+    let (bad, _) = command("gpu", "2M", "x.npy");
     assert!(!bad.status.success());
     let text = String::from_utf8_lossy(&bad.stderr);
     assert!(

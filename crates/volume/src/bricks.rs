@@ -1,10 +1,12 @@
-//! Foundry brick records of a bricked grid: the bounds and majorants the tracers build their
+//! Foundry brick records of a bricked grid or a brick store: the bounds and majorants the tracers build their
 //! acceleration structures from.
 
 use hytrace_foundry::{Brick, UNSET};
 
+use crate::brick_store::BrickStore;
 use crate::bricked::{BrickedGrid, NO_SLOT};
-use crate::grid::{VoxelGrid, BLOCK_SIDE};
+use crate::grid::{Coord, VoxelGrid, BLOCK_SIDE};
+use crate::ranges::RangeMips;
 
 impl BrickedGrid {
     /// One Foundry brick per 8^3 block whose level-0 range is not the constant background,
@@ -19,41 +21,67 @@ impl BrickedGrid {
     /// [`BrickedGrid::atlas`] (unset, [`NO_SLOT`], for constant bricks); `prim` is set when
     /// the bricks are added to a Foundry.
     pub fn foundry_bricks(&self) -> Vec<Brick> {
-        let background = self.background();
-        let level = &self.ranges().levels[0];
-        let [nx, ny, _] = level.dims.map(|d| d as usize);
-        let side = BLOCK_SIDE as f32;
-        let mut out = Vec::new();
-        for (i, range) in level.ranges.iter().enumerate() {
-            if range.is_constant(background) {
-                continue;
-            }
-            let local = [i % nx, i / nx % ny, i / (nx * ny)];
-            let block = std::array::from_fn(|k| level.lo[k] + local[k] as i32);
-            let origin = block.map(|c| c * BLOCK_SIDE);
-            let entry = self.entry(block);
-            let lo = origin.map(|c| c as f32 - 0.5);
-            out.push(Brick {
-                origin,
-                level: 0,
-                atlas_slot: entry.map_or(NO_SLOT, |e| e.atlas_slot),
-                prim: UNSET,
-                value_min: range.min,
-                value_max: range.max,
-                aabb: [
-                    lo[0],
-                    lo[1],
-                    lo[2],
-                    lo[0] + side,
-                    lo[1] + side,
-                    lo[2] + side,
-                ],
-                active_voxels: entry.map_or(0, |e| e.active_voxels),
-                size: BLOCK_SIDE as u32,
-            });
-        }
-        out
+        block_bricks(self.ranges(), self.background(), |block| {
+            self.entry(block)
+                .map_or((NO_SLOT, 0), |e| (e.atlas_slot, e.active_voxels))
+        })
     }
+}
+
+impl BrickStore {
+    /// The Foundry bricks of the store, as [`BrickedGrid::foundry_bricks`] makes them from
+    /// its range mips (which equal those of the store bricked in memory): no brick is read.
+    /// `atlas_slot` is a kept brick's record in the store ([`NO_SLOT`] for the others);
+    /// `active_voxels` is 0, the store does not count them.
+    pub fn foundry_bricks(&self) -> Vec<Brick> {
+        let origin = self.meta().index_origin;
+        block_bricks(self.mips(), self.background(), |block| {
+            let v = std::array::from_fn(|k| i64::from(block[k] * BLOCK_SIDE - origin[k]));
+            (self.record_of(v).unwrap_or(NO_SLOT), 0)
+        })
+    }
+}
+
+/// The Foundry bricks of the blocks whose level-0 range in `mips` is not the constant
+/// `background`; `texels` gives a block's atlas slot and active voxels.
+fn block_bricks(
+    mips: &RangeMips,
+    background: f32,
+    texels: impl Fn(Coord) -> (u32, u32),
+) -> Vec<Brick> {
+    let level = &mips.levels[0];
+    let [nx, ny, _] = level.dims.map(|d| d as usize);
+    let side = BLOCK_SIDE as f32;
+    let mut out = Vec::new();
+    for (i, range) in level.ranges.iter().enumerate() {
+        if range.is_constant(background) {
+            continue;
+        }
+        let local = [i % nx, i / nx % ny, i / (nx * ny)];
+        let block = std::array::from_fn(|k| level.lo[k] + local[k] as i32);
+        let origin = block.map(|c| c * BLOCK_SIDE);
+        let (atlas_slot, active_voxels) = texels(block);
+        let lo = origin.map(|c| c as f32 - 0.5);
+        out.push(Brick {
+            origin,
+            level: 0,
+            atlas_slot,
+            prim: UNSET,
+            value_min: range.min,
+            value_max: range.max,
+            aabb: [
+                lo[0],
+                lo[1],
+                lo[2],
+                lo[0] + side,
+                lo[1] + side,
+                lo[2] + side,
+            ],
+            active_voxels,
+            size: BLOCK_SIDE as u32,
+        });
+    }
+    out
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
 //! The out-of-core brick store against the in-core path: raw volumes generated here are
 //! converted, opened with budgets far smaller than the volume, and every voxel, the range
-//! mips and the transmittance of every estimator must equal those of a dense in-memory
+//! mips, the Foundry bricks and the transmittance of every estimator must equal those of a dense in-memory
 //! grid holding the values the store promises (each raw value quantized to 16 bits, bricks
 //! within the threshold of the background dropped), computed here independently.
 //! Bad input: raw files of the wrong size, non-finite voxels, budgets below one
@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 
 use hytrace_volume::{
     convert_grid, convert_raw, fog_sphere, open_volume_with, planned_memory, select_grid,
-    transmittance_batch, BrickStore, ConvertOptions, DenseGrid, Endian, Estimator, Filter, GridMap,
-    Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TransmittanceParams, VoxelGrid,
-    SUPERCHUNK_BRICKS,
+    transmittance_batch, BrickStore, BrickedGrid, ConvertOptions, DenseGrid, Endian, Estimator,
+    Filter, GridMap, Majorant, RangeMips, RawSpec, RawType, Ray, Rng, TexelFormat,
+    TransmittanceParams, VoxelGrid, SUPERCHUNK_BRICKS,
 };
 
 /// A coral-like field: thin shells around a few random centres, mostly empty space, with
@@ -271,6 +271,23 @@ fn a_store_read_through_a_small_cache_equals_the_in_core_grid_voxel_by_voxel() {
             &RangeMips::build(&expected).unwrap(),
             "{name}"
         );
+        // So are its Foundry bricks (bounds and majorants), read without a brick.
+        let bricked = BrickedGrid::convert(&expected, TexelFormat::F32).unwrap();
+        let key = |b: &hytrace_foundry::Brick| {
+            let bits = [b.value_min, b.value_max].map(f32::to_bits);
+            (b.origin, b.aabb.map(f32::to_bits), bits)
+        };
+        let keys = |bricks: Vec<hytrace_foundry::Brick>| bricks.iter().map(key).collect::<Vec<_>>();
+        let reads = store.stats().bricks_read;
+        assert_eq!(
+            keys(store.foundry_bricks()),
+            keys(bricked.foundry_bricks()),
+            "{name}"
+        );
+        // The mips of its data alone are those built by reading its kept bricks.
+        let data_mips = store.data_mips().unwrap();
+        assert_eq!(store.stats().bricks_read, reads, "{name}");
+        assert_eq!(data_mips, RangeMips::build(&store).unwrap(), "{name}");
         store.check().unwrap();
     }
 }

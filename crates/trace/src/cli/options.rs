@@ -133,6 +133,10 @@ pub struct RenderSettingsArgs {
     /// Seed of the random streams.
     #[arg(long)]
     pub seed: Option<u32>,
+    /// Bytes each medium read as stored in a brick store may hold resident (its tables and
+    /// a brick cache), e.g. 4G.
+    #[arg(long, value_parser = hytrace_trace::memory::parse_bytes)]
+    pub memory: Option<u64>,
     /// Render the solid of this name transparent (repeatable): to see inside a detector's
     /// enclosures (`hytrace info` lists the solids).
     #[arg(long)]
@@ -200,6 +204,7 @@ impl From<RenderSettingsArgs> for RenderSettings {
             max_bounces: a.max_bounces,
             step: a.step,
             seed: a.seed,
+            memory: a.memory,
             transparent: a.transparent,
             cutaway: Cutaway {
                 planes: a.cutaway.planes,

@@ -85,6 +85,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         build_s,
         render_s,
         gpu: gpu_run,
+        stores,
     } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
     bar.finish_and_clear();
     write_image(&image, &args.out, args.exr)?;
@@ -113,6 +114,12 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         });
         if let Some(g) = &gpu_run {
             add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        }
+        if let Some(c) = stores {
+            line["store"] = serde_json::json!({
+                "bricks_read": c.bricks_read, "cache_bricks": c.capacity_bricks,
+                "table_bytes": c.table_bytes,
+            });
         }
         println!("{line}");
     }

@@ -22,7 +22,8 @@ use crate::error::Context;
 use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
-    BrickedGrid, GridMap, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams,
+    BrickedGrid, CacheStats, GridMap, IndexRay, IndexTransmittance, TexelFormat,
+    TransmittanceParams, DEFAULT_STORE_BUDGET,
 };
 
 use rayon::prelude::*;
@@ -30,11 +31,11 @@ use rayon::prelude::*;
 use super::bvh::RaySlabs;
 use super::{CpuScene, Hit};
 use crate::scan::RayRow;
-use crate::scene::{open_medium, MediumSpec};
+use crate::scene::{open_medium, MediumGrid, MediumSpec, STORED_FORMAT};
 
 /// A medium's grid and what its transmittance needs.
-struct MediumGrid {
-    grid: BrickedGrid,
+struct OpenMedium {
+    grid: MediumGrid,
     /// The caller's parameters with this medium's density scale folded in.
     params: TransmittanceParams,
 }
@@ -68,7 +69,7 @@ pub struct MediumSegment {
 /// A scene's surfaces and its media opened for transmittance queries.
 pub struct SceneMedia<'a, T> {
     scene: &'a CpuScene<T>,
-    grids: Vec<MediumGrid>,
+    grids: Vec<OpenMedium>,
     /// Index space of the medium of each volume prim, from world space, per instance:
     /// `(instance, medium) -> world-to-index`.
     to_index: BTreeMap<(u32, u32), Transform64>,
@@ -82,23 +83,41 @@ fn placement_seed(seed: u32, k: u32) -> u32 {
 
 impl<'a, T: Real> SceneMedia<'a, T> {
     /// Opens every medium of `f` (the Foundry `scene` was prepared from); `params` apply to
-    /// all, their density scale multiplying each medium's own.
+    /// all, their density scale multiplying each medium's own. Media read as stored in a
+    /// brick store hold at most [`DEFAULT_STORE_BUDGET`] bytes each.
     pub fn new(
         scene: &'a CpuScene<T>,
         f: &Foundry,
         params: &TransmittanceParams,
     ) -> crate::Result<Self> {
+        Self::with_memory(scene, f, params, DEFAULT_STORE_BUDGET)
+    }
+
+    /// [`SceneMedia::new`] with each medium read as stored in a brick store holding at most
+    /// `memory` bytes resident (its tables and a cache of bricks read on demand).
+    pub fn with_memory(
+        scene: &'a CpuScene<T>,
+        f: &Foundry,
+        params: &TransmittanceParams,
+        memory: u64,
+    ) -> crate::Result<Self> {
         let mut grids = Vec::with_capacity(f.optics.media.len());
         for (i, m) in f.optics.media.iter().enumerate() {
+            let format = match m.format.as_str() {
+                STORED_FORMAT => None,
+                name => Some(
+                    TexelFormat::from_str(name)
+                        .with_context(|| format!("medium {i}: texel format"))?,
+                ),
+            };
             let spec = MediumSpec {
                 source: m.source.clone(),
                 grid: m.grid.clone(),
                 density_scale: m.density_scale,
-                format: TexelFormat::from_str(&m.format)
-                    .with_context(|| format!("medium {i}: texel format"))?,
+                format,
                 placement: Transform64::IDENTITY,
             };
-            let grid = open_medium(&spec)
+            let grid = open_medium(&spec, memory)
                 .with_context(|| format!("medium {i}"))?
                 .with_map(GridMap::IDENTITY);
             let mut params = *params;
@@ -106,7 +125,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             params
                 .validate(&grid, grid.ranges())
                 .with_context(|| format!("medium {i} ({})", m.source))?;
-            grids.push(MediumGrid { grid, params });
+            grids.push(OpenMedium { grid, params });
         }
         let mut to_index = BTreeMap::new();
         for &instance in &scene.media.members {
@@ -311,10 +330,46 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         self.grids.len()
     }
 
-    /// The grid of `medium`, bricked in its Foundry texel format, with an identity map: its
-    /// world space is its index space.
-    pub fn grid(&self, medium: u32) -> &BrickedGrid {
+    /// The grid of `medium`, bricked in its Foundry texel format or read as stored, with an
+    /// identity map: its world space is its index space.
+    pub fn grid(&self, medium: u32) -> &MediumGrid {
         &self.grids[medium as usize].grid
+    }
+
+    /// The bricked grid of `medium` for a GPU kernel; a medium read as stored from a brick
+    /// store is an error (the GPU kernels read media bricked in memory).
+    pub fn bricked_grid(&self, medium: u32) -> crate::Result<&BrickedGrid> {
+        self.grid(medium).bricked().with_context(|| {
+            format!(
+                "medium {medium} is a brick store read as stored, which GPU kernels do not read \
+                 yet: use the CPU backend, or give the medium a texel format to brick it in memory"
+            )
+        })
+    }
+
+    /// What the caches of the media read as stored did, summed over them (`None` when no
+    /// medium is read as stored).
+    pub fn store_stats(&self) -> Option<CacheStats> {
+        let stores = self.grids.iter().filter_map(|m| match &m.grid {
+            MediumGrid::Store(s, _) => Some(s.stats()),
+            MediumGrid::Bricked(_) => None,
+        });
+        stores.reduce(|a, b| CacheStats {
+            bricks_read: a.bricks_read + b.bricks_read,
+            capacity_bricks: a.capacity_bricks + b.capacity_bricks,
+            table_bytes: a.table_bytes + b.table_bytes,
+        })
+    }
+
+    /// An error when a medium read as stored could not read a brick it needed since it was
+    /// opened (those lookups read the background): results computed meanwhile are wrong.
+    pub fn check_reads(&self) -> crate::Result<()> {
+        for (i, m) in self.grids.iter().enumerate() {
+            m.grid
+                .check_reads()
+                .with_context(|| format!("medium {i}"))?;
+        }
+        Ok(())
     }
 
     /// The parameters of `medium` on the `placement`-th segment of a ray: the caller's, with

@@ -127,12 +127,20 @@ fn material_item(m: &Material) -> RenderItem {
     }
 }
 
-/// Refuses what the kernel does not do: more than [`RENDER_MAX_MEDIA`] placed media, and
-/// scattering media with negative values (which the CPU's trackers refuse).
+/// Refuses what the kernel does not do: media read as stored in a brick store, more than
+/// [`RENDER_MAX_MEDIA`] placed media, and scattering media with negative values (which the
+/// CPU's trackers refuse).
 fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
     let (Some(mode), Some(media)) = (renderer.effects.volumes, &renderer.media) else {
         return Ok(());
     };
+    for medium in 0..media.scene.medium_count() as u32 {
+        if media.scene.grid(medium).bricked().is_none() {
+            return Err(GpuError::Unsupported(format!(
+                "medium {medium} is a brick store read as stored, which the GPU renderer does not stream yet (render with --backend cpu, or give the medium a texel format to brick it in memory)"
+            )));
+        }
+    }
     let placed = media.scene.placements().count();
     if placed > RENDER_MAX_MEDIA as usize {
         return Err(GpuError::Unsupported(format!(
@@ -348,8 +356,9 @@ impl GpuRenderer {
         let medium = match &renderer.media {
             None => None,
             Some(media) => {
+                // `check_supported` refused media read as stored.
                 let bricked: Vec<&BrickedGrid> = (0..media.scene.medium_count())
-                    .map(|m| media.scene.grid(m as u32))
+                    .filter_map(|m| media.scene.grid(m as u32).bricked())
                     .collect();
                 let (grids, texture): (Vec<KernelGrid>, _) = match store {
                     TexelStore::Storage => (

@@ -26,16 +26,16 @@ use hytrace_volume::{
 use rayon::prelude::*;
 
 use super::brick_pool::{Admission, BrickPool};
-use super::context::{compute_pipeline, storage_layout_entry, GpuContext, GpuError};
+use super::context::{storage_layout_entry, GpuContext, GpuError};
 use super::records::{
     RayRecord, TransmittanceRecord, VolumeParams, STREAM_CAPACITY, STREAM_FLAGS,
     STREAM_HEADER_WORDS, STREAM_PASS, STREAM_REQUESTED, STREAM_STAMPS, VOLUME_ABSENT_BRICK,
     VOLUME_STATUS_MISSING,
 };
-use super::timing::{finish_batch, GpuTimes, PassTimer};
+use super::timing::GpuTimes;
 use super::transmittance::{
     kernel_params, kernel_rays, ray_batch, record_estimate, store_grid, transmittance_source,
-    KernelGrid, UploadedGrid,
+    KernelGrid, TransmittanceKernel, UploadedGrid,
 };
 
 const KERNEL: &str = "kernels/transmittance";
@@ -118,9 +118,9 @@ pub struct GpuStreamedVolume<'a> {
     /// The page table as uploaded.
     pages: Vec<u32>,
     grid: UploadedGrid,
-    pipeline: wgpu::ComputePipeline,
-    volume_layout: wgpu::BindGroupLayout,
-    ray_layout: wgpu::BindGroupLayout,
+    /// Group 0: the parameters, ranges, page table, brick table, pool, state; group 1:
+    /// rays, results, the rays' stream indices.
+    kernel: TransmittanceKernel,
     ranges: wgpu::Buffer,
     page_table: wgpu::Buffer,
     brick_table: wgpu::Buffer,
@@ -229,28 +229,10 @@ impl<'a> GpuStreamedVolume<'a> {
                 max_error: 0.0,
             })
             .collect();
-        let built = ctx.checked("building the streamed transmittance kernel", || {
-            let module = ctx.wgsl_module(KERNEL, &source);
-            let mut entries: Vec<_> = (0..5).map(|b| storage_layout_entry(b, true)).collect();
-            entries.push(storage_layout_entry(STATE_BINDING, false));
-            let volume_layout =
-                ctx.device
-                    .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                        label: Some("streamed volume"),
-                        entries: &entries,
-                    });
-            let ray_layout = ctx.storage_layout("streamed rays", 3, &[1]);
-            let pipeline_layout =
-                ctx.device
-                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some("streamed transmittance"),
-                        bind_group_layouts: &[Some(&volume_layout), Some(&ray_layout)],
-                        immediate_size: 0,
-                    });
-            let pipeline = compute_pipeline(ctx, &pipeline_layout, &module, "transmittance", &[]);
-            (pipeline, volume_layout, ray_layout)
-        })?;
-        let (pipeline, volume_layout, ray_layout) = built;
+        let mut layout: Vec<_> = (0..5).map(|b| storage_layout_entry(b, true)).collect();
+        layout.push(storage_layout_entry(STATE_BINDING, false));
+        let kernel =
+            TransmittanceKernel::new(ctx, "streamed transmittance", &source, &layout, 3, &[])?;
         let buffers = ctx.checked("allocating the brick pool", || {
             let ranges_buffer = pool_buffer(ctx, "stream ranges", (ranges.len() * 8) as u64, false);
             ctx.queue
@@ -281,9 +263,7 @@ impl<'a> GpuStreamedVolume<'a> {
             records,
             pages,
             grid,
-            pipeline,
-            volume_layout,
-            ray_layout,
+            kernel,
             ranges,
             page_table,
             brick_table,
@@ -510,61 +490,19 @@ impl<'a> GpuStreamedVolume<'a> {
         streams: &[u32],
         times: &mut GpuTimes,
     ) -> Result<Vec<TransmittanceRecord>, GpuError> {
-        let n = rays.len();
-        let out_size = (n.max(1) * size_of::<TransmittanceRecord>()) as u64;
-        let t0 = Instant::now();
-        let timer = PassTimer::new(ctx, "streamed transmittance timestamps");
-        let results = ctx.checked("streamed transmittance dispatch", || {
-            let results = ctx.output_buffer("transmittances", out_size);
-            let params = ctx.input_buffer("volume params", bytemuck::bytes_of(params));
-            let rays = ctx.input_buffer("volume rays", bytemuck::cast_slice(rays));
-            let streams = ctx.input_buffer("ray streams", bytemuck::cast_slice(streams));
-            let volume_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("streamed volume"),
-                layout: &self.volume_layout,
-                entries: &[
-                    (0, &params),
-                    (1, &self.ranges),
-                    (2, &self.page_table),
-                    (3, &self.brick_table),
-                    (4, &self.atlas),
-                    (STATE_BINDING, &self.state),
-                ]
-                .map(|(binding, b)| wgpu::BindGroupEntry {
-                    binding,
-                    resource: b.as_entire_binding(),
-                }),
-            });
-            let ray_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("streamed rays"),
-                layout: &self.ray_layout,
-                entries: &[(0, &rays), (1, &results), (2, &streams)].map(|(binding, b)| {
-                    wgpu::BindGroupEntry {
-                        binding,
-                        resource: b.as_entire_binding(),
-                    }
-                }),
-            });
-            ctx.submit_pass(
-                "streamed transmittance",
-                &[&self.pipeline],
-                &[(0, &volume_group), (1, &ray_group)],
-                n as u32,
-                timer.as_ref(),
-            );
-            results
-        })?;
-        let bytes = finish_batch(
-            ctx,
-            "streamed transmittance kernel",
-            t0,
-            &results,
-            out_size,
-            timer.as_ref(),
-            times,
-        )?;
-        let mut out: Vec<TransmittanceRecord> = bytemuck::pod_collect_to_vec(&bytes);
-        out.truncate(n);
-        Ok(out)
+        let arrays = [
+            (1, &self.ranges),
+            (2, &self.page_table),
+            (3, &self.brick_table),
+            (4, &self.atlas),
+            (STATE_BINDING, &self.state),
+        ]
+        .map(|(binding, b)| wgpu::BindGroupEntry {
+            binding,
+            resource: b.as_entire_binding(),
+        });
+        let streams = [bytemuck::cast_slice(streams)];
+        let label = "streamed transmittance";
+        (self.kernel).dispatch(ctx, label, params, rays, &streams, &arrays, times)
     }
 }

@@ -68,11 +68,8 @@ pub struct GpuVolume<'a> {
     grid: &'a dyn VoxelGrid,
     /// The range mips the kernel walks (the CPU twin's too).
     mips: Cow<'a, RangeMips>,
-    pipeline: wgpu::ComputePipeline,
-    /// Group 0: the parameters, then the grid's arrays.
-    volume_layout: wgpu::BindGroupLayout,
-    /// Group 1: rays, results.
-    ray_layout: wgpu::BindGroupLayout,
+    /// Group 0: the parameters, then the grid's arrays; group 1: rays, results.
+    kernel: TransmittanceKernel,
     upload: VolumeUpload,
     /// The texels' 3D texture (`atlas_texture` kernels).
     texture: Option<wgpu::TextureView>,
@@ -509,6 +506,119 @@ pub(super) fn record_estimate(
     })
 }
 
+/// The transmittance kernel compiled: its pipeline and bind group layouts (group 0: the
+/// parameters and the grid's arrays; group 1: rays, results, then any further ray inputs).
+pub(super) struct TransmittanceKernel {
+    pipeline: wgpu::ComputePipeline,
+    volume_layout: wgpu::BindGroupLayout,
+    ray_layout: wgpu::BindGroupLayout,
+}
+
+impl TransmittanceKernel {
+    /// Compiles `source` with override `constants`: group 0 laid out as `volume_entries`,
+    /// group 1 as `ray_bindings` storage buffers of which binding 1 (the results) is
+    /// written; `label` names it in errors.
+    pub(super) fn new(
+        ctx: &GpuContext,
+        label: &str,
+        source: &str,
+        volume_entries: &[wgpu::BindGroupLayoutEntry],
+        ray_bindings: u32,
+        constants: &[(String, f64)],
+    ) -> Result<TransmittanceKernel, GpuError> {
+        ctx.checked(&format!("building the {label} kernel"), || {
+            let module = ctx.wgsl_module(KERNEL, source);
+            let volume_layout =
+                ctx.device
+                    .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                        label: Some(&format!("{label} volume")),
+                        entries: volume_entries,
+                    });
+            let ray_layout = ctx.storage_layout(&format!("{label} rays"), ray_bindings, &[1]);
+            let pipeline_layout =
+                ctx.device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some(label),
+                        bind_group_layouts: &[Some(&volume_layout), Some(&ray_layout)],
+                        immediate_size: 0,
+                    });
+            let pipeline =
+                compute_pipeline(ctx, &pipeline_layout, &module, "transmittance", constants);
+            TransmittanceKernel {
+                pipeline,
+                volume_layout,
+                ray_layout,
+            }
+        })
+    }
+
+    /// One batch of `rays` with `params`: uploads them, the parameters and `ray_inputs`
+    /// (group 1's buffers after the results), binds group 0 as the parameters (binding 0)
+    /// and `arrays`, dispatches, waits and reads back one record per ray.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        label: &str,
+        params: &VolumeParams,
+        rays: &[RayRecord],
+        ray_inputs: &[&[u8]],
+        arrays: &[wgpu::BindGroupEntry],
+        times: &mut GpuTimes,
+    ) -> Result<Vec<TransmittanceRecord>, GpuError> {
+        let n = rays.len();
+        let out_size = (n.max(1) * size_of::<TransmittanceRecord>()) as u64;
+        let t0 = Instant::now();
+        let timer = PassTimer::new(ctx, &format!("{label} timestamps"));
+        let results = ctx.checked(&format!("{label} dispatch"), || {
+            let input =
+                |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes.to_vec()));
+            let results = ctx.output_buffer("transmittances", out_size);
+            let params = input("volume params", bytemuck::bytes_of(params));
+            let mut ray_buffers = vec![
+                input("volume rays", bytemuck::cast_slice(rays)),
+                results.clone(),
+            ];
+            ray_buffers.extend(ray_inputs.iter().map(|bytes| input("ray inputs", bytes)));
+            let mut entries = vec![wgpu::BindGroupEntry {
+                binding: 0,
+                resource: params.as_entire_binding(),
+            }];
+            entries.extend_from_slice(arrays);
+            let volume_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&format!("{label} volume")),
+                layout: &self.volume_layout,
+                entries: &entries,
+            });
+            let ray_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&format!("{label} rays")),
+                layout: &self.ray_layout,
+                entries: &whole_buffer_entries(&ray_buffers),
+            });
+            ctx.submit_pass(
+                label,
+                &[&self.pipeline],
+                &[(0, &volume_group), (1, &ray_group)],
+                n as u32,
+                timer.as_ref(),
+            );
+            results
+        })?;
+        let bytes = finish_batch(
+            ctx,
+            &format!("{label} kernel"),
+            t0,
+            &results,
+            out_size,
+            timer.as_ref(),
+            times,
+        )?;
+        let mut out: Vec<TransmittanceRecord> = bytemuck::pod_collect_to_vec(&bytes);
+        out.truncate(n);
+        Ok(out)
+    }
+}
+
 impl<'a> GpuVolume<'a> {
     /// Uploads `grid` and its range mips and compiles the kernel. Arrays beyond the device's
     /// binding limit, or too few storage bindings, are a [`GpuError::SceneTooBig`].
@@ -603,38 +713,16 @@ impl<'a> GpuVolume<'a> {
             name: KERNEL.to_string(),
             problem: problem.to_string(),
         })?;
-        let (pipeline, volume_layout, ray_layout) =
-            ctx.checked("building the transmittance kernel", || {
-                let module = ctx.wgsl_module(KERNEL, &source);
-                let mut entries = upload.layout_entries(ctx);
-                if texture.is_some() {
-                    entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
-                }
-                let volume_layout =
-                    ctx.device
-                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                            label: Some("transmittance volume"),
-                            entries: &entries,
-                        });
-                // The results are written.
-                let ray_layout = ctx.storage_layout("transmittance rays", 2, &[1]);
-                let pipeline_layout =
-                    ctx.device
-                        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                            label: Some("transmittance"),
-                            bind_group_layouts: &[Some(&volume_layout), Some(&ray_layout)],
-                            immediate_size: 0,
-                        });
-                let pipeline =
-                    compute_pipeline(ctx, &pipeline_layout, &module, "transmittance", &constants);
-                (pipeline, volume_layout, ray_layout)
-            })?;
+        let mut entries = upload.layout_entries(ctx);
+        if texture.is_some() {
+            entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
+        }
+        let kernel =
+            TransmittanceKernel::new(ctx, "transmittance", &source, &entries, 2, &constants)?;
         Ok(GpuVolume {
             grid,
             mips,
-            pipeline,
-            volume_layout,
-            ray_layout,
+            kernel,
             upload,
             texture,
             grid_upload,
@@ -693,56 +781,13 @@ impl<'a> GpuVolume<'a> {
         rays: &[RayRecord],
         times: &mut GpuTimes,
     ) -> Result<Vec<TransmittanceRecord>, GpuError> {
-        let n = rays.len();
-        let out_size = (n.max(1) * size_of::<TransmittanceRecord>()) as u64;
-        let t0 = Instant::now();
-        let timer = PassTimer::new(ctx, "transmittance timestamps");
-        let results = ctx.checked("transmittance dispatch", || {
-            let input =
-                |label, bytes: &[u8]| ctx.input_buffer(label, &storage_bytes(bytes.to_vec()));
-            let results = ctx.output_buffer("transmittances", out_size);
-            let params = input("volume params", bytemuck::bytes_of(params));
-            let ray_buffers = [
-                input("volume rays", bytemuck::cast_slice(rays)),
-                results.clone(),
-            ];
-            let mut volume_entries = self.upload.entries(&params);
-            if let Some(view) = &self.texture {
-                volume_entries.push(wgpu::BindGroupEntry {
-                    binding: ATLAS_TEXTURE_BINDING,
-                    resource: wgpu::BindingResource::TextureView(view),
-                });
-            }
-            let volume_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("transmittance volume"),
-                layout: &self.volume_layout,
-                entries: &volume_entries,
+        let mut arrays = self.upload.arrays.entries();
+        if let Some(view) = &self.texture {
+            arrays.push(wgpu::BindGroupEntry {
+                binding: ATLAS_TEXTURE_BINDING,
+                resource: wgpu::BindingResource::TextureView(view),
             });
-            let ray_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("transmittance rays"),
-                layout: &self.ray_layout,
-                entries: &whole_buffer_entries(&ray_buffers),
-            });
-            ctx.submit_pass(
-                "transmittance",
-                &[&self.pipeline],
-                &[(0, &volume_group), (1, &ray_group)],
-                n as u32,
-                timer.as_ref(),
-            );
-            results
-        })?;
-        let bytes = finish_batch(
-            ctx,
-            "transmittance kernel",
-            t0,
-            &results,
-            out_size,
-            timer.as_ref(),
-            times,
-        )?;
-        let mut out: Vec<TransmittanceRecord> = bytemuck::pod_collect_to_vec(&bytes);
-        out.truncate(n);
-        Ok(out)
+        }
+        (self.kernel).dispatch(ctx, "transmittance", params, rays, &[], &arrays, times)
     }
 }

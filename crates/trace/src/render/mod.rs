@@ -311,7 +311,7 @@ impl<'a> Renderer<'a> {
                 // (Media::transmittance), so the estimator serves the trackers only.
                 let mut params = TransmittanceParams::new(Estimator::Ratio);
                 params.seed = settings.seed;
-                let scene_media = SceneMedia::new(scene, f, &params)?;
+                let scene_media = SceneMedia::with_memory(scene, f, &params, settings.memory)?;
                 let optics = f
                     .optics
                     .media

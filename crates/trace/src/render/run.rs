@@ -4,6 +4,7 @@ use std::time::Instant;
 
 use crate::error::{bail, Context};
 use hytrace_foundry::Foundry;
+use hytrace_volume::CacheStats;
 
 use super::cutaway::Cutaway;
 use super::detector::{DetectorError, DetectorStyle, Legend};
@@ -87,6 +88,9 @@ pub struct RenderSettings {
     pub step: Option<f64>,
     /// Seed of the random streams.
     pub seed: Option<u32>,
+    /// Bytes each medium read as stored in a brick store may hold resident (its tables and
+    /// a brick cache).
+    pub memory: Option<u64>,
     /// Render the solid of this name transparent (repeatable): to see inside a detector's
     /// enclosures (`hytrace info` lists the solids).
     pub transparent: Vec<String>,
@@ -109,6 +113,7 @@ impl RenderSettings {
         s.max_bounces = self.max_bounces.unwrap_or(s.max_bounces);
         s.step = self.step.unwrap_or(s.step);
         s.seed = self.seed.unwrap_or(s.seed);
+        s.memory = self.memory.unwrap_or(s.memory);
         for name in &self.transparent {
             if !f.solid_names.contains(name) {
                 bail!("--transparent {name}: the scene has no solid of that name");
@@ -145,6 +150,8 @@ pub struct Rendered {
     pub render_s: f64,
     /// Set when it ran on the GPU.
     pub gpu: Option<GpuRun>,
+    /// The brick caches of the media read as stored in brick stores, summed.
+    pub stores: Option<CacheStats>,
 }
 
 /// Renders scene `f` as `spec` describes on `backend`, calling `progress` with the rows
@@ -170,12 +177,18 @@ pub fn render(
         RenderBackend::Gpu => gpu(GpuContext::new()?)?,
         RenderBackend::Auto => gpu_or_cpu("renders", gpu, cpu)?,
     };
+    let media = renderer.media.as_ref().map(|m| &m.scene);
+    if let Some(media) = media {
+        // A brick store that failed while rendering read the background: no image.
+        media.check_reads()?;
+    }
     Ok(Rendered {
         image,
         effects: renderer.effects(),
         build_s,
         render_s: t2.elapsed().as_secs_f64(),
         gpu,
+        stores: media.and_then(|m| m.store_stats()),
     })
 }
 

@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 
 use crate::error::{bail, ensure};
+use hytrace_volume::DEFAULT_STORE_BUDGET;
 use serde::Deserialize;
 
 use super::camera::{Camera, CameraSpec};
@@ -285,6 +286,10 @@ pub struct RenderSettings {
     /// Seed of the random streams.
     #[serde(default)]
     pub seed: u32,
+    /// Bytes each medium read as stored in a brick store may hold resident: its tables and
+    /// a cache of the bricks read on demand.
+    #[serde(default = "default_memory")]
+    pub memory: u64,
 }
 
 fn default_size() -> [u32; 2] {
@@ -299,6 +304,9 @@ fn default_bounces() -> u32 {
 fn default_step() -> f64 {
     0.125
 }
+fn default_memory() -> u64 {
+    DEFAULT_STORE_BUDGET
+}
 
 impl Default for RenderSettings {
     fn default() -> Self {
@@ -310,6 +318,7 @@ impl Default for RenderSettings {
             max_bounces: default_bounces(),
             step: default_step(),
             seed: 0,
+            memory: default_memory(),
         }
     }
 }

@@ -80,7 +80,7 @@ pub fn default_scene() -> crate::Result<Foundry> {
             source: "sphere:720,30,6".into(),
             grid: None,
             density_scale: DEFAULT_FOG_DENSITY,
-            format: TexelFormat::F32,
+            format: Some(TexelFormat::F32),
             placement: Transform64::IDENTITY,
         },
         4,

@@ -20,7 +20,9 @@ pub use gdml_scene::{
     gdml_to_foundry, gdml_to_foundry_with_surfaces, load_gdml_scene, load_gdml_scene_with_surfaces,
     VolumeSurfaces, GDML_MESH_TOLERANCE,
 };
-pub use media::{add_medium_solid, grid_map_transform, open_medium, MediumSpec};
+pub use media::{
+    add_medium_solid, grid_map_transform, open_medium, MediumGrid, MediumSpec, STORED_FORMAT,
+};
 pub use mesh_scene::{add_mesh_file_solid, gltf_to_foundry, load_mesh_scene, obj_to_foundry};
 pub use toml_scene::{
     load_toml_render_scene, load_toml_scene, render_scene_from_toml, scene_from_toml,

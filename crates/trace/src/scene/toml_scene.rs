@@ -10,11 +10,13 @@
 //! file = "bunny.obj"               # .obj, .gltf or .glb, relative to the scene file
 //!
 //! [volumes.fog]
-//! source = "sphere:400,10"         # .nvdb, .vdb (relative to the scene file) or procedural
+//! source = "sphere:400,10"         # .nvdb, .vdb, a brick store (relative to the scene
+//!                                  # file) or procedural
 //! grid = "density"                 # optional: grid name (default: the first)
 //! density_scale = 0.002            # extinction per mm at grid value 1
 //! format = "f32"                   # optional: bricked texel format (f32, f16, unorm16,
-//!                                  # unorm8, bc4)
+//!                                  # unorm8, bc4); a brick store without one is read
+//!                                  # lazily, as stored
 //!
 //! [gdml.detector]
 //! file = "detector.gdml"           # relative to the scene file; its solids are named
@@ -57,7 +59,7 @@ use crate::error::{bail, Context};
 use hytrace_csg::{parse_shape, to_tree};
 use hytrace_foundry::gdml::{read_gdml, GdmlOptions};
 use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
-use hytrace_volume::{is_procedural, TexelFormat};
+use hytrace_volume::{is_brick_store, is_procedural, TexelFormat};
 use serde::Deserialize;
 
 use super::gdml_scene::{gdml_to_foundry, world_solids};
@@ -448,9 +450,11 @@ fn volume_spec(entry: &VolumeEntry, dir: &Path) -> crate::Result<MediumSpec> {
     } else {
         dir.join(&entry.source).display().to_string()
     };
+    // A brick store is read as stored unless a format asks to brick it in memory.
     let format = match &entry.format {
-        Some(name) => TexelFormat::from_str(name)?,
-        None => TexelFormat::F32,
+        Some(name) => Some(TexelFormat::from_str(name)?),
+        None if is_brick_store(Path::new(&source)) => None,
+        None => Some(TexelFormat::F32),
     };
     Ok(MediumSpec {
         source,

@@ -195,6 +195,49 @@ impl BrickStore {
         &self.lods[at..at + LOD_VALUES]
     }
 
+    /// The range mips of the store's data alone, computed without reading a brick: its
+    /// range mips cropped to the box of the kept bricks grown by one block, which is what
+    /// [`RangeMips::build`] makes from the store's voxels (and so the ranges of a bricked
+    /// grid converted from it: walks over both take the same steps). The store's own mips
+    /// span the whole volume.
+    pub fn data_mips(&self) -> Result<RangeMips, VolumeError> {
+        let side = BRICK_SIDE as i32;
+        let blocks: Vec<Coord> = (self.block_origins()?.iter())
+            .map(|o| o.map(|c| c.div_euclid(side)))
+            .collect();
+        let (mut lo, mut hi) = ([i32::MAX; 3], [i32::MIN; 3]);
+        for b in &blocks {
+            for k in 0..3 {
+                lo[k] = lo[k].min(b[k] - 1);
+                hi[k] = hi[k].max(b[k] + 1);
+            }
+        }
+        if blocks.is_empty() {
+            (lo, hi) = ([0; 3], [-1; 3]);
+        }
+        let dims: [u32; 3] = std::array::from_fn(|k| (hi[k] - lo[k] + 1) as u32);
+        let mut ranges = Vec::with_capacity(dims.iter().map(|&d| d as usize).product());
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                ranges.extend((lo[0]..=hi[0]).map(|x| self.mips.range(0, [x, y, z])));
+            }
+        }
+        let level0 = RangeLevel {
+            side: BRICK_SIDE as u32,
+            lo,
+            dims,
+            ranges,
+        };
+        RangeMips::from_finest(self.meta.background, level0)
+    }
+
+    /// The store with its index-to-world map replaced by `map` (a scene places its media
+    /// with their own transforms).
+    pub fn with_map(mut self, map: GridMap) -> BrickStore {
+        self.map = map;
+        self
+    }
+
     /// The record of the brick holding store voxel `v` (index voxel `index_origin + v`), or
     /// `None` outside the volume and for a dropped brick.
     pub fn record_of(&self, v: [i64; 3]) -> Option<u32> {
