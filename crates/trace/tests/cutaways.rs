@@ -4,13 +4,14 @@
 //! inside the sphere is on it, else the section on the plane the ray entered through),
 //! on the CPU and on the GPU.
 
+mod common;
+
 use std::path::Path;
 
 use glam::DVec3;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::CpuScene;
-use hytrace_trace::gpu::{GpuContext, GpuRenderer};
 use hytrace_trace::render::camera::CameraSpec;
 use hytrace_trace::render::cutaway::{CutMode, CutPlane, Cutaway};
 use hytrace_trace::render::spec::{RenderSpec, View};
@@ -118,17 +119,6 @@ fn render_cpu(f: &Foundry, spec: &RenderSpec) -> (Image, Vec<[(DVec3, DVec3); 5]
     (r.render(&|_| {}).unwrap(), rays)
 }
 
-fn render_gpu(f: &Foundry, spec: &RenderSpec) -> Option<Image> {
-    let ctx = GpuContext::for_tests()?;
-    let scene = CpuScene::<f32>::new(f).unwrap();
-    let renderer = Renderer::new(&scene, f, spec).unwrap();
-    let gpu = GpuRenderer::new(&ctx, &renderer).unwrap();
-    let mut run = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
-    assert!(run.cut_short.is_empty(), "pixels past the loop budget");
-    run.redo_cut_short(&renderer).unwrap();
-    Some(run.image)
-}
-
 fn cases() -> Vec<(Vec<&'static str>, CutMode)> {
     let mut out = vec![
         (vec!["x=0"], CutMode::Union),
@@ -190,7 +180,7 @@ fn a_cut_sphere_shows_its_surface_and_sections_where_the_planes_say_on_cpu_and_g
             sections >= 40,
             "{texts:?} {mode:?}: {sections} section pixels"
         );
-        if let Some(gpu) = render_gpu(&f, &spec) {
+        if let Some(gpu) = common::render_on_gpu(&f, &spec) {
             let agree = gpu
                 .pixels
                 .iter()

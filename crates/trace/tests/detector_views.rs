@@ -12,7 +12,6 @@ use common::gdml_files;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::CpuScene;
-use hytrace_trace::gpu::{GpuContext, GpuRenderer};
 use hytrace_trace::render::detector::{ColorBy, DetectorError, DetectorStyle};
 use hytrace_trace::render::id_colour;
 use hytrace_trace::render::spec::{Material, RenderSpec, View};
@@ -200,18 +199,6 @@ fn render_cpu(f: &Foundry, spec: &RenderSpec) -> Image {
         .unwrap()
 }
 
-/// Renders `spec` of `f` on the GPU; `None` without one.
-fn render_gpu(f: &Foundry, spec: &RenderSpec) -> Option<Image> {
-    let ctx = GpuContext::for_tests()?;
-    let scene = CpuScene::<f32>::new(f).unwrap();
-    let renderer = Renderer::new(&scene, f, spec).unwrap();
-    let gpu = GpuRenderer::new(&ctx, &renderer).unwrap();
-    let mut run = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
-    assert!(run.cut_short.is_empty(), "pixels past the loop budget");
-    run.redo_cut_short(&renderer).unwrap();
-    Some(run.image)
-}
-
 fn black(p: &[f32; 3]) -> bool {
     p.iter().all(|&c| c <= 1e-4)
 }
@@ -229,7 +216,7 @@ fn coincident_faces_render_as_their_separated_twin_without_black_pixels() {
         }
         let (a, b) = (render_cpu(&f, &touching), render_cpu(&g, &apart));
         let mut gpu = vec![("cpu", a.clone())];
-        gpu.extend(render_gpu(&f, &touching).map(|i| ("gpu", i)));
+        gpu.extend(common::render_on_gpu(&f, &touching).map(|i| ("gpu", i)));
         for (side, image) in &gpu {
             let mut differ = 0;
             for (k, (p, q)) in image.pixels.iter().zip(&b.pixels).enumerate() {

@@ -463,3 +463,19 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
 pub fn gdml_files(dir: &Path) -> Vec<PathBuf> {
     hytrace_testkit::files::files_with_extension(dir, "gdml")
 }
+
+/// Renders `spec` of `f` on the GPU (pixels past lavapipe's loop budget fail the test);
+/// `None` without a GPU (a panic when `HYTRACE_REQUIRE_GPU=1`).
+pub fn render_on_gpu(
+    f: &Foundry,
+    spec: &hytrace_trace::render::spec::RenderSpec,
+) -> Option<hytrace_trace::render::Image> {
+    let ctx = GpuContext::for_tests()?;
+    let scene = CpuScene::<f32>::new(f).unwrap();
+    let renderer = hytrace_trace::render::Renderer::new(&scene, f, spec).unwrap();
+    let gpu = hytrace_trace::gpu::GpuRenderer::new(&ctx, &renderer).unwrap();
+    let mut run = gpu.render(&ctx, &renderer, &|_| {}).unwrap();
+    assert!(run.cut_short.is_empty(), "pixels past the loop budget");
+    run.redo_cut_short(&renderer).unwrap();
+    Some(run.image)
+}
