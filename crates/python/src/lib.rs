@@ -40,6 +40,13 @@ fn to_python<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<
         .call_method1("loads", (value.to_string(),))
 }
 
+/// A photon run's wavelength as Python gives it: nanometres, or `MATERIAL:PROPERTY`.
+#[derive(FromPyObject)]
+enum WavelengthArg {
+    Nm(f64),
+    Spectrum(String),
+}
+
 /// A scene loaded once and traced many times: `hytrace.load(path)`.
 #[pyclass(frozen, module = "hytrace")]
 struct Scene {
@@ -255,14 +262,16 @@ impl Scene {
 
     /// Propagates optical photons from `source` through the scene as `hytrace photons`
     /// does, photons `first .. first + photons` (photon `i` draws the random stream
-    /// `(seed, i)`, so runs over consecutive ranges give together what one run gives).
+    /// `(seed, i)`, so runs over consecutive ranges give together what one run gives);
+    /// `wavelength` in nanometres, or `"MATERIAL:PROPERTY"` to draw each photon's from that
+    /// spectrum of a scene material.
     ///
     /// Returns the detected photons, (H, 16) float64 with the columns of the command's
     /// output; with `histories=True`, `(hits, histories)` where histories is every photon's
     /// packed step history, (photons,) uint64.
     #[pyo3(signature = (
-        source, photons, *, wavelength = 420.0, seed = 0, max_steps = 10_000, first = 0,
-        histories = false
+        source, photons, *, wavelength = WavelengthArg::Nm(420.0), seed = 0,
+        max_steps = 10_000, first = 0, histories = false
     ))]
     #[allow(clippy::too_many_arguments)]
     fn photons<'py>(
@@ -270,16 +279,20 @@ impl Scene {
         py: Python<'py>,
         source: &str,
         photons: u64,
-        wavelength: f64,
+        wavelength: WavelengthArg,
         seed: u32,
         max_steps: u32,
         first: u64,
         histories: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let source = Source::parse(source).map_err(library_error)?;
+        let wavelength = match wavelength {
+            WavelengthArg::Nm(nm) => Wavelength::Fixed(nm),
+            WavelengthArg::Spectrum(text) => Wavelength::parse(&text).map_err(library_error)?,
+        };
         let options = RunOptions {
             source,
-            wavelength: Wavelength::Fixed(wavelength),
+            wavelength,
             photons,
             first,
             seed,

@@ -224,6 +224,13 @@ def test_photons_equal_the_command(cli, tmp_path):
     same(histories, np.load(tmp_path / "histories.npy"))
     assert len(hits) > 0
     same(scene.photons("point:0,0,0", 3000, seed=3, wavelength=400.0), hits)
+    # Wavelengths drawn from a material's spectrum, as the command draws them.
+    cli("photons", EVERY_PROCESS, "--source", "point:0,0,0", "-n", "3000", "--seed", "3",
+        "--wavelength", "Liquid:SCINTILLATIONCOMPONENT1", "--out", tmp_path / "drawn.npy")
+    drawn = scene.photons("point:0,0,0", 3000, seed=3,
+                          wavelength="Liquid:SCINTILLATIONCOMPONENT1")
+    same(drawn, np.load(tmp_path / "drawn.npy"))
+    assert len(np.unique(drawn[:, 7])) > 10
 
 
 def test_photon_ranges_equal_the_commands_first_option_and_the_whole_run(cli, tmp_path):
