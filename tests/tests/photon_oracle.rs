@@ -22,7 +22,8 @@ use serde::Deserialize;
 
 /// Photons per run of each program.
 const PHOTONS: u64 = 4000;
-const WAVELENGTH_NM: f64 = 420.0;
+/// Wavelength of the runs with a fixed one, as `--wavelength` takes it (nm).
+const WAVELENGTH: &str = "420";
 /// Opticks' cut: histories counted at least this often in the two runs together.
 const MIN_COUNT: u64 = 30;
 /// Smallest acceptable p-value of the history chi2.
@@ -92,13 +93,8 @@ fn mean_and_error(x: &[f64]) -> (f64, f64) {
     (mean, (var / n).sqrt())
 }
 
-/// Runs both programs on one file and source at [`WAVELENGTH_NM`]; returns a failure
-/// description, if any.
-fn compare(python: &Path, file: &str, source: &str) -> Option<String> {
-    compare_at(python, file, source, &WAVELENGTH_NM.to_string())
-}
-
-/// [`compare`] at a wavelength given as `--wavelength` takes it (nm or MATERIAL:PROPERTY).
+/// Runs both programs on one file and source at a wavelength given as `--wavelength` takes
+/// it (nm or MATERIAL:PROPERTY); returns a failure description, if any.
 fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Option<String> {
     let gdml = match file.strip_prefix("data/") {
         Some(own) => Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(own),
@@ -181,11 +177,22 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
     (!problems.is_empty()).then(|| format!("{file} {source} {wavelength}: {}", problems.join("; ")))
 }
 
-#[test]
-fn photon_histories_and_detections_agree_with_geant4() {
+/// Runs both programs on every case (file, source, wavelength) and fails listing every
+/// case that disagrees; nothing runs without the oracle's Python (the helper says why, or
+/// fails where oracles are required).
+fn all_agree(cases: &[(&str, &str, &str)]) {
     let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
         return;
     };
+    let failures: Vec<String> = cases
+        .iter()
+        .filter_map(|(file, source, wavelength)| compare_at(&python, file, source, wavelength))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+#[test]
+fn photon_histories_and_detections_agree_with_geant4() {
     let cases = [
         // From the air around the drop: Fresnel and total internal reflection at the air
         // (n 1.1) and lead (n from 1.0 to 1.1 across the table) boundaries, the vacuum
@@ -219,11 +226,7 @@ fn photon_histories_and_detections_agree_with_geant4() {
         ),
         ("data/photons/every_process.gdml", "sphere:0,0,0:90:in"),
     ];
-    let failures: Vec<String> = cases
-        .iter()
-        .filter_map(|(file, source)| compare(&python, file, source))
-        .collect();
-    assert!(failures.is_empty(), "{failures:#?}");
+    all_agree(&cases.map(|(file, source)| (file, source, WAVELENGTH)));
 }
 
 /// Rough and painted surfaces (Geant4's glisur and unified models, every plain finish):
@@ -232,9 +235,6 @@ fn photon_histories_and_detections_agree_with_geant4() {
 /// the hit-direction comparison weighs the angular distributions the surfaces send out.
 #[test]
 fn rough_and_painted_surfaces_agree_with_geant4() {
-    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
-        return;
-    };
     let file = "data/photons/rough_surfaces.gdml";
     let cases = [
         // unified, ground glass: spike 0.2, lobe 0.4, backscatter 0.1, Lambertian 0.3
@@ -256,11 +256,7 @@ fn rough_and_painted_surfaces_agree_with_geant4() {
         // glisur, ground metal (polish 0.5, REFLECTIVITY 0.9).
         "beam:215,0,50:0.5,0,-1:5",
     ];
-    let failures: Vec<String> = cases
-        .iter()
-        .filter_map(|source| compare(&python, file, source))
-        .collect();
-    assert!(failures.is_empty(), "{failures:#?}");
+    all_agree(&cases.map(|source| (file, source, WAVELENGTH)));
 }
 
 /// Wavelength shifting (Geant4's OpWLS): a beam into each plate of
@@ -269,15 +265,11 @@ fn rough_and_painted_surfaces_agree_with_geant4() {
 /// re-emission spectrum, the hit times its delay.
 #[test]
 fn wavelength_shifting_agrees_with_geant4() {
-    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
-        return;
-    };
     let file = "data/photons/wavelength_shifter.gdml";
-    let failures: Vec<String> = ["beam:-80,0,50:0.2,0,-1:10", "beam:80,0,50:0.2,0,-1:10"]
-        .iter()
-        .filter_map(|source| compare(&python, file, source))
-        .collect();
-    assert!(failures.is_empty(), "{failures:#?}");
+    all_agree(&[
+        (file, "beam:-80,0,50:0.2,0,-1:10", WAVELENGTH),
+        (file, "beam:80,0,50:0.2,0,-1:10", WAVELENGTH),
+    ]);
 }
 
 /// Wavelengths drawn from a material's emission spectrum (the liquid's
@@ -286,19 +278,12 @@ fn wavelength_shifting_agrees_with_geant4() {
 /// spectrum as the liquid filters it.
 #[test]
 fn wavelengths_drawn_from_a_spectrum_agree_with_geant4() {
-    let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
-        return;
-    };
-    let failures: Vec<String> = ["beam:0,0,50:0,0,-1:20", "point:0,0,0"]
-        .iter()
-        .filter_map(|source| {
-            compare_at(
-                &python,
-                "data/photons/every_process.gdml",
-                source,
-                "Liquid:SCINTILLATIONCOMPONENT1",
-            )
-        })
-        .collect();
-    assert!(failures.is_empty(), "{failures:#?}");
+    let (file, spectrum) = (
+        "data/photons/every_process.gdml",
+        "Liquid:SCINTILLATIONCOMPONENT1",
+    );
+    all_agree(&[
+        (file, "beam:0,0,50:0,0,-1:20", spectrum),
+        (file, "point:0,0,0", spectrum),
+    ]);
 }

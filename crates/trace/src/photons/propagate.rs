@@ -180,12 +180,7 @@ impl PhotonScene {
     /// Propagates photon `index` to its end: the histories of its lineages (the photon
     /// itself first, then the further photons its wavelength-shifting absorptions
     /// emitted) and the hit rows of those detected.
-    fn photon(
-        &self,
-        index: u64,
-        run: &RunOptions,
-        emission: &Emission,
-    ) -> (Vec<History>, Vec<HitRow>) {
+    fn photon(&self, index: u64, run: &RunOptions, emission: &Emission) -> PhotonEnd {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
         let start = run.source.sample(&mut rng);
         let (energy, wavelength_nm) = match emission {
@@ -199,9 +194,12 @@ impl PhotonScene {
         history.push(Label::To);
         let Some(current) = self.tracer.locate_point(start.position.to_f64()) else {
             history.push(Label::Mi);
-            return (vec![history], vec![]);
+            return PhotonEnd {
+                own: (history, None),
+                further: Vec::new(),
+            };
         };
-        let mut pending = vec![Lineage {
+        let photon = Lineage {
             pos: start.position,
             dir: start.direction,
             pol: start.polarization,
@@ -210,15 +208,16 @@ impl PhotonScene {
             wavelength_nm,
             current,
             history,
-        }];
-        let (mut histories, mut hits) = (Vec::new(), Vec::new());
-        // Depth first: the photon's own lineage ends first.
+        };
+        // The photon's own lineage first; the vectors allocate only when a wavelength
+        // shifter emits more than one photon.
+        let mut pending = Vec::new();
+        let own = self.lineage(photon, index, run, &mut rng, &mut pending);
+        let mut further = Vec::new();
         while let Some(photon) = pending.pop() {
-            let (history, hit) = self.lineage(photon, index, run, &mut rng, &mut pending);
-            histories.push(history);
-            hits.extend(hit);
+            further.push(self.lineage(photon, index, run, &mut rng, &mut pending));
         }
-        (histories, hits)
+        PhotonEnd { own, further }
     }
 
     /// Propagates one photon to its end; photons emitted by wavelength-shifting
@@ -363,6 +362,13 @@ impl PhotonScene {
     }
 }
 
+/// How one photon ended: its own lineage's history and hit, then those of the further
+/// photons its wavelength-shifting absorptions emitted.
+struct PhotonEnd {
+    own: (History, Option<HitRow>),
+    further: Vec<(History, Option<HitRow>)>,
+}
+
 /// The wavelength of a run, resolved: fixed (energy in MeV and nm) or a spectrum.
 enum Emission {
     Fixed { energy: f64, nm: f64 },
@@ -478,18 +484,18 @@ pub fn propagate_reporting(
     let mut first = run.first;
     while first < end {
         let last = first.saturating_add(BATCH).min(end);
-        let batch: Vec<(Vec<History>, Vec<HitRow>)> = (first..last)
+        let batch: Vec<PhotonEnd> = (first..last)
             .into_par_iter()
             .map(|i| scene.photon(i, run, &emission))
             .collect();
-        for (lineages, photon_hits) in batch {
-            for h in &lineages {
-                *codes.entry(h.code).or_default() += 1;
-            }
+        for end in batch {
             if run.keep_histories {
-                histories.push(lineages[0].code);
+                histories.push(end.own.0.code);
             }
-            hits.extend(photon_hits);
+            for (h, hit) in std::iter::once(end.own).chain(end.further) {
+                *codes.entry(h.code).or_default() += 1;
+                hits.extend(hit);
+            }
         }
         first = last;
         progress(first - run.first);
