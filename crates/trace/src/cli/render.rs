@@ -19,7 +19,8 @@ use super::options::RenderSettingsArgs;
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// `default` (or nothing) for the embedded default scene, a .toml scene file, a .gdml
-    /// file, a mesh or a Foundry directory.
+    /// file, a mesh, a Foundry directory, or a volume (.nvdb, .vdb, a brick store, sphere:R)
+    /// rendered with an automatic camera and transfer function.
     pub scene: Option<PathBuf>,
     /// The image: .png (8-bit sRGB), .npy (float32 linear radiance, height x width x 3) or
     /// .exr (OpenEXR linear RGB, see --exr).

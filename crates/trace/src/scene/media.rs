@@ -5,12 +5,14 @@
 //! A medium is bricked in memory in its texel format, or, when its source is a brick store
 //! and no format is given, read as stored: lazily, through the store's brick cache.
 
+use std::path::Path;
+
 use crate::error::{bail, ensure, Context};
 use hytrace_foundry::optics::Medium;
 use hytrace_foundry::{Brick, Foundry, Transform64};
 use hytrace_volume::{
-    BrickStore, BrickedGrid, Coord, GridMap, RangeMips, TexelFormat, Volume, VolumeError,
-    VoxelGrid, DEFAULT_STORE_BUDGET,
+    is_brick_store, BrickStore, BrickedGrid, Coord, GridMap, RangeMips, TexelFormat, Volume,
+    VolumeError, VoxelGrid, DEFAULT_STORE_BUDGET,
 };
 
 /// The format name of a medium read as stored in its brick store (in [`Medium::format`]).
@@ -29,6 +31,21 @@ pub struct MediumSpec {
     pub format: Option<TexelFormat>,
     /// Placement of the grid's world frame in the solid's frame.
     pub placement: Transform64,
+}
+
+impl MediumSpec {
+    /// The grid `grid` (`None`: the first) of `source`, unplaced: a brick store read as
+    /// stored, any other grid bricked in single-precision texels.
+    pub fn of_source(source: String, grid: Option<String>, density_scale: f64) -> MediumSpec {
+        let format = (!is_brick_store(Path::new(&source))).then_some(TexelFormat::F32);
+        MediumSpec {
+            source,
+            grid,
+            density_scale,
+            format,
+            placement: Transform64::IDENTITY,
+        }
+    }
 }
 
 /// The index-to-world map of a grid as a Foundry transform.

@@ -5,6 +5,7 @@ mod gdml_scene;
 mod media;
 mod mesh_scene;
 mod toml_scene;
+mod volume_scene;
 
 use std::path::Path;
 
@@ -26,6 +27,10 @@ pub use media::{
 pub use mesh_scene::{add_mesh_file_solid, gltf_to_foundry, load_mesh_scene, obj_to_foundry};
 pub use toml_scene::{
     load_toml_render_scene, load_toml_scene, render_scene_from_toml, scene_from_toml,
+};
+pub use volume_scene::{
+    is_volume_source, load_volume_render_scene, BACKGROUND, CALIBRATION_RAYS, EMISSION,
+    TARGET_DEPTH,
 };
 
 /// Loads the scene named on the command line: none or `default` gives the embedded default
@@ -67,7 +72,9 @@ pub fn load_scene(arg: Option<&Path>, options: &GdmlOptions) -> crate::Result<Fo
 /// (camera, materials, lights, media, settings), the default scene's, or for other scenes
 /// the defaults (an automatic camera, grey diffuse solids, default lights). A hierarchical
 /// scene (GDML) gets the default detector view ([`DetectorStyle`]): the world invisible,
-/// envelopes as faint shells, their contents solid, coloured by material.
+/// envelopes as faint shells, their contents solid, coloured by material. A volume (a .nvdb
+/// or .vdb file, a brick store, a procedural grid) is rendered on its own, with an
+/// automatic camera and transfer function ([`load_volume_render_scene`]).
 pub fn load_render_scene(
     arg: Option<&Path>,
     options: &GdmlOptions,
@@ -75,6 +82,9 @@ pub fn load_render_scene(
     let is_default = arg.is_none_or(|p| p.as_os_str() == "default");
     if is_default {
         return Ok((default_scene()?, default_render_spec()));
+    }
+    if let Some(p) = arg.filter(|p| is_volume_source(p)) {
+        return load_volume_render_scene(p);
     }
     if let Some(p) = arg.filter(|p| p.extension().is_some_and(|e| e == "toml") && !p.is_dir()) {
         return load_toml_render_scene(p);

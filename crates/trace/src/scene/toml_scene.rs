@@ -59,7 +59,7 @@ use crate::error::{bail, Context};
 use hytrace_csg::{parse_shape, to_tree};
 use hytrace_foundry::gdml::{read_gdml, GdmlOptions};
 use hytrace_foundry::{pack_label, Foundry, Transform64, UNSET};
-use hytrace_volume::{is_brick_store, is_procedural, TexelFormat};
+use hytrace_volume::{is_procedural, TexelFormat};
 use serde::Deserialize;
 
 use super::gdml_scene::{gdml_to_foundry, world_solids};
@@ -451,18 +451,11 @@ fn volume_spec(entry: &VolumeEntry, dir: &Path) -> crate::Result<MediumSpec> {
         dir.join(&entry.source).display().to_string()
     };
     // A brick store is read as stored unless a format asks to brick it in memory.
-    let format = match &entry.format {
-        Some(name) => Some(TexelFormat::from_str(name)?),
-        None if is_brick_store(Path::new(&source)) => None,
-        None => Some(TexelFormat::F32),
-    };
-    Ok(MediumSpec {
-        source,
-        grid: entry.grid.clone(),
-        density_scale: entry.density_scale,
-        format,
-        placement: Transform64::IDENTITY,
-    })
+    let mut spec = MediumSpec::of_source(source, entry.grid.clone(), entry.density_scale);
+    if let Some(name) = &entry.format {
+        spec.format = Some(TexelFormat::from_str(name)?);
+    }
+    Ok(spec)
 }
 
 /// Reads a scene file.
