@@ -2,19 +2,21 @@
 //! `--show`, `--hide` and the file's colours draw, checked against the placement tree;
 //! every file of the shared corpus showing its volumes; and coincident faces (a daughter
 //! sharing faces with its mother, abutting daughters) rendered as their twin with the faces
-//! 1e-3 mm apart is, with no black pixel, on the CPU and on the GPU.
+//! 1e-3 mm apart is, with no black pixel, on the CPU and on the GPU; the PNG legend's
+//! swatches are the JSON legend's colours, which the drawn volumes show.
 
 mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::gdml_files;
+use common::{gdml_files, hytrace, read_png, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::render::detector::{ColorBy, DetectorError, DetectorStyle};
 use hytrace_trace::render::id_colour;
-use hytrace_trace::render::spec::{Material, RenderSpec, View};
+use hytrace_trace::render::run::RenderSettings;
+use hytrace_trace::render::spec::{Light, Material, RenderSpec, View};
 use hytrace_trace::render::{Image, Renderer};
 use hytrace_trace::scene::load_render_scene;
 
@@ -243,6 +245,117 @@ fn coincident_faces_render_as_their_separated_twin_without_black_pixels() {
             }
         }
     }
+}
+
+/// The legend's colours by name in a detector view of the nested boxes coloured by volume,
+/// the envelope hidden (so no shell tints what is behind it).
+fn by_volume() -> RenderSettings {
+    RenderSettings {
+        detector: DetectorStyle {
+            color_by: Some(ColorBy::Volume),
+            hide: vec!["Envelope".into()],
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn the_png_legend_shows_the_json_legend_colours_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let gdml = dir.path().join("boxes.gdml");
+    std::fs::write(&gdml, nested_boxes(0.0)).unwrap();
+    let out = dir.path().join("boxes.npy");
+    let run = hytrace(
+        &[
+            "render",
+            gdml.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16x12",
+            "--spp",
+            "1",
+            "--color-by",
+            "volume",
+            "--hide",
+            "Envelope",
+        ],
+        &[],
+    );
+    assert!(run.status.success(), "{}", stderr(&run));
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("boxes.legend.json")).unwrap(),
+    )
+    .unwrap();
+    let expected: Vec<[u8; 3]> = json["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| serde_json::from_value(e["srgb8"].clone()).unwrap())
+        .collect();
+    assert_eq!(expected.len(), 2, "{json}");
+    // Swatches: runs of 16 equal pixels down the column at x = 16 (their middle) other
+    // than the paper's colour of the top left corner; each row has text to its right.
+    let (w, h, rgb) = read_png(&dir.path().join("boxes.legend.png"));
+    let at = |x: u32, y: u32| -> [u8; 3] {
+        let k = 3 * (y * w + x) as usize;
+        [rgb[k], rgb[k + 1], rgb[k + 2]]
+    };
+    let paper = at(0, 0);
+    let mut swatches = Vec::new();
+    let mut y = 0;
+    while y < h {
+        let c = at(16, y);
+        let run = (y..h).take_while(|&v| at(16, v) == c).count() as u32;
+        if c != paper && run == 16 {
+            swatches.push(c);
+            let ink = (y..y + 16).any(|v| (32..w).any(|x| at(x, v) == [255; 3]));
+            assert!(ink, "no name beside the swatch at row {y}");
+        }
+        y += run;
+    }
+    assert_eq!(swatches, expected);
+}
+
+#[test]
+fn drawn_volumes_show_their_legend_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let (f, mut spec) = load_text(dir.path(), "boxes.gdml", &nested_boxes(0.0));
+    let legend = by_volume().apply(&f, &mut spec).unwrap().unwrap();
+    // White light from one direction (no sky; diffuse surfaces take direct light only): a
+    // lit pixel is its surface's colour times one grey level.
+    spec.lights = vec![Light::Directional {
+        direction: [-0.3, 0.4, -1.0],
+        irradiance: [3.0; 3],
+    }];
+    spec.settings.size = [64, 48];
+    spec.settings.spp = 1;
+    let shaded = render_cpu(&f, &spec);
+    spec.settings.view = View::Instance;
+    let ids = render_cpu(&f, &spec);
+    let mut checked = [0; 2];
+    for (k, volume) in [A, B].into_iter().enumerate() {
+        let name = &spec.volumes[volume].logical;
+        let entry = legend.entries.iter().find(|e| &e.name == name).unwrap();
+        let id = id_colour(volume as u32).as_vec3().to_array();
+        for (p, q) in shaded.pixels.iter().zip(&ids.pixels) {
+            if *q != id || p.iter().all(|&c| c < 1e-3) {
+                continue;
+            }
+            let grey = p[0] as f64 / entry.colour[0];
+            for c in 0..3 {
+                let expected = grey * entry.colour[c];
+                assert!(
+                    (p[c] as f64 - expected).abs() <= 1e-4 + 1e-3 * expected,
+                    "{name}: pixel {p:?} is not a grey level times {:?}",
+                    entry.colour
+                );
+            }
+            checked[k] += 1;
+        }
+    }
+    assert!(checked.iter().all(|&n| n > 20), "{checked:?} lit pixels");
 }
 
 fn corpus() -> PathBuf {

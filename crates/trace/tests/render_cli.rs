@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{hytrace, repo};
+use common::{hytrace, read_png, repo};
 
 fn run_ok(args: &[&str]) -> std::process::Output {
     let out = hytrace(args, &[]);
@@ -22,17 +22,6 @@ fn run_err(args: &[&str]) -> String {
     let out = hytrace(args, &[]);
     assert!(!out.status.success(), "hytrace {args:?} should fail");
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// Width, height and RGB bytes of a PNG file.
-fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!(info.color_type, png::ColorType::Rgb);
-    buf.truncate(info.buffer_size());
-    (info.width, info.height, buf)
 }
 
 #[test]

@@ -178,7 +178,7 @@ pub struct DetectorArgs {
     #[arg(long, value_name = "PATTERN")]
     pub hide: Vec<String>,
     /// What the colours tell apart [default: material, with the colours the file gives].
-    /// Every detector view writes its legend beside the image (IMAGE.legend.json).
+    /// Every detector view writes its legend beside the image (IMAGE.legend.json and IMAGE.legend.png).
     #[arg(long, value_parser = choice::<ColorBy>(), value_name = "KEY")]
     pub color_by: Option<ColorBy>,
 }

@@ -47,10 +47,10 @@ pub struct RenderArgs {
     pub stats: bool,
 }
 
-/// Where the legend of the image `out` goes: `IMAGE.legend.json` beside it.
-fn legend_path(out: &Path) -> PathBuf {
+/// Where the legend of the image `out` goes: `IMAGE.legend.EXT` beside it (`json`, `png`).
+fn legend_path(out: &Path, ext: &str) -> PathBuf {
     let stem = out.file_stem().unwrap_or_default().to_string_lossy();
-    out.with_file_name(format!("{stem}.legend.json"))
+    out.with_file_name(format!("{stem}.legend.{ext}"))
 }
 
 /// Runs `hytrace render`.
@@ -91,10 +91,11 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     bar.finish_and_clear();
     write_image(&image, &args.out, args.exr)?;
     if let Some(legend) = &legend {
-        let path = legend_path(&args.out);
+        let path = legend_path(&args.out, "json");
         let text = serde_json::to_string_pretty(&legend.to_json())?;
         write_atomically(&path, |w| w.write_all(text.as_bytes()))
             .with_context(|| format!("writing the legend {}", path.display()))?;
+        write_image(&legend.image(), &legend_path(&args.out, "png"), args.exr)?;
     }
     let samples = width as f64 * height as f64 * spec.settings.spp as f64;
     if args.stats {

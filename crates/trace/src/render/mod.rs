@@ -12,6 +12,7 @@ pub mod camera;
 pub mod cutaway;
 pub mod detector;
 mod integrator;
+mod legend_image;
 mod media;
 pub mod optics;
 pub mod output;

@@ -121,6 +121,17 @@ pub fn gpu_and_cpu_values(
     )
 }
 
+/// Width, height and RGB bytes of a PNG file.
+pub fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
 /// The values of a float32, float64 or int32 `.npy` file, as f64.
 pub fn read_values(path: &Path) -> Vec<f64> {
     let a = read_array(path).unwrap();
