@@ -9,7 +9,8 @@
 //! and spread of the image. Also: the composed kernel holds only the effects the scene
 //! calls for (and validates), more placed media than the kernel takes are refused, pixels
 //! past the driver's loop budget are found and rendered again on the CPU, and
-//! `render --backend gpu|auto` from the command line.
+//! `render --backend gpu|auto` from the command line; GPU renders report their progress
+//! after each sample pass.
 
 mod common;
 
@@ -17,6 +18,7 @@ use common::{hytrace, repo};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::gpu::{compose_render_kernel, GpuContext, GpuError, GpuRenderer, TexelStore};
+use hytrace_trace::render::run::{render, RenderBackend};
 use hytrace_trace::render::spec::{RenderSpec, View, VolumeMode};
 use hytrace_trace::render::{Image, Renderer};
 use hytrace_trace::scene::{load_render_scene, render_scene_from_toml};
@@ -693,4 +695,35 @@ fn media_texels_from_a_3d_texture_match_the_buffer_kernel() {
         println!("{name}: {} pixels, {differ} differ", buffer.1.len());
         assert_eq!(differ, 0, "{name}: {differ} pixels differ");
     }
+}
+
+/// The progress a render reports, in calls: the row samples done so far.
+fn progress_calls(backend: RenderBackend, spp: u32) -> Vec<u64> {
+    let (f, mut spec) = load("default");
+    small(&mut spec, View::Shaded, spp);
+    let calls = std::sync::Mutex::new(Vec::new());
+    let record = |done: u64| calls.lock().unwrap().push(done);
+    render(&f, &spec, backend, TexelStore::Storage, &record).unwrap();
+    calls.into_inner().unwrap()
+}
+
+#[test]
+fn gpu_renders_report_progress_after_every_sample_pass() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let (_, mut spec) = load("default");
+    small(&mut spec, View::Shaded, 5);
+    let [_, height] = spec.settings.size;
+    let total = u64::from(height) * 5;
+    // The small image is one batch of rows: a call after each of its five passes.
+    let gpu = progress_calls(RenderBackend::Gpu, 5);
+    assert!(gpu.len() >= 5, "{gpu:?}");
+    assert!(gpu.windows(2).all(|w| w[0] <= w[1]), "{gpu:?}");
+    assert_eq!(gpu.last(), Some(&total), "{gpu:?}");
+    let distinct: std::collections::BTreeSet<u64> = gpu.iter().copied().collect();
+    assert!(distinct.len() >= 5, "{gpu:?}");
+    // The CPU counts in the same units.
+    let cpu = progress_calls(RenderBackend::Cpu, 5);
+    assert_eq!(cpu.iter().max(), Some(&total), "{cpu:?}");
 }

@@ -78,8 +78,10 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     }
     let load_s = t0.elapsed().as_secs_f64();
     let [width, height] = spec.settings.size;
-    let bar = hytrace_trace::progress::bar(height as u64, "rendering", "rows");
-    let progress = |rows| bar.set_position(rows);
+    // Rows times samples: the GPU reports each sample pass, the CPU each row.
+    let passes = u64::from(height) * u64::from(spec.settings.spp);
+    let bar = hytrace_trace::progress::bar(passes, "rendering", "row samples");
+    let progress = |done| bar.set_position(done);
     let Rendered {
         image,
         effects: fx,

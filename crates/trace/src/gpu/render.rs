@@ -18,7 +18,7 @@ use super::records::{
     RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE, VOLUME_FILTER_TRILINEAR,
 };
 use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
-use super::timing::{finish_batch, GpuTimes, PassTimer};
+use super::timing::{finish_batch, finish_pass, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use super::transmittance::{KernelGrid, VolumeUpload};
 use crate::render::camera::Projection;
@@ -469,8 +469,9 @@ impl GpuRenderer {
     }
 
     /// Renders the image `renderer` describes (the scene and effects this kernel was
-    /// built for; any view, camera, lights and settings), in batches of rows; `progress`
-    /// gets the rows finished so far.
+    /// built for; any view, camera, lights and settings), in batches of rows, one sample
+    /// pass after the other; `progress` gets the row samples finished so far (rows times
+    /// samples per pixel: `height * spp` in all).
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -501,17 +502,20 @@ impl GpuRenderer {
         let mut pixels = Vec::with_capacity(width as usize * height as usize);
         let mut cut_short = Vec::new();
         let mut times = GpuTimes::default();
+        let spp = u64::from(inputs.params.spp);
         let mut row = 0;
         while row < height {
             let rows = rows_per_batch.min(height - row);
-            for texel in self.render_rows(ctx, &inputs, row, rows, &mut times)? {
+            let done = u64::from(row) * spp;
+            let passed = |passes: u32| progress(done + u64::from(rows) * u64::from(passes));
+            for texel in self.render_rows(ctx, &inputs, row, rows, &mut times, &passed)? {
                 if texel[3] != 0.0 {
                     cut_short.push(pixels.len() as u32);
                 }
                 pixels.push([texel[0], texel[1], texel[2]]);
             }
             row += rows;
-            progress(row as u64);
+            progress(u64::from(row) * spp);
         }
         Ok(GpuImage {
             image: Image {
@@ -524,6 +528,9 @@ impl GpuRenderer {
         })
     }
 
+    /// Renders rows `row_offset..row_offset + row_count`: one submission per sample pass,
+    /// each but the last waited for here so that `progress` hears of it (with the passes
+    /// done).
     fn render_rows(
         &self,
         ctx: &GpuContext,
@@ -531,12 +538,12 @@ impl GpuRenderer {
         row_offset: u32,
         row_count: u32,
         times: &mut GpuTimes,
+        progress: &dyn Fn(u32),
     ) -> Result<Vec<[f32; 4]>, GpuError> {
         let n = (inputs.params.width * row_count) as usize;
         let out_size = (n * 16) as u64;
         let t0 = Instant::now();
-        let timer = PassTimer::new(ctx, "render timestamps");
-        let (out, _keep) = ctx.checked("render dispatch", || {
+        let (out, _keep, samples) = ctx.checked("render dispatch", || {
             let image = ctx.output_buffer("image", out_size);
             let shared = [
                 ctx.input_buffer("render items", &binding_bytes(&inputs.items)),
@@ -566,24 +573,45 @@ impl GpuRenderer {
                     })
                 })
                 .collect();
-            let mut groups = vec![(1, &self.scene_group)];
-            if let Some((medium, _)) = &self.medium {
-                groups.push((0, medium));
-            }
-            ctx.submit_sequence(
-                "render",
-                &self.pipeline,
-                &groups,
-                (2, &samples),
-                n as u32,
-                timer.as_ref(),
-            );
-            (image.clone(), (shared, samples))
+            (image.clone(), shared, samples)
         })?;
+        let mut groups = vec![(1, &self.scene_group)];
+        if let Some((medium, _)) = &self.medium {
+            groups.push((0, medium));
+        }
+        let upload = t0.elapsed();
+        let submit = |sample: &wgpu::BindGroup, timer: Option<&PassTimer>| {
+            ctx.checked("render dispatch", || {
+                let pass = std::slice::from_ref(sample);
+                ctx.submit_sequence(
+                    "render",
+                    &self.pipeline,
+                    &groups,
+                    (2, pass),
+                    n as u32,
+                    timer,
+                );
+            })
+        };
+        let (last, earlier) = samples.split_last().ok_or_else(|| GpuError::Operation {
+            what: "render".into(),
+            problem: "no sample per pixel".into(),
+        })?;
+        for (k, sample) in earlier.iter().enumerate() {
+            let timer = PassTimer::new(ctx, "render timestamps");
+            let submitted = Instant::now();
+            submit(sample, timer.as_ref())?;
+            finish_pass(ctx, "render kernel", submitted, timer.as_ref(), times)?;
+            progress(k as u32 + 1);
+        }
+        let timer = PassTimer::new(ctx, "render timestamps");
+        // The batch's upload began `upload` before its last pass was submitted.
+        let started = Instant::now() - upload;
+        submit(last, timer.as_ref())?;
         let bytes = finish_batch(
             ctx,
             "render kernel",
-            t0,
+            started,
             &out,
             out_size,
             timer.as_ref(),

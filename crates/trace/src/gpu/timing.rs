@@ -84,22 +84,13 @@ pub fn finish_batch(
     times: &mut GpuTimes,
 ) -> Result<Vec<u8>, GpuError> {
     let submitted = Instant::now();
-    ctx.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| {
-            ctx.check_not_lost().err().unwrap_or(GpuError::Operation {
-                what: what.to_string(),
-                problem: e.to_string(),
-            })
-        })?;
+    wait(ctx, what)?;
     let done = Instant::now();
     let bytes = ctx.read_buffer(out, size)?;
     times.upload_s += (submitted - started).as_secs_f64();
     times.kernel_s += (done - submitted).as_secs_f64();
     times.readback_s += done.elapsed().as_secs_f64();
-    if let Some(timer) = timer {
-        times.kernel_gpu_s = Some(times.kernel_gpu_s.unwrap_or(0.0) + timer.seconds(ctx)?);
-    }
+    add_gpu_seconds(ctx, timer, times)?;
     Ok(bytes)
 }
 
@@ -131,4 +122,45 @@ pub fn add_gpu_stats(
     line["gpu_readback_s"] = times.readback_s.into();
     line["gpu_kernel_timestamps_s"] = times.kernel_gpu_s.into();
     line["gpu_redone_on_cpu"] = times.redone_on_cpu.into();
+}
+
+/// Waits until the GPU has finished the work submitted so far (`what` names it in errors).
+fn wait(ctx: &GpuContext, what: &str) -> Result<(), GpuError> {
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| {
+            ctx.check_not_lost().err().unwrap_or(GpuError::Operation {
+                what: what.to_string(),
+                problem: e.to_string(),
+            })
+        })?;
+    Ok(())
+}
+
+/// Waits for the pass `what`, one of several of a batch, submitted at `submitted` (timed by
+/// `timer`), and adds its kernel time to `times`; the batch's last pass goes through
+/// [`finish_batch`] instead.
+pub fn finish_pass(
+    ctx: &GpuContext,
+    what: &str,
+    submitted: Instant,
+    timer: Option<&PassTimer>,
+    times: &mut GpuTimes,
+) -> Result<(), GpuError> {
+    wait(ctx, what)?;
+    times.kernel_s += submitted.elapsed().as_secs_f64();
+    add_gpu_seconds(ctx, timer, times)?;
+    Ok(())
+}
+
+/// Adds the seconds `timer` measured to the kernels' GPU time.
+fn add_gpu_seconds(
+    ctx: &GpuContext,
+    timer: Option<&PassTimer>,
+    times: &mut GpuTimes,
+) -> Result<(), GpuError> {
+    if let Some(timer) = timer {
+        times.kernel_gpu_s = Some(times.kernel_gpu_s.unwrap_or(0.0) + timer.seconds(ctx)?);
+    }
+    Ok(())
 }

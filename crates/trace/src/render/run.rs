@@ -41,7 +41,7 @@ pub struct GpuRun {
     pub times: GpuTimes,
 }
 
-/// Renders on the GPU of `ctx`. Pixels whose samples ran out of the driver's loop budget
+/// Renders on the GPU of `ctx` (`progress` as [`GpuRenderer::render`] calls it). Pixels whose samples ran out of the driver's loop budget
 /// (llvmpipe's: `shaders/loop_budget.wgsl`) are rendered again on the CPU, which draws
 /// the same random streams, so the image is the kernel's everywhere else and right
 /// everywhere; `gpu_redone_on_cpu` in the stats counts them.
@@ -154,8 +154,9 @@ pub struct Rendered {
     pub stores: Option<CacheStats>,
 }
 
-/// Renders scene `f` as `spec` describes on `backend`, calling `progress` with the rows
-/// done.
+/// Renders scene `f` as `spec` describes on `backend`, calling `progress` with the row
+/// samples done (rows times samples per pixel, `height * spp` in all): the CPU renders a
+/// row's samples together, the GPU one sample pass of a batch of rows after the other.
 pub fn render(
     f: &Foundry,
     spec: &RenderSpec,
@@ -168,7 +169,12 @@ pub fn render(
     let renderer = Renderer::new(&scene, f, spec)?;
     let build_s = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let cpu = || renderer.render(progress).map(|image| (image, None));
+    let spp = u64::from(spec.settings.spp);
+    let cpu = || {
+        renderer
+            .render(&|rows| progress(rows * spp))
+            .map(|image| (image, None))
+    };
     let gpu = |ctx: GpuContext| {
         render_gpu(&ctx, &renderer, texels, progress).map(|(image, run)| (image, Some(run)))
     };
