@@ -327,7 +327,7 @@ impl Scene {
 /// A sparse volume: one grid of a NanoVDB (`.nvdb`) or OpenVDB (`.vdb`) file, a brick store
 /// directory (read through a cache of at most `memory` bytes, as `--memory`) or a
 /// procedural grid (`sphere:RADIUS[,VOXEL[,BLEND]]`, `box:W,H,D[,VOXEL[,BLEND]]`), in the
-/// representation `repr` (as `hytrace volume sample --repr`).
+/// representation `repr` (as `hytrace volume sample --repr`; `None`: the file's own).
 #[pyclass(frozen, module = "hytrace")]
 struct Volume {
     spec: String,
@@ -366,19 +366,19 @@ fn is_volume_file(spec: &str) -> bool {
 #[pymethods]
 impl Volume {
     #[new]
-    #[pyo3(signature = (path, *, grid = None, repr = "nanovdb", memory = DEFAULT_STORE_BUDGET))]
+    #[pyo3(signature = (path, *, grid = None, repr = None, memory = DEFAULT_STORE_BUDGET))]
     fn new(
         py: Python<'_>,
         path: &Bound<'_, PyAny>,
         grid: Option<&str>,
-        repr: &str,
+        repr: Option<&str>,
         memory: u64,
     ) -> PyResult<Self> {
         let spec = match path.extract::<PathBuf>() {
             Ok(p) => p.display().to_string(),
             Err(_) => path.extract::<String>()?,
         };
-        let repr = choice("repr", repr)?;
+        let repr = repr.map(|r| choice("repr", r)).transpose()?;
         let represented = py
             .detach(|| {
                 let (_, g) = volume::open_within(&spec, grid, memory)?;

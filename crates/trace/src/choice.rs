@@ -129,7 +129,7 @@ mod tests {
     #[test]
     fn names_parse_display_and_others_are_refused_with_the_list() {
         assert_eq!("bc4".parse::<Repr>(), Ok(Repr::Bc4));
-        assert_eq!("source".parse::<Repr>(), Ok(Repr::Nanovdb));
+        assert_eq!("source".parse::<Repr>(), Ok(Repr::Source));
         assert_eq!(Repr::Unorm16.to_string(), "unorm16");
         let e = "jpeg".parse::<Repr>().unwrap_err();
         assert_eq!(

@@ -69,9 +69,11 @@ impl From<FilterArg> for Filter {
 /// Representation sampled: the grid as read, or a bricked grid of one texel format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Repr {
-    /// The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as
-    /// read).
+    /// A .nvdb file's NanoVDB buffer, read in place (other grids: as read, as `Source`).
     Nanovdb,
+    /// The grid as its file stores it: a .vdb's tree, a procedural grid's voxels, a brick
+    /// store read as stored through its cache.
+    Source,
     /// Bricked grid, BC4 texels.
     Bc4,
     /// Bricked grid, 8-bit normalized texels.
@@ -85,7 +87,8 @@ pub enum Repr {
 }
 
 crate::choice::named!(Repr {
-    (Repr::Nanovdb, "nanovdb", ["source"], "The grid as the file stores it (a NanoVDB buffer; OpenVDB or procedural grids as read)"),
+    (Repr::Nanovdb, "nanovdb", [], "A .nvdb file's NanoVDB buffer, read in place (other grids: as read, as `source`)"),
+    (Repr::Source, "source", [], "The grid as its file stores it: a .vdb's tree, a procedural grid's voxels, a brick store read as stored"),
     (Repr::Bc4, "bc4", [], "Bricked grid, BC4 texels"),
     (Repr::Unorm8, "unorm8", [], "Bricked grid, 8-bit normalized texels"),
     (Repr::Unorm16, "unorm16", [], "Bricked grid, 16-bit normalized texels"),
@@ -96,12 +99,21 @@ crate::choice::named!(Repr {
 impl Repr {
     fn texel_format(self) -> Option<TexelFormat> {
         match self {
-            Repr::Nanovdb => None,
+            Repr::Nanovdb | Repr::Source => None,
             Repr::Bc4 => Some(TexelFormat::Bc4),
             Repr::Unorm8 => Some(TexelFormat::Unorm8),
             Repr::Unorm16 => Some(TexelFormat::Unorm16),
             Repr::F16 => Some(TexelFormat::F16),
             Repr::F32 => Some(TexelFormat::F32),
+        }
+    }
+
+    /// The representation that fits `volume` when none is asked for: its file's own, read
+    /// with no conversion (`nanovdb` for a .nvdb file, else `source`).
+    pub fn fitting(volume: &Volume) -> Repr {
+        match volume {
+            Volume::Nano(_) => Repr::Nanovdb,
+            Volume::Vdb(_) | Volume::Dense(_) | Volume::Store(_) => Repr::Source,
         }
     }
 }
@@ -186,12 +198,13 @@ pub fn open_within(
     Ok(select_grid(spec, open_volume_with(spec, memory)?, name)?)
 }
 
-/// The grid in representation `repr`.
-pub fn represent(volume: Volume, repr: Repr) -> crate::Result<Represented> {
+/// The grid in representation `repr` (`None`: the one that fits it, [`Repr::fitting`]).
+pub fn represent(volume: Volume, repr: Option<Repr>) -> crate::Result<Represented> {
+    let repr = repr.unwrap_or_else(|| Repr::fitting(&volume));
     Ok(match repr.texel_format() {
         None => Represented::Source(volume),
         Some(_) if matches!(volume, Volume::Store(_)) => bail!(
-            "a brick store is read as stored (--repr nanovdb, the default): converting it to a bricked grid would read it whole"
+            "a brick store is read as stored (--repr source, the default for a store): converting it to a bricked grid would read it whole"
         ),
         Some(format) => Represented::Bricked(Box::new(BrickedGrid::convert(&volume, format)?)),
     })

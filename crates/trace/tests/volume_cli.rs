@@ -634,3 +634,49 @@ fn brick_store_misuse_fails_cleanly_without_output() {
     );
     assert!(!d.path("t.npy").exists());
 }
+
+#[test]
+fn repr_defaults_to_the_files_own_representation() {
+    use hytrace_trace::volume::{open, Repr};
+    let fitting = |spec: &str| Repr::fitting(&open(spec, None).unwrap().1);
+    assert_eq!(fitting(&data("nanovdb/density_zip.nvdb")), Repr::Nanovdb);
+    assert_eq!(fitting(&data("openvdb/density_zip.vdb")), Repr::Source);
+    assert_eq!(fitting(FOG_BOX), Repr::Source);
+    // The help says so for both commands that take --repr.
+    for command in ["sample", "transmittance"] {
+        let help = String::from_utf8(hytrace(&["volume", command, "--help"]).stdout).unwrap();
+        let help = help.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(
+            help.contains("nanovdb for a .nvdb file, source for a .vdb file, a procedural grid or a brick store"),
+            "{command}: {help}"
+        );
+    }
+    // With no --repr a .nvdb file is looked up in its NanoVDB buffer: the values equal
+    // those of --repr nanovdb and of the grid as its NumPy source holds them (density.npy,
+    // [a, b, c] is voxel (-37 + a, -26 + b, -20 + c)).
+    let d = Dir::new();
+    let index_points = [
+        [-30.0, -20.0, -10.0],
+        [-25.0, -15.0, -5.0],
+        [-36.0, -25.0, -19.0],
+    ];
+    write_f64(&d.path("p.npy"), &[3, 3], index_points.as_flattened());
+    let nvdb = data("nanovdb/density_zip.nvdb");
+    let sample = |extra: &[&str]| {
+        let (p, v) = (d.arg("p.npy"), d.arg("v.npy"));
+        let mut args = vec!["volume", "sample", &nvdb, "--points", &p, "--out", &v];
+        args.extend_from_slice(&["--space", "index", "--filter", "nearest"]);
+        args.extend_from_slice(extra);
+        let out = hytrace(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        read_values::<f32>(&d.path("v.npy"), Scalar::F32)
+    };
+    let by_default = sample(&[]);
+    assert_eq!(by_default, sample(&["--repr", "nanovdb"]));
+    let source = read_array(Path::new(&data("nanovdb/density.npy"))).unwrap();
+    let voxels: Vec<f32> = bytemuck::pod_collect_to_vec(&source.bytes);
+    for (p, got) in index_points.iter().zip(&by_default) {
+        let [a, b, c] = [p[0] + 37.0, p[1] + 26.0, p[2] + 20.0].map(|v| v as usize);
+        assert_eq!(*got, voxels[(a * 20 + b) * 20 + c], "{p:?}");
+    }
+}

@@ -39,9 +39,11 @@ pub enum VolumeCommand {
         /// Lookup filter.
         #[arg(long, value_parser = choice::<FilterArg>(), default_value_t = FilterArg::Trilinear)]
         filter: FilterArg,
-        /// Representation looked up.
-        #[arg(long, value_parser = choice::<Repr>(), default_value_t = Repr::Nanovdb)]
-        repr: Repr,
+        /// Representation looked up [default: the file's own, read with no conversion:
+        /// nanovdb for a .nvdb file, source for a .vdb file, a procedural grid or a brick
+        /// store].
+        #[arg(long, value_parser = choice::<Repr>())]
+        repr: Option<Repr>,
         /// Grid name (default: the first grid).
         #[arg(long)]
         grid: Option<String>,
@@ -67,9 +69,11 @@ pub enum VolumeCommand {
         /// Transmittances, (N,) float64.
         #[arg(long)]
         out: PathBuf,
-        /// Representation traced.
-        #[arg(long, value_parser = choice::<Repr>(), default_value_t = Repr::Nanovdb)]
-        repr: Repr,
+        /// Representation traced [default: the file's own, read with no conversion:
+        /// nanovdb for a .nvdb file, source for a .vdb file, a procedural grid or a brick
+        /// store].
+        #[arg(long, value_parser = choice::<Repr>())]
+        repr: Option<Repr>,
         #[command(flatten)]
         estimate: EstimatorArgs,
         /// Grid name (default: the first grid).
