@@ -174,6 +174,10 @@ fn covering_instances(f: &Foundry, materials: &[Material]) -> Vec<u32> {
 /// and still count in the automatic camera's framing.
 const FRAMING_OUTLIER: f64 = 20.0;
 
+/// How many times the diagonal of the solid volumes' box a shell (an envelope) may span and
+/// still count in the automatic camera's framing.
+const FRAMING_SHELLS: f64 = 3.0;
+
 /// The median box diagonal of the instances `keep` accepts (infinite without any).
 fn median_diagonal(scene: &CpuScene<f32>, keep: impl Fn(usize) -> bool) -> f64 {
     let mut d: Vec<f64> = (0..scene.instances())
@@ -275,23 +279,35 @@ impl<'a> Renderer<'a> {
             })
             .collect();
         let covering = covering_instances(f, &instance_material);
-        // What is seen: the surfaces drawn solid (a detector view's contents), else every
-        // surface drawn (its shells too); transparent instances (a GDML world) never count.
-        // A detector view leaves out of the framing what is far larger than its typical
-        // volume (beam pipes tens of metres long around a detector of a few).
+        // What is seen: the surfaces drawn solid (a detector view's contents) and the
+        // shells (envelopes) around them up to a few times their size (so nested envelopes
+        // around one thin solid frame the detector, but a tiny part in a large envelope is
+        // not lost in it); else every surface drawn. Transparent instances (a GDML world,
+        // hidden volumes) never count. A detector view leaves out what is far larger than
+        // its typical solid volume (beam pipes tens of metres long around a detector of a
+        // few).
+        let solid = |i: usize| !instance_material[i].is_see_through();
         let typical = if spec.instance_materials.is_empty() {
             f64::INFINITY
         } else {
-            FRAMING_OUTLIER * median_diagonal(scene, |i| !instance_material[i].is_see_through())
+            FRAMING_OUTLIER * median_diagonal(scene, solid)
         };
         let diagonal = |i: usize| {
             let [lo, hi] = scene.instance_bounds(i);
             (DVec3::from(hi) - DVec3::from(lo)).length()
         };
-        let bounds = scene
-            .bounds_of(|i| !instance_material[i].is_see_through() && diagonal(i) <= typical)
-            .or_else(|| scene.bounds_of(|i| instance_material[i] != Material::Transparent))
-            .or_else(|| scene.world_bounds());
+        let contents = scene.bounds_of(|i| solid(i) && diagonal(i) <= typical);
+        let bounds = match contents {
+            Some([lo, hi]) => {
+                let largest = FRAMING_SHELLS * (DVec3::from(hi) - DVec3::from(lo)).length();
+                scene.bounds_of(|i| {
+                    let shell = matches!(instance_material[i], Material::Shell { .. });
+                    (solid(i) && diagonal(i) <= typical) || (shell && diagonal(i) <= largest)
+                })
+            }
+            None => scene.bounds_of(|i| instance_material[i] != Material::Transparent),
+        }
+        .or_else(|| scene.world_bounds());
         let camera_spec = spec.camera.clone().unwrap_or_else(|| auto_camera(bounds));
         let camera = Camera::new(&camera_spec, settings.size)?;
         let mut lights = Vec::new();
