@@ -159,7 +159,7 @@ fn bricked_formats_stay_within_their_stated_bounds() {
             (Repr::F32, TexelFormat::F32),
         ] {
             let (_, grid) = open(path.to_str().unwrap(), None).unwrap();
-            let bricked = represent(grid, repr).unwrap();
+            let bricked = represent(grid, Some(repr)).unwrap();
             let hytrace_trace::volume::Represented::Bricked(b) = &bricked else {
                 panic!("{format}: not bricked");
             };
@@ -312,7 +312,7 @@ fn transmittance_equals_numpy_quadrature() {
         let (_, depth) = hytrace_tests::f64_array(&depth_path);
         let file = dir.join(format!("{name}.nvdb"));
         let (_, grid) = open(file.to_str().unwrap(), None).unwrap();
-        let grid = represent(grid, Repr::Nanovdb).unwrap();
+        let grid = represent(grid, Some(Repr::Nanovdb)).unwrap();
         let exact = TransmittanceArgs {
             estimator: EstimatorArg::Exact,
             step: 1.0,
