@@ -4,29 +4,19 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use hytrace_testkit::files::files_with_extension;
+use hytrace_testkit::files::{files_with_extension, shared_gdml_files};
 use serde::Deserialize;
 
 use crate::f64_array;
 
 /// The shared public GDML files (`HYTRACE_GDML_DIR`, default `../shared/gdml` beside the
 /// repository). Panics when missing: the oracle tests must not pass by finding nothing.
-pub fn gdml_dir() -> PathBuf {
-    let dir = std::env::var_os("HYTRACE_GDML_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/gdml"));
-    assert!(
-        dir.is_dir(),
-        "{}: the shared GDML files are missing (set HYTRACE_GDML_DIR)",
-        dir.display()
-    );
-    dir
-}
+pub use hytrace_testkit::files::shared_gdml_dir as gdml_dir;
 
 /// Every `.gdml` file under [`gdml_dir`], sorted, then the project's own files of
 /// `tests/data/gdml` (features the public files do not use).
 pub fn gdml_files() -> Vec<PathBuf> {
-    let mut files = files_with_extension(&gdml_dir(), "gdml");
+    let mut files = shared_gdml_files();
     files.extend(files_with_extension(
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("data/gdml"),
         "gdml",

@@ -19,3 +19,26 @@ pub fn files_with_extension(dir: &Path, ext: &str) -> Vec<PathBuf> {
     files.sort();
     files
 }
+
+/// The shared public GDML corpus: `HYTRACE_GDML_DIR`, else `../shared/gdml` beside the
+/// repository. Panics when it is missing: the tests over it must not pass by finding
+/// nothing.
+pub fn shared_gdml_dir() -> PathBuf {
+    let dir = std::env::var_os("HYTRACE_GDML_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/gdml"));
+    assert!(
+        dir.is_dir(),
+        "{}: the shared GDML files are missing (set HYTRACE_GDML_DIR)",
+        dir.display()
+    );
+    dir
+}
+
+/// Every `.gdml` file of [`shared_gdml_dir`], sorted; panics when there is none.
+pub fn shared_gdml_files() -> Vec<PathBuf> {
+    let dir = shared_gdml_dir();
+    let files = files_with_extension(&dir, "gdml");
+    assert!(!files.is_empty(), "{}: no GDML files", dir.display());
+    files
+}

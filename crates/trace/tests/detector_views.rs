@@ -8,11 +8,12 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{gdml_files, hytrace, read_png, stderr};
+use common::{hytrace, read_png, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
+use hytrace_testkit::files::{shared_gdml_dir, shared_gdml_files};
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::render::detector::{ColorBy, DetectorError, DetectorStyle};
 use hytrace_trace::render::id_colour;
@@ -359,12 +360,6 @@ fn drawn_volumes_show_their_legend_colours() {
     assert!(checked.iter().all(|&n| n > 20), "{checked:?} lit pixels");
 }
 
-fn corpus() -> PathBuf {
-    std::env::var_os("HYTRACE_GDML_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/gdml"))
-}
-
 /// How the default camera frames what is drawn, from the pixels that show a volume.
 #[derive(Clone, Copy, Debug)]
 struct Framing {
@@ -409,9 +404,8 @@ const MAX_BORDER: f64 = 0.1;
 
 #[test]
 fn every_corpus_file_shows_more_than_one_volume_when_it_places_several() {
-    let dir = corpus();
-    let files = gdml_files(&dir);
-    assert!(!files.is_empty(), "{}: no GDML files", dir.display());
+    let dir = shared_gdml_dir();
+    let files = shared_gdml_files();
     let (mut failed, mut framed_badly) = (Vec::new(), Vec::new());
     for path in &files {
         let name = path.strip_prefix(&dir).unwrap().display().to_string();

@@ -208,10 +208,7 @@ mod with_embree {
     /// CI): nested envelopes and a tessellated solid.
     #[test]
     fn backends_agree_on_shared_gdml_files() {
-        let dir = std::env::var_os("HYTRACE_GDML_DIR")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| repo("../shared/gdml"));
-        assert!(dir.is_dir(), "{}: shared GDML files missing", dir.display());
+        let dir = hytrace_testkit::files::shared_gdml_dir();
         for name in ["celeritas/multi-level.gdml", "geant4/tess.gdml"] {
             let f = load_scene(Some(&dir.join(name)), &GdmlOptions::default()).unwrap();
             let rays = rays_for(&f, 60, 10_000);

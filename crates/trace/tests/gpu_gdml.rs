@@ -9,11 +9,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use common::{compare, gdml_files, gpu_run, rays_for};
+use common::{compare, gpu_run, rays_for};
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_testkit::files::{shared_gdml_dir, shared_gdml_files};
 use hytrace_trace::gpu::GpuContext;
 use hytrace_trace::scene::load_scene;
 
@@ -27,12 +27,8 @@ fn gpu_matches_cpu_on_every_shared_gdml_file() {
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
-    let dir = std::env::var_os("HYTRACE_GDML_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/gdml"));
-    assert!(dir.is_dir(), "{}: shared GDML files missing", dir.display());
-    let files = gdml_files(&dir);
-    assert!(!files.is_empty(), "{}: no GDML files", dir.display());
+    let dir = shared_gdml_dir();
+    let files = shared_gdml_files();
     let start = Instant::now();
     let (mut rays_all, mut agree_all) = (0, 0);
     let mut failed = Vec::new();

@@ -470,11 +470,6 @@ pub fn mesh_scene_rays(f: &Foundry) -> Vec<RayRow> {
     rays
 }
 
-/// Every `.gdml` file under `dir`, sorted.
-pub fn gdml_files(dir: &Path) -> Vec<PathBuf> {
-    hytrace_testkit::files::files_with_extension(dir, "gdml")
-}
-
 /// Renders `spec` of `f` on the GPU (pixels past lavapipe's loop budget fail the test);
 /// `None` without a GPU (a panic when `HYTRACE_REQUIRE_GPU=1`).
 pub fn render_on_gpu(
