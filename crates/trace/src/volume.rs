@@ -780,9 +780,12 @@ pub fn convert_store(
     };
     let bar = crate::progress::bar(100, "converting", "percent");
     let progress = |done: u64, total: u64| bar.set_position(done * 100 / total.max(1));
-    let raw = Path::new(spec)
+    // Raw voxels: a `.raw` file, or a stream (a pipe: nothing else reads one).
+    let path = Path::new(spec);
+    let raw = path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+        .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
+        || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir());
     let report = match (raw, &options.dims, options.dtype) {
         (true, Some(dims), Some(dtype)) => {
             let d = numbers::<3>(dims, "--dims")?;
@@ -813,7 +816,9 @@ pub fn convert_store(
             let (_, volume) = open(spec, name)?;
             convert_grid(&volume, spec, &convert, out, &progress)?
         }
-        (false, _, _) => bail!("{spec}: --dims and --dtype describe raw files (.raw) only"),
+        (false, _, _) => {
+            bail!("{spec}: --dims and --dtype describe raw files (.raw) and pipes only")
+        }
     };
     bar.finish_and_clear();
     Ok(report)
