@@ -11,7 +11,9 @@ use super::detector::{DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore};
+use crate::gpu::{
+    gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, StreamStats, TexelStore,
+};
 
 /// Where a render runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,12 +41,15 @@ pub struct GpuRun {
     pub features: Vec<&'static str>,
     /// Upload, kernel and readback seconds.
     pub times: GpuTimes,
+    /// What streaming a brick store medium did (a medium read as stored).
+    pub stream: Option<StreamStats>,
 }
 
-/// Renders on the GPU of `ctx` (`progress` as [`GpuRenderer::render`] calls it). Pixels whose samples ran out of the driver's loop budget
-/// (llvmpipe's: `shaders/loop_budget.wgsl`) are rendered again on the CPU, which draws
-/// the same random streams, so the image is the kernel's everywhere else and right
-/// everywhere; `gpu_redone_on_cpu` in the stats counts them.
+/// Renders on the GPU of `ctx` (`progress` as [`GpuRenderer::render`] calls it). Pixels
+/// whose samples ran out of the driver's loop budget (llvmpipe's:
+/// `shaders/loop_budget.wgsl`) are rendered again on the CPU, which draws the same random
+/// streams, so the image is the kernel's everywhere else and right everywhere;
+/// `gpu_redone_on_cpu` in the stats counts them.
 fn render_gpu(
     ctx: &GpuContext,
     renderer: &Renderer,
@@ -66,6 +71,7 @@ fn render_gpu(
             adapter: ctx.describe(),
             features: gpu.features().to_vec(),
             times: run.times,
+            stream: run.stream,
         },
     ))
 }
