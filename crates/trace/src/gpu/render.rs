@@ -561,7 +561,7 @@ impl GpuRenderer {
     /// pass after the other; `progress` gets the row samples finished so far (rows times
     /// samples per pixel: `height * spp` in all). A medium read as stored in a brick store
     /// is streamed through a brick pool of at most the render's `memory` bytes
-    /// ([`Self::render_streamed`]).
+    /// (`render_streamed`).
     pub fn render(
         &self,
         ctx: &GpuContext,
