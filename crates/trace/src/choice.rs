@@ -136,12 +136,12 @@ mod tests {
             e,
             UnknownName {
                 value: "jpeg".into(),
-                names: vec!["nanovdb", "bc4", "unorm8", "unorm16", "f16", "f32"],
+                names: vec!["nanovdb", "source", "bc4", "unorm8", "unorm16", "f16", "f32"],
             }
         );
         assert_eq!(
             e.to_string(),
-            "invalid value 'jpeg' [possible values: nanovdb, bc4, unorm8, unorm16, f16, f32]"
+            "invalid value 'jpeg' [possible values: nanovdb, source, bc4, unorm8, unorm16, f16, f32]"
         );
         // Names are matched exactly, as the command line matches them.
         assert!("BC4".parse::<Repr>().is_err());
