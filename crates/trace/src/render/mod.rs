@@ -178,6 +178,10 @@ const FRAMING_OUTLIER: f64 = 20.0;
 /// still count in the automatic camera's framing.
 const FRAMING_SHELLS: f64 = 3.0;
 
+/// How many times the volume of the solid volumes' box the box with those shells must hold
+/// for the shells to count in the framing (the contents are then a sliver of the view).
+const FRAMING_SLIVER: f64 = 20.0;
+
 /// The median box diagonal of the instances `keep` accepts (infinite without any).
 fn median_diagonal(scene: &CpuScene<f32>, keep: impl Fn(usize) -> bool) -> f64 {
     let mut d: Vec<f64> = (0..scene.instances())
@@ -279,13 +283,12 @@ impl<'a> Renderer<'a> {
             })
             .collect();
         let covering = covering_instances(f, &instance_material);
-        // What is seen: the surfaces drawn solid (a detector view's contents) and the
-        // shells (envelopes) around them up to a few times their size (so nested envelopes
-        // around one thin solid frame the detector, but a tiny part in a large envelope is
-        // not lost in it); else every surface drawn. Transparent instances (a GDML world,
-        // hidden volumes) never count. A detector view leaves out what is far larger than
-        // its typical solid volume (beam pipes tens of metres long around a detector of a
-        // few).
+        // What is seen: the surfaces drawn solid (a detector view's contents), and the
+        // shells (envelopes) around them up to a few times their size when the contents are
+        // a sliver of what those show (simple-cms.gdml: nested envelopes around one thin
+        // beam pipe); else every surface drawn. Transparent instances (a GDML world, hidden
+        // volumes) never count. A detector view leaves out what is far larger than its
+        // typical solid volume (beam pipes tens of metres long around a detector of a few).
         let solid = |i: usize| !instance_material[i].is_see_through();
         let typical = if spec.instance_materials.is_empty() {
             f64::INFINITY
@@ -297,13 +300,18 @@ impl<'a> Renderer<'a> {
             (DVec3::from(hi) - DVec3::from(lo)).length()
         };
         let contents = scene.bounds_of(|i| solid(i) && diagonal(i) <= typical);
+        let volume =
+            |[lo, hi]: [[f64; 3]; 2]| (DVec3::from(hi) - DVec3::from(lo)).element_product();
         let bounds = match contents {
             Some([lo, hi]) => {
                 let largest = FRAMING_SHELLS * (DVec3::from(hi) - DVec3::from(lo)).length();
-                scene.bounds_of(|i| {
+                let with_shells = scene.bounds_of(|i| {
                     let shell = matches!(instance_material[i], Material::Shell { .. });
                     (solid(i) && diagonal(i) <= typical) || (shell && diagonal(i) <= largest)
-                })
+                });
+                with_shells
+                    .filter(|&b| FRAMING_SLIVER * volume([lo, hi]) < volume(b))
+                    .or(contents)
             }
             None => scene.bounds_of(|i| instance_material[i] != Material::Transparent),
         }
