@@ -10,7 +10,9 @@
 //! See `docs/photons.md` for the physics, the output layouts and the comparison with
 //! Geant4.
 
+pub mod backend;
 pub mod boundary;
+pub mod gpu_tables;
 pub mod bulk;
 pub mod output;
 pub mod propagate;
@@ -19,6 +21,7 @@ pub mod run;
 pub mod sources;
 pub mod surface_models;
 pub mod surfaces;
+pub mod tracer;
 
 use std::path::Path;
 

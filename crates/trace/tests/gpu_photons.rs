@@ -1,0 +1,246 @@
+//! The GPU photon kernel (`shaders/kernels/photons.wgsl`) against its CPU twin (the
+//! propagator with the f32 tracer) photon by photon, and against the default CPU run (f64
+//! geometry) by the fraction of identical histories and a chi2 on history frequencies,
+//! on the three scenes the kernel's physics covers: the repository's every-process scene,
+//! the raindrop and the 8x8 SiPM files of the shared corpus. Physics the kernel does not
+//! model is refused by `--backend gpu` naming it; `auto` falls back to the CPU.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{gpu_stats, hytrace, repo, stderr};
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{GpuContext, GpuPhotons};
+use hytrace_trace::photons::output::{compare_histories, HitRow};
+use hytrace_trace::photons::sources::{Source, Wavelength};
+use hytrace_trace::photons::tracer::Precision;
+use hytrace_trace::photons::{load_photon_scene, propagate, PhotonRun, PhotonScene, RunOptions};
+
+fn options(source: &str, photons: u64) -> RunOptions {
+    RunOptions {
+        source: Source::parse(source).unwrap(),
+        wavelength: Wavelength::Fixed(420.0),
+        photons,
+        first: 7,
+        seed: 11,
+        max_steps: 10_000,
+        keep_histories: true,
+    }
+}
+
+fn scene(path: &PathBuf, precision: Precision) -> PhotonScene {
+    let (f, surfaces) = load_photon_scene(path, &GdmlOptions::default()).unwrap();
+    PhotonScene::with_precision(&f, surfaces, precision).unwrap()
+}
+
+/// The hit rows of the photons whose histories are equal in both runs, paired.
+fn paired_hits<'a>(a: &'a PhotonRun, b: &'a PhotonRun) -> Vec<(&'a HitRow, &'a HitRow)> {
+    let first = 7.0;
+    let same = |h: &HitRow| {
+        let i = (h.0[13] - first) as usize;
+        a.histories[i] == b.histories[i]
+    };
+    let (x, y): (Vec<_>, Vec<_>) = (
+        a.hits.iter().filter(|h| same(h)).collect(),
+        b.hits.iter().filter(|h| same(h)).collect(),
+    );
+    assert_eq!(x.len(), y.len());
+    x.into_iter().zip(y).collect()
+}
+
+/// The fraction of photons with identical histories.
+fn same_histories(a: &PhotonRun, b: &PhotonRun) -> f64 {
+    let same = a
+        .histories
+        .iter()
+        .zip(&b.histories)
+        .filter(|(x, y)| x == y)
+        .count();
+    same as f64 / a.histories.len() as f64
+}
+
+/// GPU against the f32 twin photon by photon (histories, then hit rows within f32
+/// rounding of the physics: the kernel computes it in f32, the twin in f64 over the same
+/// f32 geometry), and against the f64 CPU by the histories' frequencies.
+fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usize) {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let run = options(source, photons);
+    let s32 = scene(&path, Precision::F32);
+    let kernel = GpuPhotons::new(&ctx, &s32, &run.wavelength).unwrap();
+    let gpu = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap();
+    let cpu32 = propagate(&s32, &run).unwrap();
+    let cpu64 = propagate(&scene(&path, Precision::F64), &run).unwrap();
+    let g = &gpu.run;
+    assert_eq!(g.histories.len(), photons as usize);
+    assert!(g.hits.len() >= min_detected, "{name}: {} hits", g.hits.len());
+    let twin_same = same_histories(g, &cpu32);
+    let f64_same = same_histories(g, &cpu64);
+    let chi2 = compare_histories(&g.counts, &cpu64.counts, 30);
+    eprintln!(
+        "{name}: {photons} photons, {} hits; histories equal to the f32 twin {:.4}, to the f64 CPU {:.4}; \
+         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}",
+        g.hits.len(),
+        twin_same,
+        f64_same,
+        chi2.chi2,
+        chi2.ndf,
+        chi2.p_value,
+        gpu.times.redone_on_cpu
+    );
+    // f32 rounding of the physics takes a random decision apart for a few photons.
+    assert!(twin_same >= 0.99, "{name}: {twin_same}");
+    assert!(f64_same >= 0.98, "{name}: {f64_same}");
+    assert!(chi2.p_value > 1e-3, "{name}: {chi2:?}");
+    let pairs = paired_hits(g, &cpu32);
+    assert!(pairs.len() as f64 >= 0.95 * g.hits.len() as f64);
+    for (a, b) in pairs {
+        // Position, time, direction, wavelength, polarization: f32 physics over the same
+        // steps; instance, copy number, index, mask and steps exactly.
+        for k in 0..11 {
+            let tolerance = 2e-4 * (1.0 + b.0[k].abs());
+            assert!(
+                (a.0[k] - b.0[k]).abs() <= tolerance,
+                "{name}: column {k} of photon {}: {} vs {}",
+                b.0[13],
+                a.0[k],
+                b.0[k]
+            );
+        }
+        assert_eq!(a.0[11..], b.0[11..], "{name}");
+    }
+}
+
+#[test]
+fn every_process_scene_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/every_process.gdml");
+    twin("every_process point", path.clone(), "point:0,0,0", 3000, 50);
+    twin("every_process beam", path, "beam:-90,0,5:1,0,0:20:10", 2000, 20);
+}
+
+#[test]
+fn raindrop_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("../shared/gdml/eic-opticks/opticks_raindrop.gdml");
+    twin("raindrop point", path.clone(), "point:0,0,70", 3000, 500);
+    twin("raindrop sphere", path, "sphere:0,0,0:40:in", 2000, 500);
+}
+
+#[test]
+fn sipm_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("../shared/gdml/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml");
+    twin("sipm point", path, "point:0.1,0.1,4", 1500, 200);
+}
+
+#[test]
+fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = repo("tests/data/photons/every_process.gdml");
+    let run = |backend: &str| {
+        let out = dir.path().join(format!("{backend}.npy"));
+        let history = dir.path().join(format!("{backend}-history.npy"));
+        let o = hytrace(
+            &[
+                "photons",
+                scene.to_str().unwrap(),
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "500",
+                "-o",
+                out.to_str().unwrap(),
+                &format!("--history={}", history.display()),
+                "--top",
+                "0",
+                "--backend",
+                backend,
+                "--stats",
+            ],
+            &[],
+        );
+        (o, out, history)
+    };
+    let (gpu, gpu_hits, gpu_history) = run("gpu");
+    let stdout = String::from_utf8_lossy(&gpu.stdout).into_owned();
+    let line = stdout.lines().last().unwrap_or_default().to_string();
+    let stats = gpu_stats(&std::process::Output {
+        stdout: line.into_bytes(),
+        ..gpu
+    });
+    assert_eq!(stats["photons"], 500);
+    let (cpu, cpu_hits, cpu_history) = run("cpu");
+    assert!(cpu.status.success(), "{}", stderr(&cpu));
+    let read = |p: &PathBuf| std::fs::read(p).unwrap();
+    // Same header (dtype, shape) and the same number of bytes: the same layout.
+    assert_eq!(read(&gpu_history).len(), read(&cpu_history).len());
+    assert_eq!(read(&gpu_hits).len() % 128, read(&cpu_hits).len() % 128);
+}
+
+#[test]
+fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hits.npy");
+    let cases = [
+        (
+            "tests/data/photons/rough_surfaces.gdml",
+            "beam:-265,0,50:0.5,0,-1:5",
+            "420",
+            "finish",
+        ),
+        (
+            "tests/data/photons/wavelength_shifter.gdml",
+            "beam:-80,0,50:0.2,0,-1:10",
+            "420",
+            "WLSABSLENGTH",
+        ),
+        (
+            "tests/data/photons/every_process.gdml",
+            "point:0,0,0",
+            "Liquid:SCINTILLATIONCOMPONENT1",
+            "spectrum",
+        ),
+    ];
+    for (file, source, wavelength, needle) in cases {
+        let scene = repo(file);
+        let args = |backend: &'static str| {
+            vec![
+                "photons".to_string(),
+                scene.to_str().unwrap().to_string(),
+                "--source".into(),
+                source.into(),
+                "--wavelength".into(),
+                wavelength.into(),
+                "-n".into(),
+                "50".into(),
+                "-o".into(),
+                out.to_str().unwrap().into(),
+                "--backend".into(),
+                backend.into(),
+                "--stats".into(),
+            ]
+        };
+        let gpu_args = args("gpu");
+        let o = hytrace(&gpu_args.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{file}: accepted on the GPU");
+        assert!(
+            e.contains(needle) && e.contains("not on the GPU") && e.contains(file.rsplit('/').next().unwrap()),
+            "{file}: {e}"
+        );
+        assert!(!out.exists(), "{file}: an output file after the error");
+        let auto_args = args("auto");
+        let o = hytrace(&auto_args.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+        assert!(o.status.success(), "{file}: {}", stderr(&o));
+        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(stats["backend"], "cpu", "{file}");
+        assert!(stderr(&o).contains(needle), "{file}: {}", stderr(&o));
+        std::fs::remove_file(&out).unwrap();
+    }
+}
