@@ -1,7 +1,8 @@
 //! The geometry under the photon propagator: the CPU tracer in f64 (the default), or in
 //! f32, the precision of the GPU kernel's scene traversal, so that the CPU propagator is
 //! the GPU photon kernel's twin (`shaders/kernels/photons.wgsl`; compared photon by photon
-//! in `crates/trace/tests/gpu_photons.rs`). The physics stays f64 in both.
+//! in `crates/trace/tests/gpu_photons.rs`): rays and points are rounded to f32 first, as
+//! the kernel holds them. The physics stays f64 in both.
 
 use hytrace_csg::{Ray, V3};
 
@@ -36,6 +37,11 @@ fn widened(h: Hit<f32>) -> Hit<f64> {
     }
 }
 
+/// `v` rounded to f32, as the GPU kernel holds a photon (no low part).
+fn rounded(v: V3<f64>) -> V3<f64> {
+    V3::from_f64(v.to_f64().map(|c| f64::from(c as f32)))
+}
+
 impl PhotonTracer {
     /// Prepares the scene's tracer in `precision`.
     pub fn new(f: &Foundry, precision: Precision) -> crate::Result<Self> {
@@ -51,7 +57,15 @@ impl PhotonTracer {
         match self {
             PhotonTracer::F64(s) => s.trace_in(ray, Some(current), tmin, f64::INFINITY),
             PhotonTracer::F32(s) => s
-                .trace_in(ray, Some(current), tmin as f32, f32::INFINITY)
+                .trace_in(
+                    &Ray {
+                        origin: rounded(ray.origin),
+                        direction: rounded(ray.direction),
+                    },
+                    Some(current),
+                    tmin as f32,
+                    f32::INFINITY,
+                )
                 .map(widened),
         }
     }
@@ -60,7 +74,7 @@ impl PhotonTracer {
     pub fn locate_point(&self, x: [f64; 3]) -> Option<u32> {
         match self {
             PhotonTracer::F64(s) => s.locate_point(x),
-            PhotonTracer::F32(s) => s.locate_point(x),
+            PhotonTracer::F32(s) => s.locate_point(rounded(V3::from_f64(x)).to_f64()),
         }
     }
 
