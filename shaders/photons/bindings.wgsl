@@ -2,6 +2,7 @@
 // crates/trace/src/photons/gpu_tables.rs), the property lookup (twin of
 // photons::properties::Property::value) and a photon's history (twin of
 // photons::output::History).
+// #import generated/foundry
 // #import generated/trace_records
 
 @group(2) @binding(0) var<storage, read> pparams: PhotonParams;

@@ -75,7 +75,11 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     let cpu64 = propagate(&scene(&path, Precision::F64), &run).unwrap();
     let g = &gpu.run;
     assert_eq!(g.histories.len(), photons as usize);
-    assert!(g.hits.len() >= min_detected, "{name}: {} hits", g.hits.len());
+    assert!(
+        g.hits.len() >= min_detected,
+        "{name}: {} hits",
+        g.hits.len()
+    );
     let twin_same = same_histories(g, &cpu32);
     let f64_same = same_histories(g, &cpu64);
     let chi2 = compare_histories(&g.counts, &cpu64.counts, 30);
@@ -118,7 +122,13 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
 fn every_process_scene_matches_the_cpu_twin_photon_by_photon() {
     let path = repo("tests/data/photons/every_process.gdml");
     twin("every_process point", path.clone(), "point:0,0,0", 3000, 50);
-    twin("every_process beam", path, "beam:-90,0,5:1,0,0:20:10", 2000, 20);
+    twin(
+        "every_process beam",
+        path,
+        "beam:-90,0,5:1,0,0:20:10",
+        2000,
+        20,
+    );
 }
 
 #[test]
@@ -228,16 +238,24 @@ fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
             ]
         };
         let gpu_args = args("gpu");
-        let o = hytrace(&gpu_args.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+        let o = hytrace(
+            &gpu_args.iter().map(String::as_str).collect::<Vec<_>>(),
+            &[],
+        );
         let e = stderr(&o);
         assert!(!o.status.success(), "{file}: accepted on the GPU");
         assert!(
-            e.contains(needle) && e.contains("not on the GPU") && e.contains(file.rsplit('/').next().unwrap()),
+            e.contains(needle)
+                && e.contains("not on the GPU")
+                && e.contains(file.rsplit('/').next().unwrap()),
             "{file}: {e}"
         );
         assert!(!out.exists(), "{file}: an output file after the error");
         let auto_args = args("auto");
-        let o = hytrace(&auto_args.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+        let o = hytrace(
+            &auto_args.iter().map(String::as_str).collect::<Vec<_>>(),
+            &[],
+        );
         assert!(o.status.success(), "{file}: {}", stderr(&o));
         let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(stats["backend"], "cpu", "{file}");

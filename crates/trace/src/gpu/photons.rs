@@ -127,10 +127,7 @@ impl GpuPhotons {
         let result = propagate_batches(scene, run, progress, &mut |range, emission| {
             self.batch(ctx, scene, run, range, emission, &mut times)
         })?;
-        Ok(GpuPhotonRun {
-            run: result,
-            times,
-        })
+        Ok(GpuPhotonRun { run: result, times })
     }
 
     /// One batch: the kernel's records turned into the photons' ends, those cut short
@@ -145,7 +142,9 @@ impl GpuPhotons {
         times: &mut GpuTimes,
     ) -> crate::Result<Vec<PhotonEnd>> {
         let Emission::Fixed { energy, nm } = *emission else {
-            return Err(GpuError::Unsupported("photons: energies drawn from a spectrum".into()).into());
+            return Err(
+                GpuError::Unsupported("photons: energies drawn from a spectrum".into()).into(),
+            );
         };
         let n = (range.end - range.start) as usize;
         let params = params(run, &range, energy, nm, self.hierarchical);
@@ -179,7 +178,8 @@ impl GpuPhotons {
             timer.as_ref(),
             times,
         )?;
-        let records: Vec<PhotonRecord> = bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<PhotonRecord>()]);
+        let records: Vec<PhotonRecord> =
+            bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<PhotonRecord>()]);
         Ok(range
             .zip(records)
             .map(|(index, r)| {

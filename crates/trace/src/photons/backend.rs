@@ -97,7 +97,11 @@ pub fn propagate_on(
         PhotonBackend::Gpu => gpu(GpuContext::new()?, surfaces),
         PhotonBackend::Auto => {
             let again = surfaces.clone();
-            gpu_or_cpu("propagates photons", |ctx| gpu(ctx, surfaces), || cpu(again))
+            gpu_or_cpu(
+                "propagates photons",
+                |ctx| gpu(ctx, surfaces),
+                || cpu(again),
+            )
         }
     }
 }

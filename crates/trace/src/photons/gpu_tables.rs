@@ -99,7 +99,10 @@ impl FlatSurfaces {
     /// The surface of a crossing from `pre` into `post` ([`UNSET`] for none): the twin of
     /// `surface_between` in `shaders/photons/surfaces.wgsl`.
     pub fn between(&self, pre: u32, post: u32) -> u32 {
-        let (a, b) = (&self.instances[pre as usize], &self.instances[post as usize]);
+        let (a, b) = (
+            &self.instances[pre as usize],
+            &self.instances[post as usize],
+        );
         if b.mother == pre {
             return b.enter_surface;
         }
@@ -121,7 +124,11 @@ impl FlatSurfaces {
 }
 
 /// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
-fn push_table(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, p: Option<&Property>) -> u32 {
+fn push_table(
+    tables: &mut Vec<PhotonTable>,
+    rows: &mut Vec<[f32; 2]>,
+    p: Option<&Property>,
+) -> u32 {
     let Some(p) = p else {
         return UNSET;
     };
@@ -199,5 +206,52 @@ impl GpuTables {
             surfaces,
             lookup: FlatSurfaces::new(&scene.surfaces, &scene.material, &scene.mother, &scene.copy),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photons::load_photon_scene;
+    use hytrace_foundry::gdml::GdmlOptions;
+
+    /// The kernel's lookup finds the surface Geant4's lookup finds for every ordered pair
+    /// of instances (siblings, mothers and daughters, and farther apart), on files with
+    /// skin surfaces, border surfaces between mothers and daughters, and many border
+    /// surfaces between siblings (pfRICH).
+    #[test]
+    fn flat_lookup_agrees_with_the_surface_lookup_on_every_pair() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut sibling_borders = 0;
+        for file in [
+            "tests/data/photons/every_process.gdml",
+            "tests/data/photons/rough_surfaces.gdml",
+            "../shared/gdml/eic-opticks/opticks_raindrop.gdml",
+            "../shared/gdml/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml",
+            "../shared/gdml/eic-opticks/pfrich_min_FINAL.gdml",
+            "../shared/gdml/eic-opticks/basic_detector.gdml",
+            "../shared/gdml/geant4/opticalsurfaces.gdml",
+        ] {
+            let (f, surfaces) = load_photon_scene(&root.join(file), &GdmlOptions::default())
+                .unwrap_or_else(|e| panic!("{file}: {e:#}"));
+            let scene = PhotonScene::new(&f, surfaces).unwrap();
+            let flat =
+                FlatSurfaces::new(&scene.surfaces, &scene.material, &scene.mother, &scene.copy);
+            sibling_borders += flat.borders.len();
+            let n = scene.material.len() as u32;
+            let mut surfaced = 0;
+            for pre in 0..n {
+                for post in (0..n).filter(|&p| p != pre) {
+                    let s = scene.surfaces.between(pre, post);
+                    assert_eq!(flat.between(pre, post), s, "{file}: {pre} -> {post}");
+                    surfaced += usize::from(s != UNSET);
+                }
+            }
+            assert!(surfaced > 0, "{file}: no crossing has a surface");
+        }
+        assert!(
+            sibling_borders > 0,
+            "no file has border surfaces between siblings"
+        );
     }
 }

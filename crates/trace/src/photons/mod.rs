@@ -12,8 +12,8 @@
 
 pub mod backend;
 pub mod boundary;
-pub mod gpu_tables;
 pub mod bulk;
+pub mod gpu_tables;
 pub mod output;
 pub mod propagate;
 pub mod properties;

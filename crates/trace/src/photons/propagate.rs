@@ -26,8 +26,8 @@ use super::properties::{
 };
 use super::sources::{Source, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
-use super::{PhotonError, V};
 use super::tracer::{PhotonTracer, Precision};
+use super::{PhotonError, V};
 use crate::cpu::Hit;
 use crate::scene::VolumeSurfaces;
 
@@ -62,8 +62,8 @@ impl PhotonScene {
         surfaces: Option<VolumeSurfaces>,
         precision: Precision,
     ) -> Result<Self, PhotonError> {
-        let tracer = PhotonTracer::new(f, precision)
-            .map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
+        let tracer =
+            PhotonTracer::new(f, precision).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
         let boundaries = &f.optics.boundaries;
         let material = f
             .inst
@@ -462,10 +462,12 @@ pub fn propagate_reporting(
     progress: &dyn Fn(u64),
 ) -> Result<PhotonRun, PhotonError> {
     propagate_batches(scene, run, progress, &mut |photons, emission| {
-        Ok::<_, PhotonError>(photons
-            .into_par_iter()
-            .map(|i| scene.photon(i, run, emission))
-            .collect())
+        Ok::<_, PhotonError>(
+            photons
+                .into_par_iter()
+                .map(|i| scene.photon(i, run, emission))
+                .collect(),
+        )
     })
 }
 
@@ -482,7 +484,9 @@ pub(crate) fn propagate_batches<E: From<PhotonError>>(
     batch: &mut BatchFn<E>,
 ) -> Result<PhotonRun, E> {
     if run.photons == 0 {
-        return Err(PhotonError::Input("the number of photons (-n) must be at least 1".into()).into());
+        return Err(
+            PhotonError::Input("the number of photons (-n) must be at least 1".into()).into(),
+        );
     }
     let emission = scene.emission(&run.wavelength)?;
     let Some(end) = run.first.checked_add(run.photons) else {

@@ -274,8 +274,7 @@ impl VolumeSurfaces {
         }
         let mut pairs = Vec::new();
         for ((a, b), &s) in &self.rules.border {
-            let (Some(pre), Some(post)) = (by_name.get(a.as_str()), by_name.get(b.as_str()))
-            else {
+            let (Some(pre), Some(post)) = (by_name.get(a.as_str()), by_name.get(b.as_str())) else {
                 continue;
             };
             for &p in pre {
