@@ -23,6 +23,8 @@ use crate::photons::sources::Source;
 use crate::photons::{PhotonRun, PhotonScene, RunOptions};
 
 const KERNEL: &str = "kernels/photons";
+/// Photons per dispatch at most (records of 80 bytes: 84 MB).
+const BATCH: u64 = 1 << 20;
 /// Storage buffers of the photon group (group 2).
 const PHOTON_BINDINGS: u32 = 8;
 
@@ -124,7 +126,10 @@ impl GpuPhotons {
         progress: &dyn Fn(u64),
     ) -> crate::Result<GpuPhotonRun> {
         let mut times = GpuTimes::default();
-        let result = propagate_batches(scene, run, progress, &mut |range, emission| {
+        // Batches fill a large GPU, within the binding limit of the records.
+        let record = size_of::<PhotonRecord>() as u64;
+        let size = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
+        let result = propagate_batches(scene, run, progress, size, &mut |range, emission| {
             self.batch(ctx, scene, run, range, emission, &mut times)
         })?;
         Ok(GpuPhotonRun { run: result, times })

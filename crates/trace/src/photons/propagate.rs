@@ -461,7 +461,7 @@ pub fn propagate_reporting(
     run: &RunOptions,
     progress: &dyn Fn(u64),
 ) -> Result<PhotonRun, PhotonError> {
-    propagate_batches(scene, run, progress, &mut |photons, emission| {
+    propagate_batches(scene, run, progress, BATCH, &mut |photons, emission| {
         Ok::<_, PhotonError>(
             photons
                 .into_par_iter()
@@ -475,12 +475,13 @@ pub fn propagate_reporting(
 pub(crate) type BatchFn<'a, E> =
     dyn FnMut(std::ops::Range<u64>, &Emission) -> Result<Vec<PhotonEnd>, E> + 'a;
 
-/// Checks a run, then propagates its photons in batches of [`BATCH`] with `batch` (the
-/// CPU's or the GPU's) and gathers their hits, histories and history counts.
+/// Checks a run, then propagates its photons in batches of `size` with `batch` (the CPU's
+/// or the GPU's) and gathers their hits, histories and history counts.
 pub(crate) fn propagate_batches<E: From<PhotonError>>(
     scene: &PhotonScene,
     run: &RunOptions,
     progress: &dyn Fn(u64),
+    size: u64,
     batch: &mut BatchFn<E>,
 ) -> Result<PhotonRun, E> {
     if run.photons == 0 {
@@ -516,7 +517,7 @@ pub(crate) fn propagate_batches<E: From<PhotonError>>(
     let mut codes: std::collections::HashMap<u64, u64> = Default::default();
     let mut first = run.first;
     while first < end {
-        let last = first.saturating_add(BATCH).min(end);
+        let last = first.saturating_add(size).min(end);
         for end in batch(first..last, &emission)? {
             if run.keep_histories {
                 histories.push(end.own.0.code);
