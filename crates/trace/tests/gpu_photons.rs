@@ -7,10 +7,12 @@
 
 mod common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use common::{gpu_stats, hytrace, repo, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::read_array;
 use hytrace_trace::gpu::{GpuContext, GpuPhotons};
 use hytrace_trace::photons::output::{compare_histories, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
@@ -29,7 +31,7 @@ fn options(source: &str, photons: u64) -> RunOptions {
     }
 }
 
-fn scene(path: &PathBuf, precision: Precision) -> PhotonScene {
+fn scene(path: &Path, precision: Precision) -> PhotonScene {
     let (f, surfaces) = load_photon_scene(path, &GdmlOptions::default()).unwrap();
     PhotonScene::with_precision(&f, surfaces, precision).unwrap()
 }
@@ -185,10 +187,31 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     assert_eq!(stats["photons"], 500);
     let (cpu, cpu_hits, cpu_history) = run("cpu");
     assert!(cpu.status.success(), "{}", stderr(&cpu));
-    let read = |p: &PathBuf| std::fs::read(p).unwrap();
-    // Same header (dtype, shape) and the same number of bytes: the same layout.
-    assert_eq!(read(&gpu_history).len(), read(&cpu_history).len());
-    assert_eq!(read(&gpu_hits).len() % 128, read(&cpu_hits).len() % 128);
+    // The same layouts: float64 (H, 16) hits, uint64 (500,) histories, nearly all equal.
+    let (g, c) = (
+        read_array(&gpu_hits).unwrap(),
+        read_array(&cpu_hits).unwrap(),
+    );
+    assert_eq!((g.scalar, c.scalar), (Scalar::F64, Scalar::F64));
+    assert_eq!(g.shape, vec![stats["hits"].as_u64().unwrap(), 16]);
+    assert!(
+        g.shape[0].abs_diff(c.shape[0]) <= 2,
+        "{:?} {:?}",
+        g.shape,
+        c.shape
+    );
+    let histories = |p: &PathBuf| {
+        let h = std::fs::read(p).unwrap();
+        assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
+        h[128..]
+            .chunks_exact(8)
+            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let (hg, hc) = (histories(&gpu_history), histories(&cpu_history));
+    assert_eq!((hg.len(), hc.len()), (500, 500));
+    let same = hg.iter().zip(&hc).filter(|(a, b)| a == b).count();
+    assert!(same >= 495, "{same} of 500 histories equal");
 }
 
 #[test]

@@ -49,7 +49,9 @@ impl FlatSurfaces {
     /// The lookup of a scene's surfaces.
     pub fn new(lookup: &SurfaceLookup, material: &[u32], mother: &[u32], copy: &[i32]) -> Self {
         let n = material.len() as u32;
-        let (sibling, borders): (Vec<(u32, u32)>, Vec<(u32, u32, u32)>) = match lookup {
+        // Per instance, the surfaces towards and from a sibling; the border pairs.
+        type Siblings = (Vec<(u32, u32)>, Vec<(u32, u32, u32)>);
+        let (sibling, borders): Siblings = match lookup {
             SurfaceLookup::Gdml(v) => (
                 (0..n).map(|i| (v.skin(i), v.skin(i))).collect(),
                 v.border_pairs(),
