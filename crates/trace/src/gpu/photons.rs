@@ -75,14 +75,9 @@ impl GpuPhotons {
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7]);
+            // Group 0 (the Foundry's own arrays) is not used.
             let pipeline_layout =
-                ctx.device
-                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some("photons"),
-                        // Group 0 (the Foundry's own arrays) is not used.
-                        bind_group_layouts: &[None, Some(&upload.layout), Some(&layout)],
-                        immediate_size: 0,
-                    });
+                ctx.pipeline_layout("photons", &[None, Some(&upload.layout), Some(&layout)]);
             let tables = vec![
                 ctx.input_buffer("photon tables", &binding_bytes(&flat.tables)),
                 ctx.input_buffer("photon rows", &binding_bytes(&flat.rows)),

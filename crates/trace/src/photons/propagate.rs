@@ -6,7 +6,7 @@
 //! from the material's ABSLENGTH and RAYLEIGH lengths, and asks the CPU tracer (f64, or f32
 //! as the GPU kernel's twin: [`super::tracer`]) for
 //! the distance to the next boundary: leaving the volume or entering one of its daughters
-//! ([`CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
+//! ([`crate::cpu::CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
 //! the far side is the daughter entered, or where the photon goes on leaving the volume
 //! (a touching sibling, else the mother); the two materials and the optical surface of the
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
