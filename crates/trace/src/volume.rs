@@ -588,13 +588,7 @@ pub fn transmittance_stats(run: &TransmittanceRun, load_s: f64) -> serde_json::V
         line["gpu_readback_s"] = g.times.readback_s.into();
         line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
         if let Some(st) = &g.stream {
-            line["stream"] = json!({
-                "passes": st.passes, "rays_deferred": st.rays_deferred,
-                "bricks_uploaded": st.bricks_uploaded, "bricks_evicted": st.bricks_evicted,
-                "resident_bricks": st.resident_bricks, "pool_slots": st.pool_slots,
-                "max_slots": st.max_slots, "pool_doublings": st.pool_doublings,
-                "device_bytes": st.device_bytes,
-            });
+            line["stream"] = st.json("rays_deferred");
         }
     }
     line
