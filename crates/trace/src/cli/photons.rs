@@ -5,12 +5,15 @@ use std::time::Instant;
 
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{add_gpu_stats, warn_redone};
 use hytrace_trace::outputs::{check_destinations, OutputSet};
+use hytrace_trace::photons::backend::{propagate_on, BackendRun, PhotonBackend};
 use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
-use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, RunOptions};
 use serde_json::json;
+
+use super::choice::choice;
 
 /// Options of `hytrace photons`.
 #[derive(Args, Debug)]
@@ -58,8 +61,15 @@ pub struct PhotonsArgs {
     /// Steps after which a photon is stopped (history label TR).
     #[arg(long, default_value_t = 10_000)]
     pub max_steps: u32,
+    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32: torch
+    /// sources at a fixed wavelength, absorption, Rayleigh scattering, Fresnel boundaries,
+    /// polished surfaces; other physics is refused, naming it) or auto (the GPU when an
+    /// adapter opens and the kernel models the scene, else the CPU).
+    #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
+    pub backend: PhotonBackend,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
-    /// propagate_s, photons_per_s, threads, backend).
+    /// propagate_s, photons_per_s, threads, backend; on the GPU also the adapter and its
+    /// times).
     #[arg(long)]
     pub stats: bool,
 }
@@ -75,12 +85,10 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let (f, surfaces) = load_photon_scene(&args.scene, options)?;
     let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let scene = prepare(&f, surfaces, &args.scene)?;
-    let build_s = t1.elapsed().as_secs_f64();
     let bar = hytrace_trace::progress::bar(args.photons, "propagating", "photons");
-    let run = propagate_in(
-        &scene,
+    let BackendRun { run, build_s, gpu } = propagate_on(
+        &f,
+        surfaces,
         &args.scene,
         &RunOptions {
             source,
@@ -91,9 +99,13 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             max_steps: args.max_steps,
             keep_histories: matches!(args.history, Some(Some(_))),
         },
+        args.backend,
         &|done| bar.set_position(done),
     )?;
     bar.finish_and_clear();
+    if let Some(g) = &gpu {
+        warn_redone(&g.adapter, &g.times, args.photons as usize, "photons");
+    }
     let mut written = OutputSet::new();
     written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
     if let Some(path) = history_path {
@@ -104,8 +116,8 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         print!("{}", history_table(&run.counts, args.top));
     }
     if args.stats {
-        let line = json!({
-            "backend": "cpu",
+        let mut line = json!({
+            "backend": if gpu.is_some() { "gpu" } else { "cpu" },
             "photons": args.photons,
             "hits": run.hits.len(),
             "load_s": load_s,
@@ -114,6 +126,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "photons_per_s": if run.propagate_s > 0.0 { args.photons as f64 / run.propagate_s } else { 0.0 },
             "threads": rayon::current_num_threads(),
         });
+        if let Some(g) = &gpu {
+            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        }
         println!("{line}");
     } else {
         eprintln!(

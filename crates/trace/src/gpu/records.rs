@@ -512,6 +512,7 @@ pub fn generate() -> String {
     push_struct::<RenderItem>(&mut out);
     push_struct::<RenderInstance>(&mut out);
     push_struct::<RenderMedium>(&mut out);
+    super::photon_records::push_photon_wgsl(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          const STATUS_LOOPS_CUT: u32 = {STATUS_LOOPS_CUT}u;\n\
@@ -592,5 +593,6 @@ pub fn generate() -> String {
 pub fn gpu_records() -> Vec<RecordEntry> {
     let mut all = gpu_layout::records();
     all.extend(trace_records());
+    all.extend(super::photon_records::photon_records());
     all
 }

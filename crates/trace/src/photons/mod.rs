@@ -10,8 +10,10 @@
 //! See `docs/photons.md` for the physics, the output layouts and the comparison with
 //! Geant4.
 
+pub mod backend;
 pub mod boundary;
 pub mod bulk;
+pub mod gpu_tables;
 pub mod output;
 pub mod propagate;
 pub mod properties;
@@ -19,6 +21,7 @@ pub mod run;
 pub mod sources;
 pub mod surface_models;
 pub mod surfaces;
+pub mod tracer;
 
 use std::path::Path;
 

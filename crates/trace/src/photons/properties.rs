@@ -90,6 +90,14 @@ impl Property {
         }
     }
 
+    /// The `(energy, value)` rows.
+    pub fn rows(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.energies
+            .iter()
+            .copied()
+            .zip(self.values.iter().copied())
+    }
+
     /// The value at photon energy `e` (MeV): linear between rows, the first or last value
     /// outside them.
     pub fn value(&self, e: f64) -> f64 {
