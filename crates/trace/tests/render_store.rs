@@ -248,6 +248,7 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
         .with_store_resident();
     let mut whole = whole_kernel.render(&ctx, &whole_renderer, &|_| {}).unwrap();
     assert_eq!(whole.stream.unwrap().deferred, 0);
+    assert_eq!(whole.preview.as_ref().unwrap().pixels, whole.image.pixels);
     assert_eq!(streamed.cut_short, whole.cut_short);
     streamed.redo_cut_short(&renderer).unwrap();
     whole.redo_cut_short(&whole_renderer).unwrap();
@@ -255,6 +256,32 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
     assert_eq!(bits(&streamed.image), bits(&whole.image));
     let lit = streamed.image.pixels.iter().filter(|p| p[0] > 0.0).count();
     assert!(lit * 4 > streamed.image.pixels.len(), "{lit} pixels lit");
+    // The first pass, every pixel: those it finished are the image's; those that lacked a
+    // brick show its coarser level of detail (octant means), near the image but not it,
+    // and not the background the absent bricks would read without it.
+    let preview = streamed.preview.as_ref().unwrap();
+    let (mut deferred, mut dark, mut error, mut total) = (0, 0, 0.0f64, 0.0f64);
+    for (p, q) in preview.pixels.iter().zip(&streamed.image.pixels) {
+        if p == q {
+            continue;
+        }
+        deferred += 1;
+        if q[0] > 1e-3 && p[0] == 0.0 {
+            dark += 1;
+        }
+        error += (0..3).map(|c| f64::from((p[c] - q[c]).abs())).sum::<f64>();
+        total += (0..3).map(|c| f64::from(q[c])).sum::<f64>();
+    }
+    eprintln!(
+        "preview: {deferred} pixels differ, relative L1 {:.3}",
+        error / total
+    );
+    assert!(deferred > 0);
+    assert_eq!(dark, 0, "lit pixels black in the preview");
+    assert!(
+        error < 0.25 * total,
+        "the preview is far from the image: {error} of {total}"
+    );
     let bad = (cpu.pixels.iter().zip(&streamed.image.pixels))
         .filter(|(p, q)| (0..3).any(|c| (p[c] - q[c]).abs() > 1e-4))
         .count();
@@ -265,6 +292,8 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
 
     let out = tmp.path().join("gpu.npy");
     let memory = least.to_string();
+    let first = tmp.path().join("first.npy");
+    let first_arg = first.to_str().unwrap();
     let args = [
         "--backend",
         "gpu",
@@ -273,9 +302,15 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
         "--memory",
         &memory,
         "--stats",
+        "--preview",
+        first_arg,
     ];
     let o = render(&stored, &out, &args);
     assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read_values(&first).len(), read_values(&out).len());
+    let cpu_out = tmp.path().join("cpu.npy");
+    let text = refused(&stored, &cpu_out, &["--preview", first_arg]);
+    assert!(text.contains("--backend gpu"), "{text}");
     let stats: serde_json::Value =
         serde_json::from_slice(o.stdout.split(|&b| b == b'\n').next().unwrap()).unwrap();
     assert_eq!(stats["backend"], "gpu", "{stats}");
