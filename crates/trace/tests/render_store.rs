@@ -344,3 +344,69 @@ fn gpu_renders_of_stores_refuse_what_they_cannot_stream() {
         "{err}"
     );
 }
+
+/// `scan --transmittance` reads a medium stored in a brick store through a cache of
+/// `--memory` bytes: with the least budget (bricks evicted and read again) the
+/// transmittance equals, bit for bit, that of the same store bricked in memory; a budget
+/// below it is refused naming the store, writing nothing.
+#[test]
+fn scan_transmittance_reads_a_store_through_a_memory_budget() {
+    use hytrace_trace::scan::{write_rays, RayRow};
+    let tmp = tempfile::tempdir().unwrap();
+    let (stored, in_core) = scenes(tmp.path());
+    let least = least_memory(&stored, tmp.path()).to_string();
+    let mut rng = Rng::new(5, 0, 0);
+    let rays: Vec<RayRow> = (0..4000)
+        .map(|_| {
+            // From a sphere around the cloud towards a random point of it.
+            let o = [0.0; 3].map(|_: f64| rng.next_f64() * 2.0 - 1.0);
+            let n = (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt().max(1e-3);
+            let origin = o.map(|c| 400.0 * c / n);
+            let target = [0.0; 3].map(|_: f64| (rng.next_f64() * 2.0 - 1.0) * 90.0);
+            let d: [f64; 3] = std::array::from_fn(|k| target[k] - origin[k]);
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            RayRow {
+                origin,
+                direction: d.map(|c| c / l),
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            }
+        })
+        .collect();
+    let rays_path = tmp.path().join("rays.npy");
+    write_rays(&rays_path, &rays).unwrap();
+    let scan = |scene: &Path, name: &str, memory: &str| {
+        let hits = tmp.path().join(format!("{name}-hits.npy"));
+        let t = tmp.path().join(format!("{name}-t.npy"));
+        let args = [
+            "scan",
+            scene.to_str().unwrap(),
+            "--rays",
+            rays_path.to_str().unwrap(),
+            "--out",
+            hits.to_str().unwrap(),
+            "--transmittance",
+            t.to_str().unwrap(),
+            "--memory",
+            memory,
+        ];
+        (hytrace(&args, &[]), t)
+    };
+    let (o, lazy) = scan(&stored, "stored", &least);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (o, whole) = scan(&in_core, "in-core", "1G");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (lazy, whole) = (read_values(&lazy), read_values(&whole));
+    assert!(lazy.iter().any(|&v| v < 0.5), "no ray crosses the cloud");
+    assert_eq!(
+        lazy.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        whole.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+    let (o, t) = scan(&stored, "refused", "1");
+    assert!(!o.status.success() && !t.exists());
+    assert!(
+        stderr(&o).contains("cloud.bricks") && stderr(&o).contains("too small"),
+        "{}",
+        stderr(&o)
+    );
+}
