@@ -25,7 +25,10 @@ use hytrace_volume::{TransmittanceParams, DEFAULT_STORE_BUDGET};
 use crate::cpu::media::{MediumSegment, SceneMedia};
 use crate::cpu::{CpuScene, Hit, TraceScratch, BATCH};
 use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
+use crate::gpu::{
+    gpu_or_cpu, warn_redone, GpuContext, GpuStreamedVolume, GpuTimes, GpuTracer, GpuVolume, GPU_INF,
+};
+use crate::scene::MediumGrid;
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -737,14 +740,22 @@ pub fn media_transmittance(
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Gpu, Precision::F32) => {
-            gpu_transmittance(foundry, rays, ends, params, GpuContext::new()?)
+            gpu_transmittance(foundry, rays, ends, params, memory, GpuContext::new()?)
         }
         (Backend::Auto, Precision::F32) => gpu_or_cpu(
             "computes transmittance",
-            |ctx| gpu_transmittance(foundry, rays, ends, params, ctx),
+            |ctx| gpu_transmittance(foundry, rays, ends, params, memory, ctx),
             || cpu::<f32>(foundry, rays, ends, params, (0, memory)),
         ),
     }
+}
+
+/// A scene medium's transmittance kernel on the GPU.
+enum MediumKernel<'a> {
+    /// Bricked in memory, uploaded whole.
+    InCore(GpuVolume<'a>),
+    /// Read as stored in a brick store, streamed through a brick pool.
+    Streamed(GpuStreamedVolume<'a>),
 }
 
 /// The GPU's transmittance over each ray's `[tmin, end]`: the CPU's f32 scene clips the
@@ -753,12 +764,14 @@ pub fn media_transmittance(
 /// segment position and medium, each of all `N` rays so that ray `i` draws the random
 /// streams of index `i` (rays without such a segment go as empty rays, their estimates
 /// unused), with that placement's seed. The estimates multiply per ray in segment order,
-/// as on the CPU. Each medium's grid is uploaded once.
+/// as on the CPU. Each medium's grid is uploaded once; a medium read as stored in a brick
+/// store streams through a GPU brick pool of `memory` bytes ([`GpuStreamedVolume`]).
 fn gpu_transmittance(
     f: &Foundry,
     rays: &[RayRow],
     ends: &[f64],
     params: &TransmittanceParams,
+    memory: u64,
     ctx: GpuContext,
 ) -> crate::Result<TransmittanceRun> {
     crate::error::ensure!(
@@ -770,10 +783,19 @@ fn gpu_transmittance(
     let t0 = Instant::now();
     let cpu = CpuScene::<f32>::new(f)?;
     let media = SceneMedia::new(&cpu, f, params)?;
-    let volumes = (0..media.medium_count() as u32)
+    let mut volumes = (0..media.medium_count() as u32)
         .map(|m| {
-            let grid = media.bricked_grid(m)?;
-            GpuVolume::new(&ctx, grid).with_context(|| format!("medium {m}"))
+            let kernel: crate::Result<MediumKernel> = match media.grid(m) {
+                MediumGrid::Bricked(grid) => GpuVolume::new(&ctx, grid)
+                    .map(MediumKernel::InCore)
+                    .map_err(Into::into),
+                MediumGrid::Store(store, mips) => {
+                    GpuStreamedVolume::with_mips(&ctx, store, mips, memory)
+                        .map(MediumKernel::Streamed)
+                        .map_err(Into::into)
+                }
+            };
+            kernel.with_context(|| format!("medium {m}"))
         })
         .collect::<crate::Result<Vec<_>>>()?;
     let open_s = t0.elapsed().as_secs_f64();
@@ -812,9 +834,12 @@ fn gpu_transmittance(
                 None => hytrace_volume::Ray::new([0.0; 3], [1.0, 0.0, 0.0], 0.0, 0.0),
             })
             .collect();
-        let (estimates, t) = volumes[medium as usize]
-            .transmittance(&ctx, &batch, &media.params(medium, placement))
-            .with_context(|| format!("medium {medium}"))?;
+        let params = media.params(medium, placement);
+        let (estimates, t) = match &mut volumes[medium as usize] {
+            MediumKernel::InCore(v) => v.transmittance(&ctx, &batch, &params),
+            MediumKernel::Streamed(v) => v.transmittance(&ctx, &batch, &params),
+        }
+        .with_context(|| format!("medium {medium}"))?;
         add_times(&mut times, &t);
         for ((v, ray), e) in values.iter_mut().zip(&segments).zip(&estimates) {
             if find(ray).is_some() {

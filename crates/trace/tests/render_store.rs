@@ -404,6 +404,46 @@ fn scan_transmittance_reads_a_store_through_a_memory_budget() {
     );
     let (o, t) = scan(&stored, "refused", "1");
     assert!(!o.status.success() && !t.exists());
+    // On the GPU the store streams through a brick pool of that budget (at least what the
+    // pool needs): the exact estimator's answers agree with the CPU's ray by ray.
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let store = BrickStore::open(&tmp.path().join("cloud.bricks"), 1 << 30).unwrap();
+    let gpu_least = match GpuStreamedVolume::new(&ctx, &store, 1) {
+        Err(StreamError::Budget { least, .. }) => least,
+        other => panic!("a 1-byte budget: {:?}", other.err()),
+    };
+    let budget = least.parse::<u64>().unwrap().max(gpu_least).to_string();
+    let exact = |backend: &str, name: &str| {
+        let t = tmp.path().join(format!("{name}-exact.npy"));
+        let hits = tmp.path().join(format!("{name}-exact-hits.npy"));
+        let args = [
+            "scan",
+            stored.to_str().unwrap(),
+            "--rays",
+            rays_path.to_str().unwrap(),
+            "--out",
+            hits.to_str().unwrap(),
+            "--transmittance",
+            t.to_str().unwrap(),
+            "--estimator",
+            "exact",
+            "--memory",
+            &budget,
+            "--backend",
+            backend,
+            "--stats",
+        ];
+        let o = hytrace(&args, &[]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        read_values(&t)
+    };
+    let (cpu, gpu) = (exact("cpu", "cpu"), exact("gpu", "gpu"));
+    let worst = (cpu.iter().zip(&gpu))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-4, "GPU and CPU differ by up to {worst}");
     assert!(
         stderr(&o).contains("cloud.bricks") && stderr(&o).contains("too small"),
         "{}",
