@@ -20,7 +20,7 @@ use hytrace_trace::error::report;
 use hytrace_trace::gpu::TexelStore;
 use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, PhotonScene, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, Origin, PhotonScene, RunOptions};
 use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
 use hytrace_trace::render::spec::RenderSpec;
 use hytrace_trace::scan::{self, Backend, Precision, RAY_COLUMNS};
@@ -291,8 +291,7 @@ impl Scene {
             WavelengthArg::Spectrum(text) => Wavelength::parse(&text).map_err(library_error)?,
         };
         let options = RunOptions {
-            source,
-            wavelength,
+            origin: Origin::Torch { source, wavelength },
             photons,
             first,
             seed,

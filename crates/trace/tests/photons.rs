@@ -13,7 +13,7 @@ use hytrace_foundry::npy::read_array;
 use hytrace_trace::photons::properties::energy_of_wavelength;
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{
-    load_photon_scene, propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions,
+    load_photon_scene, propagate, propagate_reporting, Origin, PhotonRun, PhotonScene, RunOptions,
 };
 
 fn scene_path() -> PathBuf {
@@ -27,8 +27,10 @@ fn scene() -> PhotonScene {
 
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
-        source: Source::parse(source).unwrap(),
-        wavelength: Wavelength::Fixed(420.0),
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::Fixed(420.0),
+        },
         photons,
         first: 0,
         seed: 3,

@@ -1,15 +1,18 @@
 //! `hytrace photons`: options, outputs and the history table.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
+use anyhow::bail;
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::outputs::{check_destinations, OutputSet};
+use hytrace_trace::photons::gensteps::GenstepFile;
 use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
 use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, Origin, RunOptions};
 use serde_json::json;
 
 /// Options of `hytrace photons`.
@@ -24,16 +27,26 @@ pub struct PhotonsArgs {
     /// / `...:out` (from the sphere's surface along its inward or outward normal); mm.
     /// Photons start at time 0 with a random linear polarization perpendicular to their
     /// direction.
-    #[arg(long)]
-    pub source: String,
+    #[arg(
+        long,
+        required_unless_present = "gensteps",
+        conflicts_with = "gensteps"
+    )]
+    pub source: Option<String>,
+    /// Photons from gensteps instead of a source: a float64 .npy of shape (G, 14), one row
+    /// a Cherenkov (kind 1) or scintillation (kind 2) step of a charged particle, emitted as
+    /// Geant4's G4Cerenkov and G4Scintillation emit them (layout in docs/photons.md).
+    #[arg(long, value_name = "G.npy")]
+    pub gensteps: Option<PathBuf>,
     /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm),
     /// or MATERIAL:PROPERTY: drawn for each photon from that intensity table (per photon
-    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1.
-    #[arg(long, default_value = "420")]
+    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1 (torch sources
+    /// only).
+    #[arg(long, default_value = "420", conflicts_with = "gensteps")]
     pub wavelength: String,
-    /// Number of photons.
-    #[arg(short = 'n', long)]
-    pub photons: u64,
+    /// Number of photons (with --gensteps: by default all from --first on).
+    #[arg(short = 'n', long, required_unless_present = "gensteps")]
+    pub photons: Option<u64>,
     /// Detected photons, float64 (H, 16): x y z (mm) t (ns) dx dy dz wavelength (nm)
     /// px py pz (polarization) instance (whose surface detected it) copy (its copy number)
     /// photon (index) mask (history flags, Opticks' bits) steps; written atomically.
@@ -66,7 +79,14 @@ pub struct PhotonsArgs {
 
 /// Runs `hytrace photons`.
 pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
-    let source = Source::parse(&args.source)?;
+    let origin = match (&args.gensteps, &args.source) {
+        (Some(path), _) => Origin::Gensteps(Arc::new(GenstepFile::read(path)?)),
+        (None, Some(source)) => Origin::Torch {
+            source: Source::parse(source)?,
+            wavelength: Wavelength::parse(&args.wavelength)?,
+        },
+        (None, None) => bail!("give --source or --gensteps"),
+    };
     // Both outputs are checked before the work and written together after it.
     let history_path = args.history.as_ref().and_then(|h| h.as_deref());
     let mut destinations = vec![("--out", args.out.as_path())];
@@ -78,14 +98,28 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let scene = prepare(&f, surfaces, &args.scene)?;
     let build_s = t1.elapsed().as_secs_f64();
-    let bar = hytrace_trace::progress::bar(args.photons, "propagating", "photons");
+    let photons = match (args.photons, &origin) {
+        (Some(n), _) => n,
+        (None, Origin::Gensteps(file)) => {
+            let total = scene.genstep_photons(file.as_ref())?;
+            if total <= args.first {
+                bail!(
+                    "{}: the gensteps emit {total} photons, none from --first {}",
+                    file.source,
+                    args.first
+                );
+            }
+            total - args.first
+        }
+        (None, Origin::Torch { .. }) => bail!("-n is needed with --source"),
+    };
+    let bar = hytrace_trace::progress::bar(photons, "propagating", "photons");
     let run = propagate_in(
         &scene,
         &args.scene,
         &RunOptions {
-            source,
-            wavelength: Wavelength::parse(&args.wavelength)?,
-            photons: args.photons,
+            origin,
+            photons,
             first: args.first,
             seed: args.seed,
             max_steps: args.max_steps,
@@ -106,19 +140,19 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     if args.stats {
         let line = json!({
             "backend": "cpu",
-            "photons": args.photons,
+            "photons": photons,
             "hits": run.hits.len(),
             "load_s": load_s,
             "build_s": build_s,
             "propagate_s": run.propagate_s,
-            "photons_per_s": if run.propagate_s > 0.0 { args.photons as f64 / run.propagate_s } else { 0.0 },
+            "photons_per_s": if run.propagate_s > 0.0 { photons as f64 / run.propagate_s } else { 0.0 },
             "threads": rayon::current_num_threads(),
         });
         println!("{line}");
     } else {
         eprintln!(
             "{} photons, {} detected, written to {}",
-            args.photons,
+            photons,
             run.hits.len(),
             args.out.display()
         );

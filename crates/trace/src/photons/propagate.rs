@@ -11,6 +11,7 @@
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
 //! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use hytrace_csg::Ray;
@@ -18,12 +19,13 @@ use hytrace_foundry::{Foundry, UNSET};
 use hytrace_volume::Rng;
 use rayon::prelude::*;
 
-use super::bulk::{rayleigh_scatter, rotate_uz, sample_distance};
+use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
+use super::gensteps::{GenstepFile, Gensteps};
 use super::output::{sorted_counts, History, HitRow, Label};
 use super::properties::{
     energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
 };
-use super::sources::{Source, Wavelength};
+use super::sources::{Source, Start, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
 use super::{PhotonError, V};
 use crate::cpu::{CpuScene, Hit};
@@ -99,8 +101,26 @@ impl PhotonScene {
         })
     }
 
-    /// Resolves a run's wavelength: a fixed one checked, a spectrum looked up among the
-    /// scene's materials.
+    /// Resolves where a run's photons come from: a torch source with its wavelength, or
+    /// gensteps prepared for the scene's materials.
+    fn emitting(&self, origin: &Origin) -> Result<Emitting, PhotonError> {
+        match origin {
+            Origin::Torch { source, wavelength } => Ok(Emitting::Torch {
+                source: *source,
+                emission: self.emission(wavelength)?,
+            }),
+            Origin::Gensteps(file) => Ok(Emitting::Gensteps(Gensteps::new(file, &self.materials)?)),
+        }
+    }
+
+    /// Number of photons `file`'s gensteps emit in this scene (they are checked against
+    /// its materials).
+    pub fn genstep_photons(&self, file: &GenstepFile) -> Result<u64, PhotonError> {
+        Ok(Gensteps::new(file, &self.materials)?.photons())
+    }
+
+    /// Resolves a torch run's wavelength: a fixed one checked, a spectrum looked up among
+    /// the scene's materials.
     fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
         match wavelength {
             Wavelength::Fixed(nm) if nm.is_finite() && *nm > 0.0 => Ok(Emission::Fixed {
@@ -180,14 +200,28 @@ impl PhotonScene {
     /// Propagates photon `index` to its end: the histories of its lineages (the photon
     /// itself first, then the further photons its wavelength-shifting absorptions
     /// emitted) and the hit rows of those detected.
-    fn photon(&self, index: u64, run: &RunOptions, emission: &Emission) -> PhotonEnd {
+    fn photon(&self, index: u64, run: &RunOptions, emitting: &Emitting) -> PhotonEnd {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
-        let start = run.source.sample(&mut rng);
-        let (energy, wavelength_nm) = match emission {
-            Emission::Fixed { energy, nm } => (*energy, *nm),
-            Emission::Spectrum(s) => {
-                let e = s.sample(&mut rng);
-                (e, wavelength_of_energy(e))
+        let (start, time, energy, wavelength_nm) = match emitting {
+            Emitting::Torch { source, emission } => {
+                let start = source.sample(&mut rng);
+                let (energy, nm) = match emission {
+                    Emission::Fixed { energy, nm } => (*energy, *nm),
+                    Emission::Spectrum(s) => {
+                        let e = s.sample(&mut rng);
+                        (e, wavelength_of_energy(e))
+                    }
+                };
+                (start, 0.0, energy, nm)
+            }
+            Emitting::Gensteps(g) => {
+                let e = g.emit(index, &mut rng);
+                let start = Start {
+                    position: e.position,
+                    direction: e.direction,
+                    polarization: e.polarization,
+                };
+                (start, e.time, e.energy, wavelength_of_energy(e.energy))
             }
         };
         let mut history = History::default();
@@ -203,7 +237,7 @@ impl PhotonScene {
             pos: start.position,
             dir: start.direction,
             pol: start.polarization,
-            time: 0.0,
+            time,
             energy,
             wavelength_nm,
             current,
@@ -369,7 +403,13 @@ struct PhotonEnd {
     further: Vec<(History, Option<HitRow>)>,
 }
 
-/// The wavelength of a run, resolved: fixed (energy in MeV and nm) or a spectrum.
+/// Where a run's photons come from, resolved for the scene.
+enum Emitting {
+    Torch { source: Source, emission: Emission },
+    Gensteps(Gensteps),
+}
+
+/// The wavelength of a torch run, resolved: fixed (energy in MeV and nm) or a spectrum.
 enum Emission {
     Fixed { energy: f64, nm: f64 },
     Spectrum(Spectrum),
@@ -388,27 +428,26 @@ struct Lineage {
     history: History,
 }
 
-/// A direction uniform over the sphere and a polarization uniform among those
-/// perpendicular to it (Geant4's draw for re-emitted photons).
-fn isotropic(rng: &mut Rng) -> (V, V) {
-    let cos = 1.0 - 2.0 * rng.next_f64();
-    let sin = ((1.0 - cos) * (1.0 + cos)).sqrt();
-    let phi = std::f64::consts::TAU * rng.next_f64();
-    let dir = V::new(sin * phi.cos(), sin * phi.sin(), cos);
-    let a = std::f64::consts::TAU * rng.next_f64();
-    (
-        dir,
-        rotate_uz(V::new(a.cos(), a.sin(), 0.0), dir).normalized(),
-    )
+/// Where a run's photons come from.
+#[derive(Clone, Debug)]
+pub enum Origin {
+    /// A torch source: every photon starts at time 0 with this wavelength.
+    Torch {
+        /// Where photons start and which way.
+        source: Source,
+        /// Their wavelength: fixed or drawn from a material's spectrum.
+        wavelength: Wavelength,
+    },
+    /// Gensteps: photon `i` of the run is photon `i` of the file (numbered through its rows
+    /// in order).
+    Gensteps(Arc<GenstepFile>),
 }
 
 /// What to propagate.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
-    /// Where photons start.
-    pub source: Source,
-    /// The photons' wavelength: fixed or drawn from a material's spectrum.
-    pub wavelength: Wavelength,
+    /// Where photons come from.
+    pub origin: Origin,
     /// Number of photons.
     pub photons: u64,
     /// Index of the first photon: the run propagates photons `first .. first + photons`,
@@ -455,7 +494,7 @@ pub fn propagate_reporting(
             "the number of photons (-n) must be at least 1".into(),
         ));
     }
-    let emission = scene.emission(&run.wavelength)?;
+    let emitting = scene.emitting(&run.origin)?;
     let Some(end) = run.first.checked_add(run.photons) else {
         return Err(PhotonError::Input(format!(
             "photons {} .. {} + {}: past the last photon index",
@@ -467,15 +506,27 @@ pub fn propagate_reporting(
             "the step limit must be at least 1".into(),
         ));
     }
-    let origin = match run.source {
-        Source::Point { position } => position,
-        Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
-    };
-    if scene.tracer.locate_point(origin.to_f64()).is_none() {
-        return Err(PhotonError::Input(format!(
-            "the source at ({}, {}, {}) mm lies outside the world",
-            origin.x, origin.y, origin.z
-        )));
+    match &emitting {
+        Emitting::Torch { source, .. } => {
+            let origin = match *source {
+                Source::Point { position } => position,
+                Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
+            };
+            if scene.tracer.locate_point(origin.to_f64()).is_none() {
+                return Err(PhotonError::Input(format!(
+                    "the source at ({}, {}, {}) mm lies outside the world",
+                    origin.x, origin.y, origin.z
+                )));
+            }
+        }
+        Emitting::Gensteps(g) if end > g.photons() => {
+            return Err(PhotonError::Input(format!(
+                "photons {} .. {end}: the gensteps emit {} photons",
+                run.first,
+                g.photons()
+            )));
+        }
+        Emitting::Gensteps(_) => {}
     }
     let start = Instant::now();
     let mut hits = Vec::new();
@@ -486,7 +537,7 @@ pub fn propagate_reporting(
         let last = first.saturating_add(BATCH).min(end);
         let batch: Vec<PhotonEnd> = (first..last)
             .into_par_iter()
-            .map(|i| scene.photon(i, run, &emission))
+            .map(|i| scene.photon(i, run, &emitting))
             .collect();
         for end in batch {
             if run.keep_histories {

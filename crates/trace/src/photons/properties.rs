@@ -90,6 +90,19 @@ impl Property {
         }
     }
 
+    /// The photon energies of the rows (MeV), not decreasing.
+    pub fn energies(&self) -> &[f64] {
+        &self.energies
+    }
+
+    /// The largest value of the table.
+    pub fn max_value(&self) -> f64 {
+        self.values
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
     /// The value at photon energy `e` (MeV): linear between rows, the first or last value
     /// outside them.
     pub fn value(&self, e: f64) -> f64 {
@@ -246,7 +259,11 @@ impl Wls {
 }
 
 /// Looks up a named constant property (a one-value GDML matrix), checked.
-fn constant(list: &[(String, Table)], name: &str, owner: &str) -> Result<Option<f64>, PhotonError> {
+pub(super) fn constant(
+    list: &[(String, Table)],
+    name: &str,
+    owner: &str,
+) -> Result<Option<f64>, PhotonError> {
     let Some((_, t)) = list.iter().find(|(n, _)| n == name) else {
         return Ok(None);
     };
@@ -264,7 +281,7 @@ fn constant(list: &[(String, Table)], name: &str, owner: &str) -> Result<Option<
 const UNMODELLED_MATERIAL_PROPERTIES: [&str; 3] = ["WLSABSLENGTH2", "WLSCOMPONENT2", "MIEHG"];
 
 /// Looks up a named two-column property of a list, checked.
-fn property(
+pub(super) fn property(
     list: &[(String, Table)],
     name: &str,
     owner: &str,
