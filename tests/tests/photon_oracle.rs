@@ -118,6 +118,7 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
             seed: 1,
             max_steps: 100_000,
             keep_histories: false,
+            records: 0,
         },
     )
     .unwrap();

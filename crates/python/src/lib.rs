@@ -297,6 +297,7 @@ impl Scene {
             seed,
             max_steps,
             keep_histories: histories,
+            records: 0,
         };
         let run = py
             .detach(|| {

@@ -46,14 +46,20 @@ impl OutputSet {
         dest: &Path,
         write: impl FnOnce(&Path) -> crate::Result<()>,
     ) -> crate::Result<()> {
-        let context = || format!("writing {}", dest.display());
+        let tmp = self.reserve(dest)?;
+        write(&tmp).with_context(|| format!("writing {}", dest.display()))
+    }
+
+    /// Adds an output to be written over time: the temporary path (in `dest`'s directory,
+    /// created when missing) to write it at, moved onto `dest` by [`OutputSet::commit`].
+    pub fn reserve(&mut self, dest: &Path) -> crate::Result<PathBuf> {
         let tmp = temporary_beside(dest)
-            .with_context(context)?
+            .with_context(|| format!("writing {}", dest.display()))?
             .into_temp_path();
         let tracked = TrackedTemporary::new(&tmp);
-        write(&tmp).with_context(context)?;
+        let path = tmp.to_path_buf();
         self.staged.push((tmp, dest.to_path_buf(), tracked));
-        Ok(())
+        Ok(path)
     }
 
     /// Moves every staged output into place.

@@ -36,6 +36,7 @@ fn options(source: &str, photons: u64) -> RunOptions {
         seed: 3,
         max_steps: 10_000,
         keep_histories: true,
+        records: 0,
     }
 }
 

@@ -9,8 +9,8 @@ use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::outputs::{check_destinations, OutputSet};
 use hytrace_trace::photons::gensteps::GenstepFile;
-use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
-use hytrace_trace::photons::run::{prepare, propagate_in};
+use hytrace_trace::photons::output::{history_table, RunFiles};
+use hytrace_trace::photons::run::{prepare, propagate_batches_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, Origin, RunOptions};
 use serde_json::json;
@@ -65,6 +65,19 @@ pub struct PhotonsArgs {
     /// history there, uint64 (N,), 4 bits a label, first label lowest.
     #[arg(long, num_args = 0..=1, require_equals = true, value_name = "PATH")]
     pub history: Option<Option<PathBuf>>,
+    /// Record the first K step points of every photon (its own lineage, through
+    /// re-emissions) into --records-out: float32 (N, K, 12), x y z t dx dy dz px py pz
+    /// wavelength label (direction and polarization as it leaves the point, label code as
+    /// in the history; zeros past the photon's end).
+    #[arg(long, value_name = "K", requires = "records_out")]
+    pub records: Option<u32>,
+    /// Where --records writes the step points.
+    #[arg(long, value_name = "PATH", requires = "records")]
+    pub records_out: Option<PathBuf>,
+    /// Photons propagated per batch: each batch's hits, histories and records are written
+    /// out as it finishes, so memory is bounded by the batch; results do not depend on it.
+    #[arg(long, default_value_t = 65_536)]
+    pub batch: u64,
     /// Rows of the history table.
     #[arg(long, default_value_t = 20)]
     pub top: usize,
@@ -87,11 +100,16 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         },
         (None, None) => bail!("give --source or --gensteps"),
     };
-    // Both outputs are checked before the work and written together after it.
+    // The outputs are checked before the work, streamed to temporary files during it and
+    // moved into place together after it.
     let history_path = args.history.as_ref().and_then(|h| h.as_deref());
     let mut destinations = vec![("--out", args.out.as_path())];
     destinations.extend(history_path.map(|p| ("--history", p)));
+    destinations.extend(args.records_out.as_deref().map(|p| ("--records-out", p)));
     check_destinations(&destinations)?;
+    if args.records == Some(0) {
+        bail!("--records 0: record at least one step point");
+    }
     let t0 = Instant::now();
     let (f, surfaces) = load_photon_scene(&args.scene, options)?;
     let load_s = t0.elapsed().as_secs_f64();
@@ -113,8 +131,20 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         }
         (None, Origin::Torch { .. }) => bail!("-n is needed with --source"),
     };
+    let mut written = OutputSet::new();
+    let hits_tmp = written.reserve(&args.out)?;
+    let history_tmp = history_path.map(|p| written.reserve(p)).transpose()?;
+    let records_tmp = match (&args.records_out, args.records) {
+        (Some(p), Some(k)) => Some((written.reserve(p)?, k)),
+        _ => None,
+    };
+    let mut files = RunFiles::create(
+        &hits_tmp,
+        history_tmp.as_deref(),
+        records_tmp.as_ref().map(|(p, k)| (p.as_path(), *k)),
+    )?;
     let bar = hytrace_trace::progress::bar(photons, "propagating", "photons");
-    let run = propagate_in(
+    let run = propagate_batches_in(
         &scene,
         &args.scene,
         &RunOptions {
@@ -123,16 +153,15 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             first: args.first,
             seed: args.seed,
             max_steps: args.max_steps,
-            keep_histories: matches!(args.history, Some(Some(_))),
+            keep_histories: history_tmp.is_some(),
+            records: args.records.unwrap_or(0),
         },
+        args.batch,
+        &mut |batch| files.append(&batch),
         &|done| bar.set_position(done),
     )?;
     bar.finish_and_clear();
-    let mut written = OutputSet::new();
-    written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
-    if let Some(path) = history_path {
-        written.stage(path, |p| Ok(write_histories(p, &run.histories)?))?;
-    }
+    files.finish()?;
     written.commit()?;
     if args.history.is_some() {
         print!("{}", history_table(&run.counts, args.top));
@@ -141,7 +170,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         let line = json!({
             "backend": "cpu",
             "photons": photons,
-            "hits": run.hits.len(),
+            "hits": run.hits,
             "load_s": load_s,
             "build_s": build_s,
             "propagate_s": run.propagate_s,
@@ -153,7 +182,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         eprintln!(
             "{} photons, {} detected, written to {}",
             photons,
-            run.hits.len(),
+            run.hits,
             args.out.display()
         );
     }

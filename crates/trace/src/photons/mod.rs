@@ -33,7 +33,10 @@ use hytrace_foundry::Foundry;
 
 use crate::scene::{load_gdml_scene_with_surfaces, load_scene, VolumeSurfaces};
 
-pub use propagate::{propagate, propagate_reporting, Origin, PhotonRun, PhotonScene, RunOptions};
+pub use propagate::{
+    propagate, propagate_batches, propagate_reporting, Batch, Origin, PhotonRun, PhotonScene,
+    RunOptions, RunSummary,
+};
 
 /// Vectors of the propagator: f64 throughout.
 pub type V = V3<f64>;

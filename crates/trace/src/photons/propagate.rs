@@ -21,7 +21,9 @@ use rayon::prelude::*;
 
 use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
 use super::gensteps::{GenstepFile, Gensteps};
-use super::output::{sorted_counts, History, HitRow, Label};
+use super::output::{
+    record_point, sorted_counts, History, HitRow, Label, RecordPoint, RECORD_COLUMNS,
+};
 use super::properties::{
     energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
 };
@@ -225,12 +227,21 @@ impl PhotonScene {
             }
         };
         let mut history = History::default();
-        history.push(Label::To);
+        let mut record = Vec::with_capacity(run.records as usize);
+        let mut mark = |history: &mut History, label: Label| {
+            history.push(label);
+            if record.len() < run.records as usize {
+                let (p, d, e) = (start.position, start.direction, start.polarization);
+                record.push(record_point(label, p, time, d, e, wavelength_nm));
+            }
+        };
+        mark(&mut history, Label::To);
         let Some(current) = self.tracer.locate_point(start.position.to_f64()) else {
-            history.push(Label::Mi);
+            mark(&mut history, Label::Mi);
             return PhotonEnd {
                 own: (history, None),
                 further: Vec::new(),
+                record: padded(record, run.records),
             };
         };
         let photon = Lineage {
@@ -246,16 +257,28 @@ impl PhotonScene {
         // The photon's own lineage first; the vectors allocate only when a wavelength
         // shifter emits more than one photon.
         let mut pending = Vec::new();
-        let own = self.lineage(photon, index, run, &mut rng, &mut pending);
+        let own = self.lineage(
+            photon,
+            index,
+            run,
+            &mut rng,
+            &mut pending,
+            Some(&mut record),
+        );
         let mut further = Vec::new();
         while let Some(photon) = pending.pop() {
-            further.push(self.lineage(photon, index, run, &mut rng, &mut pending));
+            further.push(self.lineage(photon, index, run, &mut rng, &mut pending, None));
         }
-        PhotonEnd { own, further }
+        PhotonEnd {
+            own,
+            further,
+            record: padded(record, run.records),
+        }
     }
 
     /// Propagates one photon to its end; photons emitted by wavelength-shifting
-    /// absorptions beyond the one that carries on are pushed onto `pending`.
+    /// absorptions beyond the one that carries on are pushed onto `pending`. With `record`,
+    /// each step point is appended to it until it holds `run.records`.
     fn lineage(
         &self,
         photon: Lineage,
@@ -263,6 +286,7 @@ impl PhotonScene {
         run: &RunOptions,
         rng: &mut Rng,
         pending: &mut Vec<Lineage>,
+        mut record: Option<&mut Vec<RecordPoint>>,
     ) -> (History, Option<HitRow>) {
         let Lineage {
             mut pos,
@@ -274,6 +298,18 @@ impl PhotonScene {
             mut current,
             mut history,
         } = photon;
+        // Labels a step and records its point: where the photon is and how it leaves.
+        macro_rules! mark {
+            ($label:expr) => {{
+                history.push($label);
+                if let Some(r) = record
+                    .as_deref_mut()
+                    .filter(|r| r.len() < run.records as usize)
+                {
+                    r.push(record_point($label, pos, time, dir, pol, wavelength_nm));
+                }
+            }};
+        }
         for steps in 1..=run.max_steps {
             let m = self.material[current as usize];
             let mat = self.tables.material(m);
@@ -289,25 +325,25 @@ impl PhotonScene {
             let t_b = hit.map_or(f64::INFINITY, |h| h.t);
             let step = t_b.min(d_abs).min(d_sc).min(d_wls);
             if !step.is_finite() {
-                history.push(Label::Mi);
+                mark!(Label::Mi);
                 return (history, None);
             }
             pos = pos + dir * step;
             time += step / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
             if d_abs == step && d_abs < t_b {
-                history.push(Label::Ab);
+                mark!(Label::Ab);
                 return (history, None);
             }
             if d_sc == step && d_sc < t_b {
                 (dir, pol) = rayleigh_scatter(dir, pol, rng);
-                history.push(Label::Sc);
+                mark!(Label::Sc);
                 continue;
             }
             if d_wls == step && d_wls < t_b {
                 // Absorbed by the shifter; what it emits starts here, isotropic, with a
                 // random transverse polarization, after the material's delay.
                 let Some(wls) = mat.and_then(|m| m.wls.as_ref()) else {
-                    history.push(Label::Ab);
+                    mark!(Label::Ab);
                     return (history, None);
                 };
                 let count = wls.sample_count(rng);
@@ -315,11 +351,12 @@ impl PhotonScene {
                     .filter_map(|_| wls.sample_energy(energy, rng))
                     .collect();
                 let Some((&first, rest)) = energies.split_first() else {
-                    history.push(Label::Ab);
+                    mark!(Label::Ab);
                     return (history, None);
                 };
-                history.push(Label::Re);
                 time += wls.time_constant;
+                let mut emitted = history;
+                emitted.push(Label::Re);
                 for &e in rest.iter().rev() {
                     let (d, p) = isotropic(rng);
                     pending.push(Lineage {
@@ -330,17 +367,18 @@ impl PhotonScene {
                         energy: e,
                         wavelength_nm: wavelength_of_energy(e),
                         current,
-                        history,
+                        history: emitted,
                     });
                 }
                 (dir, pol) = isotropic(rng);
                 energy = first;
                 wavelength_nm = wavelength_of_energy(first);
+                mark!(Label::Re);
                 continue;
             }
             let hit = hit.expect("a finite step that is no interaction is a boundary");
             let Some(post) = self.next_volume(pos, dir, current, &hit) else {
-                history.push(Label::Mi);
+                mark!(Label::Mi);
                 return (history, None);
             };
             let normal = if hit.normal.dot(dir) > 0.0 {
@@ -357,18 +395,18 @@ impl PhotonScene {
             let materials = (m, self.material[post as usize]);
             match cross(&self.tables, materials, surface, photon, normal, rng) {
                 Crossing::Transmitted => {
-                    history.push(Label::Bt);
+                    mark!(Label::Bt);
                     current = post;
                 }
-                Crossing::Reflected => history.push(Label::Br),
-                Crossing::SurfaceReflected => history.push(Label::Sr),
-                Crossing::DiffuseReflected => history.push(Label::Dr),
+                Crossing::Reflected => mark!(Label::Br),
+                Crossing::SurfaceReflected => mark!(Label::Sr),
+                Crossing::DiffuseReflected => mark!(Label::Dr),
                 Crossing::Absorbed => {
-                    history.push(Label::Sa);
+                    mark!(Label::Sa);
                     return (history, None);
                 }
                 Crossing::Detected => {
-                    history.push(Label::Sd);
+                    mark!(Label::Sd);
                     let row = HitRow([
                         pos.x,
                         pos.y,
@@ -391,16 +429,24 @@ impl PhotonScene {
                 }
             }
         }
-        history.push(Label::Tr);
+        mark!(Label::Tr);
         (history, None)
     }
 }
 
 /// How one photon ended: its own lineage's history and hit, then those of the further
-/// photons its wavelength-shifting absorptions emitted.
+/// photons its wavelength-shifting absorptions emitted, and its own lineage's first step
+/// points (`RunOptions::records` of them, zero past its end; none when not asked for).
 struct PhotonEnd {
     own: (History, Option<HitRow>),
     further: Vec<(History, Option<HitRow>)>,
+    record: Vec<RecordPoint>,
+}
+
+/// `record` filled to `k` points with zero points (label 0).
+fn padded(mut record: Vec<RecordPoint>, k: u32) -> Vec<RecordPoint> {
+    record.resize(k as usize, [0.0; RECORD_COLUMNS]);
+    record
 }
 
 /// Where a run's photons come from, resolved for the scene.
@@ -460,6 +506,8 @@ pub struct RunOptions {
     pub max_steps: u32,
     /// Keep every photon's packed history in [`PhotonRun::histories`].
     pub keep_histories: bool,
+    /// Step points to record of each photon ([`PhotonRun::records`]; 0: none).
+    pub records: u32,
 }
 
 /// What a run gives back.
@@ -475,6 +523,31 @@ pub struct PhotonRun {
     pub counts: Vec<(String, u64)>,
     /// Seconds spent propagating.
     pub propagate_s: f64,
+    /// The first `records` step points of every photon's own lineage, `records` a photon
+    /// (zero points past its end), when asked for.
+    pub records: Vec<RecordPoint>,
+}
+
+/// The results of one batch of photons, in photon order.
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    /// Hit rows.
+    pub hits: Vec<HitRow>,
+    /// Packed histories, when asked for.
+    pub histories: Vec<u64>,
+    /// Step points, [`RunOptions::records`] a photon, when asked for.
+    pub records: Vec<RecordPoint>,
+}
+
+/// What a run handed over batch by batch adds up to.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    /// Hits.
+    pub hits: u64,
+    /// Count of each history, as [`PhotonRun::counts`].
+    pub counts: Vec<(String, u64)>,
+    /// Seconds spent propagating (the sink's time included).
+    pub propagate_s: f64,
 }
 
 /// Propagates photons `run.first .. run.first + run.photons` through `scene`, in parallel
@@ -489,9 +562,48 @@ pub fn propagate_reporting(
     run: &RunOptions,
     progress: &dyn Fn(u64),
 ) -> Result<PhotonRun, PhotonError> {
+    let mut all = Batch::default();
+    let summary = propagate_batches(
+        scene,
+        run,
+        BATCH,
+        &mut |b| {
+            all.hits.extend(b.hits);
+            all.histories.extend(b.histories);
+            all.records.extend(b.records);
+            Ok(())
+        },
+        progress,
+    )?;
+    Ok(PhotonRun {
+        hits: all.hits,
+        histories: all.histories,
+        counts: summary.counts,
+        propagate_s: summary.propagate_s,
+        records: all.records,
+    })
+}
+
+/// Propagates photons `run.first .. run.first + run.photons` through `scene`, `batch` at a
+/// time (in parallel over each batch's photons), handing each batch's results to `sink`
+/// in photon order as it finishes (so a run's memory is bounded by its batch), then
+/// calling `progress` with the number of photons done. The results do not depend on
+/// `batch`.
+pub fn propagate_batches(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    batch: u64,
+    sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+    progress: &dyn Fn(u64),
+) -> Result<RunSummary, PhotonError> {
     if run.photons == 0 {
         return Err(PhotonError::Input(
             "the number of photons (-n) must be at least 1".into(),
+        ));
+    }
+    if batch == 0 {
+        return Err(PhotonError::Input(
+            "the batch size must be at least 1".into(),
         ));
     }
     let emitting = scene.emitting(&run.origin)?;
@@ -529,34 +641,34 @@ pub fn propagate_reporting(
         Emitting::Gensteps(_) => {}
     }
     let start = Instant::now();
-    let mut hits = Vec::new();
-    let mut histories = Vec::new();
+    let mut hits = 0;
     let mut codes: std::collections::HashMap<u64, u64> = Default::default();
     let mut first = run.first;
     while first < end {
-        let last = first.saturating_add(BATCH).min(end);
-        let batch: Vec<PhotonEnd> = (first..last)
+        let last = first.saturating_add(batch).min(end);
+        let ends: Vec<PhotonEnd> = (first..last)
             .into_par_iter()
             .map(|i| scene.photon(i, run, &emitting))
             .collect();
-        for end in batch {
+        let mut out = Batch::default();
+        for end in ends {
             if run.keep_histories {
-                histories.push(end.own.0.code);
+                out.histories.push(end.own.0.code);
             }
+            out.records.extend(end.record);
             for (h, hit) in std::iter::once(end.own).chain(end.further) {
                 *codes.entry(h.code).or_default() += 1;
-                hits.extend(hit);
+                out.hits.extend(hit);
             }
         }
+        hits += out.hits.len() as u64;
+        sink(out)?;
         first = last;
         progress(first - run.first);
     }
-    let propagate_s = start.elapsed().as_secs_f64();
-    let counts = sorted_counts(codes);
-    Ok(PhotonRun {
+    Ok(RunSummary {
         hits,
-        histories,
-        counts,
-        propagate_s,
+        counts: sorted_counts(codes),
+        propagate_s: start.elapsed().as_secs_f64(),
     })
 }
