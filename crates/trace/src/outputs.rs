@@ -57,6 +57,13 @@ impl OutputSet {
             .with_context(|| format!("writing {}", dest.display()))?
             .into_temp_path();
         let tracked = TrackedTemporary::new(&tmp);
+        // Temporary files are created private (0600); the output is an ordinary file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o644))
+                .with_context(|| format!("writing {}", dest.display()))?;
+        }
         let path = tmp.to_path_buf();
         self.staged.push((tmp, dest.to_path_buf(), tracked));
         Ok(path)
@@ -87,6 +94,13 @@ mod tests {
         assert!(!a.exists() && !b.exists());
         set.commit().unwrap();
         assert_eq!(std::fs::read_to_string(&b).unwrap(), "b");
+        // Ordinary files, not private like the temporary files they were written as.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&a).unwrap().permissions().mode();
+            assert_eq!(mode & 0o777, 0o644);
+        }
         // A second output failing: the first is not left behind, nor any temporary file.
         let c = dir.path().join("c.txt");
         let mut set = OutputSet::new();

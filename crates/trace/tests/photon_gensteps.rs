@@ -1,11 +1,18 @@
-//! `hytrace photons --gensteps`: photons from Cherenkov and scintillation steps through a
-//! scintillator cube with a sensor plate, end to end; bad genstep files.
+//! Photons in a scintillator cube with a sensor plate
+//! (`tests/data/photons/scintillator.gdml`): `hytrace photons --gensteps` from Cherenkov
+//! and scintillation steps, end to end, and bad genstep files; re-emission (REEMISSIONPROB)
+//! at the rate and with the spectrum the material gives.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::{read_array, write_array};
+use hytrace_trace::photons::output::chi2_survival;
+use hytrace_trace::photons::properties::HC_EV_NM;
+use hytrace_trace::photons::sources::{Source, Wavelength};
+use hytrace_trace::photons::{load_photon_scene, propagate, Origin, PhotonScene, RunOptions};
 
 fn scene_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/photons/scintillator.gdml")
@@ -187,4 +194,87 @@ fn bad_genstep_files_fail_naming_the_file_and_row_without_output() {
         assert!(!out.status.success() && err.contains(needle), "{err}");
         assert!(!hits.exists());
     }
+}
+
+/// The probability that Geant4's draw from an emission table `(eV, intensity)` rows (the
+/// trapezoid integral inverted linearly between rows) falls below `e` eV.
+fn emission_cdf(rows: &[(f64, f64)], e: f64) -> f64 {
+    let mut cumulative = vec![0.0];
+    for w in rows.windows(2) {
+        let last = cumulative[cumulative.len() - 1];
+        cumulative.push(last + 0.5 * (w[1].0 - w[0].0) * (w[0].1 + w[1].1));
+    }
+    let total = cumulative[cumulative.len() - 1];
+    let i = rows.partition_point(|r| r.0 <= e).clamp(1, rows.len() - 1);
+    let (e0, e1) = (rows[i - 1].0, rows[i].0);
+    let c = cumulative[i - 1]
+        + (cumulative[i] - cumulative[i - 1]) * ((e - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    c / total
+}
+
+#[test]
+fn absorbed_photons_are_re_emitted_at_the_rate_and_with_the_spectrum_of_the_scintillator() {
+    let (f, surfaces) = load_photon_scene(&scene_path(), &GdmlOptions::default()).unwrap();
+    let scene = PhotonScene::new(&f, surfaces).unwrap();
+    let run = propagate(
+        &scene,
+        &RunOptions {
+            // 400 nm = 3.1 eV: REEMISSIONPROB 0.5.
+            origin: Origin::Torch {
+                source: Source::parse("point:0,0,0").unwrap(),
+                wavelength: Wavelength::Fixed(400.0),
+            },
+            photons: 40_000,
+            first: 0,
+            seed: 9,
+            max_steps: 10_000,
+            keep_histories: false,
+            records: 2,
+        },
+    )
+    .unwrap();
+    // The photons whose first step ended in the bulk: absorbed (AB) or re-emitted (RE).
+    let (mut absorbed, mut energies) = (0u64, Vec::new());
+    for p in run.records.chunks_exact(2) {
+        let (a, b) = (&p[0], &p[1]);
+        match b[11] as u8 {
+            4 => absorbed += 1,
+            5 => {
+                energies.push(HC_EV_NM / f64::from(b[10]));
+                let seg =
+                    ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+                // Delayed: no earlier than the absorbed photon's arrival at c.
+                assert!(b[3] >= seg / 299.8 - 1e-6, "{b:?}");
+            }
+            _ => {}
+        }
+    }
+    let re = energies.len() as f64;
+    let n = re + absorbed as f64;
+    assert!(n > 4000.0, "{n} absorptions");
+    assert!(
+        (re / n - 0.5).abs() < 3.0 * (0.25 / n).sqrt(),
+        "{re} of {n}"
+    );
+    // The spectrum: SCINTILLATIONCOMPONENT1 and 2 (yields 0.8, 0.2) between their rows.
+    let fast = [(2.0, 0.0), (2.6, 0.3), (2.9, 1.0), (3.2, 0.5), (3.6, 0.0)];
+    let slow = [(2.0, 0.0), (2.4, 1.0), (2.8, 0.2), (3.6, 0.0)];
+    let edges = [2.0, 2.4, 2.6, 2.8, 2.9, 3.2, 3.6];
+    let mix = |e: f64| 0.8 * emission_cdf(&fast, e) + 0.2 * emission_cdf(&slow, e);
+    let mut chi2 = 0.0;
+    for w in edges.windows(2) {
+        let seen = energies.iter().filter(|&&e| e >= w[0] && e < w[1]).count() as f64;
+        let want = re * (mix(w[1]) - mix(w[0]));
+        chi2 += (seen - want).powi(2) / want;
+    }
+    let p = chi2_survival(chi2, (edges.len() - 2) as f64);
+    assert!(p > 1e-3, "chi2 {chi2}, p {p}");
+    // The fast component alone is rejected.
+    let mut alone = 0.0;
+    for w in edges.windows(2) {
+        let seen = energies.iter().filter(|&&e| e >= w[0] && e < w[1]).count() as f64;
+        let want = re * (emission_cdf(&fast, w[1]) - emission_cdf(&fast, w[0]));
+        alone += (seen - want).powi(2) / want;
+    }
+    assert!(chi2_survival(alone, (edges.len() - 2) as f64) < 1e-6);
 }

@@ -331,6 +331,17 @@ impl PhotonScene {
             pos = pos + dir * step;
             time += step / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
             if d_abs == step && d_abs < t_b {
+                // A scintillator may emit again what it absorbed (REEMISSIONPROB).
+                let reemission = mat.and_then(|m| m.reemission.as_ref());
+                if let Some(k) = reemission.and_then(|r| r.reemits(energy, rng)) {
+                    let scintillator = &reemission.expect("checked above").scintillator;
+                    energy = scintillator.energy(k, rng);
+                    wavelength_nm = wavelength_of_energy(energy);
+                    time += scintillator.delay(k, rng);
+                    (dir, pol) = isotropic(rng);
+                    mark!(Label::Re);
+                    continue;
+                }
                 mark!(Label::Ab);
                 return (history, None);
             }
