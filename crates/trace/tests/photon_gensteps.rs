@@ -240,7 +240,7 @@ fn absorbed_photons_are_re_emitted_at_the_rate_and_with_the_spectrum_of_the_scin
         match b[11] as u8 {
             4 => absorbed += 1,
             5 => {
-                energies.push(HC_EV_NM / f64::from(b[10]));
+                energies.push(HC_EV_NM / f64::from(b[7]));
                 let seg =
                     ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
                 // Delayed: no earlier than the absorbed photon's arrival at c.

@@ -66,9 +66,9 @@ pub struct PhotonsArgs {
     #[arg(long, num_args = 0..=1, require_equals = true, value_name = "PATH")]
     pub history: Option<Option<PathBuf>>,
     /// Record the first K step points of every photon (its own lineage, through
-    /// re-emissions) into --records-out: float32 (N, K, 12), x y z t dx dy dz px py pz
-    /// wavelength label (direction and polarization as it leaves the point, label code as
-    /// in the history; zeros past the photon's end).
+    /// re-emissions) into --records-out: float32 (N, K, 12), x y z t dx dy dz wavelength
+    /// px py pz label (direction and polarization as it leaves the point, label code as in
+    /// the history; zeros past the photon's end).
     #[arg(long, value_name = "K", requires = "records_out")]
     pub records: Option<u32>,
     /// Where --records writes the step points.

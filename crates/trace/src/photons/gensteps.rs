@@ -417,43 +417,29 @@ impl Gensteps {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hytrace_foundry::optics::Table;
-
-    fn table(values: &[f64]) -> Table {
-        Table {
-            columns: if values.len() == 1 { 1 } else { 2 },
-            values: values.to_vec(),
-        }
-    }
+    use crate::photons::scintillation::tests::material;
 
     /// Material 0 a vacuum (no optical tables), material 1 a scintillator with two
     /// components (the second with a rise time) and a RINDEX for Cherenkov light.
     fn materials() -> Vec<Material> {
-        let props: &[(&str, &[f64])] = &[
-            ("RINDEX", &[2.0e-6, 1.45, 3.5e-6, 1.50]),
-            (
-                "SCINTILLATIONCOMPONENT1",
-                &[2.0e-6, 0.0, 2.8e-6, 1.0, 3.5e-6, 0.0],
-            ),
-            ("SCINTILLATIONCOMPONENT2", &[2.0e-6, 1.0, 3.5e-6, 1.0]),
-            ("SCINTILLATIONTIMECONSTANT1", &[5.0]),
-            ("SCINTILLATIONTIMECONSTANT2", &[40.0]),
-            ("SCINTILLATIONRISETIME2", &[3.0]),
-            ("SCINTILLATIONYIELD1", &[0.75]),
-            ("SCINTILLATIONYIELD2", &[0.25]),
-        ];
         vec![
-            Material {
-                name: "Vacuum".into(),
-                properties: Vec::new(),
-            },
-            Material {
-                name: "Scint".into(),
-                properties: props
-                    .iter()
-                    .map(|(n, v)| (n.to_string(), table(v)))
-                    .collect(),
-            },
+            material("Vacuum", &[]),
+            material(
+                "Scint",
+                &[
+                    ("RINDEX", &[2.0e-6, 1.45, 3.5e-6, 1.50]),
+                    (
+                        "SCINTILLATIONCOMPONENT1",
+                        &[2.0e-6, 0.0, 2.8e-6, 1.0, 3.5e-6, 0.0],
+                    ),
+                    ("SCINTILLATIONCOMPONENT2", &[2.0e-6, 1.0, 3.5e-6, 1.0]),
+                    ("SCINTILLATIONTIMECONSTANT1", &[5.0]),
+                    ("SCINTILLATIONTIMECONSTANT2", &[40.0]),
+                    ("SCINTILLATIONRISETIME2", &[3.0]),
+                    ("SCINTILLATIONYIELD1", &[0.75]),
+                    ("SCINTILLATIONYIELD2", &[0.25]),
+                ],
+            ),
         ]
     }
 

@@ -145,29 +145,32 @@ pub struct HitRow(pub [f64; 16]);
 /// Columns of a step point of `--records` (float32).
 pub const RECORD_COLUMNS: usize = 12;
 
-/// One step point of a photon: `x y z t dx dy dz px py pz wavelength label`, where it is
-/// (mm), when (ns), its direction and polarization as it leaves the point, its wavelength
-/// (nm) and the step's label code (0: no point, past the photon's end).
+/// One step point of a photon: `x y z t dx dy dz wavelength px py pz label`, where it is
+/// (mm), when (ns), its direction as it leaves the point, its wavelength (nm) and
+/// polarization (the first 11 columns of a hit row) and the step's label code (0: no
+/// point, past the photon's end).
 pub type RecordPoint = [f32; RECORD_COLUMNS];
+
+/// The columns hit rows and step points begin with: `x y z t dx dy dz wavelength px py
+/// pz` of a photon at `pos` at time `time` (ns) going along `dir` at `nm` nanometres with
+/// polarization `pol`.
+pub fn photon_columns(pos: V, time: f64, dir: V, nm: f64, pol: V) -> [f64; 11] {
+    [
+        pos.x, pos.y, pos.z, time, dir.x, dir.y, dir.z, nm, pol.x, pol.y, pol.z,
+    ]
+}
 
 /// The step point labelled `label` of a photon at `pos` at time `time` (ns), leaving along
 /// `dir` with polarization `pol` at `nm` nanometres.
 pub fn record_point(label: Label, pos: V, time: f64, dir: V, pol: V, nm: f64) -> RecordPoint {
-    [
-        pos.x,
-        pos.y,
-        pos.z,
-        time,
-        dir.x,
-        dir.y,
-        dir.z,
-        pol.x,
-        pol.y,
-        pol.z,
-        nm,
-        f64::from(label as u8),
-    ]
-    .map(|x| x as f32)
+    let mut point = [f32::from(label as u8); RECORD_COLUMNS];
+    for (p, c) in point
+        .iter_mut()
+        .zip(photon_columns(pos, time, dir, nm, pol))
+    {
+        *p = c as f32;
+    }
+    point
 }
 
 /// The files a run streams its results into as its batches finish: hits (float64

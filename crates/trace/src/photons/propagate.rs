@@ -22,7 +22,8 @@ use rayon::prelude::*;
 use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
 use super::gensteps::{GenstepFile, Gensteps};
 use super::output::{
-    record_point, sorted_counts, History, HitRow, Label, RecordPoint, RECORD_COLUMNS,
+    photon_columns, record_point, sorted_counts, History, HitRow, Label, RecordPoint, HIT_COLUMNS,
+    RECORD_COLUMNS,
 };
 use super::properties::{
     energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
@@ -418,24 +419,16 @@ impl PhotonScene {
                 }
                 Crossing::Detected => {
                     mark!(Label::Sd);
-                    let row = HitRow([
-                        pos.x,
-                        pos.y,
-                        pos.z,
-                        time,
-                        dir.x,
-                        dir.y,
-                        dir.z,
-                        wavelength_nm,
-                        pol.x,
-                        pol.y,
-                        pol.z,
+                    let mut row = [0.0; HIT_COLUMNS.len()];
+                    row[..11].copy_from_slice(&photon_columns(pos, time, dir, wavelength_nm, pol));
+                    row[11..].copy_from_slice(&[
                         f64::from(hit.instance),
                         f64::from(self.copy[hit.instance as usize]),
                         index as f64,
                         f64::from(history.mask),
                         f64::from(steps),
                     ]);
+                    let row = HitRow(row);
                     return (history, Some(row));
                 }
             }

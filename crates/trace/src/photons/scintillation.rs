@@ -134,11 +134,13 @@ impl Scintillator {
     }
 }
 
+/// Materials for the tests of the photon sources.
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use hytrace_foundry::optics::Table;
 
+    /// A table: a constant for one value, else `(energy, value)` rows.
     fn table(values: &[f64]) -> Table {
         Table {
             columns: if values.len() == 1 { 1 } else { 2 },
@@ -146,10 +148,10 @@ mod tests {
         }
     }
 
-    /// A material with the given named tables.
-    pub(crate) fn material(props: &[(&str, &[f64])]) -> Material {
+    /// A material named `name` with the given named tables.
+    pub(crate) fn material(name: &str, props: &[(&str, &[f64])]) -> Material {
         Material {
-            name: "Scint".into(),
+            name: name.into(),
             properties: props
                 .iter()
                 .map(|(n, v)| (n.to_string(), table(v)))
@@ -161,29 +163,35 @@ mod tests {
 
     #[test]
     fn photons_divide_among_components_as_geant4_divides_them() {
-        let two = Scintillator::new(&material(&[
-            ("SCINTILLATIONCOMPONENT1", SPECTRUM),
-            ("SCINTILLATIONCOMPONENT2", SPECTRUM),
-            ("SCINTILLATIONTIMECONSTANT1", &[6.0]),
-            ("SCINTILLATIONTIMECONSTANT2", &[1500.0]),
-            ("SCINTILLATIONYIELD1", &[0.3]),
-            ("SCINTILLATIONYIELD2", &[0.7]),
-        ]))
+        let two = Scintillator::new(&material(
+            "Scint",
+            &[
+                ("SCINTILLATIONCOMPONENT1", SPECTRUM),
+                ("SCINTILLATIONCOMPONENT2", SPECTRUM),
+                ("SCINTILLATIONTIMECONSTANT1", &[6.0]),
+                ("SCINTILLATIONTIMECONSTANT2", &[1500.0]),
+                ("SCINTILLATIONYIELD1", &[0.3]),
+                ("SCINTILLATIONYIELD2", &[0.7]),
+            ],
+        ))
         .unwrap();
         // floor(10 * 0.3) = 3 (0.3 / 1.0 * 10 is 2.9999999999999996 in f64, as in Geant4).
         assert_eq!(two.split(10)[0] + two.split(10)[1], 10);
         assert_eq!(two.split(1000), [300, 700, 0]);
-        let three = Scintillator::new(&material(&[
-            ("SCINTILLATIONCOMPONENT1", SPECTRUM),
-            ("SCINTILLATIONCOMPONENT2", SPECTRUM),
-            ("SCINTILLATIONCOMPONENT3", SPECTRUM),
-            ("SCINTILLATIONTIMECONSTANT1", &[1.0]),
-            ("SCINTILLATIONTIMECONSTANT2", &[2.0]),
-            ("SCINTILLATIONTIMECONSTANT3", &[3.0]),
-            ("SCINTILLATIONYIELD1", &[1.0]),
-            ("SCINTILLATIONYIELD2", &[1.0]),
-            ("SCINTILLATIONYIELD3", &[1.0]),
-        ]))
+        let three = Scintillator::new(&material(
+            "Scint",
+            &[
+                ("SCINTILLATIONCOMPONENT1", SPECTRUM),
+                ("SCINTILLATIONCOMPONENT2", SPECTRUM),
+                ("SCINTILLATIONCOMPONENT3", SPECTRUM),
+                ("SCINTILLATIONTIMECONSTANT1", &[1.0]),
+                ("SCINTILLATIONTIMECONSTANT2", &[2.0]),
+                ("SCINTILLATIONTIMECONSTANT3", &[3.0]),
+                ("SCINTILLATIONYIELD1", &[1.0]),
+                ("SCINTILLATIONYIELD2", &[1.0]),
+                ("SCINTILLATIONYIELD3", &[1.0]),
+            ],
+        ))
         .unwrap();
         assert_eq!(three.split(10), [3, 3, 3]);
         // Drawn in proportion to the yields: a third each.
@@ -213,7 +221,7 @@ mod tests {
                 "no SCINTILLATIONCOMPONENT1",
             ),
         ] {
-            let e = Scintillator::new(&material(&props))
+            let e = Scintillator::new(&material("Scint", &props))
                 .unwrap_err()
                 .to_string();
             assert!(e.contains("`Scint`") && e.contains(needle), "{e}");
