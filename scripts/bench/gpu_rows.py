@@ -5,7 +5,7 @@ Usage: python3 scripts/bench/gpu_rows.py HYTRACE GDML_DIR OUT_DIR [SCALE]
 HYTRACE is a release build of the command, GDML_DIR the shared corpus (../shared/gdml),
 SCALE shrinks every size (1: 4e6 rays per scan, 1280x720 renders, 1e6 transmittance rays
 and photons; 0.01 runs in a minute on lavapipe). BENCH_PARTS picks the parts
-(scans,transmittance,renders,photons). Each measurement is one JSON line in
+(scans,transmittance,renders,photons,streaming). Each measurement is one JSON line in
 OUT_DIR/rows.jsonl (and on stdout): the command's --stats, its wall time, and for every
 pair of GPU and CPU outputs the rows that agree bit for bit and the largest difference.
 Needs NumPy. On a machine lent through the device tool, see docs/gpu.md.
@@ -191,8 +191,62 @@ def photons():
         run(f"photons {name} cpu", ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.npy", "--stats"], timeout=90)
 
 
+CORAL_SCENE = """[volumes.coral]
+source = "{store}"
+density_scale = {density}
+emission = [2e-5, 1.3e-5, 0.6e-5]
+
+[camera]
+eye = [42, -30, 34]
+target = [10.24, 10.24, 9]
+fov = 32
+
+[[lights]]
+kind = "environment"
+radiance = [0.02, 0.02, 0.03]
+
+[render]
+volumes = "emission-absorption"
+spp = 1
+"""
+
+
+def streaming():
+    """A coral-like brick store (1024^3 at SCALE 1) rendered on the GPU streamed through a
+    64 MiB brick pool and with a pool holding it whole, and on the CPU through a 64 MiB
+    cache: times, bricks uploaded and deferred pixels; the two GPU images bit for bit."""
+    side = 1024 if SCALE >= 1 else 128
+    raw, store = f"{TMP}/coral{side}.raw", f"{TMP}/coral{side}.bricks"
+    if not os.path.exists(store):
+        here = os.path.dirname(os.path.abspath(__file__))
+        subprocess.run([sys.executable, os.path.join(here, "make_coral_volume.py"), raw,
+                        "--dims", f"{side},{side},{side}"], check=True)
+        spacing = 20.48 / side
+        run(f"convert coral{side}", ["volume", "convert", raw, "--store", "--dims", f"{side},{side},{side}",
+                                     "--dtype", "u16", "--spacing", f"{spacing},{spacing},{spacing}",
+                                     "--memory", "2G", "-o", store], timeout=600)
+        os.remove(raw)
+    scene = f"{TMP}/coral{side}.toml"
+    with open(scene, "w") as f:
+        f.write(CORAL_SCENE.format(store=store, density=3e-5 * side / 1024))
+    size = "1280x720" if SCALE >= 1 else "160x90"
+    outs = {}
+    for be, memory in [("gpu", "64M"), ("gpu", "4G"), ("cpu", "64M")]:
+        out = f"{TMP}/coral.{be}.{memory}.npy"
+        run(f"render coral{side} {be} --memory {memory}", ["render", scene, "--size", size, "--step", "1",
+            "--memory", memory, "--backend", be, "--stats", "-o", out], timeout=300)
+        outs[(be, memory)] = out
+    for a, b in [(("gpu", "64M"), ("gpu", "4G")), (("gpu", "64M"), ("cpu", "64M"))]:
+        try:
+            x, y = np.load(outs[a]), np.load(outs[b])
+            record({"label": f"coral render {a} vs {b}", "values": int(x.size),
+                    "identical": int(np.sum(x == y)), "max_abs_diff": float(np.max(np.abs(x - y)))})
+        except Exception as e:  # noqa: BLE001 - a failed run is reported above
+            record({"label": f"coral render {a} vs {b}", "error": str(e)})
+
+
 if __name__ == "__main__":
-    which = os.environ.get("BENCH_PARTS", "scans,transmittance,renders,photons").split(",")
+    which = os.environ.get("BENCH_PARTS", "scans,transmittance,renders,photons,streaming").split(",")
     for part in which:
         t0 = time.time()
         globals()[part]()

@@ -224,7 +224,8 @@ struct RenderParams {
     probe_trips: u32,
     cut_count: u32,
     cut_mode: u32,
-    pad: array<u32, 2>,
+    listed: u32,
+    pad: u32,
     cuts: array<vec4<f32>, 3>,
 }
 

@@ -97,12 +97,19 @@ fn radiance_sample(o: vec3<f32>, d: vec3<f32>, rng: ptr<function, VolumeRng>) ->
 @compute @workgroup_size(64)
 fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups_: vec3<u32>) {
     let k = gid.y * groups_.x * 64u + gid.x;
-    if k >= rparams.width * rparams.row_count {
+    // A batch of rows, or of the pixels listed (a streamed render's pending ones).
+    let count = select(rparams.width * rparams.row_count, rparams.listed, rparams.listed > 0u);
+    if k >= count {
         return;
     }
-    let i = k % rparams.width;
-    let j = rparams.row_offset + k / rparams.width;
-    let pixel = j * rparams.width + i;
+    var pixel = rparams.row_offset * rparams.width + k;
+    // #if streamed
+    if rparams.listed > 0u {
+        pixel = pixel_ids[k];
+    }
+    // #endif
+    let i = pixel % rparams.width;
+    let j = pixel / rparams.width;
     // One sample per dispatch (long paths stay within one invocation's budget): the
     // image holds the running sum, in sample order, until the last sample divides it.
     let s = rparams.sample;
@@ -119,6 +126,13 @@ fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         sum = image[k].xyz + sum;
         cut = max(cut, image[k].w);
     }
+    // #if streamed
+    // w: 2 once a sample of the pixel read a brick the pool lacked: the host discards the
+    // pixel and renders it again once the brick is resident.
+    if stream_missing {
+        cut = 2.0;
+    }
+    // #endif
     if s + 1u == rparams.spp {
         sum /= f32(rparams.spp);
     }

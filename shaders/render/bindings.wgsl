@@ -9,6 +9,10 @@
 @group(2) @binding(2) var<storage, read> instances: array<RenderInstance>;
 @group(2) @binding(3) var<storage, read_write> image: array<vec4<f32>>;
 @group(2) @binding(4) var<storage, read> media: array<RenderMedium>;
+// #if streamed
+// The pixels of a streamed batch (row-major indices), when `rparams.listed` > 0.
+@group(2) @binding(5) var<storage, read> pixel_ids: array<u32>;
+// #endif
 
 const MODE_PATH: u32 = 0u;
 const MODE_SHADOW: u32 = 1u;

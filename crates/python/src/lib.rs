@@ -200,11 +200,13 @@ impl Scene {
 
     /// Renders the scene as `hytrace render` does, returning the image: (H, W, 3) float32
     /// linear radiance, rows from the top. Each option overrides the scene's own:
-    /// `size` as `(width, height)` or `"WIDTHxHEIGHT"`.
+    /// `size` as `(width, height)` or `"WIDTHxHEIGHT"`; `memory`: bytes each medium read as
+    /// stored in a brick store may hold resident (its cache; on the GPU its brick pool), as
+    /// `--memory`.
     #[pyo3(signature = (
         *, size = None, spp = None, view = None, volumes = None, max_bounces = None,
         step = None, seed = None, transparent = Vec::new(), backend = "cpu",
-        gpu_texels = "storage"
+        gpu_texels = "storage", memory = None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
@@ -220,6 +222,7 @@ impl Scene {
         transparent: Vec<String>,
         backend: &str,
         gpu_texels: &str,
+        memory: Option<u64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let size = match size {
             None => None,
@@ -239,7 +242,7 @@ impl Scene {
             max_bounces,
             step,
             seed,
-            memory: None,
+            memory,
             transparent,
             cutaway: Default::default(),
             detector: Default::default(),

@@ -137,6 +137,25 @@ def test_render_equals_the_command(cli, tmp_path, default_scene, options, flags)
     assert image.max() > 0
 
 
+@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+def test_render_of_a_brick_store_within_a_memory_budget_equals_the_command(cli, tmp_path, backend):
+    # A fog converted to a brick store, read as stored through a budget of 6 MiB (a cache
+    # on the CPU, a brick pool on the GPU): the image equals the command's bit for bit.
+    cli("volume", "convert", "sphere:40,0.5", "--store", "-o", tmp_path / "fog.bricks")
+    scene = tmp_path / "fog.toml"
+    scene.write_text('[volumes.fog]\nsource = "fog.bricks"\ndensity_scale = 0.05\n'
+                     'emission = [0.5, 0.4, 0.3]\n\n[[place]]\nsolid = "fog"\n\n'
+                     '[camera]\neye = [0, -200, 40]\ntarget = [0, 0, 0]\n\n'
+                     '[render]\nvolumes = "emission-absorption"\n')
+    cli("render", scene, "--out", tmp_path / "image.npy", "--size", "24x16", "--memory", "6M",
+        "--backend", backend)
+    image = hytrace.load(scene).render(size=(24, 16), memory=6 << 20, backend=backend)
+    same(image, np.load(tmp_path / "image.npy"))
+    assert image.max() > 0
+    with pytest.raises(hytrace.HytraceError, match="fog.bricks.*too small"):
+        hytrace.load(scene).render(size=(24, 16), memory=1, backend=backend)
+
+
 def test_render_on_the_gpu_equals_the_command(cli, tmp_path, default_scene):
     cli("render", "default", "--out", tmp_path / "image.npy", "--size", "16x12",
         "--backend", "gpu")

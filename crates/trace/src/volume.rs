@@ -588,13 +588,7 @@ pub fn transmittance_stats(run: &TransmittanceRun, load_s: f64) -> serde_json::V
         line["gpu_readback_s"] = g.times.readback_s.into();
         line["gpu_kernel_timestamps_s"] = g.times.kernel_gpu_s.into();
         if let Some(st) = &g.stream {
-            line["stream"] = json!({
-                "passes": st.passes, "rays_deferred": st.rays_deferred,
-                "bricks_uploaded": st.bricks_uploaded, "bricks_evicted": st.bricks_evicted,
-                "resident_bricks": st.resident_bricks, "pool_slots": st.pool_slots,
-                "max_slots": st.max_slots, "pool_doublings": st.pool_doublings,
-                "device_bytes": st.device_bytes,
-            });
+            line["stream"] = st.json("rays_deferred");
         }
     }
     line
@@ -786,9 +780,12 @@ pub fn convert_store(
     };
     let bar = crate::progress::bar(100, "converting", "percent");
     let progress = |done: u64, total: u64| bar.set_position(done * 100 / total.max(1));
-    let raw = Path::new(spec)
+    // Raw voxels: a `.raw` file, or a stream (a pipe: nothing else reads one).
+    let path = Path::new(spec);
+    let raw = path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+        .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
+        || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir());
     let report = match (raw, &options.dims, options.dtype) {
         (true, Some(dims), Some(dtype)) => {
             let d = numbers::<3>(dims, "--dims")?;
@@ -819,7 +816,9 @@ pub fn convert_store(
             let (_, volume) = open(spec, name)?;
             convert_grid(&volume, spec, &convert, out, &progress)?
         }
-        (false, _, _) => bail!("{spec}: --dims and --dtype describe raw files (.raw) only"),
+        (false, _, _) => {
+            bail!("{spec}: --dims and --dtype describe raw files (.raw) and pipes only")
+        }
     };
     bar.finish_and_clear();
     Ok(report)

@@ -634,3 +634,66 @@ fn brick_store_misuse_fails_cleanly_without_output() {
     );
     assert!(!d.path("t.npy").exists());
 }
+
+/// `volume convert` of raw voxels arriving on standard input (a pipe, read once): with
+/// `--range` the store equals, file for file, the store of the same bytes from a `.raw`
+/// file; without it the command refuses, naming the option, and writes nothing.
+#[cfg(unix)]
+#[test]
+fn raw_voxels_from_a_pipe_convert_in_one_pass_as_the_file_does() {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let d = Dir::new();
+    write_ball_raw(&d.path("ball.raw"));
+    let common = [
+        "--store", "--dims", "40,32,24", "--dtype", "f32", "--range", "0,2",
+    ];
+    let from_file = hytrace(
+        &[
+            &["volume", "convert", &d.arg("ball.raw")][..],
+            &common,
+            &["-o", &d.arg("file.bricks")],
+        ]
+        .concat(),
+    );
+    assert!(from_file.status.success(), "{}", stderr(&from_file));
+    let piped = |extra: &[&str], out: &str| {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_hytrace"))
+            .args(
+                [
+                    &["volume", "convert", "/dev/stdin"][..],
+                    extra,
+                    &["-o", &d.arg(out)],
+                ]
+                .concat(),
+            )
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let bytes = std::fs::read(d.path("ball.raw")).unwrap();
+        // A refusal before reading closes the pipe: the write's error is expected then.
+        let _ = child.stdin.take().unwrap().write_all(&bytes);
+        child.wait_with_output().unwrap()
+    };
+    let o = piped(&common, "pipe.bricks");
+    assert!(o.status.success(), "{}", stderr(&o));
+    for entry in std::fs::read_dir(d.path("file.bricks")).unwrap() {
+        let name = entry.unwrap().file_name();
+        if name == "store.json" {
+            continue;
+        }
+        let a = std::fs::read(d.path("file.bricks").join(&name)).unwrap();
+        let b = std::fs::read(d.path("pipe.bricks").join(&name)).unwrap();
+        assert!(a == b, "{name:?} differs");
+    }
+    let o = piped(&common[..5], "refused.bricks");
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("/dev/stdin") && stderr(&o).contains("--range"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.path("refused.bricks").exists());
+}

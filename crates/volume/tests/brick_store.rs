@@ -497,6 +497,80 @@ fn bad_raw_files_and_options_are_refused_naming_the_file() {
     assert!(e.to_string().contains("already exists"), "{e}");
 }
 
+/// A raw volume streamed through a pipe (read once, as a reconstruction streamed while it
+/// is made, or a file decompressed on the fly) converts with its range given to the same
+/// store, file for file, as the file itself; without the range, and with a stream shorter
+/// or longer than the volume, it is refused naming the pipe, nothing left behind.
+#[cfg(unix)]
+#[test]
+fn a_raw_volume_streamed_through_a_pipe_converts_in_one_pass_with_its_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [20, 20, 20];
+    let values = coral_field(dims, 1, 6);
+    let spec = spec(dims, RawType::F32, Endian::Little);
+    let mut opts = options(0.0, 0.0);
+    let lo = values.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = values.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    opts.range = Some([lo, hi]);
+    let from_file = convert(dir.path(), "file", &values, &spec, &opts);
+    let bytes = std::fs::read(dir.path().join("file.raw")).unwrap();
+    let pipe = dir.path().join("pipe.raw");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&pipe)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    // Writes `bytes` into the pipe once a reader opens it (a reader that stops early
+    // breaks the pipe: the writer's error is expected then).
+    let feed = |bytes: Vec<u8>| {
+        let pipe = pipe.clone();
+        std::thread::spawn(move || {
+            let mut f = std::fs::OpenOptions::new().write(true).open(pipe).unwrap();
+            let _ = std::io::Write::write_all(&mut f, &bytes);
+        })
+    };
+    let out = dir.path().join("pipe.bricks");
+    let writer = feed(bytes.clone());
+    convert_raw(&pipe, &spec, &opts, &out, &|_, _| ()).unwrap();
+    writer.join().unwrap();
+    for entry in std::fs::read_dir(&from_file).unwrap() {
+        let name = entry.unwrap().file_name();
+        let a = std::fs::read(from_file.join(&name)).unwrap();
+        let b = std::fs::read(out.join(&name)).unwrap();
+        if name == "store.json" {
+            // The metadata names its source file.
+            let a = String::from_utf8(a)
+                .unwrap()
+                .replace("file.raw", "pipe.raw");
+            assert_eq!(a, String::from_utf8(b).unwrap());
+        } else {
+            assert!(a == b, "{name:?} differs");
+        }
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+    let refused = |opts: &ConvertOptions, want: &str| {
+        let e = convert_raw(&pipe, &spec, opts, &out, &|_, _| ())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("pipe.raw") && e.contains(want), "{e}");
+        assert!(!out.exists());
+    };
+    // Refused before the pipe is opened: no writer.
+    refused(&options(0.0, 0.0), "--range");
+    let writer = feed(bytes[..bytes.len() - 7].to_vec());
+    refused(&opts, "failed to fill whole buffer");
+    writer.join().unwrap();
+    let writer = feed([&bytes[..], &[0u8; 16]].concat());
+    refused(&opts, "holds more than the 32000 bytes");
+    writer.join().unwrap();
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n != "file.raw" && n != "file.bricks" && n != "pipe.raw")
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
 #[test]
 fn truncated_corrupted_and_underbudgeted_stores_are_refused_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();

@@ -134,7 +134,7 @@ pub struct RenderSettingsArgs {
     #[arg(long)]
     pub seed: Option<u32>,
     /// Bytes each medium read as stored in a brick store may hold resident (its tables and
-    /// a brick cache), e.g. 4G.
+    /// a brick cache; on the GPU also its brick pool in device memory), e.g. 4G.
     #[arg(long, value_parser = hytrace_trace::memory::parse_bytes)]
     pub memory: Option<u64>,
     /// Render the solid of this name transparent (repeatable): to see inside a detector's

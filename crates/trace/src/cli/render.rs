@@ -114,6 +114,9 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         });
         if let Some(g) = &gpu_run {
             add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+            if let Some(st) = &g.stream {
+                line["stream"] = st.json("pixels_deferred");
+            }
         }
         if let Some(c) = stores {
             line["store"] = serde_json::json!({

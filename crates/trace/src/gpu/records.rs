@@ -302,8 +302,12 @@ record! {
         pub cut_count: u32,
         /// `RENDER_CUT_*`: how the planes' kept sides combine.
         pub cut_mode: u32,
+        /// Pixels of this batch listed by index (a streamed render's pending pixels,
+        /// `shaders/kernels/render.wgsl`); 0: the batch is `row_count` rows from
+        /// `row_offset`.
+        pub listed: u32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
         /// The cut planes: unit normal (pointing into the removed side) and offset.
         pub cuts: [[f32; 4]; 3],
     }

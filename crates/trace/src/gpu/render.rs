@@ -8,7 +8,9 @@
 use std::time::Instant;
 
 use super::compose::declared_constants;
-use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
+use super::context::{
+    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
+};
 use super::records::{
     RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_CUT_INTERSECTION,
     RENDER_CUT_UNION, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL,
@@ -17,15 +19,16 @@ use super::records::{
     RENDER_MATERIAL_TRANSPARENT, RENDER_MAX_MEDIA, RENDER_VOLUMES_ABSORPTION,
     RENDER_VOLUMES_MULTIPLE, RENDER_VOLUMES_NONE, RENDER_VOLUMES_SINGLE, VOLUME_FILTER_TRILINEAR,
 };
+use super::streamed_store::{store_kernel_grid, PassSize, StorePool, StreamError, StreamStats};
 use super::texels::{atlas_texture, texture_layout_entry, TexelStore, ATLAS_TEXTURE_BINDING};
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use super::transmittance::{KernelGrid, VolumeUpload};
+use super::transmittance::{store_grid, KernelGrid, UploadedGrid, VolumeUpload};
 use crate::render::camera::Projection;
 use crate::render::cutaway::CutMode;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
-use hytrace_volume::{global_range, BrickedGrid};
+use hytrace_volume::{global_range, BrickStore, BrickedGrid, RangeMips};
 
 const KERNEL: &str = "kernels/render";
 /// Storage buffers of the render group (group 2).
@@ -45,6 +48,8 @@ pub struct GpuImage {
     /// (`shaders/loop_budget.wgsl`: llvmpipe only): their values are wrong, to be
     /// rendered again elsewhere.
     pub cut_short: Vec<u32>,
+    /// What streaming a brick store did, for a render that streamed one.
+    pub stream: Option<StreamStats>,
 }
 
 impl GpuImage {
@@ -67,13 +72,43 @@ pub struct GpuRenderer {
     pipeline: wgpu::ComputePipeline,
     render_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
-    /// The media's group 0, with each grid's translation of index space.
-    medium: Option<(wgpu::BindGroup, Vec<[f64; 3]>)>,
+    /// The media's group 0.
+    medium: Option<MediumGroup>,
     hierarchical: bool,
     features: Vec<&'static str>,
     /// The effect part of `features`, which every render must call for exactly.
     effects: Vec<&'static str>,
     source: String,
+    /// Upload a streamed store whole before rendering ([`GpuRenderer::with_store_resident`]).
+    resident_store: bool,
+}
+
+/// The media's group 0 as renders bind it.
+enum MediumGroup {
+    /// Grids uploaded whole: the bind group, and each grid's translation of index space.
+    InCore(wgpu::BindGroup, Vec<[f64; 3]>),
+    /// One brick store streamed through a pool each render sets up: group 0's layout, and
+    /// the grid as the kernel reads it.
+    Streamed(wgpu::BindGroupLayout, Box<UploadedGrid>),
+}
+
+impl MediumGroup {
+    /// Each grid's translation of index space.
+    fn shifts(&self) -> Vec<[f64; 3]> {
+        match self {
+            MediumGroup::InCore(_, shifts) => shifts.clone(),
+            MediumGroup::Streamed(_, grid) => vec![grid.shift],
+        }
+    }
+}
+
+/// The pixels of one dispatch batch.
+#[derive(Clone, Copy)]
+enum Batch<'p> {
+    /// `count` rows from `first`.
+    Rows { first: u32, count: u32 },
+    /// The pixels listed (row-major indices).
+    Listed(&'p [u32]),
 }
 
 /// The per-render inputs of the kernel.
@@ -134,12 +169,14 @@ fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
     let (Some(mode), Some(media)) = (renderer.effects.volumes, &renderer.media) else {
         return Ok(());
     };
-    for medium in 0..media.scene.medium_count() as u32 {
-        if media.scene.grid(medium).bricked().is_none() {
-            return Err(GpuError::Unsupported(format!(
-                "medium {medium} is a brick store read as stored, which the GPU renderer does not stream yet (render with --backend cpu, or give the medium a texel format to brick it in memory)"
-            )));
-        }
+    let count = media.scene.medium_count();
+    let stores = (0..count as u32)
+        .filter(|&m| media.scene.grid(m).store().is_some())
+        .count();
+    if stores > 0 && count > 1 {
+        return Err(GpuError::Unsupported(format!(
+            "the GPU renderer streams one medium read as stored in a brick store, alone; this scene has {count} media, {stores} of them brick stores read as stored (render with --backend cpu, or give the stores a texel format to brick them in memory)"
+        )));
     }
     let placed = media.scene.placements().count();
     if placed > RENDER_MAX_MEDIA as usize {
@@ -159,6 +196,31 @@ fn check_supported(renderer: &Renderer) -> Result<(), GpuError> {
         }
     }
     Ok(())
+}
+
+/// The brick store the render streams (its only medium, read as stored; `check_supported`
+/// refuses others beside it) and the range mips walks over it take, when media are
+/// rendered.
+fn streamed_medium<'r>(renderer: &'r Renderer) -> Option<(&'r BrickStore, &'r RangeMips)> {
+    let media = renderer.media.as_ref()?;
+    renderer.effects.volumes?;
+    (media.scene.medium_count() == 1)
+        .then(|| media.scene.grid(0).store())
+        .flatten()
+}
+
+/// The kernel's parameters of medium `medium` uploaded as `grid`: the CPU's trackers'
+/// (trilinear lookups, the finest local majorants; the march walks one global segment
+/// whatever `global` says).
+fn medium_params(renderer: &Renderer, medium: usize, grid: &UploadedGrid) -> VolumeParams {
+    let mut params = grid.base;
+    if let Some(media) = &renderer.media {
+        params.density_scale = media.scene.params(medium as u32, 0).density_scale as f32;
+    }
+    params.lookup_filter = VOLUME_FILTER_TRILINEAR;
+    params.global = 0;
+    params.finest = 0;
+    params
 }
 
 /// The effect features and `RENDER_EFFECT_*` bits of a render.
@@ -199,6 +261,9 @@ pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, 
         .map_err(|e| GpuError::SceneTooBig(e.to_string()))?;
     let mut features = super::tracer::scene_features(&arrays);
     features.extend(effect_features(renderer).0);
+    if streamed_medium(renderer).is_some() {
+        features.push("streamed");
+    }
     let source = kernel_source(KERNEL, &features)?;
     Ok((features, source))
 }
@@ -281,7 +346,8 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shifts: &[[f64; 3]]) -> Rende
             CutMode::Union => RENDER_CUT_UNION,
             CutMode::Intersection => RENDER_CUT_INTERSECTION,
         },
-        pad: [0; 2],
+        listed: 0,
+        pad: 0,
         cuts: std::array::from_fn(|k| match renderer.cutaway.planes.get(k) {
             Some(c) => {
                 let n = c.normal.map(|x| x as f32);
@@ -353,8 +419,12 @@ impl GpuRenderer {
         // Every medium's grid in the shared arrays, with the trackers' parameters (the
         // CPU's: trilinear lookups, the finest local majorants; the march walks one global
         // segment whatever `global` says).
+        let streamed = streamed_medium(renderer)
+            .map(|(store, mips)| store_grid(store_kernel_grid(store, mips)))
+            .transpose()?;
         let medium = match &renderer.media {
             None => None,
+            Some(_) if streamed.is_some() => None,
             Some(media) => {
                 // `check_supported` refused media read as stored.
                 let bricked: Vec<&BrickedGrid> = (0..media.scene.medium_count())
@@ -380,30 +450,25 @@ impl GpuRenderer {
                     features.push("atlas_texture");
                 }
                 constants.extend(volume_constants);
-                let params: Vec<VolumeParams> = volume
-                    .grids
-                    .iter()
-                    .enumerate()
-                    .map(|(m, g)| {
-                        let mut params = g.base;
-                        params.density_scale = media.scene.params(m as u32, 0).density_scale as f32;
-                        params.lookup_filter = VOLUME_FILTER_TRILINEAR;
-                        params.global = 0;
-                        params.finest = 0;
-                        params
-                    })
+                let params: Vec<VolumeParams> = (volume.grids.iter().enumerate())
+                    .map(|(m, g)| medium_params(renderer, m, g))
                     .collect();
                 let params = ctx.input_buffer("medium params", &binding_bytes(&params));
                 let shifts: Vec<[f64; 3]> = volume.grids.iter().map(|g| g.shift).collect();
                 Some((volume, params, texture, shifts))
             }
         };
-        let medium_bindings = medium.as_ref().map_or(0, |(v, ..)| v.binding_count());
+        let medium_bindings = match (&medium, &streamed) {
+            (Some((v, ..)), _) => v.binding_count(),
+            (None, Some(_)) => 6,
+            (None, None) => 0,
+        };
+        let render_bindings = RENDER_BINDINGS + u32::from(streamed.is_some());
         let upload = SceneUpload::new(
             ctx,
             renderer.scene,
             "render",
-            RENDER_BINDINGS + medium_bindings,
+            render_bindings + medium_bindings,
         )?;
         features.extend(upload.features.iter().filter(|f| f.starts_with("chunked_")));
         constants.extend(upload.constants.iter().cloned());
@@ -413,7 +478,7 @@ impl GpuRenderer {
         }
         ctx.checked("building the render kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
-            let render_layout = ctx.storage_layout("render", RENDER_BINDINGS, &[3]);
+            let render_layout = ctx.storage_layout("render", render_bindings, &[3]);
             let medium_group = medium.as_ref().map(|(volume, params, texture, shifts)| {
                 let mut layout_entries = volume.layout_entries(ctx);
                 let mut entries = volume.entries(params);
@@ -435,9 +500,24 @@ impl GpuRenderer {
                     layout: &layout,
                     entries: &entries,
                 });
-                (layout, group, shifts.clone())
+                (layout, MediumGroup::InCore(group, shifts.clone()))
             });
-            let group0 = medium_group.as_ref().map(|(layout, _, _)| layout);
+            let medium_group = medium_group.or_else(|| {
+                let (grid, _) = streamed.as_ref()?;
+                let mut entries = vec![storage_layout_entry(0, true)];
+                entries.extend(StorePool::layout_entries());
+                let layout =
+                    ctx.device
+                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                            label: Some("streamed medium"),
+                            entries: &entries,
+                        });
+                Some((
+                    layout.clone(),
+                    MediumGroup::Streamed(layout, Box::new(*grid)),
+                ))
+            });
+            let group0 = medium_group.as_ref().map(|(layout, _)| layout);
             let pipeline_layout =
                 ctx.device
                     .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -449,13 +529,21 @@ impl GpuRenderer {
                 pipeline: compute_pipeline(ctx, &pipeline_layout, &module, "render", &constants),
                 render_layout,
                 scene_group: upload.group.clone(),
-                medium: medium_group.map(|(_, group, shifts)| (group, shifts)),
+                medium: medium_group.map(|(_, group)| group),
                 hierarchical: upload.hierarchical,
                 features: features.clone(),
                 effects: effect_features(renderer).0,
                 source: source.clone(),
+                resident_store: false,
             }
         })
+    }
+
+    /// This renderer uploading a streamed brick store whole before it renders: the
+    /// in-core reference of a streamed render (the budget must hold every kept brick).
+    pub fn with_store_resident(mut self) -> Self {
+        self.resident_store = true;
+        self
     }
 
     /// The composition features of the kernel (the scene's, `shading`, `specular`).
@@ -470,13 +558,14 @@ impl GpuRenderer {
 
     /// Renders the image `renderer` describes (the scene and effects this kernel was
     /// built for; any view, camera, lights and settings), in batches of rows; `progress`
-    /// gets the rows finished so far.
+    /// gets the rows finished so far. A medium read as stored in a brick store is streamed
+    /// through a brick pool of at most the render's `memory` bytes ([`Self::render_streamed`]).
     pub fn render(
         &self,
         ctx: &GpuContext,
         renderer: &Renderer,
         progress: &dyn Fn(u64),
-    ) -> Result<GpuImage, GpuError> {
+    ) -> crate::Result<GpuImage> {
         // The scene is the caller's promise; the effects are checked.
         check_supported(renderer)?;
         let effects = effect_features(renderer).0;
@@ -487,30 +576,34 @@ impl GpuRenderer {
                     "the kernel was built for features {:?}, this render needs the effects {effects:?}",
                     self.features
                 ),
-            });
+            }
+            .into());
         }
-        let inputs = inputs(
-            renderer,
-            self.hierarchical,
-            self.medium.as_ref().map_or(&[][..], |(_, shifts)| shifts),
-        );
+        let shifts = self.medium.as_ref().map_or(Vec::new(), MediumGroup::shifts);
+        let inputs = inputs(renderer, self.hierarchical, &shifts);
+        if let Some(MediumGroup::Streamed(layout, _)) = &self.medium {
+            return self.render_streamed(ctx, renderer, &inputs, layout, progress);
+        }
+        let group0 = match &self.medium {
+            Some(MediumGroup::InCore(group, _)) => Some(group),
+            _ => None,
+        };
         let (width, height) = (inputs.params.width, inputs.params.height);
-        let per_row = width as u64 * inputs.params.spp as u64;
-        let limit_rows = (ctx.limits.max_storage_buffer_binding_size / (16 * width as u64)).max(1);
-        let rows_per_batch = (SAMPLES_PER_BATCH / per_row).clamp(1, limit_rows) as u32;
+        let rows_per_batch = (self.batch_pixels(ctx, &inputs) / width as u64).max(1) as u32;
         let mut pixels = Vec::with_capacity(width as usize * height as usize);
         let mut cut_short = Vec::new();
         let mut times = GpuTimes::default();
         let mut row = 0;
         while row < height {
-            let rows = rows_per_batch.min(height - row);
-            for texel in self.render_rows(ctx, &inputs, row, rows, &mut times)? {
+            let count = rows_per_batch.min(height - row);
+            let batch = Batch::Rows { first: row, count };
+            for texel in self.dispatch(ctx, &inputs, batch, group0, &mut times)? {
                 if texel[3] != 0.0 {
                     cut_short.push(pixels.len() as u32);
                 }
                 pixels.push([texel[0], texel[1], texel[2]]);
             }
-            row += rows;
+            row += count;
             progress(row as u64);
         }
         Ok(GpuImage {
@@ -521,44 +614,158 @@ impl GpuRenderer {
             },
             times,
             cut_short,
+            stream: None,
         })
     }
 
-    fn render_rows(
+    /// Pixels a batch takes: [`SAMPLES_PER_BATCH`] samples, within the device's binding
+    /// limit on the image's buffer.
+    fn batch_pixels(&self, ctx: &GpuContext, inputs: &RenderInputs) -> u64 {
+        let per_pixel = inputs.params.spp as u64;
+        let limit = (ctx.limits.max_storage_buffer_binding_size / 16).max(1);
+        (SAMPLES_PER_BATCH / per_pixel).clamp(1, limit)
+    }
+
+    /// A render whose medium is a brick store streamed through a brick pool, in passes: a
+    /// pass renders every sample of its pending pixels; a pixel a sample of which read a
+    /// brick the pool lacked is discarded and rendered again in a later pass, after the
+    /// host uploaded the bricks the pass requested, so every pixel is the kernel's answer
+    /// with its bricks resident (the image equals, bit for bit, the render with the whole
+    /// store resident). Pass sizes halve while a pass finishes no pixel and places no
+    /// brick; a pixel that alone needs more bricks than the pool holds is a
+    /// [`StreamError::PoolTooSmall`].
+    fn render_streamed(
+        &self,
+        ctx: &GpuContext,
+        renderer: &Renderer,
+        inputs: &RenderInputs,
+        layout: &wgpu::BindGroupLayout,
+        progress: &dyn Fn(u64),
+    ) -> crate::Result<GpuImage> {
+        let (store, mips) = streamed_medium(renderer).ok_or_else(|| GpuError::Operation {
+            what: "render".into(),
+            problem: "the kernel was built to stream a brick store this render lacks".into(),
+        })?;
+        let mut pool = StorePool::new(ctx, store, mips, renderer.settings.memory)?;
+        if self.resident_store {
+            pool.make_resident(ctx)?;
+        }
+        let params = [medium_params(renderer, 0, pool.grid())];
+        let params = ctx.input_buffer("medium params", &binding_bytes(&params));
+        let (width, height) = (inputs.params.width, inputs.params.height);
+        let total = width as usize * height as usize;
+        let mut pixels = vec![[0.0f32; 3]; total];
+        let mut cut_short = Vec::new();
+        let mut times = GpuTimes::default();
+        let mut pending: Vec<u32> = (0..total as u32).collect();
+        let mut size = PassSize::new(total);
+        let batch = self.batch_pixels(ctx, inputs) as usize;
+        while !pending.is_empty() {
+            let pass = pool.begin_pass(ctx)?;
+            let run = &pending[..size.of(pending.len())];
+            let mut missing = Vec::new();
+            for chunk in run.chunks(batch) {
+                let group0 = {
+                    let mut entries = vec![wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    }];
+                    entries.extend(pool.entries());
+                    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("streamed medium"),
+                        layout,
+                        entries: &entries,
+                    })
+                };
+                let texels =
+                    self.dispatch(ctx, inputs, Batch::Listed(chunk), Some(&group0), &mut times)?;
+                for (&p, texel) in chunk.iter().zip(texels) {
+                    if texel[3] >= 2.0 {
+                        missing.push(p);
+                        continue;
+                    }
+                    if texel[3] != 0.0 {
+                        cut_short.push(p);
+                    }
+                    pixels[p as usize] = [texel[0], texel[1], texel[2]];
+                }
+            }
+            let finished = run.len() - missing.len();
+            pool.defer(missing.len());
+            let placed = pool.end_pass(ctx, pass)?;
+            let rest = pending[run.len()..].to_vec();
+            pending = missing;
+            pending.extend(rest);
+            if size.stuck_after(finished, placed) {
+                let p = pending[0];
+                return Err(StreamError::PoolTooSmall {
+                    item: format!("pixel ({}, {})", p % width, p / width),
+                    slots: pool.slots(),
+                }
+                .into());
+            }
+            progress(((total - pending.len()) / width as usize) as u64);
+        }
+        cut_short.sort_unstable();
+        Ok(GpuImage {
+            image: Image {
+                width,
+                height,
+                pixels,
+            },
+            times,
+            cut_short,
+            stream: Some(pool.stats()),
+        })
+    }
+
+    /// One batch of pixels, every sample (a dispatch per sample): each pixel's summed
+    /// radiance over the samples, and in `w` 1 when a sample ran out of the driver's loop
+    /// budget, 2 when one read a brick a streamed pool lacked.
+    fn dispatch(
         &self,
         ctx: &GpuContext,
         inputs: &RenderInputs,
-        row_offset: u32,
-        row_count: u32,
+        batch: Batch,
+        group0: Option<&wgpu::BindGroup>,
         times: &mut GpuTimes,
     ) -> Result<Vec<[f32; 4]>, GpuError> {
-        let n = (inputs.params.width * row_count) as usize;
+        let (row_offset, row_count, listed) = match batch {
+            Batch::Rows { first, count } => (first, count, None),
+            Batch::Listed(pixels) => (0, 0, Some(pixels)),
+        };
+        let n = listed.map_or((inputs.params.width * row_count) as usize, <[u32]>::len);
         let out_size = (n * 16) as u64;
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "render timestamps");
         let (out, _keep) = ctx.checked("render dispatch", || {
             let image = ctx.output_buffer("image", out_size);
-            let shared = [
+            let mut shared = vec![
                 ctx.input_buffer("render items", &binding_bytes(&inputs.items)),
                 ctx.input_buffer("render instances", &binding_bytes(&inputs.instances)),
                 ctx.input_buffer("render media", &binding_bytes(&inputs.media)),
             ];
+            if let Some(pixels) = listed {
+                shared.push(ctx.input_buffer("render pixels", bytemuck::cast_slice(pixels)));
+            }
             // One dispatch per sample, each with its parameters.
             let samples: Vec<wgpu::BindGroup> = (0..inputs.params.spp)
                 .map(|sample| {
                     let params = RenderParams {
                         row_offset,
                         row_count,
+                        listed: n as u32 * u32::from(listed.is_some()),
                         sample,
                         ..inputs.params
                     };
-                    let buffers = [
+                    let mut buffers = vec![
                         ctx.input_buffer("render params", &binding_bytes(&[params])),
                         shared[0].clone(),
                         shared[1].clone(),
                         image.clone(),
                         shared[2].clone(),
                     ];
+                    buffers.extend(shared.get(3).cloned());
                     ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some("render"),
                         layout: &self.render_layout,
@@ -567,7 +774,7 @@ impl GpuRenderer {
                 })
                 .collect();
             let mut groups = vec![(1, &self.scene_group)];
-            if let Some((medium, _)) = &self.medium {
+            if let Some(medium) = group0 {
                 groups.push((0, medium));
             }
             ctx.submit_sequence(

@@ -11,7 +11,9 @@ use super::detector::{DetectorError, DetectorStyle, Legend};
 use super::spec::{RenderSpec, View, VolumeMode};
 use super::{Effects, Image, Renderer};
 use crate::cpu::CpuScene;
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, TexelStore};
+use crate::gpu::{
+    gpu_or_cpu, warn_redone, GpuContext, GpuRenderer, GpuTimes, StreamStats, TexelStore,
+};
 
 /// Where a render runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,6 +41,8 @@ pub struct GpuRun {
     pub features: Vec<&'static str>,
     /// Upload, kernel and readback seconds.
     pub times: GpuTimes,
+    /// What streaming a brick store medium did (a medium read as stored).
+    pub stream: Option<StreamStats>,
 }
 
 /// Renders on the GPU of `ctx`. Pixels whose samples ran out of the driver's loop budget
@@ -66,6 +70,7 @@ fn render_gpu(
             adapter: ctx.describe(),
             features: gpu.features().to_vec(),
             times: run.times,
+            stream: run.stream,
         },
     ))
 }

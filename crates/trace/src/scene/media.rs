@@ -70,6 +70,15 @@ impl MediumGrid {
         }
     }
 
+    /// The brick store read as stored and the range mips walks over it take (those of its
+    /// data), `None` for a grid bricked in memory.
+    pub fn store(&self) -> Option<(&BrickStore, &RangeMips)> {
+        match self {
+            MediumGrid::Bricked(_) => None,
+            MediumGrid::Store(s, mips) => Some((s, mips)),
+        }
+    }
+
     /// The grid with its index-to-world map replaced by `map`.
     pub fn with_map(self, map: GridMap) -> MediumGrid {
         match self {

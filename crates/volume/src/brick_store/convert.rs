@@ -1,7 +1,10 @@
 //! Converting a raw volume file, or any grid, into a brick store in bounded memory.
 //!
 //! Two sequential passes over the source: the first finds the data's range (the 16-bit codes
-//! span it), the second walks it one layer of bricks (8 z-planes) at a time. A window of
+//! span it), the second walks it one layer of bricks (8 z-planes) at a time. With the range
+//! given, one pass: so a raw volume can come through a pipe (a reconstruction streamed as
+//! it is made, or a file decompressed on the fly), read once, its length checked as it
+//! ends. A window of
 //! three layers is resident: the layer being written and its two neighbours, whose voxels
 //! the one-voxel halos of its blocks' ranges read.
 
@@ -237,7 +240,9 @@ fn write_store<S: PlaneSource>(
     meta.background = options.background;
     meta.threshold = options.threshold;
     meta.quantization = quantization;
-    brick_pass(&mut open()?, &mut meta, staging.path())?;
+    let mut source = open()?;
+    brick_pass(&mut source, &mut meta, staging.path())?;
+    source.finish()?;
     let json = serde_json::to_vec_pretty(&meta).expect("the metadata serializes");
     write_atomically(&staging.path().join("store.json"), |w| w.write_all(&json))
         .map_err(|e| StoreError::new(out, e.to_string()))?;
@@ -278,7 +283,20 @@ fn validate(
     }
     let voxels = spec.dims.iter().map(|&d| d as u64).product::<u64>();
     let expected = voxels * spec.dtype.size() as u64;
-    let len = std::fs::metadata(input).map_err(io_error(input))?.len();
+    let file = std::fs::metadata(input).map_err(io_error(input))?;
+    if !file.is_file() {
+        // A pipe (or another stream) is read once, as it comes, so the range must be
+        // given, and its length is checked as it is read.
+        if options.range.is_none() {
+            return fail(
+                "is not a regular file (a pipe?): it can be read only once, so give --range MIN,MAX \
+                 (the first pass that finds the data's range needs a second read)"
+                    .into(),
+            );
+        }
+        return validate_options(input, spec.dims, options, spec.dtype, out);
+    }
+    let len = file.len();
     if len != expected {
         return fail(format!(
             "the file has {len} bytes, but --dims {}x{}x{} of {:?} need {expected}",
@@ -328,6 +346,11 @@ fn validate_options(
 trait PlaneSource {
     /// Fills `out` with the next `out.len()` voxels; non-finite values are errors.
     fn next(&mut self, out: &mut [f32]) -> Result<(), StoreError>;
+
+    /// After the last voxel: an error when the source holds more than the volume.
+    fn finish(&mut self) -> Result<(), StoreError> {
+        Ok(())
+    }
 }
 
 /// A source that reports the voxels read over every pass.
@@ -344,6 +367,10 @@ impl<S: PlaneSource> PlaneSource for Counted<'_, S> {
         self.done.set(self.done.get() + out.len() as u64);
         (self.progress)(self.done.get(), self.total);
         Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), StoreError> {
+        self.inner.finish()
     }
 }
 
@@ -438,6 +465,25 @@ impl PlaneSource for RawReader<'_> {
         }
         self.read += out.len() as u64;
         Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), StoreError> {
+        // A regular file's length was checked before reading; a stream's is checked here.
+        let mut byte = [0u8];
+        match self.reader.read(&mut byte).map_err(io_error(self.path))? {
+            0 => Ok(()),
+            _ => Err(StoreError::new(
+                self.path,
+                format!(
+                    "the stream holds more than the {} bytes --dims {}x{}x{} of {:?} need",
+                    self.read * self.spec.dtype.size() as u64,
+                    self.spec.dims[0],
+                    self.spec.dims[1],
+                    self.spec.dims[2],
+                    self.spec.dtype
+                ),
+            )),
+        }
     }
 }
 
