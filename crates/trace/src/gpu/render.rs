@@ -559,7 +559,7 @@ impl GpuRenderer {
     /// Renders the image `renderer` describes (the scene and effects this kernel was
     /// built for; any view, camera, lights and settings), in batches of rows; `progress`
     /// gets the rows finished so far. A medium read as stored in a brick store is streamed
-    /// through a brick pool of at most the render's `memory` bytes ([`Self::render_streamed`]).
+    /// through a brick pool of at most the render's `memory` bytes (`render_streamed`).
     pub fn render(
         &self,
         ctx: &GpuContext,
