@@ -344,6 +344,27 @@ fn bad_input_fails_naming_the_problem_without_output() {
             ],
             vec!["`blue`", "nanometres"],
         ),
+        (
+            vec!["--source", "point:0,0,0", "-n", "10", "--batch", "0"],
+            vec!["batch size must be at least 1"],
+        ),
+        (
+            vec![
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "10",
+                "--records",
+                "0",
+                "--records-out",
+                "r.npy",
+            ],
+            vec!["--records 0"],
+        ),
+        (
+            vec!["--source", "point:0,0,0", "-n", "10", "--records", "4"],
+            vec!["--records-out"],
+        ),
     ] {
         let mut all = vec!["photons", scene_arg];
         all.extend(&args);
