@@ -183,12 +183,23 @@ def transmittance():
 
 
 def photons():
+    """Photons/s of the GPU kernel beside the CPU propagator on the same photons, and the
+    fraction of photons whose histories agree (the kernel is f32, the CPU f64)."""
     n = str(int(1_000_000 * SCALE))
     for name, f, src in [
         ("sipm", f"{GDML}/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml", "point:0.1,0.1,4"),
         ("raindrop", f"{GDML}/eic-opticks/opticks_raindrop.gdml", "point:0,0,70"),
+        ("every_process", "tests/data/photons/every_process.gdml", "point:0,0,0"),
     ]:
-        run(f"photons {name} cpu", ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.npy", "--stats"], timeout=90)
+        histories = {}
+        for be in ["cpu", "gpu"]:
+            h = f"{TMP}/ph.{name}.{be}.history.npy"
+            args = ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.{be}.npy", f"--history={h}", "--top", "0", "--backend", be, "--stats"]
+            if run(f"photons {name} {be}", args, timeout=300) is not None:
+                histories[be] = h
+        if len(histories) == 2:
+            a, b = np.load(histories["cpu"]), np.load(histories["gpu"])
+            record({"label": f"photons {name} gpu vs cpu", "photons": int(len(a)), "same_history": int(np.sum(a == b))})
 
 
 CORAL_SCENE = """[volumes.coral]

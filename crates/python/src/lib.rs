@@ -331,7 +331,9 @@ impl Scene {
         let photons = match (photons, &origin) {
             (Some(n), _) => n,
             (None, Origin::Gensteps(file)) => {
-                let total = scene.genstep_photons(file).map_err(library_error)?;
+                let total = file
+                    .photons(&self.foundry.optics.materials)
+                    .map_err(library_error)?;
                 if total <= first {
                     let e = format!("the gensteps emit {total} photons, none from first={first}");
                     return Err(value_error(e).into());

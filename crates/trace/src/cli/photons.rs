@@ -7,13 +7,16 @@ use std::time::Instant;
 use anyhow::bail;
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{add_gpu_stats, warn_redone};
 use hytrace_trace::outputs::{check_destinations, OutputSet};
+use hytrace_trace::photons::backend::{propagate_on, BackendRun, PhotonBackend};
 use hytrace_trace::photons::gensteps::GenstepFile;
 use hytrace_trace::photons::output::{history_table, RunFiles};
-use hytrace_trace::photons::run::{prepare, propagate_batches_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{load_photon_scene, Origin, RunOptions};
 use serde_json::json;
+
+use super::choice::choice;
 
 /// Options of `hytrace photons`.
 #[derive(Args, Debug)]
@@ -84,8 +87,15 @@ pub struct PhotonsArgs {
     /// Steps after which a photon is stopped (history label TR).
     #[arg(long, default_value_t = 10_000)]
     pub max_steps: u32,
+    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32: torch
+    /// sources at a fixed wavelength, absorption, Rayleigh scattering, Fresnel boundaries,
+    /// polished surfaces; other physics is refused, naming it) or auto (the GPU when an
+    /// adapter opens and the kernel models the scene, else the CPU).
+    #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
+    pub backend: PhotonBackend,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
-    /// propagate_s, photons_per_s, threads, backend).
+    /// propagate_s, photons_per_s, threads, backend; on the GPU also the adapter and its
+    /// times).
     #[arg(long)]
     pub stats: bool,
 }
@@ -113,13 +123,10 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let (f, surfaces) = load_photon_scene(&args.scene, options)?;
     let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let scene = prepare(&f, surfaces, &args.scene)?;
-    let build_s = t1.elapsed().as_secs_f64();
     let photons = match (args.photons, &origin) {
         (Some(n), _) => n,
         (None, Origin::Gensteps(file)) => {
-            let total = scene.genstep_photons(file.as_ref())?;
+            let total = file.photons(&f.optics.materials)?;
             if total <= args.first {
                 bail!(
                     "{}: the gensteps emit {total} photons, none from --first {}",
@@ -144,8 +151,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         records_tmp.as_ref().map(|(p, k)| (p.as_path(), *k)),
     )?;
     let bar = hytrace_trace::progress::bar(photons, "propagating", "photons");
-    let run = propagate_batches_in(
-        &scene,
+    let BackendRun { run, build_s, gpu } = propagate_on(
+        &f,
+        surfaces,
         &args.scene,
         &RunOptions {
             origin,
@@ -156,19 +164,23 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             keep_histories: history_tmp.is_some(),
             records: args.records.unwrap_or(0),
         },
+        args.backend,
         args.batch,
         &mut |batch| files.append(&batch),
         &|done| bar.set_position(done),
     )?;
     bar.finish_and_clear();
+    if let Some(g) = &gpu {
+        warn_redone(&g.adapter, &g.times, photons as usize, "photons");
+    }
     files.finish()?;
     written.commit()?;
     if args.history.is_some() {
         print!("{}", history_table(&run.counts, args.top));
     }
     if args.stats {
-        let line = json!({
-            "backend": "cpu",
+        let mut line = json!({
+            "backend": if gpu.is_some() { "gpu" } else { "cpu" },
             "photons": photons,
             "hits": run.hits,
             "load_s": load_s,
@@ -177,6 +189,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "photons_per_s": if run.propagate_s > 0.0 { photons as f64 / run.propagate_s } else { 0.0 },
             "threads": rayon::current_num_threads(),
         });
+        if let Some(g) = &gpu {
+            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        }
         println!("{line}");
     } else {
         eprintln!(

@@ -460,7 +460,7 @@ impl GpuRenderer {
         };
         let medium_bindings = match (&medium, &streamed) {
             (Some((v, ..)), _) => v.binding_count(),
-            (None, Some(_)) => 6,
+            (None, Some(_)) => 7,
             (None, None) => 0,
         };
         let render_bindings = RENDER_BINDINGS + u32::from(streamed.is_some());

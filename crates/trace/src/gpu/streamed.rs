@@ -45,9 +45,9 @@ impl<'a> GpuStreamedVolume<'a> {
     ) -> Result<GpuStreamedVolume<'a>, StreamError> {
         let pool = StorePool::new(ctx, store, store.mips(), budget)?;
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < 9 {
+        if per_stage < 10 {
             return Err(GpuError::SceneTooBig(format!(
-                "the streamed transmittance kernel binds 9 storage buffers, the device allows {per_stage}"
+                "the streamed transmittance kernel binds 10 storage buffers, the device allows {per_stage}"
             ))
             .into());
         }

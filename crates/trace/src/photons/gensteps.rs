@@ -110,6 +110,12 @@ impl GenstepFile {
         GenstepFile::from_values(source, &array.shape, &values)
     }
 
+    /// Number of photons the gensteps emit in a scene of `materials` (checked against
+    /// them, as a run checks them).
+    pub fn photons(&self, materials: &[Material]) -> Result<u64, PhotonError> {
+        Ok(Gensteps::new(self, materials)?.photons())
+    }
+
     /// Gensteps from an array's shape and values (row-major); `source` names them in
     /// messages.
     pub fn from_values(

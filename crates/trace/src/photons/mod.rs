@@ -11,10 +11,12 @@
 //! See `docs/photons.md` for the physics, the output layouts and the comparison with
 //! Geant4.
 
+pub mod backend;
 pub mod boundary;
 pub mod bulk;
 pub mod cherenkov;
 pub mod gensteps;
+pub mod gpu_tables;
 pub mod output;
 pub mod propagate;
 pub mod properties;
@@ -23,6 +25,7 @@ pub mod scintillation;
 pub mod sources;
 pub mod surface_models;
 pub mod surfaces;
+pub mod tracer;
 
 use std::path::Path;
 

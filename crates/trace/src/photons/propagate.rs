@@ -3,9 +3,10 @@
 //!
 //! Each step, in the volume the photon is in (known from the previous step, as Geant4's
 //! tracking navigator keeps it), draws a distance to absorption and to Rayleigh scattering
-//! from the material's ABSLENGTH and RAYLEIGH lengths, and asks the CPU tracer (f64) for
+//! from the material's ABSLENGTH and RAYLEIGH lengths, and asks the CPU tracer (f64, or f32
+//! as the GPU kernel's twin: [`super::tracer`]) for
 //! the distance to the next boundary: leaving the volume or entering one of its daughters
-//! ([`CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
+//! ([`crate::cpu::CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
 //! the far side is the daughter entered, or where the photon goes on leaving the volume
 //! (a touching sibling, else the mother); the two materials and the optical surface of the
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
@@ -30,8 +31,9 @@ use super::properties::{
 };
 use super::sources::{Source, Start, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
+use super::tracer::{PhotonTracer, Precision};
 use super::{PhotonError, V};
-use crate::cpu::{CpuScene, Hit};
+use crate::cpu::Hit;
 use crate::scene::VolumeSurfaces;
 
 /// Photons propagated per parallel batch (bounds the memory of a run without histories).
@@ -39,23 +41,34 @@ const BATCH: u64 = 1 << 16;
 
 /// A scene prepared for photons.
 pub struct PhotonScene {
-    tracer: CpuScene<f64>,
-    tables: OpticsTables,
+    pub(crate) tracer: PhotonTracer,
+    pub(crate) tables: OpticsTables,
     /// The scene's materials as read (their tables, for spectra a run draws from).
     materials: Vec<hytrace_foundry::optics::Material>,
     /// Material inside every instance ([`UNSET`] for none).
-    material: Vec<u32>,
-    mother: Vec<u32>,
-    copy: Vec<i32>,
-    surfaces: SurfaceLookup,
-    hierarchical: bool,
+    pub(crate) material: Vec<u32>,
+    pub(crate) mother: Vec<u32>,
+    pub(crate) copy: Vec<i32>,
+    pub(crate) surfaces: SurfaceLookup,
+    pub(crate) hierarchical: bool,
 }
 
 impl PhotonScene {
     /// Prepares a scene: its tracer, its materials' and used surfaces' property tables
     /// (checked), and the surface lookup (Geant4's for a GDML scene, given `surfaces`).
     pub fn new(f: &Foundry, surfaces: Option<VolumeSurfaces>) -> Result<Self, PhotonError> {
-        let tracer = CpuScene::new(f).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
+        Self::with_precision(f, surfaces, Precision::F64)
+    }
+
+    /// [`PhotonScene::new`] navigating with the CPU tracer in `precision` (f32: the GPU
+    /// kernel's twin).
+    pub fn with_precision(
+        f: &Foundry,
+        surfaces: Option<VolumeSurfaces>,
+        precision: Precision,
+    ) -> Result<Self, PhotonError> {
+        let tracer =
+            PhotonTracer::new(f, precision).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
         let boundaries = &f.optics.boundaries;
         let material = f
             .inst
@@ -106,7 +119,7 @@ impl PhotonScene {
 
     /// Resolves where a run's photons come from: a torch source with its wavelength, or
     /// gensteps prepared for the scene's materials.
-    fn emitting(&self, origin: &Origin) -> Result<Emitting, PhotonError> {
+    pub(crate) fn emitting(&self, origin: &Origin) -> Result<Emitting, PhotonError> {
         match origin {
             Origin::Torch { source, wavelength } => Ok(Emitting::Torch {
                 source: *source,
@@ -116,15 +129,9 @@ impl PhotonScene {
         }
     }
 
-    /// Number of photons `file`'s gensteps emit in this scene (they are checked against
-    /// its materials).
-    pub fn genstep_photons(&self, file: &GenstepFile) -> Result<u64, PhotonError> {
-        Ok(Gensteps::new(file, &self.materials)?.photons())
-    }
-
     /// Resolves a torch run's wavelength: a fixed one checked, a spectrum looked up among
     /// the scene's materials.
-    fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
+    pub(crate) fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
         match wavelength {
             Wavelength::Fixed(nm) if nm.is_finite() && *nm > 0.0 => Ok(Emission::Fixed {
                 energy: energy_of_wavelength(*nm),
@@ -169,9 +176,7 @@ impl PhotonScene {
         let mut tmin = 0.0;
         let mut found = None;
         for _ in 0..8 {
-            let h = self
-                .tracer
-                .trace_in(&ray, Some(current), tmin, f64::INFINITY)?;
+            let h = self.tracer.trace_in(&ray, current, tmin)?;
             let leaving = h.instance == current;
             let outward = h.normal.dot(dir) > 0.0;
             if leaving == outward || h.t > eps {
@@ -203,7 +208,7 @@ impl PhotonScene {
     /// Propagates photon `index` to its end: the histories of its lineages (the photon
     /// itself first, then the further photons its wavelength-shifting absorptions
     /// emitted) and the hit rows of those detected.
-    fn photon(&self, index: u64, run: &RunOptions, emitting: &Emitting) -> PhotonEnd {
+    pub(crate) fn photon(&self, index: u64, run: &RunOptions, emitting: &Emitting) -> PhotonEnd {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
         let (start, time, energy, wavelength_nm) = match emitting {
             Emitting::Torch { source, emission } => {
@@ -441,10 +446,10 @@ impl PhotonScene {
 /// How one photon ended: its own lineage's history and hit, then those of the further
 /// photons its wavelength-shifting absorptions emitted, and its own lineage's first step
 /// points (`RunOptions::records` of them, zero past its end; none when not asked for).
-struct PhotonEnd {
-    own: (History, Option<HitRow>),
-    further: Vec<(History, Option<HitRow>)>,
-    record: Vec<RecordPoint>,
+pub(crate) struct PhotonEnd {
+    pub(crate) own: (History, Option<HitRow>),
+    pub(crate) further: Vec<(History, Option<HitRow>)>,
+    pub(crate) record: Vec<RecordPoint>,
 }
 
 /// `record` filled to `k` points with zero points (label 0).
@@ -454,13 +459,13 @@ fn padded(mut record: Vec<RecordPoint>, k: u32) -> Vec<RecordPoint> {
 }
 
 /// Where a run's photons come from, resolved for the scene.
-enum Emitting {
+pub(crate) enum Emitting {
     Torch { source: Source, emission: Emission },
     Gensteps(Gensteps),
 }
 
 /// The wavelength of a torch run, resolved: fixed (energy in MeV and nm) or a spectrum.
-enum Emission {
+pub(crate) enum Emission {
     Fixed { energy: f64, nm: f64 },
     Spectrum(Spectrum),
 }
@@ -600,27 +605,50 @@ pub fn propagate_batches(
     sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
     progress: &dyn Fn(u64),
 ) -> Result<RunSummary, PhotonError> {
+    let mut on_cpu = |photons: std::ops::Range<u64>, emitting: &Emitting| {
+        Ok::<_, PhotonError>(
+            photons
+                .into_par_iter()
+                .map(|i| scene.photon(i, run, emitting))
+                .collect(),
+        )
+    };
+    drive_batches(scene, run, batch, &mut on_cpu, sink, progress)
+}
+
+/// A batch of photons propagated: the ends of photons `range`, in order.
+pub(crate) type BatchFn<'a, E> =
+    dyn FnMut(std::ops::Range<u64>, &Emitting) -> Result<Vec<PhotonEnd>, E> + 'a;
+
+/// Checks a run, then propagates its photons in batches of `size` with `batch` (the CPU's
+/// or the GPU's), handing each batch's hits, histories and step points to `sink` as it
+/// finishes, and counts the histories.
+pub(crate) fn drive_batches<E: From<PhotonError>>(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    size: u64,
+    batch: &mut BatchFn<E>,
+    sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+    progress: &dyn Fn(u64),
+) -> Result<RunSummary, E> {
     if run.photons == 0 {
-        return Err(PhotonError::Input(
-            "the number of photons (-n) must be at least 1".into(),
-        ));
+        return Err(
+            PhotonError::Input("the number of photons (-n) must be at least 1".into()).into(),
+        );
     }
-    if batch == 0 {
-        return Err(PhotonError::Input(
-            "the batch size must be at least 1".into(),
-        ));
+    if size == 0 {
+        return Err(PhotonError::Input("the batch size must be at least 1".into()).into());
     }
     let emitting = scene.emitting(&run.origin)?;
     let Some(end) = run.first.checked_add(run.photons) else {
         return Err(PhotonError::Input(format!(
             "photons {} .. {} + {}: past the last photon index",
             run.first, run.first, run.photons
-        )));
+        ))
+        .into());
     };
     if run.max_steps == 0 {
-        return Err(PhotonError::Input(
-            "the step limit must be at least 1".into(),
-        ));
+        return Err(PhotonError::Input("the step limit must be at least 1".into()).into());
     }
     match &emitting {
         Emitting::Torch { source, .. } => {
@@ -632,7 +660,8 @@ pub fn propagate_batches(
                 return Err(PhotonError::Input(format!(
                     "the source at ({}, {}, {}) mm lies outside the world",
                     origin.x, origin.y, origin.z
-                )));
+                ))
+                .into());
             }
         }
         Emitting::Gensteps(g) if end > g.photons() => {
@@ -640,7 +669,8 @@ pub fn propagate_batches(
                 "photons {} .. {end}: the gensteps emit {} photons",
                 run.first,
                 g.photons()
-            )));
+            ))
+            .into());
         }
         Emitting::Gensteps(_) => {}
     }
@@ -649,13 +679,9 @@ pub fn propagate_batches(
     let mut codes: std::collections::HashMap<u64, u64> = Default::default();
     let mut first = run.first;
     while first < end {
-        let last = first.saturating_add(batch).min(end);
-        let ends: Vec<PhotonEnd> = (first..last)
-            .into_par_iter()
-            .map(|i| scene.photon(i, run, &emitting))
-            .collect();
+        let last = first.saturating_add(size).min(end);
         let mut out = Batch::default();
-        for end in ends {
+        for end in batch(first..last, &emitting)? {
             if run.keep_histories {
                 out.histories.push(end.own.0.code);
             }
@@ -666,7 +692,7 @@ pub fn propagate_batches(
             }
         }
         hits += out.hits.len() as u64;
-        sink(out)?;
+        sink(out).map_err(E::from)?;
         first = last;
         progress(first - run.first);
     }

@@ -104,6 +104,14 @@ impl Property {
             .fold(f64::NEG_INFINITY, f64::max)
     }
 
+    /// The `(energy, value)` rows.
+    pub fn rows(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.energies
+            .iter()
+            .copied()
+            .zip(self.values.iter().copied())
+    }
+
     /// The value at photon energy `e` (MeV): linear between rows, the first or last value
     /// outside them.
     pub fn value(&self, e: f64) -> f64 {
@@ -364,6 +372,9 @@ impl MaterialOptics {
             wlsabslength: property(&m.properties, "WLSABSLENGTH", &owner)?,
             wls,
             reemission: match property(&m.properties, "REEMISSIONPROB", &owner)? {
+                // Zero everywhere (as in files written for Geant4, which has no such
+                // process): nothing is re-emitted and the scintillation is not needed.
+                Some(p) if p.max_value() == 0.0 => None,
                 None => None,
                 Some(probability) => {
                     if probability.max_value() > 1.0 {
@@ -875,6 +886,9 @@ mod tests {
         let ok = MaterialOptics::new(&material([scint(), vec![prob(0.3)]].concat())).unwrap();
         let r = ok.reemission.expect("re-emits");
         assert_eq!(r.probability.value(2.5e-6), 0.3);
+        // A probability of zero re-emits nothing and needs no scintillation.
+        let zero = MaterialOptics::new(&material(vec![prob(0.0)])).unwrap();
+        assert!(zero.reemission.is_none());
         for (props, needle) in [
             (vec![prob(0.3)], "no SCINTILLATIONCOMPONENT1"),
             ([scint(), vec![prob(1.5)]].concat(), "above 1"),
