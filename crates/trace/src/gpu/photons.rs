@@ -121,21 +121,12 @@ impl GpuPhotons {
         progress: &dyn Fn(u64),
     ) -> crate::Result<GpuPhotonRun> {
         let mut all = Batch::default();
-        let mut gather = |b: Batch| {
-            all.hits.extend(b.hits);
-            all.histories.extend(b.histories);
-            Ok(())
-        };
         let (summary, times) =
-            self.propagate_into(ctx, scene, run, BATCH, &mut gather, progress)?;
-        let run = PhotonRun {
-            hits: all.hits,
-            histories: all.histories,
-            counts: summary.counts,
-            propagate_s: summary.propagate_s,
-            records: Vec::new(),
-        };
-        Ok(GpuPhotonRun { run, times })
+            self.propagate_into(ctx, scene, run, BATCH, &mut |b| all.gather(b), progress)?;
+        Ok(GpuPhotonRun {
+            run: PhotonRun::of(all, summary),
+            times,
+        })
     }
 
     /// Propagates `run`'s photons through `scene` (the one the kernel was built for) at

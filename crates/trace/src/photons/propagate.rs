@@ -548,6 +548,29 @@ pub struct Batch {
     pub records: Vec<RecordPoint>,
 }
 
+impl Batch {
+    /// Appends `b`'s results to these.
+    pub fn gather(&mut self, b: Batch) -> Result<(), PhotonError> {
+        self.hits.extend(b.hits);
+        self.histories.extend(b.histories);
+        self.records.extend(b.records);
+        Ok(())
+    }
+}
+
+impl PhotonRun {
+    /// A run's results gathered from all its batches, and its summary.
+    pub fn of(all: Batch, summary: RunSummary) -> PhotonRun {
+        PhotonRun {
+            hits: all.hits,
+            histories: all.histories,
+            counts: summary.counts,
+            propagate_s: summary.propagate_s,
+            records: all.records,
+        }
+    }
+}
+
 /// What a run handed over batch by batch adds up to.
 #[derive(Clone, Debug)]
 pub struct RunSummary {
@@ -572,25 +595,8 @@ pub fn propagate_reporting(
     progress: &dyn Fn(u64),
 ) -> Result<PhotonRun, PhotonError> {
     let mut all = Batch::default();
-    let summary = propagate_batches(
-        scene,
-        run,
-        BATCH,
-        &mut |b| {
-            all.hits.extend(b.hits);
-            all.histories.extend(b.histories);
-            all.records.extend(b.records);
-            Ok(())
-        },
-        progress,
-    )?;
-    Ok(PhotonRun {
-        hits: all.hits,
-        histories: all.histories,
-        counts: summary.counts,
-        propagate_s: summary.propagate_s,
-        records: all.records,
-    })
+    let summary = propagate_batches(scene, run, BATCH, &mut |b| all.gather(b), progress)?;
+    Ok(PhotonRun::of(all, summary))
 }
 
 /// Propagates photons `run.first .. run.first + run.photons` through `scene`, `batch` at a
