@@ -200,6 +200,10 @@ def photons():
         if len(histories) == 2:
             a, b = np.load(histories["cpu"]), np.load(histories["gpu"])
             record({"label": f"photons {name} gpu vs cpu", "photons": int(len(a)), "same_history": int(np.sum(a == b))})
+        if SCALE >= 1:
+            # Ten times as many on the GPU alone: the rate once the device is full.
+            big = str(int(10_000_000 * SCALE))
+            run(f"photons {name} gpu 1e7", ["photons", f, "--source", src, "-n", big, "-o", f"{TMP}/ph.big.npy", "--backend", "gpu", "--stats"], timeout=120)
 
 
 CORAL_SCENE = """[volumes.coral]
@@ -223,10 +227,10 @@ spp = 1
 
 
 def streaming():
-    """A coral-like brick store (1024^3 at SCALE 1) rendered on the GPU streamed through a
+    """A coral-like brick store (BENCH_CORAL_SIDE^3 voxels, 1024 by default at SCALE 1) rendered on the GPU streamed through a
     64 MiB brick pool and with a pool holding it whole, and on the CPU through a 64 MiB
     cache: times, bricks uploaded and deferred pixels; the two GPU images bit for bit."""
-    side = 1024 if SCALE >= 1 else 128
+    side = int(os.environ.get("BENCH_CORAL_SIDE", "1024" if SCALE >= 1 else "128"))
     raw, store = f"{TMP}/coral{side}.raw", f"{TMP}/coral{side}.bricks"
     if not os.path.exists(store):
         here = os.path.dirname(os.path.abspath(__file__))
