@@ -77,10 +77,11 @@ pub struct PhotonsArgs {
     /// Where --records writes the step points.
     #[arg(long, value_name = "PATH", requires = "records")]
     pub records_out: Option<PathBuf>,
-    /// Photons propagated per batch: each batch's hits, histories and records are written
-    /// out as it finishes, so memory is bounded by the batch; results do not depend on it.
-    #[arg(long, default_value_t = 65_536)]
-    pub batch: u64,
+    /// Photons propagated per batch (default: 65536 on the CPU; on the GPU as many as fill
+    /// it, up to 1048576): each batch's hits, histories and records are written out as it
+    /// finishes, so memory is bounded by the batch; results do not depend on it.
+    #[arg(long)]
+    pub batch: Option<u64>,
     /// Rows of the history table.
     #[arg(long, default_value_t = 20)]
     pub top: usize,

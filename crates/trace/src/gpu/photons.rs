@@ -122,7 +122,7 @@ impl GpuPhotons {
     ) -> crate::Result<GpuPhotonRun> {
         let mut all = Batch::default();
         let (summary, times) =
-            self.propagate_into(ctx, scene, run, BATCH, &mut |b| all.gather(b), progress)?;
+            self.propagate_into(ctx, scene, run, None, &mut |b| all.gather(b), progress)?;
         Ok(GpuPhotonRun {
             run: PhotonRun::of(all, summary),
             times,
@@ -130,7 +130,8 @@ impl GpuPhotons {
     }
 
     /// Propagates `run`'s photons through `scene` (the one the kernel was built for) at
-    /// most `batch` a dispatch, handing each batch's results to `sink` as it finishes
+    /// most `batch` a dispatch (by default as many as fill the GPU, up to 2^20), handing
+    /// each batch's results to `sink` as it finishes
     /// ([`crate::photons::propagate_batches`] on the GPU); `progress` hears the photons
     /// done after each.
     pub fn propagate_into(
@@ -138,7 +139,7 @@ impl GpuPhotons {
         ctx: &GpuContext,
         scene: &PhotonScene,
         run: &RunOptions,
-        batch: u64,
+        batch: Option<u64>,
         sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
         progress: &dyn Fn(u64),
     ) -> crate::Result<(RunSummary, GpuTimes)> {
@@ -148,7 +149,8 @@ impl GpuPhotons {
         let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
         let mut on_gpu =
             |range, emitting: &Emitting| self.batch(ctx, scene, run, range, emitting, &mut times);
-        let summary = drive_batches(scene, run, batch.min(most), &mut on_gpu, sink, progress)?;
+        let size = batch.map_or(most, |b| b.min(most));
+        let summary = drive_batches(scene, run, size, &mut on_gpu, sink, progress)?;
         Ok((summary, times))
     }
 

@@ -52,9 +52,10 @@ pub struct BackendRun {
     pub gpu: Option<GpuPhotonInfo>,
 }
 
-/// Prepares the scene `f` read from `path` and propagates `run` on `backend`, at most
-/// `batch` photons at a time, handing each batch's results to `sink` as it finishes;
-/// errors name the file. `auto` tells on stderr why it fell back to the CPU.
+/// Prepares the scene `f` read from `path` and propagates `run` on `backend`, `batch`
+/// photons at a time (by default the CPU's [`super::propagate::BATCH`], on the GPU as many
+/// as fill it), handing each batch's results to `sink` as it finishes; errors name the
+/// file. `auto` tells on stderr why it fell back to the CPU.
 #[allow(clippy::too_many_arguments)]
 pub fn propagate_on(
     f: &Foundry,
@@ -62,7 +63,7 @@ pub fn propagate_on(
     path: &Path,
     run: &RunOptions,
     backend: PhotonBackend,
-    batch: u64,
+    batch: Option<u64>,
     sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
     progress: &dyn Fn(u64),
 ) -> crate::Result<BackendRun> {
@@ -82,7 +83,14 @@ pub fn propagate_on(
         let build_s = t.elapsed().as_secs_f64();
         let mut sink = sink.borrow_mut();
         Ok(BackendRun {
-            run: propagate_batches_in(&scene, path, run, batch, &mut **sink, progress)?,
+            run: propagate_batches_in(
+                &scene,
+                path,
+                run,
+                batch.unwrap_or(super::propagate::BATCH),
+                &mut **sink,
+                progress,
+            )?,
             build_s,
             gpu: None,
         })

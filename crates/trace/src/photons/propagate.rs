@@ -36,8 +36,8 @@ use super::{PhotonError, V};
 use crate::cpu::Hit;
 use crate::scene::VolumeSurfaces;
 
-/// Photons propagated per parallel batch (bounds the memory of a run without histories).
-const BATCH: u64 = 1 << 16;
+/// Photons the CPU propagates per parallel batch by default (bounds a run's memory).
+pub const BATCH: u64 = 1 << 16;
 
 /// A scene prepared for photons.
 pub struct PhotonScene {
