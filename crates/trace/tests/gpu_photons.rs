@@ -17,17 +17,22 @@ use hytrace_trace::gpu::{GpuContext, GpuPhotons};
 use hytrace_trace::photons::output::{compare_histories, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::tracer::Precision;
-use hytrace_trace::photons::{load_photon_scene, propagate, PhotonRun, PhotonScene, RunOptions};
+use hytrace_trace::photons::{
+    load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
+};
 
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
-        source: Source::parse(source).unwrap(),
-        wavelength: Wavelength::Fixed(420.0),
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::Fixed(420.0),
+        },
         photons,
         first: 7,
         seed: 11,
         max_steps: 10_000,
         keep_histories: true,
+        records: 0,
     }
 }
 
@@ -71,7 +76,7 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     };
     let run = options(source, photons);
     let s32 = scene(&path, Precision::F32);
-    let kernel = GpuPhotons::new(&ctx, &s32, &run.wavelength).unwrap();
+    let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
     let gpu = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap();
     let cpu32 = propagate(&s32, &run).unwrap();
     let cpu64 = propagate(&scene(&path, Precision::F64), &run).unwrap();

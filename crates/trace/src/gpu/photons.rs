@@ -18,9 +18,9 @@ use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use crate::photons::gpu_tables::{unsupported, GpuTables};
 use crate::photons::output::{History, HitRow};
-use crate::photons::propagate::{propagate_batches, Emission, PhotonEnd};
+use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
-use crate::photons::{PhotonRun, PhotonScene, RunOptions};
+use crate::photons::{Batch, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
 
 const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most (records of 80 bytes: 84 MB).
@@ -49,15 +49,15 @@ pub struct GpuPhotonRun {
 }
 
 impl GpuPhotons {
-    /// Uploads `scene` (prepared with the f32 tracer) and compiles its photon kernel.
-    /// Physics the kernel does not model, here or in `wavelength`, is a
-    /// [`GpuError::Unsupported`] naming it.
+    /// Uploads `scene` (prepared with the f32 tracer) and compiles its photon kernel for
+    /// runs like `run`. Physics or options the kernel does not model, in the scene or in
+    /// `run`, are a [`GpuError::Unsupported`] naming them.
     pub fn new(
         ctx: &GpuContext,
         scene: &PhotonScene,
-        wavelength: &crate::photons::sources::Wavelength,
+        run: &RunOptions,
     ) -> Result<GpuPhotons, GpuError> {
-        if let Some(why) = unsupported(&scene.tables, wavelength) {
+        if let Some(why) = unsupported(&scene.tables, run) {
             return Err(GpuError::Unsupported(format!(
                 "photons: {why}; run them with --backend cpu"
             )));
@@ -112,7 +112,7 @@ impl GpuPhotons {
     }
 
     /// Propagates `run`'s photons through `scene` (the one the kernel was built for), in
-    /// batches; `progress` hears the photons done after each.
+    /// batches, gathering their results; `progress` hears the photons done after each.
     pub fn propagate(
         &self,
         ctx: &GpuContext,
@@ -120,14 +120,38 @@ impl GpuPhotons {
         run: &RunOptions,
         progress: &dyn Fn(u64),
     ) -> crate::Result<GpuPhotonRun> {
+        let mut all = Batch::default();
+        let (summary, times) =
+            self.propagate_into(ctx, scene, run, None, &mut |b| all.gather(b), progress)?;
+        Ok(GpuPhotonRun {
+            run: PhotonRun::of(all, summary),
+            times,
+        })
+    }
+
+    /// Propagates `run`'s photons through `scene` (the one the kernel was built for) at
+    /// most `batch` a dispatch (by default as many as fill the GPU, up to 2^20), handing
+    /// each batch's results to `sink` as it finishes
+    /// ([`crate::photons::propagate_batches`] on the GPU); `progress` hears the photons
+    /// done after each.
+    pub fn propagate_into(
+        &self,
+        ctx: &GpuContext,
+        scene: &PhotonScene,
+        run: &RunOptions,
+        batch: Option<u64>,
+        sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+        progress: &dyn Fn(u64),
+    ) -> crate::Result<(RunSummary, GpuTimes)> {
         let mut times = GpuTimes::default();
         // Batches fill a large GPU, within the binding limit of the records.
         let record = size_of::<PhotonRecord>() as u64;
-        let size = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
-        let result = propagate_batches(scene, run, progress, size, &mut |range, emission| {
-            self.batch(ctx, scene, run, range, emission, &mut times)
-        })?;
-        Ok(GpuPhotonRun { run: result, times })
+        let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
+        let mut on_gpu =
+            |range, emitting: &Emitting| self.batch(ctx, scene, run, range, emitting, &mut times);
+        let size = batch.map_or(most, |b| b.min(most));
+        let summary = drive_batches(scene, run, size, &mut on_gpu, sink, progress)?;
+        Ok((summary, times))
     }
 
     /// One batch: the kernel's records turned into the photons' ends, those cut short
@@ -138,16 +162,21 @@ impl GpuPhotons {
         scene: &PhotonScene,
         run: &RunOptions,
         range: Range<u64>,
-        emission: &Emission,
+        emitting: &Emitting,
         times: &mut GpuTimes,
     ) -> crate::Result<Vec<PhotonEnd>> {
-        let Emission::Fixed { energy, nm } = *emission else {
-            return Err(
-                GpuError::Unsupported("photons: energies drawn from a spectrum".into()).into(),
-            );
+        let Emitting::Torch {
+            source,
+            emission: Emission::Fixed { energy, nm },
+        } = *emitting
+        else {
+            return Err(GpuError::Unsupported(
+                "photons: energies drawn from a spectrum, or gensteps".into(),
+            )
+            .into());
         };
         let n = (range.end - range.start) as usize;
-        let params = params(run, &range, energy, nm, self.hierarchical);
+        let params = params(run, source, &range, energy, nm, self.hierarchical);
         let out_size = (n.max(1) * size_of::<PhotonRecord>()) as u64;
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "photon timestamps");
@@ -185,20 +214,22 @@ impl GpuPhotons {
             .map(|(index, r)| {
                 if r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0 {
                     times.redone_on_cpu += 1;
-                    return scene.photon(index, run, emission);
+                    return scene.photon(index, run, emitting);
                 }
                 PhotonEnd {
                     own: end_of(&r, index, &scene.copy),
                     further: Vec::new(),
+                    record: Vec::new(),
                 }
             })
             .collect())
     }
 }
 
-/// The kernel's parameters for the photons `range` of `run`.
+/// The kernel's parameters for the photons `range` of `run` from `source`.
 fn params(
     run: &RunOptions,
+    source: Source,
     range: &Range<u64>,
     energy: f64,
     nm: f64,
@@ -218,7 +249,7 @@ fn params(
         cos_divergence: 1.0,
         ..Default::default()
     };
-    match run.source {
+    match source {
         Source::Point { position } => {
             p.source_kind = PHOTON_SOURCE_POINT;
             p.source_at = f(position);

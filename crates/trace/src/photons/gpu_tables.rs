@@ -14,7 +14,7 @@ use hytrace_foundry::UNSET;
 use super::properties::{Finish, OpticsTables, Property, SurfaceKind};
 use super::sources::Wavelength;
 use super::surfaces::SurfaceLookup;
-use super::PhotonScene;
+use super::{Origin, PhotonScene, RunOptions};
 use crate::gpu::photon_records::{
     PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable,
     PHOTON_SURFACE_DIELECTRIC, PHOTON_SURFACE_METAL,
@@ -143,12 +143,30 @@ fn push_table(
     tables.len() as u32 - 1
 }
 
-/// Why the GPU kernel cannot propagate photons of `wavelength` through a scene with
-/// `tables` (the first reason), `None` when it can.
-pub fn unsupported(tables: &OpticsTables, wavelength: &Wavelength) -> Option<String> {
-    if let Wavelength::Spectrum { material, property } = wavelength {
+/// Why the GPU kernel cannot propagate `run`'s photons through a scene with `tables`
+/// (the first reason), `None` when it can.
+pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
+    match &run.origin {
+        Origin::Gensteps(_) => {
+            return Some("--gensteps: photons emitted by Cherenkov and scintillation steps".into())
+        }
+        Origin::Torch {
+            wavelength: Wavelength::Spectrum { material, property },
+            ..
+        } => {
+            return Some(format!(
+                "--wavelength {material}:{property}: photon energies drawn from a spectrum"
+            ))
+        }
+        Origin::Torch { .. } => {}
+    }
+    if run.records > 0 {
+        return Some("--records: step points".into());
+    }
+    if let Some(m) = tables.materials.iter().find(|m| m.reemission.is_some()) {
         return Some(format!(
-            "--wavelength {material}:{property}: photon energies drawn from a spectrum"
+            "material `{}`: property REEMISSIONPROB (re-emission)",
+            m.name
         ));
     }
     if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
@@ -255,5 +273,57 @@ mod tests {
             sibling_borders > 0,
             "no file has border surfaces between siblings"
         );
+    }
+
+    /// Gensteps, step points and re-emission are refused for the kernel by name; a torch
+    /// run through a scene without them is not.
+    #[test]
+    fn gensteps_records_and_re_emission_are_not_on_the_gpu() {
+        use crate::photons::gensteps::GenstepFile;
+        use crate::photons::sources::Source;
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let tables = |file: &str| {
+            let (f, surfaces) =
+                load_photon_scene(&root.join(file), &GdmlOptions::default()).unwrap();
+            PhotonScene::new(&f, surfaces).unwrap().tables
+        };
+        let torch = RunOptions {
+            origin: Origin::Torch {
+                source: Source::parse("point:0,0,0").unwrap(),
+                wavelength: Wavelength::Fixed(420.0),
+            },
+            photons: 10,
+            first: 0,
+            seed: 0,
+            max_steps: 100,
+            keep_histories: false,
+            records: 0,
+        };
+        let every = tables("tests/data/photons/every_process.gdml");
+        assert_eq!(unsupported(&every, &torch), None);
+        let gensteps = RunOptions {
+            origin: Origin::Gensteps(std::sync::Arc::new(GenstepFile {
+                source: "g.npy".into(),
+                steps: Vec::new(),
+            })),
+            ..torch.clone()
+        };
+        let records = RunOptions {
+            records: 4,
+            ..torch.clone()
+        };
+        let scintillator = tables("tests/data/photons/scintillator.gdml");
+        for (tables, run, needle) in [
+            (&every, &gensteps, "--gensteps"),
+            (&every, &records, "--records"),
+            (
+                &scintillator,
+                &torch,
+                "material `LS`: property REEMISSIONPROB",
+            ),
+        ] {
+            let why = unsupported(tables, run).expect("refused");
+            assert!(why.contains(needle), "{why}");
+        }
     }
 }
