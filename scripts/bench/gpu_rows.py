@@ -183,12 +183,27 @@ def transmittance():
 
 
 def photons():
+    """Photons/s of the GPU kernel beside the CPU propagator on the same photons, and the
+    fraction of photons whose histories agree (the kernel is f32, the CPU f64)."""
     n = str(int(1_000_000 * SCALE))
     for name, f, src in [
         ("sipm", f"{GDML}/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml", "point:0.1,0.1,4"),
         ("raindrop", f"{GDML}/eic-opticks/opticks_raindrop.gdml", "point:0,0,70"),
+        ("every_process", "tests/data/photons/every_process.gdml", "point:0,0,0"),
     ]:
-        run(f"photons {name} cpu", ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.npy", "--stats"], timeout=90)
+        histories = {}
+        for be in ["cpu", "gpu"]:
+            h = f"{TMP}/ph.{name}.{be}.history.npy"
+            args = ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.{be}.npy", f"--history={h}", "--top", "0", "--backend", be, "--stats"]
+            if run(f"photons {name} {be}", args, timeout=300) is not None:
+                histories[be] = h
+        if len(histories) == 2:
+            a, b = np.load(histories["cpu"]), np.load(histories["gpu"])
+            record({"label": f"photons {name} gpu vs cpu", "photons": int(len(a)), "same_history": int(np.sum(a == b))})
+        if SCALE >= 1:
+            # Ten times as many on the GPU alone: the rate once the device is full.
+            big = str(int(10_000_000 * SCALE))
+            run(f"photons {name} gpu 1e7", ["photons", f, "--source", src, "-n", big, "-o", f"{TMP}/ph.big.npy", "--backend", "gpu", "--stats"], timeout=120)
 
 
 CORAL_SCENE = """[volumes.coral]
@@ -212,10 +227,10 @@ spp = 1
 
 
 def streaming():
-    """A coral-like brick store (1024^3 at SCALE 1) rendered on the GPU streamed through a
+    """A coral-like brick store (BENCH_CORAL_SIDE^3 voxels, 1024 by default at SCALE 1) rendered on the GPU streamed through a
     64 MiB brick pool and with a pool holding it whole, and on the CPU through a 64 MiB
     cache: times, bricks uploaded and deferred pixels; the two GPU images bit for bit."""
-    side = 1024 if SCALE >= 1 else 128
+    side = int(os.environ.get("BENCH_CORAL_SIDE", "1024" if SCALE >= 1 else "128"))
     raw, store = f"{TMP}/coral{side}.raw", f"{TMP}/coral{side}.bricks"
     if not os.path.exists(store):
         here = os.path.dirname(os.path.abspath(__file__))

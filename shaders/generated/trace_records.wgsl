@@ -253,6 +253,85 @@ struct RenderMedium {
     pad: u32,
 }
 
+struct PhotonParams {
+    source_at: array<f32, 3>,
+    source_kind: u32,
+    source_direction: array<f32, 3>,
+    source_radius: f32,
+    cos_divergence: f32,
+    inward: u32,
+    energy: f32,
+    wavelength_nm: f32,
+    first_lo: u32,
+    first_hi: u32,
+    photon_count: u32,
+    seed: u32,
+    max_steps: u32,
+    hierarchical: u32,
+    probe_trips: u32,
+    pad: u32,
+}
+
+struct PhotonTable {
+    first: u32,
+    count: u32,
+}
+
+struct PhotonMaterial {
+    rindex: u32,
+    abslength: u32,
+    rayleigh: u32,
+    groupvel: u32,
+}
+
+struct PhotonSurface {
+    kind: u32,
+    reflectivity: u32,
+    efficiency: u32,
+    transmittance: u32,
+}
+
+struct PhotonInstance {
+    material: u32,
+    mother: u32,
+    copy: i32,
+    enter_surface: u32,
+    leave_surface: u32,
+    sibling_leave: u32,
+    sibling_enter: u32,
+    pad: u32,
+}
+
+struct PhotonBorder {
+    pre: u32,
+    post: u32,
+    surface: u32,
+    pad: u32,
+}
+
+struct PhotonRecord {
+    position: array<f32, 3>,
+    time: f32,
+    direction: array<f32, 3>,
+    wavelength: f32,
+    polarization: array<f32, 3>,
+    instance: u32,
+    history: array<u32, 2>,
+    mask: u32,
+    labels: u32,
+    steps: u32,
+    status: u32,
+    pad: array<u32, 2>,
+}
+
+const PHOTON_SOURCE_POINT: u32 = 0u;
+const PHOTON_SOURCE_BEAM: u32 = 1u;
+const PHOTON_SOURCE_SPHERE: u32 = 2u;
+const PHOTON_SURFACE_METAL: u32 = 0u;
+const PHOTON_SURFACE_DIELECTRIC: u32 = 1u;
+const PHOTON_DETECTED: u32 = 1u;
+const PHOTON_LOOPS_CUT: u32 = 2u;
+const PHOTON_DEPTH_LIMIT: u32 = 4u;
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 const STATUS_LOOPS_CUT: u32 = 2u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
@@ -279,7 +358,7 @@ const VOLUME_STATUS_NEGATIVE: u32 = 1u;
 const VOLUME_STATUS_MARCH_STEPS: u32 = 2u;
 const VOLUME_STATUS_LOOPS_CUT: u32 = 4u;
 const VOLUME_STATUS_MISSING: u32 = 8u;
-const VOLUME_ABSENT_BRICK: u32 = 4294967294u;
+const VOLUME_ABSENT_BRICK: u32 = 2147483648u;
 const STREAM_HEADER_WORDS: u32 = 8u;
 const STREAM_REQUESTED: u32 = 0u;
 const STREAM_CAPACITY: u32 = 1u;

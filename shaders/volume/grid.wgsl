@@ -143,10 +143,11 @@ fn grid_voxel(c: vec3<i32>) -> f32 {
         return vparams.background;
     }
     // #if streamed
-    // A brick store's page table: `e` is the brick's pool slot, or it is absent.
-    if e == VOLUME_ABSENT_BRICK {
+    // A brick store's page table: `e` is the brick's pool slot, or it is absent (and holds
+    // its record: its octant's mean stands in until it arrives).
+    if (e & VOLUME_ABSENT_BRICK) != 0u {
         stream_request(page);
-        return vparams.background;
+        return stream_coarse(e & ~VOLUME_ABSENT_BRICK, vec3<u32>(c & vec3<i32>(7)));
     }
     stream_touch(e);
     // #endif

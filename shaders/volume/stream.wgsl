@@ -1,15 +1,18 @@
 // A brick store streamed through the GPU's brick pool (crates/trace/src/gpu/brick_pool.rs):
 // the page table is the indirection, whose entries are pool slots, VOLUME_NO_BRICK for a
-// dropped brick, or VOLUME_ABSENT_BRICK for a kept brick not in the pool. A lookup there
-// records the brick in the request list (once a pass: a per-brick flag bit set atomically
-// decides which invocation appends it), marks the invocation's item as missing (its answer
-// is discarded and it runs again after the host uploads the brick) and reads the
-// background. A lookup in a resident brick stamps its slot with the pass number, which
+// dropped brick, or VOLUME_ABSENT_BRICK | record for a kept brick not in the pool. A lookup
+// there records the brick in the request list (once a pass: a per-brick flag bit set
+// atomically decides which invocation appends it), marks the invocation's item as missing
+// (its answer is discarded and it runs again after the host uploads the brick) and reads
+// the brick's coarser level of detail (what a preview shows until it arrives). A lookup in a resident brick stamps its slot with the pass number, which
 // the host's least-recently-used eviction reads.
 // #import generated/trace_records
 
 // Header (STREAM_* words), then the request list, the flag bits, the slot stamps.
 @group(0) @binding(20) var<storage, read_write> stream_state: array<atomic<u32>>;
+// The store's coarser levels of detail, nine values a kept brick (by record): its mean, then
+// its eight octants' means (x fastest).
+@group(0) @binding(21) var<storage, read> stream_lods: array<f32>;
 
 // Whether this invocation read a brick that is not in the pool.
 var<private> stream_missing: bool = false;
@@ -36,4 +39,11 @@ fn stream_touch(slot: u32) {
         let stamps = atomicLoad(&stream_state[STREAM_STAMPS]);
         atomicMax(&stream_state[stamps + slot], atomicLoad(&stream_state[STREAM_PASS]));
     }
+}
+
+// The value an absent brick shows while it is requested: the mean of the octant of record
+// `record`'s brick that holds texel `b` (0 to 7 on each axis).
+fn stream_coarse(record: u32, b: vec3<u32>) -> f32 {
+    let octant = (b.x >> 2u) | ((b.y >> 2u) << 1u) | ((b.z >> 2u) << 2u);
+    return stream_lods[record * 9u + 1u + octant];
 }

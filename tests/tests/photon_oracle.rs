@@ -17,7 +17,7 @@ use hytrace_tests::gdml::gdml_dir;
 use hytrace_tests::{geant4_data_dir, oracle_python};
 use hytrace_trace::photons::output::compare_histories;
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, propagate, PhotonScene, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, propagate, Origin, PhotonScene, RunOptions};
 use serde::Deserialize;
 
 /// Photons per run of each program.
@@ -109,13 +109,16 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
     let run = propagate(
         &scene,
         &RunOptions {
-            source: Source::parse(source).unwrap(),
-            wavelength: Wavelength::parse(wavelength).unwrap(),
+            origin: Origin::Torch {
+                source: Source::parse(source).unwrap(),
+                wavelength: Wavelength::parse(wavelength).unwrap(),
+            },
             photons: PHOTONS,
             first: 0,
             seed: 1,
             max_steps: 100_000,
             keep_histories: false,
+            records: 0,
         },
     )
     .unwrap();

@@ -176,6 +176,118 @@ pub fn write_records<R: Record>(path: &Path, records: &[R]) -> Result<()> {
     write_with_header(path, dtype, &shape, bytemuck::cast_slice(records))
 }
 
+/// Bytes of the header an [`NpyStream`] writes: fixed, so the final shape fits where the
+/// first one was (a multiple of 64, as NumPy aligns its headers).
+const STREAM_HEADER: usize = 128;
+
+/// A plain `.npy` array written row by row, its shape `(rows, ...)` filled in when it is
+/// finished: for outputs larger than memory. The file is written where it is created
+/// (give it a temporary path and rename it, as [`write_atomically`] does, to keep readers
+/// from a partial file).
+#[derive(Debug)]
+pub struct NpyStream {
+    file: BufWriter<File>,
+    path: std::path::PathBuf,
+    /// NumPy's type string of the elements (`<f8`, `<u8`, ...) and their size in bytes.
+    descr: String,
+    item: usize,
+    /// The shape of one row.
+    row: Vec<u64>,
+    rows: u64,
+}
+
+impl NpyStream {
+    /// Creates `path` for rows of shape `row` of elements of NumPy type `descr` (a
+    /// little-endian plain type such as `<f8` or `<u8`), `item` bytes each.
+    pub fn create(path: &Path, descr: &str, item: usize, row: &[u64]) -> Result<Self> {
+        let file = File::create(path).map_err(|source| FoundryError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut stream = NpyStream {
+            file: BufWriter::new(file),
+            path: path.to_path_buf(),
+            descr: descr.to_string(),
+            item,
+            row: row.to_vec(),
+            rows: 0,
+        };
+        let header = stream.header();
+        stream.write(&header)?;
+        Ok(stream)
+    }
+
+    /// The header for the rows written so far.
+    fn header(&self) -> Vec<u8> {
+        let mut shape: Vec<String> = vec![self.rows.to_string()];
+        shape.extend(self.row.iter().map(u64::to_string));
+        let shape = match shape.len() {
+            1 => format!("({},)", shape[0]),
+            _ => format!("({})", shape.join(", ")),
+        };
+        let dict = format!(
+            "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
+            self.descr
+        );
+        let mut h = b"\x93NUMPY\x01\x00".to_vec();
+        h.extend(((STREAM_HEADER - 10) as u16).to_le_bytes());
+        h.extend(dict.as_bytes());
+        h.resize(STREAM_HEADER - 1, b' ');
+        h.push(b'\n');
+        h
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        self.file
+            .write_all(bytes)
+            .map_err(|source| FoundryError::Io {
+                path: self.path.clone(),
+                source,
+            })
+    }
+
+    /// Appends `bytes`, a whole number of rows.
+    pub fn append(&mut self, bytes: &[u8]) -> Result<()> {
+        let row_bytes = self.row.iter().product::<u64>() * self.item as u64;
+        if row_bytes == 0 || !(bytes.len() as u64).is_multiple_of(row_bytes) {
+            return Err(FoundryError::Build(format!(
+                "{}: {} bytes are not whole rows of {row_bytes} bytes",
+                self.path.display(),
+                bytes.len()
+            )));
+        }
+        self.write(bytes)?;
+        self.rows += bytes.len() as u64 / row_bytes;
+        Ok(())
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Writes the final shape into the header and closes the file.
+    pub fn finish(mut self) -> Result<()> {
+        use std::io::{Seek, SeekFrom};
+        let header = self.header();
+        let io = |source| FoundryError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        if header.len() != STREAM_HEADER {
+            return Err(FoundryError::Build(format!(
+                "{}: the shape does not fit a {STREAM_HEADER}-byte header",
+                self.path.display()
+            )));
+        }
+        self.file.flush().map_err(io)?;
+        let file = self.file.get_mut();
+        file.seek(SeekFrom::Start(0)).map_err(io)?;
+        file.write_all(&header).map_err(io)?;
+        file.sync_all().map_err(io)
+    }
+}
+
 struct RawNpy {
     dtype: DType,
     shape: Vec<u64>,
@@ -341,6 +453,39 @@ mod tests {
         let (dtype, shape) = record_dtype::<Transform64>();
         assert_eq!(dtype.descr(), "'<f8'");
         assert_eq!(shape, vec![4, 4]);
+    }
+
+    #[test]
+    fn streamed_rows_read_back_as_one_array() {
+        let dir = tempfile::tempdir().unwrap();
+        let (streamed, whole) = (dir.path().join("s.npy"), dir.path().join("w.npy"));
+        let values: Vec<f64> = (0..60).map(|i| i as f64 * 0.5).collect();
+        let mut s = NpyStream::create(&streamed, "<f8", 8, &[3, 2]).unwrap();
+        for chunk in values.chunks(12) {
+            s.append(bytemuck::cast_slice(chunk)).unwrap();
+        }
+        assert!(s.append(&[0u8; 8]).is_err());
+        assert_eq!(s.rows(), 10);
+        s.finish().unwrap();
+        write_array(
+            &whole,
+            Scalar::F64,
+            &[10, 3, 2],
+            bytemuck::cast_slice(&values),
+        )
+        .unwrap();
+        assert_eq!(read_array(&streamed).unwrap(), read_array(&whole).unwrap());
+        // No rows, one-dimensional rows.
+        let empty = dir.path().join("e.npy");
+        NpyStream::create(&empty, "<u4", 4, &[])
+            .unwrap()
+            .finish()
+            .unwrap();
+        let e = read_array(&empty).unwrap();
+        assert_eq!(
+            (e.scalar, e.shape, e.bytes.len()),
+            (Scalar::U32, vec![0], 0)
+        );
     }
 
     #[test]

@@ -12,15 +12,16 @@ mod arrays;
 mod errors;
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
 use hytrace_trace::error::report;
 use hytrace_trace::gpu::TexelStore;
+use hytrace_trace::photons::gensteps::{GenstepFile, GENSTEP_COLUMNS};
 use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, PhotonScene, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, Origin, PhotonScene, RunOptions};
 use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
 use hytrace_trace::render::spec::RenderSpec;
 use hytrace_trace::scan::{self, Backend, Precision, RAY_COLUMNS};
@@ -68,7 +69,21 @@ impl Scene {
             lenient: self.lenient,
         }
     }
+
+    /// The scene prepared for photons, on first use.
+    fn photon_scene(&self) -> hytrace_trace::Result<&PhotonScene> {
+        if let Some(s) = self.photon_scene.get() {
+            return Ok(s);
+        }
+        let (f, surfaces) = load_photon_scene(&self.path, &self.options())?;
+        let scene = prepare(&f, surfaces, &self.path)?;
+        Ok(self.photon_scene.get_or_init(|| scene))
+    }
 }
+
+/// The columns of a genstep row, for messages.
+const GENSTEP_COLUMN_NAMES: &str =
+    "kind, photons, material, t0, x0, y0, z0, x1, y1, z1, beta0, beta1, charge, component";
 
 /// Loads a scene: `"default"` (the embedded default scene), a Foundry directory, a
 /// `.toml` scene file, a `.gdml` file or an `.obj`, `.gltf` or `.glb` mesh, as
@@ -267,53 +282,80 @@ impl Scene {
     /// does, photons `first .. first + photons` (photon `i` draws the random stream
     /// `(seed, i)`, so runs over consecutive ranges give together what one run gives);
     /// `wavelength` in nanometres, or `"MATERIAL:PROPERTY"` to draw each photon's from that
-    /// spectrum of a scene material.
+    /// spectrum of a scene material. With `gensteps` (a `(G, 14)` array of Cherenkov and
+    /// scintillation steps, the layout of `hytrace photons --gensteps`) instead of a
+    /// source, the photons they emit (`photons` defaults to all from `first` on).
     ///
     /// Returns the detected photons, (H, 16) float64 with the columns of the command's
     /// output; with `histories=True`, `(hits, histories)` where histories is every photon's
     /// packed step history, (photons,) uint64.
     #[pyo3(signature = (
-        source, photons, *, wavelength = WavelengthArg::Nm(420.0), seed = 0,
-        max_steps = 10_000, first = 0, histories = false
+        source = None, photons = None, *, gensteps = None, wavelength = WavelengthArg::Nm(420.0),
+        seed = 0, max_steps = 10_000, first = 0, histories = false
     ))]
     #[allow(clippy::too_many_arguments)]
     fn photons<'py>(
         &self,
         py: Python<'py>,
-        source: &str,
-        photons: u64,
+        source: Option<&str>,
+        photons: Option<u64>,
+        gensteps: Option<&Bound<'py, PyAny>>,
         wavelength: WavelengthArg,
         seed: u32,
         max_steps: u32,
         first: u64,
         histories: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let source = Source::parse(source).map_err(library_error)?;
-        let wavelength = match wavelength {
-            WavelengthArg::Nm(nm) => Wavelength::Fixed(nm),
-            WavelengthArg::Spectrum(text) => Wavelength::parse(&text).map_err(library_error)?,
+        let origin = match (source, gensteps) {
+            (Some(source), None) => {
+                let source = Source::parse(source).map_err(library_error)?;
+                let wavelength = match wavelength {
+                    WavelengthArg::Nm(nm) => Wavelength::Fixed(nm),
+                    WavelengthArg::Spectrum(text) => {
+                        Wavelength::parse(&text).map_err(library_error)?
+                    }
+                };
+                Origin::Torch { source, wavelength }
+            }
+            (None, Some(g)) => {
+                let rows = float_rows::<GENSTEP_COLUMNS>(g, "gensteps", GENSTEP_COLUMN_NAMES)?;
+                let values: &[f64] = bytemuck::cast_slice(rows.rows());
+                let shape = [rows.rows().len() as u64, GENSTEP_COLUMNS as u64];
+                let file = GenstepFile::from_values("gensteps".into(), &shape, values)
+                    .map_err(library_error)?;
+                Origin::Gensteps(Arc::new(file))
+            }
+            _ => return Err(value_error("give a source or gensteps, not both".into()).into()),
+        };
+        let scene = py.detach(|| self.photon_scene()).map_err(library_error)?;
+        let photons = match (photons, &origin) {
+            (Some(n), _) => n,
+            (None, Origin::Gensteps(file)) => {
+                let total = file
+                    .photons(&self.foundry.optics.materials)
+                    .map_err(library_error)?;
+                if total <= first {
+                    let e = format!("the gensteps emit {total} photons, none from first={first}");
+                    return Err(value_error(e).into());
+                }
+                total - first
+            }
+            (None, Origin::Torch { .. }) => {
+                let e = "photons: the number of photons is needed with a source";
+                return Err(value_error(e.into()).into());
+            }
         };
         let options = RunOptions {
-            source,
-            wavelength,
+            origin,
             photons,
             first,
             seed,
             max_steps,
             keep_histories: histories,
+            records: 0,
         };
         let run = py
-            .detach(|| {
-                let scene = match self.photon_scene.get() {
-                    Some(s) => s,
-                    None => {
-                        let (f, surfaces) = load_photon_scene(&self.path, &self.options())?;
-                        let scene = prepare(&f, surfaces, &self.path)?;
-                        self.photon_scene.get_or_init(|| scene)
-                    }
-                };
-                propagate_in(scene, &self.path, &options, &|_| ())
-            })
+            .detach(|| propagate_in(scene, &self.path, &options, &|_| ()))
             .map_err(library_error)?;
         let n = run.hits.len();
         let rows: Vec<[f64; 16]> = run.hits.into_iter().map(|h| h.0).collect();

@@ -265,6 +265,31 @@ def test_photon_ranges_equal_the_commands_first_option_and_the_whole_run(cli, tm
     same(parts[1], np.load(tmp_path / "part.npy"))
 
 
+# A scintillation step along x and a Cherenkov step of a fast electron down the z axis in
+# the scintillator cube (material 1), in the layout of `hytrace photons --gensteps`.
+GENSTEPS = np.array([
+    [2, 3000, 1, 10.0, -20, 0, 0, 20, 0, 0, 0.5, 0.5, -1, 0],
+    [1, 2000, 1, 50.0, 0, 0, 60, 0, 0, 20, 0.99, 0.98, -1, 0],
+], dtype=np.float64)
+
+
+def test_photons_from_gensteps_equal_the_command(cli, tmp_path):
+    cube = DATA / "photons" / "scintillator.gdml"
+    np.save(tmp_path / "g.npy", GENSTEPS)
+    cli("photons", cube, "--gensteps", tmp_path / "g.npy", "--seed", "2",
+        "--out", tmp_path / "hits.npy", f"--history={tmp_path / 'histories.npy'}")
+    scene = hytrace.load(cube)
+    hits, histories = scene.photons(gensteps=GENSTEPS, seed=2, histories=True)
+    same(hits, np.load(tmp_path / "hits.npy"))
+    same(histories, np.load(tmp_path / "histories.npy"))
+    assert len(histories) == 5000 and len(hits) > 500
+    # A range of the photons.
+    cli("photons", cube, "--gensteps", tmp_path / "g.npy", "--first", "2500", "-n", "1000",
+        "--out", tmp_path / "part.npy")
+    same(scene.photons(None, 1000, gensteps=GENSTEPS, first=2500),
+         np.load(tmp_path / "part.npy"))
+
+
 def test_tracing_releases_the_gil(default_scene):
     rays = random_rays(400_000, seed=10)
     started, done = threading.Event(), threading.Event()

@@ -180,6 +180,29 @@ def test_bad_photon_runs_raise_the_commands_message(cli, tmp_path, source, count
     assert str(raised.value) == cli_error(p)
 
 
+def test_bad_gensteps_raise_the_commands_message(cli, tmp_path):
+    cube = EVERY_PROCESS.parent / "scintillator.gdml"
+    scene = hytrace.load(cube)
+    good = [2, 10, 1, 0, 0, 0, 0, 1, 0, 0, 1, 1, -1, 0]
+    for bad, match in [
+        ([7] + good[1:], "row 1: unknown kind 7"),
+        (good[:1] + [-5] + good[2:], r"row 1: the number of photons \(column 1\) is -5"),
+        (good[:2] + [9] + good[3:], "row 1: material index 9 out of range"),
+    ]:
+        rows = np.array([good, bad], dtype=np.float64)
+        with pytest.raises(hytrace.HytraceValueError, match=match) as raised:
+            scene.photons(gensteps=rows)
+        np.save(tmp_path / "g.npy", rows)
+        p = cli("photons", cube, "--gensteps", tmp_path / "g.npy", "--out", tmp_path / "h.npy",
+                check=False)
+        # The same message, the file named where the array is called `gensteps`.
+        assert str(raised.value) == cli_error(p).replace(str(tmp_path / "g.npy"), "gensteps")
+    with pytest.raises(hytrace.HytraceValueError, match="gensteps"):
+        scene.photons(gensteps=np.zeros((2, 13)))
+    with pytest.raises(hytrace.HytraceValueError, match="not both"):
+        scene.photons("point:0,0,0", 10, gensteps=np.array([good], dtype=np.float64))
+
+
 def test_negative_counts_and_seeds_raise_overflow_errors(default_scene):
     with pytest.raises(OverflowError):
         hytrace.load(EVERY_PROCESS).photons("point:0,0,0", -5)

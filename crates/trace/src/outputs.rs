@@ -46,14 +46,27 @@ impl OutputSet {
         dest: &Path,
         write: impl FnOnce(&Path) -> crate::Result<()>,
     ) -> crate::Result<()> {
-        let context = || format!("writing {}", dest.display());
+        let tmp = self.reserve(dest)?;
+        write(&tmp).with_context(|| format!("writing {}", dest.display()))
+    }
+
+    /// Adds an output to be written over time: the temporary path (in `dest`'s directory,
+    /// created when missing) to write it at, moved onto `dest` by [`OutputSet::commit`].
+    pub fn reserve(&mut self, dest: &Path) -> crate::Result<PathBuf> {
         let tmp = temporary_beside(dest)
-            .with_context(context)?
+            .with_context(|| format!("writing {}", dest.display()))?
             .into_temp_path();
         let tracked = TrackedTemporary::new(&tmp);
-        write(&tmp).with_context(context)?;
+        // Temporary files are created private (0600); the output is an ordinary file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o644))
+                .with_context(|| format!("writing {}", dest.display()))?;
+        }
+        let path = tmp.to_path_buf();
         self.staged.push((tmp, dest.to_path_buf(), tracked));
-        Ok(())
+        Ok(path)
     }
 
     /// Moves every staged output into place.
@@ -81,6 +94,13 @@ mod tests {
         assert!(!a.exists() && !b.exists());
         set.commit().unwrap();
         assert_eq!(std::fs::read_to_string(&b).unwrap(), "b");
+        // Ordinary files, not private like the temporary files they were written as.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&a).unwrap().permissions().mode();
+            assert_eq!(mode & 0o777, 0o644);
+        }
         // A second output failing: the first is not left behind, nor any temporary file.
         let c = dir.path().join("c.txt");
         let mut set = OutputSet::new();

@@ -20,12 +20,15 @@ use hytrace_foundry::Foundry;
 use rayon::prelude::*;
 use serde_json::json;
 
-use hytrace_volume::TransmittanceParams;
+use hytrace_volume::{TransmittanceParams, DEFAULT_STORE_BUDGET};
 
 use crate::cpu::media::{MediumSegment, SceneMedia};
 use crate::cpu::{CpuScene, Hit, TraceScratch, BATCH};
 use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
-use crate::gpu::{gpu_or_cpu, warn_redone, GpuContext, GpuTimes, GpuTracer, GpuVolume, GPU_INF};
+use crate::gpu::{
+    gpu_or_cpu, warn_redone, GpuContext, GpuStreamedVolume, GpuTimes, GpuTracer, GpuVolume, GPU_INF,
+};
+use crate::scene::MediumGrid;
 
 /// Which tracer answers a scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -648,7 +651,24 @@ pub fn scan_transmittance_on(
         _ if times.gpu.is_some() => Backend::Gpu,
         _ => Backend::Cpu,
     };
-    media_transmittance(foundry, rays, &ends, precision, params, ran_on, first_ray)
+    let run = MediaRun {
+        backend: ran_on,
+        first_ray,
+        memory: DEFAULT_STORE_BUDGET,
+    };
+    media_transmittance(foundry, rays, &ends, precision, params, run)
+}
+
+/// Where and how a scan's media transmittance runs.
+#[derive(Clone, Copy, Debug)]
+pub struct MediaRun {
+    /// The backend (the one the surfaces ran on).
+    pub backend: Backend,
+    /// The random stream index of the first ray.
+    pub first_ray: u32,
+    /// Bytes each medium read as stored in a brick store may hold resident (its tables
+    /// and a cache of bricks read on demand).
+    pub memory: u64,
 }
 
 /// Where each ray's media end: its first surface crossing in `result`, or its `tmax` on a
@@ -663,31 +683,36 @@ pub fn ray_ends(result: &ScanResult, rays: &[RayRow]) -> Vec<f64> {
 }
 
 /// Transmittance of the scene's media along every ray over `[tmin, ends[i]]` (the ends a
-/// scan found, [`ray_ends`]), on `backend`. On the GPU (f32 only) the transmittance kernel
+/// scan found, [`ray_ends`]), on `run.backend`, media read as stored in a brick store
+/// through caches of `run.memory` bytes. On the GPU (f32 only) the transmittance kernel
 /// estimates every medium on the very index-space segments and random streams the CPU
 /// would; `auto` falls back to the CPU with a line on stderr when the GPU fails. With
 /// Embree (f32 only) the brick clusters each ray meets are found by Embree, the estimates
-/// are the CPU's. Ray `i` draws the random streams of index `first_ray + i`; the GPU's
-/// kernel numbers its rays from 0 and takes `first_ray = 0` only.
+/// are the CPU's. Ray `i` draws the random streams of index `run.first_ray + i`; the
+/// GPU's kernel numbers its rays from 0 and takes `first_ray = 0` only.
 pub fn media_transmittance(
     foundry: &Foundry,
     rays: &[RayRow],
     ends: &[f64],
     precision: Precision,
     params: &TransmittanceParams,
-    backend: Backend,
-    first_ray: u32,
+    run: MediaRun,
 ) -> crate::Result<TransmittanceRun> {
+    let MediaRun {
+        backend,
+        first_ray,
+        memory,
+    } = run;
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         ends: &[f64],
         params: &TransmittanceParams,
-        first_ray: u32,
+        (first_ray, memory): (u32, u64),
     ) -> crate::Result<TransmittanceRun> {
         timed_transmittance(|opened| {
             let scene = CpuScene::<T>::new(f)?;
-            let media = SceneMedia::new(&scene, f, params)?;
+            let media = SceneMedia::with_memory(&scene, f, params, memory)?;
             *opened = Instant::now();
             media.transmittances_to(rays, ends, first_ray)
         })
@@ -699,26 +724,38 @@ pub fn media_transmittance(
         );
     }
     match (backend, precision) {
-        (Backend::Cpu, Precision::F32) => cpu::<f32>(foundry, rays, ends, params, first_ray),
-        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, ends, params, first_ray),
+        (Backend::Cpu, Precision::F32) => {
+            cpu::<f32>(foundry, rays, ends, params, (first_ray, memory))
+        }
+        (Backend::Cpu, Precision::F64) => {
+            cpu::<f64>(foundry, rays, ends, params, (first_ray, memory))
+        }
         (Backend::Embree, Precision::F64) => {
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Embree, Precision::F32) => {
-            embree_transmittance(foundry, rays, ends, params, first_ray)
+            embree_transmittance(foundry, rays, ends, params, (first_ray, memory))
         }
         (Backend::Gpu | Backend::Auto, Precision::F64) => {
             bail!("the GPU backend traces in f32: use --precision f32 (the default)")
         }
         (Backend::Gpu, Precision::F32) => {
-            gpu_transmittance(foundry, rays, ends, params, GpuContext::new()?)
+            gpu_transmittance(foundry, rays, ends, params, memory, GpuContext::new()?)
         }
         (Backend::Auto, Precision::F32) => gpu_or_cpu(
             "computes transmittance",
-            |ctx| gpu_transmittance(foundry, rays, ends, params, ctx),
-            || cpu::<f32>(foundry, rays, ends, params, 0),
+            |ctx| gpu_transmittance(foundry, rays, ends, params, memory, ctx),
+            || cpu::<f32>(foundry, rays, ends, params, (0, memory)),
         ),
     }
+}
+
+/// A scene medium's transmittance kernel on the GPU.
+enum MediumKernel<'a> {
+    /// Bricked in memory, uploaded whole.
+    InCore(GpuVolume<'a>),
+    /// Read as stored in a brick store, streamed through a brick pool.
+    Streamed(GpuStreamedVolume<'a>),
 }
 
 /// The GPU's transmittance over each ray's `[tmin, end]`: the CPU's f32 scene clips the
@@ -727,12 +764,14 @@ pub fn media_transmittance(
 /// segment position and medium, each of all `N` rays so that ray `i` draws the random
 /// streams of index `i` (rays without such a segment go as empty rays, their estimates
 /// unused), with that placement's seed. The estimates multiply per ray in segment order,
-/// as on the CPU. Each medium's grid is uploaded once.
+/// as on the CPU. Each medium's grid is uploaded once; a medium read as stored in a brick
+/// store streams through a GPU brick pool of `memory` bytes ([`GpuStreamedVolume`]).
 fn gpu_transmittance(
     f: &Foundry,
     rays: &[RayRow],
     ends: &[f64],
     params: &TransmittanceParams,
+    memory: u64,
     ctx: GpuContext,
 ) -> crate::Result<TransmittanceRun> {
     crate::error::ensure!(
@@ -744,10 +783,19 @@ fn gpu_transmittance(
     let t0 = Instant::now();
     let cpu = CpuScene::<f32>::new(f)?;
     let media = SceneMedia::new(&cpu, f, params)?;
-    let volumes = (0..media.medium_count() as u32)
+    let mut volumes = (0..media.medium_count() as u32)
         .map(|m| {
-            let grid = media.bricked_grid(m)?;
-            GpuVolume::new(&ctx, grid).with_context(|| format!("medium {m}"))
+            let kernel: crate::Result<MediumKernel> = match media.grid(m) {
+                MediumGrid::Bricked(grid) => GpuVolume::new(&ctx, grid)
+                    .map(MediumKernel::InCore)
+                    .map_err(Into::into),
+                MediumGrid::Store(store, mips) => {
+                    GpuStreamedVolume::with_mips(&ctx, store, mips, memory)
+                        .map(MediumKernel::Streamed)
+                        .map_err(Into::into)
+                }
+            };
+            kernel.with_context(|| format!("medium {m}"))
         })
         .collect::<crate::Result<Vec<_>>>()?;
     let open_s = t0.elapsed().as_secs_f64();
@@ -786,9 +834,12 @@ fn gpu_transmittance(
                 None => hytrace_volume::Ray::new([0.0; 3], [1.0, 0.0, 0.0], 0.0, 0.0),
             })
             .collect();
-        let (estimates, t) = volumes[medium as usize]
-            .transmittance(&ctx, &batch, &media.params(medium, placement))
-            .with_context(|| format!("medium {medium}"))?;
+        let params = media.params(medium, placement);
+        let (estimates, t) = match &mut volumes[medium as usize] {
+            MediumKernel::InCore(v) => v.transmittance(&ctx, &batch, &params),
+            MediumKernel::Streamed(v) => v.transmittance(&ctx, &batch, &params),
+        }
+        .with_context(|| format!("medium {medium}"))?;
         add_times(&mut times, &t);
         for ((v, ray), e) in values.iter_mut().zip(&segments).zip(&estimates) {
             if find(ray).is_some() {
@@ -864,11 +915,11 @@ fn embree_transmittance(
     rays: &[RayRow],
     ends: &[f64],
     params: &TransmittanceParams,
-    first_ray: u32,
+    (first_ray, memory): (u32, u64),
 ) -> crate::Result<TransmittanceRun> {
     timed_transmittance(|opened| {
         let cpu = CpuScene::<f32>::new(f)?;
-        let media = SceneMedia::new(&cpu, f, params)?;
+        let media = SceneMedia::with_memory(&cpu, f, params, memory)?;
         let scene = crate::embree::EmbreeScene::new(f, &cpu)?;
         *opened = Instant::now();
         media.transmittances_with(rays, ends, first_ray, |r, end| {
@@ -900,7 +951,7 @@ fn embree_transmittance(
     _: &[RayRow],
     _: &[f64],
     _: &TransmittanceParams,
-    _: u32,
+    _: (u32, u64),
 ) -> crate::Result<TransmittanceRun> {
     bail!("{NO_EMBREE}")
 }

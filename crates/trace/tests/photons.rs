@@ -2,18 +2,23 @@
 //! (`tests/data/photons/every_process.gdml`): results independent of the number of
 //! threads, Beer-Lambert attenuation on the way to a material without RINDEX (which kills
 //! photons at its boundary, as Geant4 does), detections only on the sensor, the output
-//! files, and bad input failing cleanly without output.
+//! files, and bad input failing cleanly without output; the outputs streamed batch by batch
+//! (tiny batches) equal to the in-memory run, and `--records` step points lying where the
+//! CPU tracer puts the scene's surfaces and ending at the hits.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use hytrace_csg::V3;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
+use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::photons::output::RECORD_COLUMNS;
 use hytrace_trace::photons::properties::energy_of_wavelength;
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{
-    load_photon_scene, propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions,
+    load_photon_scene, propagate, propagate_reporting, Origin, PhotonRun, PhotonScene, RunOptions,
 };
 
 fn scene_path() -> PathBuf {
@@ -27,13 +32,16 @@ fn scene() -> PhotonScene {
 
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
-        source: Source::parse(source).unwrap(),
-        wavelength: Wavelength::Fixed(420.0),
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::Fixed(420.0),
+        },
         photons,
         first: 0,
         seed: 3,
         max_steps: 10_000,
         keep_histories: true,
+        records: 0,
     }
 }
 
@@ -336,6 +344,27 @@ fn bad_input_fails_naming_the_problem_without_output() {
             ],
             vec!["`blue`", "nanometres"],
         ),
+        (
+            vec!["--source", "point:0,0,0", "-n", "10", "--batch", "0"],
+            vec!["batch size must be at least 1"],
+        ),
+        (
+            vec![
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "10",
+                "--records",
+                "0",
+                "--records-out",
+                "r.npy",
+            ],
+            vec!["--records 0"],
+        ),
+        (
+            vec!["--source", "point:0,0,0", "-n", "10", "--records", "4"],
+            vec!["--records-out"],
+        ),
     ] {
         let mut all = vec!["photons", scene_arg];
         all.extend(&args);
@@ -372,5 +401,145 @@ fn bad_input_fails_naming_the_problem_without_output() {
             assert!(err.contains(n), "{err}");
         }
         assert!(!hits.exists());
+    }
+}
+
+/// Steps recorded by the `--records` tests, and their source.
+const K: u32 = 6;
+const SOURCE: &str = "point:0,0,-20";
+
+/// A run from [`SOURCE`] recording `K` step points a photon.
+fn recording(photons: u64) -> RunOptions {
+    RunOptions {
+        records: K,
+        ..options(SOURCE, photons)
+    }
+}
+
+/// An array's values, as `T`.
+fn values<T: bytemuck::Pod>(path: &Path, scalar: Scalar, shape: &[u64]) -> Vec<T> {
+    let a = read_array(path).unwrap();
+    assert_eq!((a.scalar, a.shape.as_slice()), (scalar, shape));
+    bytemuck::pod_collect_to_vec(&a.bytes)
+}
+
+#[test]
+fn streamed_outputs_equal_the_in_memory_run_whatever_the_batch() {
+    let n = 1500;
+    let run = propagate(&scene(), &recording(n)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (hits, hist, rec) = (
+        dir.path().join("hits.npy"),
+        dir.path().join("hist.npy"),
+        dir.path().join("rec.npy"),
+    );
+    let scene_arg = scene_path();
+    let out = hytrace(&[
+        "photons",
+        scene_arg.to_str().unwrap(),
+        "--source",
+        SOURCE,
+        "-n",
+        &n.to_string(),
+        "--seed",
+        "3",
+        "--batch",
+        "7",
+        "--records",
+        &K.to_string(),
+        "--records-out",
+        rec.to_str().unwrap(),
+        "-o",
+        hits.to_str().unwrap(),
+        &format!("--history={}", hist.display()),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let h = run.hits.len() as u64;
+    assert!(h > 50, "{h} hits");
+    let streamed: Vec<f64> = values(&hits, Scalar::F64, &[h, 16]);
+    let memory: Vec<f64> = run.hits.iter().flat_map(|r| r.0).collect();
+    assert_eq!(streamed, memory);
+    let a = std::fs::read(&hist).unwrap();
+    assert_eq!(
+        bytemuck::pod_collect_to_vec::<u8, u64>(&a[128..]),
+        run.histories
+    );
+    let points: Vec<f32> = values(&rec, Scalar::F32, &[n, u64::from(K), 12]);
+    let memory: Vec<f32> = run.records.iter().flatten().copied().collect();
+    assert_eq!(points, memory);
+}
+
+#[test]
+fn step_points_lie_on_the_boundaries_and_end_at_the_hits() {
+    let n = 3000;
+    let (f, surfaces) = load_photon_scene(&scene_path(), &GdmlOptions::default()).unwrap();
+    let scene = PhotonScene::new(&f, surfaces).unwrap();
+    let tracer = CpuScene::<f64>::new(&f).unwrap();
+    let run = propagate(&scene, &recording(n)).unwrap();
+    assert_eq!(run.records.len(), (n * u64::from(K)) as usize);
+    let label = |p: &[f32; RECORD_COLUMNS]| p[11] as u64;
+    let (mut on_boundaries, mut in_bulk) = (0, 0);
+    for (i, points) in run.records.chunks_exact(K as usize).enumerate() {
+        // The labels are the history's first K, then zero points.
+        let code = run.histories[i];
+        for (k, p) in points.iter().enumerate() {
+            assert_eq!(label(p), (code >> (4 * k)) & 0xf, "photon {i} point {k}");
+            if label(p) == 0 {
+                assert_eq!(*p, [0.0; RECORD_COLUMNS]);
+            }
+        }
+        // The source's point first.
+        assert_eq!(&points[0][..4], &[0.0, 0.0, -20.0, 0.0]);
+        for w in points.windows(2) {
+            let (a, b) = (&w[0], &w[1]);
+            if label(b) == 0 {
+                break;
+            }
+            let v = |p: &[f32; RECORD_COLUMNS], c: usize| {
+                V3::new(f64::from(p[c]), f64::from(p[c + 1]), f64::from(p[c + 2]))
+            };
+            let (pa, pb, da) = (v(a, 0), v(b, 0), v(a, 4).normalized());
+            // Straight along the direction the photon left the previous point, later.
+            let seg = pb - pa;
+            assert!(
+                seg.cross(da).length() < 1e-3 && seg.dot(da) > -1e-3,
+                "photon {i}"
+            );
+            assert!(b[3] >= a[3], "photon {i}");
+            // Boundaries (BT, BR, SR, DR, SD, SA): on a solid's surface (the least distance
+            // to the surfaces of the scene's solids, which are boxes and a sphere: exact).
+            let nearest = (0..tracer.instances() as u32)
+                .map(|inst| tracer.surface_distance(inst, [pb.x, pb.y, pb.z]))
+                .fold(f64::INFINITY, f64::min);
+            match label(b) {
+                7..=12 => {
+                    assert!(nearest < 1e-3, "photon {i}: {nearest} mm from a surface");
+                    on_boundaries += 1;
+                }
+                4 | 6 => in_bulk += 1,
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        on_boundaries > 1000 && in_bulk > 300,
+        "{on_boundaries} {in_bulk}"
+    );
+    // A detected photon's last point is its hit row (rounded to float32).
+    for hit in &run.hits {
+        let i = hit.0[13] as usize;
+        let points = &run.records[i * K as usize..(i + 1) * K as usize];
+        let Some(last) = points.iter().rev().find(|p| label(p) != 0) else {
+            panic!("photon {i} has no points")
+        };
+        if (hit.0[15] as usize) < K as usize {
+            assert_eq!(label(last), 7, "photon {i}");
+            let want: Vec<f32> = hit.0[..11].iter().map(|&c| c as f32).collect();
+            assert_eq!(&last[..11], want.as_slice(), "photon {i}");
+        }
     }
 }

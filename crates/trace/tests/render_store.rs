@@ -248,6 +248,7 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
         .with_store_resident();
     let mut whole = whole_kernel.render(&ctx, &whole_renderer, &|_| {}).unwrap();
     assert_eq!(whole.stream.unwrap().deferred, 0);
+    assert_eq!(whole.preview.as_ref().unwrap().pixels, whole.image.pixels);
     assert_eq!(streamed.cut_short, whole.cut_short);
     streamed.redo_cut_short(&renderer).unwrap();
     whole.redo_cut_short(&whole_renderer).unwrap();
@@ -255,6 +256,32 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
     assert_eq!(bits(&streamed.image), bits(&whole.image));
     let lit = streamed.image.pixels.iter().filter(|p| p[0] > 0.0).count();
     assert!(lit * 4 > streamed.image.pixels.len(), "{lit} pixels lit");
+    // The first pass, every pixel: those it finished are the image's; those that lacked a
+    // brick show its coarser level of detail (octant means), near the image but not it,
+    // and not the background the absent bricks would read without it.
+    let preview = streamed.preview.as_ref().unwrap();
+    let (mut deferred, mut dark, mut error, mut total) = (0, 0, 0.0f64, 0.0f64);
+    for (p, q) in preview.pixels.iter().zip(&streamed.image.pixels) {
+        if p == q {
+            continue;
+        }
+        deferred += 1;
+        if q[0] > 1e-3 && p[0] == 0.0 {
+            dark += 1;
+        }
+        error += (0..3).map(|c| f64::from((p[c] - q[c]).abs())).sum::<f64>();
+        total += (0..3).map(|c| f64::from(q[c])).sum::<f64>();
+    }
+    eprintln!(
+        "preview: {deferred} pixels differ, relative L1 {:.3}",
+        error / total
+    );
+    assert!(deferred > 0);
+    assert_eq!(dark, 0, "lit pixels black in the preview");
+    assert!(
+        error < 0.25 * total,
+        "the preview is far from the image: {error} of {total}"
+    );
     let bad = (cpu.pixels.iter().zip(&streamed.image.pixels))
         .filter(|(p, q)| (0..3).any(|c| (p[c] - q[c]).abs() > 1e-4))
         .count();
@@ -265,6 +292,8 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
 
     let out = tmp.path().join("gpu.npy");
     let memory = least.to_string();
+    let first = tmp.path().join("first.npy");
+    let first_arg = first.to_str().unwrap();
     let args = [
         "--backend",
         "gpu",
@@ -273,9 +302,15 @@ fn a_store_read_as_stored_streams_through_the_gpu_brick_pool() {
         "--memory",
         &memory,
         "--stats",
+        "--preview",
+        first_arg,
     ];
     let o = render(&stored, &out, &args);
     assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read_values(&first).len(), read_values(&out).len());
+    let cpu_out = tmp.path().join("cpu.npy");
+    let text = refused(&stored, &cpu_out, &["--preview", first_arg]);
+    assert!(text.contains("--backend gpu"), "{text}");
     let stats: serde_json::Value =
         serde_json::from_slice(o.stdout.split(|&b| b == b'\n').next().unwrap()).unwrap();
     assert_eq!(stats["backend"], "gpu", "{stats}");
@@ -307,5 +342,111 @@ fn gpu_renders_of_stores_refuse_what_they_cannot_stream() {
     assert!(
         err.contains("one medium read as stored") && err.contains("--backend cpu"),
         "{err}"
+    );
+}
+
+/// `scan --transmittance` reads a medium stored in a brick store through a cache of
+/// `--memory` bytes: with the least budget (bricks evicted and read again) the
+/// transmittance equals, bit for bit, that of the same store bricked in memory; a budget
+/// below it is refused naming the store, writing nothing.
+#[test]
+fn scan_transmittance_reads_a_store_through_a_memory_budget() {
+    use hytrace_trace::scan::{write_rays, RayRow};
+    let tmp = tempfile::tempdir().unwrap();
+    let (stored, in_core) = scenes(tmp.path());
+    let least = least_memory(&stored, tmp.path()).to_string();
+    let mut rng = Rng::new(5, 0, 0);
+    let rays: Vec<RayRow> = (0..4000)
+        .map(|_| {
+            // From a sphere around the cloud towards a random point of it.
+            let o = [0.0; 3].map(|_: f64| rng.next_f64() * 2.0 - 1.0);
+            let n = (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt().max(1e-3);
+            let origin = o.map(|c| 400.0 * c / n);
+            let target = [0.0; 3].map(|_: f64| (rng.next_f64() * 2.0 - 1.0) * 90.0);
+            let d: [f64; 3] = std::array::from_fn(|k| target[k] - origin[k]);
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            RayRow {
+                origin,
+                direction: d.map(|c| c / l),
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            }
+        })
+        .collect();
+    let rays_path = tmp.path().join("rays.npy");
+    write_rays(&rays_path, &rays).unwrap();
+    let scan = |scene: &Path, name: &str, memory: &str| {
+        let hits = tmp.path().join(format!("{name}-hits.npy"));
+        let t = tmp.path().join(format!("{name}-t.npy"));
+        let args = [
+            "scan",
+            scene.to_str().unwrap(),
+            "--rays",
+            rays_path.to_str().unwrap(),
+            "--out",
+            hits.to_str().unwrap(),
+            "--transmittance",
+            t.to_str().unwrap(),
+            "--memory",
+            memory,
+        ];
+        (hytrace(&args, &[]), t)
+    };
+    let (o, lazy) = scan(&stored, "stored", &least);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (o, whole) = scan(&in_core, "in-core", "1G");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (lazy, whole) = (read_values(&lazy), read_values(&whole));
+    assert!(lazy.iter().any(|&v| v < 0.5), "no ray crosses the cloud");
+    assert_eq!(
+        lazy.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        whole.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+    let (o, t) = scan(&stored, "refused", "1");
+    assert!(!o.status.success() && !t.exists());
+    // On the GPU the store streams through a brick pool of that budget (at least what the
+    // pool needs): the exact estimator's answers agree with the CPU's ray by ray.
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let store = BrickStore::open(&tmp.path().join("cloud.bricks"), 1 << 30).unwrap();
+    let gpu_least = match GpuStreamedVolume::new(&ctx, &store, 1) {
+        Err(StreamError::Budget { least, .. }) => least,
+        other => panic!("a 1-byte budget: {:?}", other.err()),
+    };
+    let budget = least.parse::<u64>().unwrap().max(gpu_least).to_string();
+    let exact = |backend: &str, name: &str| {
+        let t = tmp.path().join(format!("{name}-exact.npy"));
+        let hits = tmp.path().join(format!("{name}-exact-hits.npy"));
+        let args = [
+            "scan",
+            stored.to_str().unwrap(),
+            "--rays",
+            rays_path.to_str().unwrap(),
+            "--out",
+            hits.to_str().unwrap(),
+            "--transmittance",
+            t.to_str().unwrap(),
+            "--estimator",
+            "exact",
+            "--memory",
+            &budget,
+            "--backend",
+            backend,
+            "--stats",
+        ];
+        let o = hytrace(&args, &[]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        read_values(&t)
+    };
+    let (cpu, gpu) = (exact("cpu", "cpu"), exact("gpu", "gpu"));
+    let worst = (cpu.iter().zip(&gpu))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-4, "GPU and CPU differ by up to {worst}");
+    assert!(
+        stderr(&o).contains("cloud.bricks") && stderr(&o).contains("too small"),
+        "{}",
+        stderr(&o)
     );
 }

@@ -539,7 +539,7 @@ fn brick_store_misuse_fails_cleanly_without_output() {
             "-o",
             &out,
         ],
-        "describe raw files (.raw) and pipes only",
+        "raw files (.raw) and pipes only",
     );
     fails(
         &[

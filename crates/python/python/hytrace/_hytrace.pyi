@@ -72,9 +72,10 @@ class Scene:
     @overload
     def photons(
         self,
-        source: str,
-        photons: int,
+        source: Optional[str] = None,
+        photons: Optional[int] = None,
         *,
+        gensteps: Optional[npt.ArrayLike] = None,
         wavelength: float | str = 420.0,
         seed: int = 0,
         max_steps: int = 10000,
@@ -84,9 +85,10 @@ class Scene:
     @overload
     def photons(
         self,
-        source: str,
-        photons: int,
+        source: Optional[str] = None,
+        photons: Optional[int] = None,
         *,
+        gensteps: Optional[npt.ArrayLike] = None,
         wavelength: float | str = 420.0,
         seed: int = 0,
         max_steps: int = 10000,

@@ -1,16 +1,22 @@
 //! `hytrace photons`: options, outputs and the history table.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
+use anyhow::bail;
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{add_gpu_stats, warn_redone};
 use hytrace_trace::outputs::{check_destinations, OutputSet};
-use hytrace_trace::photons::output::{history_table, write_histories, write_hits};
-use hytrace_trace::photons::run::{prepare, propagate_in};
+use hytrace_trace::photons::backend::{propagate_on, BackendRun, PhotonBackend};
+use hytrace_trace::photons::gensteps::GenstepFile;
+use hytrace_trace::photons::output::{history_table, RunFiles};
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, Origin, RunOptions};
 use serde_json::json;
+
+use super::choice::choice;
 
 /// Options of `hytrace photons`.
 #[derive(Args, Debug)]
@@ -24,16 +30,26 @@ pub struct PhotonsArgs {
     /// / `...:out` (from the sphere's surface along its inward or outward normal); mm.
     /// Photons start at time 0 with a random linear polarization perpendicular to their
     /// direction.
-    #[arg(long)]
-    pub source: String,
+    #[arg(
+        long,
+        required_unless_present = "gensteps",
+        conflicts_with = "gensteps"
+    )]
+    pub source: Option<String>,
+    /// Photons from gensteps instead of a source: a float64 .npy of shape (G, 14), one row
+    /// a Cherenkov (kind 1) or scintillation (kind 2) step of a charged particle, emitted as
+    /// Geant4's G4Cerenkov and G4Scintillation emit them (layout in docs/photons.md).
+    #[arg(long, value_name = "G.npy")]
+    pub gensteps: Option<PathBuf>,
     /// Wavelength of every photon, nm (photon energy h c / lambda, h c = 1239.84198 eV nm),
     /// or MATERIAL:PROPERTY: drawn for each photon from that intensity table (per photon
-    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1.
-    #[arg(long, default_value = "420")]
+    /// energy) of a material of the scene, e.g. LAr:SCINTILLATIONCOMPONENT1 (torch sources
+    /// only).
+    #[arg(long, default_value = "420", conflicts_with = "gensteps")]
     pub wavelength: String,
-    /// Number of photons.
-    #[arg(short = 'n', long)]
-    pub photons: u64,
+    /// Number of photons (with --gensteps: by default all from --first on).
+    #[arg(short = 'n', long, required_unless_present = "gensteps")]
+    pub photons: Option<u64>,
     /// Detected photons, float64 (H, 16): x y z (mm) t (ns) dx dy dz wavelength (nm)
     /// px py pz (polarization) instance (whose surface detected it) copy (its copy number)
     /// photon (index) mask (history flags, Opticks' bits) steps; written atomically.
@@ -52,74 +68,137 @@ pub struct PhotonsArgs {
     /// history there, uint64 (N,), 4 bits a label, first label lowest.
     #[arg(long, num_args = 0..=1, require_equals = true, value_name = "PATH")]
     pub history: Option<Option<PathBuf>>,
+    /// Record the first K step points of every photon (its own lineage, through
+    /// re-emissions) into --records-out: float32 (N, K, 12), x y z t dx dy dz wavelength
+    /// px py pz label (direction and polarization as it leaves the point, label code as in
+    /// the history; zeros past the photon's end).
+    #[arg(long, value_name = "K", requires = "records_out")]
+    pub records: Option<u32>,
+    /// Where --records writes the step points.
+    #[arg(long, value_name = "PATH", requires = "records")]
+    pub records_out: Option<PathBuf>,
+    /// Photons propagated per batch (default: 65536 on the CPU; on the GPU as many as fill
+    /// it, up to 1048576): each batch's hits, histories and records are written out as it
+    /// finishes, so memory is bounded by the batch; results do not depend on it.
+    #[arg(long)]
+    pub batch: Option<u64>,
     /// Rows of the history table.
     #[arg(long, default_value_t = 20)]
     pub top: usize,
     /// Steps after which a photon is stopped (history label TR).
     #[arg(long, default_value_t = 10_000)]
     pub max_steps: u32,
+    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32: torch
+    /// sources at a fixed wavelength, absorption, Rayleigh scattering, Fresnel boundaries,
+    /// polished surfaces; other physics is refused, naming it) or auto (the GPU when an
+    /// adapter opens and the kernel models the scene, else the CPU).
+    #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
+    pub backend: PhotonBackend,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
-    /// propagate_s, photons_per_s, threads, backend).
+    /// propagate_s, photons_per_s, threads, backend; on the GPU also the adapter and its
+    /// times).
     #[arg(long)]
     pub stats: bool,
 }
 
 /// Runs `hytrace photons`.
 pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
-    let source = Source::parse(&args.source)?;
-    // Both outputs are checked before the work and written together after it.
+    let origin = match (&args.gensteps, &args.source) {
+        (Some(path), _) => Origin::Gensteps(Arc::new(GenstepFile::read(path)?)),
+        (None, Some(source)) => Origin::Torch {
+            source: Source::parse(source)?,
+            wavelength: Wavelength::parse(&args.wavelength)?,
+        },
+        (None, None) => bail!("give --source or --gensteps"),
+    };
+    // The outputs are checked before the work, streamed to temporary files during it and
+    // moved into place together after it.
     let history_path = args.history.as_ref().and_then(|h| h.as_deref());
     let mut destinations = vec![("--out", args.out.as_path())];
     destinations.extend(history_path.map(|p| ("--history", p)));
+    destinations.extend(args.records_out.as_deref().map(|p| ("--records-out", p)));
     check_destinations(&destinations)?;
+    if args.records == Some(0) {
+        bail!("--records 0: record at least one step point");
+    }
     let t0 = Instant::now();
     let (f, surfaces) = load_photon_scene(&args.scene, options)?;
     let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let scene = prepare(&f, surfaces, &args.scene)?;
-    let build_s = t1.elapsed().as_secs_f64();
-    let bar = hytrace_trace::progress::bar(args.photons, "propagating", "photons");
-    let run = propagate_in(
-        &scene,
+    let photons = match (args.photons, &origin) {
+        (Some(n), _) => n,
+        (None, Origin::Gensteps(file)) => {
+            let total = file.photons(&f.optics.materials)?;
+            if total <= args.first {
+                bail!(
+                    "{}: the gensteps emit {total} photons, none from --first {}",
+                    file.source,
+                    args.first
+                );
+            }
+            total - args.first
+        }
+        (None, Origin::Torch { .. }) => bail!("-n is needed with --source"),
+    };
+    let mut written = OutputSet::new();
+    let hits_tmp = written.reserve(&args.out)?;
+    let history_tmp = history_path.map(|p| written.reserve(p)).transpose()?;
+    let records_tmp = match (&args.records_out, args.records) {
+        (Some(p), Some(k)) => Some((written.reserve(p)?, k)),
+        _ => None,
+    };
+    let mut files = RunFiles::create(
+        &hits_tmp,
+        history_tmp.as_deref(),
+        records_tmp.as_ref().map(|(p, k)| (p.as_path(), *k)),
+    )?;
+    let bar = hytrace_trace::progress::bar(photons, "propagating", "photons");
+    let BackendRun { run, build_s, gpu } = propagate_on(
+        &f,
+        surfaces,
         &args.scene,
         &RunOptions {
-            source,
-            wavelength: Wavelength::parse(&args.wavelength)?,
-            photons: args.photons,
+            origin,
+            photons,
             first: args.first,
             seed: args.seed,
             max_steps: args.max_steps,
-            keep_histories: matches!(args.history, Some(Some(_))),
+            keep_histories: history_tmp.is_some(),
+            records: args.records.unwrap_or(0),
         },
+        args.backend,
+        args.batch,
+        &mut |batch| files.append(&batch),
         &|done| bar.set_position(done),
     )?;
     bar.finish_and_clear();
-    let mut written = OutputSet::new();
-    written.stage(&args.out, |p| Ok(write_hits(p, &run.hits)?))?;
-    if let Some(path) = history_path {
-        written.stage(path, |p| Ok(write_histories(p, &run.histories)?))?;
+    if let Some(g) = &gpu {
+        warn_redone(&g.adapter, &g.times, photons as usize, "photons");
     }
+    files.finish()?;
     written.commit()?;
     if args.history.is_some() {
         print!("{}", history_table(&run.counts, args.top));
     }
     if args.stats {
-        let line = json!({
-            "backend": "cpu",
-            "photons": args.photons,
-            "hits": run.hits.len(),
+        let mut line = json!({
+            "backend": if gpu.is_some() { "gpu" } else { "cpu" },
+            "photons": photons,
+            "hits": run.hits,
             "load_s": load_s,
             "build_s": build_s,
             "propagate_s": run.propagate_s,
-            "photons_per_s": if run.propagate_s > 0.0 { args.photons as f64 / run.propagate_s } else { 0.0 },
+            "photons_per_s": if run.propagate_s > 0.0 { photons as f64 / run.propagate_s } else { 0.0 },
             "threads": rayon::current_num_threads(),
         });
+        if let Some(g) = &gpu {
+            add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        }
         println!("{line}");
     } else {
         eprintln!(
             "{} photons, {} detected, written to {}",
-            args.photons,
-            run.hits.len(),
+            photons,
+            run.hits,
             args.out.display()
         );
     }

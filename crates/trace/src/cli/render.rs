@@ -39,6 +39,11 @@ pub struct RenderArgs {
     pub gpu_texels: TexelStore,
     #[command(flatten)]
     pub settings: RenderSettingsArgs,
+    /// Also write the first pass of a GPU render that streams a brick store (what a viewer
+    /// shows while bricks arrive: pixels that lacked a brick at its coarser level of
+    /// detail), same formats as --out.
+    #[arg(long, value_name = "IMAGE")]
+    pub preview: Option<PathBuf>,
     /// Print which effects and kernels the scene uses, and render nothing.
     #[arg(long)]
     pub explain: bool,
@@ -61,6 +66,21 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "{}: the image must be a {IMAGE_EXTENSIONS} file",
             args.out.display()
         );
+    }
+    if let Some(p) = &args.preview {
+        let ext = p.extension().and_then(|e| e.to_str());
+        if !matches!(ext, Some("png" | "npy" | "exr")) {
+            bail!(
+                "--preview {}: the image must be a {IMAGE_EXTENSIONS} file",
+                p.display()
+            );
+        }
+        if args.backend == RenderBackend::Cpu {
+            bail!(
+                "--preview shows a GPU render's first pass, while bricks of a brick store \
+                 are missing; the CPU reads every brick when it needs it: give --backend gpu"
+            );
+        }
     }
     let t0 = Instant::now();
     let (f, mut spec) = load_render_scene(args.scene.as_deref(), options)?;
@@ -92,6 +112,16 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
     } = render(&f, &spec, args.backend, args.gpu_texels, &progress)?;
     bar.finish_and_clear();
     write_image(&image, &args.out, args.exr)?;
+    if let Some(path) = &args.preview {
+        match gpu_run.as_ref().and_then(|g| g.preview.as_ref()) {
+            Some(first) => write_image(first, path, args.exr)?,
+            None => eprintln!(
+                "--preview {}: not written: this render streamed no brick store on the GPU, \
+                 so it had no pass with bricks missing",
+                path.display()
+            ),
+        }
+    }
     if let Some(legend) = &legend {
         let path = legend_path(&args.out, "json");
         let text = serde_json::to_string_pretty(&legend.to_json())?;

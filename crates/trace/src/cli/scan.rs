@@ -50,6 +50,10 @@ pub struct ScanArgs {
     pub transmittance: Option<PathBuf>,
     #[command(flatten)]
     pub estimate: EstimatorArgs,
+    /// With --transmittance: bytes each medium read as stored in a brick store may hold
+    /// resident (its tables and a cache of bricks read on demand), e.g. 64M.
+    #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
+    pub memory: u64,
 }
 
 /// Runs `hytrace scan`.
@@ -66,6 +70,7 @@ pub fn run(args: ScanArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         backend,
         transmittance,
         estimate,
+        memory,
     } = args;
     // Every output is checked before the work and written together after it.
     let generated_rays = rays.as_deref().filter(|_| sweep_kind.is_some());
@@ -106,8 +111,11 @@ pub fn run(args: ScanArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             &scan::ray_ends(&result, &ray_rows),
             precision,
             &volume::EstimatorOptions::from(estimate).args().params(),
-            media_backend,
-            0,
+            scan::MediaRun {
+                backend: media_backend,
+                first_ray: 0,
+                memory,
+            },
         )?),
         None => None,
     };

@@ -22,8 +22,8 @@ use crate::error::Context;
 use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
-    BrickedGrid, CacheStats, GridMap, IndexRay, IndexTransmittance, TexelFormat,
-    TransmittanceParams, DEFAULT_STORE_BUDGET,
+    CacheStats, GridMap, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams,
+    DEFAULT_STORE_BUDGET,
 };
 
 use rayon::prelude::*;
@@ -334,17 +334,6 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     /// identity map: its world space is its index space.
     pub fn grid(&self, medium: u32) -> &MediumGrid {
         &self.grids[medium as usize].grid
-    }
-
-    /// The bricked grid of `medium` for a GPU kernel; a medium read as stored from a brick
-    /// store is an error (the GPU kernels read media bricked in memory).
-    pub fn bricked_grid(&self, medium: u32) -> crate::Result<&BrickedGrid> {
-        self.grid(medium).bricked().with_context(|| {
-            format!(
-                "medium {medium} is a brick store read as stored, which GPU kernels do not read \
-                 yet: use the CPU backend, or give the medium a texel format to brick it in memory"
-            )
-        })
     }
 
     /// What the caches of the media read as stored did, summed over them (`None` when no

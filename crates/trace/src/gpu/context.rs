@@ -187,6 +187,21 @@ impl GpuContext {
             })
     }
 
+    /// The pipeline layout of a kernel with the bind group layouts `groups` (group 0 first;
+    /// `None` for a group it does not use).
+    pub fn pipeline_layout(
+        &self,
+        label: &str,
+        groups: &[Option<&wgpu::BindGroupLayout>],
+    ) -> wgpu::PipelineLayout {
+        self.device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: groups,
+                immediate_size: 0,
+            })
+    }
+
     /// A bind group layout of read-only storage buffers at `bindings`.
     pub fn read_only_layout(&self, label: &str, bindings: &[u32]) -> wgpu::BindGroupLayout {
         self.device

@@ -6,6 +6,8 @@ pub mod compose;
 mod context;
 pub mod nanovdb;
 pub mod oneshot;
+pub mod photon_records;
+mod photons;
 pub mod probe;
 pub mod records;
 mod render;
@@ -18,6 +20,7 @@ mod tracer;
 mod transmittance;
 
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
+pub use photons::{GpuPhotonRun, GpuPhotons};
 pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
 pub use streamed::GpuStreamedVolume;

@@ -453,9 +453,10 @@ pub const VOLUME_STATUS_LOOPS_CUT: u32 = 4;
 /// [`TransmittanceRecord::status`] bit of a streamed pass: the ray read a brick that is not
 /// in the brick pool; its answer is discarded and it runs again once the brick is uploaded.
 pub const VOLUME_STATUS_MISSING: u32 = 8;
-/// Page-table (indirection) entry of a brick store's kept brick that is not in the GPU's
-/// brick pool (`crate::gpu::brick_pool`): a lookup there requests it.
-pub const VOLUME_ABSENT_BRICK: u32 = u32::MAX - 1;
+/// Bit of a page-table (indirection) entry marking a brick store's kept brick that is not
+/// in the GPU's brick pool (`crate::gpu::brick_pool`); the other bits are the brick's record
+/// in the store, whose coarser level of detail a lookup reads while it requests the brick.
+pub const VOLUME_ABSENT_BRICK: u32 = 1 << 31;
 /// Words of the stream state's header (`shaders/volume/stream.wgsl`), before the requests.
 pub const STREAM_HEADER_WORDS: u32 = 8;
 /// Stream state header word: requests recorded in this pass (may exceed the capacity).
@@ -511,6 +512,7 @@ pub fn generate() -> String {
     push_struct::<RenderItem>(&mut out);
     push_struct::<RenderInstance>(&mut out);
     push_struct::<RenderMedium>(&mut out);
+    super::photon_records::push_photon_wgsl(&mut out);
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          const STATUS_LOOPS_CUT: u32 = {STATUS_LOOPS_CUT}u;\n\
@@ -591,5 +593,6 @@ pub fn generate() -> String {
 pub fn gpu_records() -> Vec<RecordEntry> {
     let mut all = gpu_layout::records();
     all.extend(trace_records());
+    all.extend(super::photon_records::photon_records());
     all
 }

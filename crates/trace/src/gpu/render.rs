@@ -50,6 +50,10 @@ pub struct GpuImage {
     pub cut_short: Vec<u32>,
     /// What streaming a brick store did, for a render that streamed one.
     pub stream: Option<StreamStats>,
+    /// A streamed render's first pass, every pixel: the pixels it deferred show the
+    /// coarser level of detail of the bricks they lacked (what a viewer shows while the
+    /// bricks arrive; the image converges to [`GpuImage::image`]).
+    pub preview: Option<Image>,
 }
 
 impl GpuImage {
@@ -460,7 +464,7 @@ impl GpuRenderer {
         };
         let medium_bindings = match (&medium, &streamed) {
             (Some((v, ..)), _) => v.binding_count(),
-            (None, Some(_)) => 6,
+            (None, Some(_)) => 7,
             (None, None) => 0,
         };
         let render_bindings = RENDER_BINDINGS + u32::from(streamed.is_some());
@@ -620,6 +624,7 @@ impl GpuRenderer {
             times,
             cut_short,
             stream: None,
+            preview: None,
         })
     }
 
@@ -664,6 +669,7 @@ impl GpuRenderer {
         let mut times = GpuTimes::default();
         let mut pending: Vec<u32> = (0..total as u32).collect();
         let mut size = PassSize::new(total);
+        let mut preview = None;
         let batch = self.batch_pixels(ctx, inputs) as usize;
         while !pending.is_empty() {
             let pass = pool.begin_pass(ctx)?;
@@ -688,6 +694,8 @@ impl GpuRenderer {
                 for (&p, texel) in chunk.iter().zip(texels) {
                     if texel[3] >= 2.0 {
                         missing.push(p);
+                        // The first pass's value, shown until the pixel is rendered again.
+                        pixels[p as usize] = [texel[0], texel[1], texel[2]];
                         continue;
                     }
                     if texel[3] != 0.0 {
@@ -698,6 +706,14 @@ impl GpuRenderer {
             }
             let finished = run.len() - missing.len();
             pool.defer(missing.len());
+            if pass == 1 {
+                // The first pass runs every pixel.
+                preview = Some(Image {
+                    width,
+                    height,
+                    pixels: pixels.clone(),
+                });
+            }
             let placed = pool.end_pass(ctx, pass)?;
             let rest = pending[run.len()..].to_vec();
             pending = missing;
@@ -723,6 +739,7 @@ impl GpuRenderer {
             times,
             cut_short,
             stream: Some(pool.stats()),
+            preview,
         })
     }
 

@@ -12,7 +12,7 @@
 //! The CPU twin is [`hytrace_volume::transmittance_batch`] on the [`BrickStore`] itself
 //! (read through its cache): `tests/gpu_stream.rs` compares them ray by ray.
 
-use hytrace_volume::{BrickStore, Estimate, Ray, TransmittanceParams, VoxelGrid};
+use hytrace_volume::{BrickStore, Estimate, RangeMips, Ray, TransmittanceParams, VoxelGrid};
 
 use super::context::{GpuContext, GpuError};
 use super::records::{RayRecord, TransmittanceRecord, VolumeParams, VOLUME_STATUS_MISSING};
@@ -28,6 +28,8 @@ const KERNEL: &str = "kernels/transmittance";
 /// A brick store on the GPU through a brick pool, with the streamed transmittance kernel.
 pub struct GpuStreamedVolume<'a> {
     pool: StorePool<'a>,
+    /// The range mips walks take (the store's own, or those of its data).
+    mips: &'a RangeMips,
     /// Group 0: the parameters and the pool's arrays and state; group 1: rays, results,
     /// the rays' stream indices.
     kernel: TransmittanceKernel,
@@ -43,11 +45,23 @@ impl<'a> GpuStreamedVolume<'a> {
         store: &'a BrickStore,
         budget: u64,
     ) -> Result<GpuStreamedVolume<'a>, StreamError> {
-        let pool = StorePool::new(ctx, store, store.mips(), budget)?;
+        Self::with_mips(ctx, store, store.mips(), budget)
+    }
+
+    /// [`GpuStreamedVolume::new`] with walks bounded by `mips` (e.g.
+    /// [`BrickStore::data_mips`], which scene media take, so that the GPU walks take the
+    /// CPU twin's steps).
+    pub fn with_mips(
+        ctx: &GpuContext,
+        store: &'a BrickStore,
+        mips: &'a RangeMips,
+        budget: u64,
+    ) -> Result<GpuStreamedVolume<'a>, StreamError> {
+        let pool = StorePool::new(ctx, store, mips, budget)?;
         let per_stage = ctx.limits.max_storage_buffers_per_shader_stage;
-        if per_stage < 9 {
+        if per_stage < 10 {
             return Err(GpuError::SceneTooBig(format!(
-                "the streamed transmittance kernel binds 9 storage buffers, the device allows {per_stage}"
+                "the streamed transmittance kernel binds 10 storage buffers, the device allows {per_stage}"
             ))
             .into());
         }
@@ -59,7 +73,7 @@ impl<'a> GpuStreamedVolume<'a> {
         layout.extend(StorePool::layout_entries());
         let kernel =
             TransmittanceKernel::new(ctx, "streamed transmittance", &source, &layout, 3, &[])?;
-        Ok(GpuStreamedVolume { pool, kernel })
+        Ok(GpuStreamedVolume { pool, mips, kernel })
     }
 
     /// What the streaming did so far.
@@ -94,7 +108,7 @@ impl<'a> GpuStreamedVolume<'a> {
         params: &TransmittanceParams,
     ) -> crate::Result<(Vec<Estimate>, GpuTimes)> {
         let store: &dyn VoxelGrid = self.pool.store();
-        let mips = self.pool.store().mips();
+        let mips = self.mips;
         let grid = self.pool.grid();
         let records = kernel_rays(store, mips, grid, rays, params)?;
         let base = kernel_params(&grid.base, params);

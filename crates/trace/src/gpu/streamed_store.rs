@@ -3,8 +3,8 @@
 //! transmittance of [`super::streamed`] and the streamed render of [`super::render`]).
 //!
 //! The pool holds the store's 16-bit bricks in a storage buffer of slots behind a page
-//! table (the kernel's indirection: each brick's pool slot, [`VOLUME_ABSENT_BRICK`] or
-//! none), and a request buffer the kernel fills with the bricks it needs and lacks
+//! table (the kernel's indirection: each brick's pool slot, [`VOLUME_ABSENT_BRICK`] with
+//! its record, whose coarser level of detail the kernel reads meanwhile, or none), and a request buffer the kernel fills with the bricks it needs and lacks
 //! (`shaders/volume/stream.wgsl`). Kernels run in passes: before one, [`StorePool::begin_pass`]
 //! clears the requests; after it, [`StorePool::end_pass`] reads them, places the bricks in
 //! the pool ([`BrickPool`]: doubling up to the budget, then evicting the least recently
@@ -35,13 +35,16 @@ const SLOT_BYTES: u64 = BRICK_BYTES as u64 + size_of::<BrickEntry>() as u64 + 4;
 /// The state buffer's binding in group 0 (`shaders/volume/stream.wgsl`).
 const STATE_BINDING: u32 = 20;
 
+/// The levels of detail's binding in group 0 (`shaders/volume/stream.wgsl`).
+const LODS_BINDING: u32 = 21;
+
 /// Why a streamed volume could not be set up or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum StreamError {
     /// The budget does not hold the fixed arrays and one superchunk's bricks.
     #[error(
         "a GPU memory budget of {budget} bytes is too small for this brick store: its range \
-         mips, page table and request buffer take {fixed} bytes and the brick pool needs room \
+         mips, page table, levels of detail and request buffer take {fixed} bytes and the brick pool needs room \
          for {least_bricks} bricks ({SLOT_BYTES} bytes each); give at least {least} bytes"
     )]
     Budget {
@@ -153,6 +156,8 @@ pub(super) struct StorePool<'a> {
     brick_table: wgpu::Buffer,
     atlas: wgpu::Buffer,
     state: wgpu::Buffer,
+    /// Every kept brick's coarser levels of detail (by record).
+    lods: wgpu::Buffer,
     /// Words of the state buffer: header, requests, flags, stamps.
     state_words: u64,
     request_capacity: u32,
@@ -185,7 +190,11 @@ impl<'a> StorePool<'a> {
         let least_bricks = kept.min(SUPERCHUNK_BRICKS as u64).max(1);
         // Requests a pass may record: as many as the pool may place, and a few superchunks.
         let per_slot_requests = 4;
+        let lods: Vec<f32> = (0..kept as u32)
+            .flat_map(|r| store.lod(r).iter().copied())
+            .collect();
         let fixed = (ranges.len() * 8) as u64
+            + (lods.len() * 4) as u64
             + page_count * 4
             + (u64::from(STREAM_HEADER_WORDS) + flag_words) * 4
             + size_of::<VolumeParams>() as u64;
@@ -203,6 +212,13 @@ impl<'a> StorePool<'a> {
             .min(kept.max(1))
             .min(limit / BRICK_BYTES as u64)
             .min(u64::from(VOLUME_ABSENT_BRICK - 1)) as u32;
+        // An absent page holds its record beside the flag bit.
+        if kept >= u64::from(VOLUME_ABSENT_BRICK - 1) {
+            return Err(GpuError::SceneTooBig(format!(
+                "the store keeps {kept} bricks; the GPU's page table holds fewer than 2^31"
+            ))
+            .into());
+        }
         let request_capacity = max_slots;
         let pool = BrickPool::new(INITIAL_SLOTS, max_slots);
         let state_words = u64::from(STREAM_HEADER_WORDS)
@@ -210,7 +226,7 @@ impl<'a> StorePool<'a> {
             + flag_words
             + u64::from(max_slots);
         let pages: Vec<u32> = (records.iter())
-            .map(|r| r.map_or(NO_BRICK, |_| VOLUME_ABSENT_BRICK))
+            .map(|r| r.map_or(NO_BRICK, |record| VOLUME_ABSENT_BRICK | record))
             .collect();
         let q = meta.quantization;
         // Slot `k`'s entry decodes slot `k`'s texels with the store's quantization.
@@ -246,9 +262,19 @@ impl<'a> StorePool<'a> {
                 true,
             );
             let state = pool_buffer(ctx, "stream state", state_words * 4, true);
-            (ranges_buffer, page_table, brick_table, atlas, state)
+            let lods_buffer = pool_buffer(ctx, "levels of detail", (lods.len() * 4) as u64, false);
+            ctx.queue
+                .write_buffer(&lods_buffer, 0, bytemuck::cast_slice(&lods));
+            (
+                ranges_buffer,
+                page_table,
+                brick_table,
+                atlas,
+                state,
+                lods_buffer,
+            )
         })?;
-        let (ranges, page_table, brick_table, atlas, state) = buffers;
+        let (ranges, page_table, brick_table, atlas, state, lods) = buffers;
         let mut pool = StorePool {
             store,
             records,
@@ -259,6 +285,7 @@ impl<'a> StorePool<'a> {
             brick_table,
             atlas,
             state,
+            lods,
             state_words,
             request_capacity,
             flag_words: flag_words as u32,
@@ -282,23 +309,25 @@ impl<'a> StorePool<'a> {
         &self.grid
     }
 
-    /// The layout entries of group 0 but the parameters: the arrays (read-only) and the
-    /// state (read-write).
+    /// The layout entries of group 0 but the parameters: the arrays and levels of detail
+    /// (read-only) and the state (read-write).
     pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         let mut layout: Vec<_> = (1..5).map(|b| storage_layout_entry(b, true)).collect();
         layout.push(storage_layout_entry(STATE_BINDING, false));
+        layout.push(storage_layout_entry(LODS_BINDING, true));
         layout
     }
 
-    /// The bind group entries of the arrays and the state (their buffers change as the
-    /// pool grows: bind them again each pass).
-    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
+    /// The bind group entries of the arrays, the state and the levels of detail (the pool's
+    /// buffer changes as it grows: bind them again each pass).
+    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
         [
             (1, &self.ranges),
             (2, &self.page_table),
             (3, &self.brick_table),
             (4, &self.atlas),
             (STATE_BINDING, &self.state),
+            (LODS_BINDING, &self.lods),
         ]
         .map(|(binding, b)| wgpu::BindGroupEntry {
             binding,
@@ -319,7 +348,7 @@ impl<'a> StorePool<'a> {
     /// The bricks in the pool (page-table indices: x fastest over the store's bricks).
     pub fn resident_bricks(&self) -> Vec<u32> {
         (self.pages.iter().enumerate())
-            .filter(|(_, &e)| e != NO_BRICK && e != VOLUME_ABSENT_BRICK)
+            .filter(|(_, &e)| e != NO_BRICK && e & VOLUME_ABSENT_BRICK == 0)
             .map(|(p, _)| p as u32)
             .collect()
     }
@@ -398,7 +427,8 @@ impl<'a> StorePool<'a> {
                 .write_buffer(&self.atlas, u64::from(p.slot) * slot_bytes, bytes);
             self.pages[p.brick as usize] = p.slot;
             if let Some(old) = p.evicted {
-                self.pages[old as usize] = VOLUME_ABSENT_BRICK;
+                let record = records[old as usize].expect("only kept bricks are resident");
+                self.pages[old as usize] = VOLUME_ABSENT_BRICK | record;
                 self.stats.bricks_evicted += 1;
             }
         }

@@ -180,14 +180,9 @@ impl GpuTracer {
         ctx.checked("building the scan kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let ray_layout = ctx.storage_layout("scan rays", RAY_BINDINGS, &[2, 3]);
+            // Group 0 (the Foundry's own arrays) is not used by the scan.
             let pipeline_layout =
-                ctx.device
-                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some("scan"),
-                        // Group 0 (the Foundry's own arrays) is not used by the scan.
-                        bind_group_layouts: &[None, Some(&upload.layout), Some(&ray_layout)],
-                        immediate_size: 0,
-                    });
+                ctx.pipeline_layout("scan", &[None, Some(&upload.layout), Some(&ray_layout)]);
             let entry =
                 |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name, &constants);
             GpuTracer {

@@ -38,6 +38,20 @@ pub fn rotate_uz(v: V, axis: V) -> V {
     }
 }
 
+/// A direction uniform over the sphere and a polarization uniform among those
+/// perpendicular to it (Geant4's draw for scintillation and re-emitted photons).
+pub fn isotropic(rng: &mut Rng) -> (V, V) {
+    let cos = 1.0 - 2.0 * rng.next_f64();
+    let sin = ((1.0 - cos) * (1.0 + cos)).sqrt();
+    let phi = std::f64::consts::TAU * rng.next_f64();
+    let dir = V::new(sin * phi.cos(), sin * phi.sin(), cos);
+    let a = std::f64::consts::TAU * rng.next_f64();
+    (
+        dir,
+        rotate_uz(V::new(a.cos(), a.sin(), 0.0), dir).normalized(),
+    )
+}
+
 /// Rayleigh scattering of a linearly polarized photon: new direction and polarization,
 /// drawn as Geant4 draws them. A direction uniform over the sphere and one of the two
 /// polarizations perpendicular to it, in the plane of the new direction and the old

@@ -1,5 +1,6 @@
 //! Optical photon propagation on the CPU, with Geant4's optical physics (`hytrace
-//! photons`): torch sources ([`sources`]), material and surface property tables
+//! photons`): torch sources ([`sources`]), gensteps ([`gensteps`]) emitting Cherenkov
+//! ([`cherenkov`]) and scintillation ([`scintillation`]) light, material and surface property tables
 //! ([`properties`]), Fresnel reflection and refraction ([`boundary`]), bulk absorption and
 //! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]) and their rough and painted
 //! models ([`surface_models`]), the propagation loop
@@ -10,15 +11,21 @@
 //! See `docs/photons.md` for the physics, the output layouts and the comparison with
 //! Geant4.
 
+pub mod backend;
 pub mod boundary;
 pub mod bulk;
+pub mod cherenkov;
+pub mod gensteps;
+pub mod gpu_tables;
 pub mod output;
 pub mod propagate;
 pub mod properties;
 pub mod run;
+pub mod scintillation;
 pub mod sources;
 pub mod surface_models;
 pub mod surfaces;
+pub mod tracer;
 
 use std::path::Path;
 
@@ -29,7 +36,10 @@ use hytrace_foundry::Foundry;
 
 use crate::scene::{load_gdml_scene_with_surfaces, load_scene, VolumeSurfaces};
 
-pub use propagate::{propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions};
+pub use propagate::{
+    propagate, propagate_batches, propagate_reporting, Batch, Origin, PhotonRun, PhotonScene,
+    RunOptions, RunSummary,
+};
 
 /// Vectors of the propagator: f64 throughout.
 pub type V = V3<f64>;

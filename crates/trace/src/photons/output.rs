@@ -21,13 +21,11 @@
 
 use std::collections::HashMap;
 
-use npyz::WriterBuilder;
 use std::path::Path;
 
-use hytrace_foundry::layout::Scalar;
-use hytrace_foundry::npy::{write_array, write_atomically};
+use hytrace_foundry::npy::NpyStream;
 
-use super::PhotonError;
+use super::{Batch, PhotonError, V};
 
 /// A step label.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -144,30 +142,101 @@ pub const HIT_COLUMNS: [&str; 16] = [
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HitRow(pub [f64; 16]);
 
-/// Writes hit rows atomically as a float64 `(N, 16)` array.
-pub fn write_hits(path: &Path, hits: &[HitRow]) -> Result<(), PhotonError> {
-    let flat: Vec<f64> = hits.iter().flat_map(|h| h.0).collect();
-    write_array(
-        path,
-        Scalar::F64,
-        &[hits.len() as u64, HIT_COLUMNS.len() as u64],
-        bytemuck::cast_slice(&flat),
-    )
-    .map_err(|e| PhotonError::Output(e.to_string()))
+/// Columns of a step point of `--records` (float32).
+pub const RECORD_COLUMNS: usize = 12;
+
+/// One step point of a photon: `x y z t dx dy dz wavelength px py pz label`, where it is
+/// (mm), when (ns), its direction as it leaves the point, its wavelength (nm) and
+/// polarization (the first 11 columns of a hit row) and the step's label code (0: no
+/// point, past the photon's end).
+pub type RecordPoint = [f32; RECORD_COLUMNS];
+
+/// The columns hit rows and step points begin with: `x y z t dx dy dz wavelength px py
+/// pz` of a photon at `pos` at time `time` (ns) going along `dir` at `nm` nanometres with
+/// polarization `pol`.
+pub fn photon_columns(pos: V, time: f64, dir: V, nm: f64, pol: V) -> [f64; 11] {
+    [
+        pos.x, pos.y, pos.z, time, dir.x, dir.y, dir.z, nm, pol.x, pol.y, pol.z,
+    ]
 }
 
-/// Writes packed histories atomically as a uint64 `(N,)` array.
-pub fn write_histories(path: &Path, codes: &[u64]) -> Result<(), PhotonError> {
-    let dtype = npyz::DType::Plain("<u8".parse::<npyz::TypeStr>().expect("valid type string"));
-    write_atomically(path, |w| {
-        let w = npyz::WriteOptions::new_header_only()
-            .dtype(dtype)
-            .shape(&[codes.len() as u64])
-            .writer(w)
-            .write_header_only()?;
-        w.write_all(bytemuck::cast_slice(codes))
-    })
-    .map_err(|e| PhotonError::Output(e.to_string()))
+/// The step point labelled `label` of a photon at `pos` at time `time` (ns), leaving along
+/// `dir` with polarization `pol` at `nm` nanometres.
+pub fn record_point(label: Label, pos: V, time: f64, dir: V, pol: V, nm: f64) -> RecordPoint {
+    let mut point = [f32::from(label as u8); RECORD_COLUMNS];
+    for (p, c) in point
+        .iter_mut()
+        .zip(photon_columns(pos, time, dir, nm, pol))
+    {
+        *p = c as f32;
+    }
+    point
+}
+
+/// The files a run streams its results into as its batches finish: hits (float64
+/// `(H, 16)`), and when asked for packed histories (uint64 `(N,)`) and step points
+/// (float32 `(N, K, 12)`). Each is written where it is created (give temporary paths and
+/// rename them when finished, as [`crate::outputs::OutputSet`] does).
+pub struct RunFiles {
+    hits: NpyStream,
+    histories: Option<NpyStream>,
+    records: Option<NpyStream>,
+}
+
+/// An output error as a photon error.
+fn output_error(e: hytrace_foundry::FoundryError) -> PhotonError {
+    PhotonError::Output(e.to_string())
+}
+
+impl RunFiles {
+    /// Creates the files: hits at `hits`, histories at `histories`, and `k` step points a
+    /// photon at `records`.
+    pub fn create(
+        hits: &Path,
+        histories: Option<&Path>,
+        records: Option<(&Path, u32)>,
+    ) -> Result<RunFiles, PhotonError> {
+        let f64s = |p: &Path, row: &[u64]| NpyStream::create(p, "<f8", 8, row);
+        Ok(RunFiles {
+            hits: f64s(hits, &[HIT_COLUMNS.len() as u64]).map_err(output_error)?,
+            histories: histories
+                .map(|p| NpyStream::create(p, "<u8", 8, &[]))
+                .transpose()
+                .map_err(output_error)?,
+            records: records
+                .map(|(p, k)| {
+                    NpyStream::create(p, "<f4", 4, &[u64::from(k), RECORD_COLUMNS as u64])
+                })
+                .transpose()
+                .map_err(output_error)?,
+        })
+    }
+
+    /// Appends a batch.
+    pub fn append(&mut self, batch: &Batch) -> Result<(), PhotonError> {
+        let hits: Vec<f64> = batch.hits.iter().flat_map(|h| h.0).collect();
+        self.hits
+            .append(bytemuck::cast_slice(&hits))
+            .map_err(output_error)?;
+        if let Some(h) = &mut self.histories {
+            h.append(bytemuck::cast_slice(&batch.histories))
+                .map_err(output_error)?;
+        }
+        if let Some(r) = &mut self.records {
+            r.append(bytemuck::cast_slice(&batch.records))
+                .map_err(output_error)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the final shapes.
+    pub fn finish(self) -> Result<(), PhotonError> {
+        self.hits.finish().map_err(output_error)?;
+        for f in [self.histories, self.records].into_iter().flatten() {
+            f.finish().map_err(output_error)?;
+        }
+        Ok(())
+    }
 }
 
 /// Counts of each history, most frequent first (ties by history string).

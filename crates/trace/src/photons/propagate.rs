@@ -3,14 +3,16 @@
 //!
 //! Each step, in the volume the photon is in (known from the previous step, as Geant4's
 //! tracking navigator keeps it), draws a distance to absorption and to Rayleigh scattering
-//! from the material's ABSLENGTH and RAYLEIGH lengths, and asks the CPU tracer (f64) for
+//! from the material's ABSLENGTH and RAYLEIGH lengths, and asks the CPU tracer (f64, or f32
+//! as the GPU kernel's twin: [`super::tracer`]) for
 //! the distance to the next boundary: leaving the volume or entering one of its daughters
-//! ([`CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
+//! ([`crate::cpu::CpuScene::trace_in`]). The nearest of the three happens. At a boundary the volume on
 //! the far side is the daughter entered, or where the photon goes on leaving the volume
 //! (a touching sibling, else the mother); the two materials and the optical surface of the
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
 //! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use hytrace_csg::Ray;
@@ -18,39 +20,55 @@ use hytrace_foundry::{Foundry, UNSET};
 use hytrace_volume::Rng;
 use rayon::prelude::*;
 
-use super::bulk::{rayleigh_scatter, rotate_uz, sample_distance};
-use super::output::{sorted_counts, History, HitRow, Label};
+use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
+use super::gensteps::{GenstepFile, Gensteps};
+use super::output::{
+    photon_columns, record_point, sorted_counts, History, HitRow, Label, RecordPoint, HIT_COLUMNS,
+    RECORD_COLUMNS,
+};
 use super::properties::{
     energy_of_wavelength, wavelength_of_energy, OpticsTables, Property, Spectrum, C_LIGHT_MM_PER_NS,
 };
-use super::sources::{Source, Wavelength};
+use super::sources::{Source, Start, Wavelength};
 use super::surfaces::{cross, AtBoundary, Crossing, SurfaceLookup};
+use super::tracer::{PhotonTracer, Precision};
 use super::{PhotonError, V};
-use crate::cpu::{CpuScene, Hit};
+use crate::cpu::Hit;
 use crate::scene::VolumeSurfaces;
 
-/// Photons propagated per parallel batch (bounds the memory of a run without histories).
-const BATCH: u64 = 1 << 16;
+/// Photons the CPU propagates per parallel batch by default (bounds a run's memory).
+pub const BATCH: u64 = 1 << 16;
 
 /// A scene prepared for photons.
 pub struct PhotonScene {
-    tracer: CpuScene<f64>,
-    tables: OpticsTables,
+    pub(crate) tracer: PhotonTracer,
+    pub(crate) tables: OpticsTables,
     /// The scene's materials as read (their tables, for spectra a run draws from).
     materials: Vec<hytrace_foundry::optics::Material>,
     /// Material inside every instance ([`UNSET`] for none).
-    material: Vec<u32>,
-    mother: Vec<u32>,
-    copy: Vec<i32>,
-    surfaces: SurfaceLookup,
-    hierarchical: bool,
+    pub(crate) material: Vec<u32>,
+    pub(crate) mother: Vec<u32>,
+    pub(crate) copy: Vec<i32>,
+    pub(crate) surfaces: SurfaceLookup,
+    pub(crate) hierarchical: bool,
 }
 
 impl PhotonScene {
     /// Prepares a scene: its tracer, its materials' and used surfaces' property tables
     /// (checked), and the surface lookup (Geant4's for a GDML scene, given `surfaces`).
     pub fn new(f: &Foundry, surfaces: Option<VolumeSurfaces>) -> Result<Self, PhotonError> {
-        let tracer = CpuScene::new(f).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
+        Self::with_precision(f, surfaces, Precision::F64)
+    }
+
+    /// [`PhotonScene::new`] navigating with the CPU tracer in `precision` (f32: the GPU
+    /// kernel's twin).
+    pub fn with_precision(
+        f: &Foundry,
+        surfaces: Option<VolumeSurfaces>,
+        precision: Precision,
+    ) -> Result<Self, PhotonError> {
+        let tracer =
+            PhotonTracer::new(f, precision).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
         let boundaries = &f.optics.boundaries;
         let material = f
             .inst
@@ -99,9 +117,21 @@ impl PhotonScene {
         })
     }
 
-    /// Resolves a run's wavelength: a fixed one checked, a spectrum looked up among the
-    /// scene's materials.
-    fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
+    /// Resolves where a run's photons come from: a torch source with its wavelength, or
+    /// gensteps prepared for the scene's materials.
+    pub(crate) fn emitting(&self, origin: &Origin) -> Result<Emitting, PhotonError> {
+        match origin {
+            Origin::Torch { source, wavelength } => Ok(Emitting::Torch {
+                source: *source,
+                emission: self.emission(wavelength)?,
+            }),
+            Origin::Gensteps(file) => Ok(Emitting::Gensteps(Gensteps::new(file, &self.materials)?)),
+        }
+    }
+
+    /// Resolves a torch run's wavelength: a fixed one checked, a spectrum looked up among
+    /// the scene's materials.
+    pub(crate) fn emission(&self, wavelength: &Wavelength) -> Result<Emission, PhotonError> {
         match wavelength {
             Wavelength::Fixed(nm) if nm.is_finite() && *nm > 0.0 => Ok(Emission::Fixed {
                 energy: energy_of_wavelength(*nm),
@@ -146,9 +176,7 @@ impl PhotonScene {
         let mut tmin = 0.0;
         let mut found = None;
         for _ in 0..8 {
-            let h = self
-                .tracer
-                .trace_in(&ray, Some(current), tmin, f64::INFINITY)?;
+            let h = self.tracer.trace_in(&ray, current, tmin)?;
             let leaving = h.instance == current;
             let outward = h.normal.dot(dir) > 0.0;
             if leaving == outward || h.t > eps {
@@ -180,30 +208,53 @@ impl PhotonScene {
     /// Propagates photon `index` to its end: the histories of its lineages (the photon
     /// itself first, then the further photons its wavelength-shifting absorptions
     /// emitted) and the hit rows of those detected.
-    fn photon(&self, index: u64, run: &RunOptions, emission: &Emission) -> PhotonEnd {
+    pub(crate) fn photon(&self, index: u64, run: &RunOptions, emitting: &Emitting) -> PhotonEnd {
         let mut rng = Rng::new(run.seed, index as u32, (index >> 32) as u32);
-        let start = run.source.sample(&mut rng);
-        let (energy, wavelength_nm) = match emission {
-            Emission::Fixed { energy, nm } => (*energy, *nm),
-            Emission::Spectrum(s) => {
-                let e = s.sample(&mut rng);
-                (e, wavelength_of_energy(e))
+        let (start, time, energy, wavelength_nm) = match emitting {
+            Emitting::Torch { source, emission } => {
+                let start = source.sample(&mut rng);
+                let (energy, nm) = match emission {
+                    Emission::Fixed { energy, nm } => (*energy, *nm),
+                    Emission::Spectrum(s) => {
+                        let e = s.sample(&mut rng);
+                        (e, wavelength_of_energy(e))
+                    }
+                };
+                (start, 0.0, energy, nm)
+            }
+            Emitting::Gensteps(g) => {
+                let e = g.emit(index, &mut rng);
+                let start = Start {
+                    position: e.position,
+                    direction: e.direction,
+                    polarization: e.polarization,
+                };
+                (start, e.time, e.energy, wavelength_of_energy(e.energy))
             }
         };
         let mut history = History::default();
-        history.push(Label::To);
+        let mut record = Vec::with_capacity(run.records as usize);
+        let mut mark = |history: &mut History, label: Label| {
+            history.push(label);
+            if record.len() < run.records as usize {
+                let (p, d, e) = (start.position, start.direction, start.polarization);
+                record.push(record_point(label, p, time, d, e, wavelength_nm));
+            }
+        };
+        mark(&mut history, Label::To);
         let Some(current) = self.tracer.locate_point(start.position.to_f64()) else {
-            history.push(Label::Mi);
+            mark(&mut history, Label::Mi);
             return PhotonEnd {
                 own: (history, None),
                 further: Vec::new(),
+                record: padded(record, run.records),
             };
         };
         let photon = Lineage {
             pos: start.position,
             dir: start.direction,
             pol: start.polarization,
-            time: 0.0,
+            time,
             energy,
             wavelength_nm,
             current,
@@ -212,16 +263,28 @@ impl PhotonScene {
         // The photon's own lineage first; the vectors allocate only when a wavelength
         // shifter emits more than one photon.
         let mut pending = Vec::new();
-        let own = self.lineage(photon, index, run, &mut rng, &mut pending);
+        let own = self.lineage(
+            photon,
+            index,
+            run,
+            &mut rng,
+            &mut pending,
+            Some(&mut record),
+        );
         let mut further = Vec::new();
         while let Some(photon) = pending.pop() {
-            further.push(self.lineage(photon, index, run, &mut rng, &mut pending));
+            further.push(self.lineage(photon, index, run, &mut rng, &mut pending, None));
         }
-        PhotonEnd { own, further }
+        PhotonEnd {
+            own,
+            further,
+            record: padded(record, run.records),
+        }
     }
 
     /// Propagates one photon to its end; photons emitted by wavelength-shifting
-    /// absorptions beyond the one that carries on are pushed onto `pending`.
+    /// absorptions beyond the one that carries on are pushed onto `pending`. With `record`,
+    /// each step point is appended to it until it holds `run.records`.
     fn lineage(
         &self,
         photon: Lineage,
@@ -229,6 +292,7 @@ impl PhotonScene {
         run: &RunOptions,
         rng: &mut Rng,
         pending: &mut Vec<Lineage>,
+        mut record: Option<&mut Vec<RecordPoint>>,
     ) -> (History, Option<HitRow>) {
         let Lineage {
             mut pos,
@@ -240,6 +304,18 @@ impl PhotonScene {
             mut current,
             mut history,
         } = photon;
+        // Labels a step and records its point: where the photon is and how it leaves.
+        macro_rules! mark {
+            ($label:expr) => {{
+                history.push($label);
+                if let Some(r) = record
+                    .as_deref_mut()
+                    .filter(|r| r.len() < run.records as usize)
+                {
+                    r.push(record_point($label, pos, time, dir, pol, wavelength_nm));
+                }
+            }};
+        }
         for steps in 1..=run.max_steps {
             let m = self.material[current as usize];
             let mat = self.tables.material(m);
@@ -255,25 +331,36 @@ impl PhotonScene {
             let t_b = hit.map_or(f64::INFINITY, |h| h.t);
             let step = t_b.min(d_abs).min(d_sc).min(d_wls);
             if !step.is_finite() {
-                history.push(Label::Mi);
+                mark!(Label::Mi);
                 return (history, None);
             }
             pos = pos + dir * step;
             time += step / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
             if d_abs == step && d_abs < t_b {
-                history.push(Label::Ab);
+                // A scintillator may emit again what it absorbed (REEMISSIONPROB).
+                let reemission = mat.and_then(|m| m.reemission.as_ref());
+                if let Some(k) = reemission.and_then(|r| r.reemits(energy, rng)) {
+                    let scintillator = &reemission.expect("checked above").scintillator;
+                    energy = scintillator.energy(k, rng);
+                    wavelength_nm = wavelength_of_energy(energy);
+                    time += scintillator.delay(k, rng);
+                    (dir, pol) = isotropic(rng);
+                    mark!(Label::Re);
+                    continue;
+                }
+                mark!(Label::Ab);
                 return (history, None);
             }
             if d_sc == step && d_sc < t_b {
                 (dir, pol) = rayleigh_scatter(dir, pol, rng);
-                history.push(Label::Sc);
+                mark!(Label::Sc);
                 continue;
             }
             if d_wls == step && d_wls < t_b {
                 // Absorbed by the shifter; what it emits starts here, isotropic, with a
                 // random transverse polarization, after the material's delay.
                 let Some(wls) = mat.and_then(|m| m.wls.as_ref()) else {
-                    history.push(Label::Ab);
+                    mark!(Label::Ab);
                     return (history, None);
                 };
                 let count = wls.sample_count(rng);
@@ -281,11 +368,12 @@ impl PhotonScene {
                     .filter_map(|_| wls.sample_energy(energy, rng))
                     .collect();
                 let Some((&first, rest)) = energies.split_first() else {
-                    history.push(Label::Ab);
+                    mark!(Label::Ab);
                     return (history, None);
                 };
-                history.push(Label::Re);
                 time += wls.time_constant;
+                let mut emitted = history;
+                emitted.push(Label::Re);
                 for &e in rest.iter().rev() {
                     let (d, p) = isotropic(rng);
                     pending.push(Lineage {
@@ -296,17 +384,18 @@ impl PhotonScene {
                         energy: e,
                         wavelength_nm: wavelength_of_energy(e),
                         current,
-                        history,
+                        history: emitted,
                     });
                 }
                 (dir, pol) = isotropic(rng);
                 energy = first;
                 wavelength_nm = wavelength_of_energy(first);
+                mark!(Label::Re);
                 continue;
             }
             let hit = hit.expect("a finite step that is no interaction is a boundary");
             let Some(post) = self.next_volume(pos, dir, current, &hit) else {
-                history.push(Label::Mi);
+                mark!(Label::Mi);
                 return (history, None);
             };
             let normal = if hit.normal.dot(dir) > 0.0 {
@@ -323,54 +412,60 @@ impl PhotonScene {
             let materials = (m, self.material[post as usize]);
             match cross(&self.tables, materials, surface, photon, normal, rng) {
                 Crossing::Transmitted => {
-                    history.push(Label::Bt);
+                    mark!(Label::Bt);
                     current = post;
                 }
-                Crossing::Reflected => history.push(Label::Br),
-                Crossing::SurfaceReflected => history.push(Label::Sr),
-                Crossing::DiffuseReflected => history.push(Label::Dr),
+                Crossing::Reflected => mark!(Label::Br),
+                Crossing::SurfaceReflected => mark!(Label::Sr),
+                Crossing::DiffuseReflected => mark!(Label::Dr),
                 Crossing::Absorbed => {
-                    history.push(Label::Sa);
+                    mark!(Label::Sa);
                     return (history, None);
                 }
                 Crossing::Detected => {
-                    history.push(Label::Sd);
-                    let row = HitRow([
-                        pos.x,
-                        pos.y,
-                        pos.z,
-                        time,
-                        dir.x,
-                        dir.y,
-                        dir.z,
-                        wavelength_nm,
-                        pol.x,
-                        pol.y,
-                        pol.z,
+                    mark!(Label::Sd);
+                    let mut row = [0.0; HIT_COLUMNS.len()];
+                    row[..11].copy_from_slice(&photon_columns(pos, time, dir, wavelength_nm, pol));
+                    row[11..].copy_from_slice(&[
                         f64::from(hit.instance),
                         f64::from(self.copy[hit.instance as usize]),
                         index as f64,
                         f64::from(history.mask),
                         f64::from(steps),
                     ]);
+                    let row = HitRow(row);
                     return (history, Some(row));
                 }
             }
         }
-        history.push(Label::Tr);
+        mark!(Label::Tr);
         (history, None)
     }
 }
 
 /// How one photon ended: its own lineage's history and hit, then those of the further
-/// photons its wavelength-shifting absorptions emitted.
-struct PhotonEnd {
-    own: (History, Option<HitRow>),
-    further: Vec<(History, Option<HitRow>)>,
+/// photons its wavelength-shifting absorptions emitted, and its own lineage's first step
+/// points (`RunOptions::records` of them, zero past its end; none when not asked for).
+pub(crate) struct PhotonEnd {
+    pub(crate) own: (History, Option<HitRow>),
+    pub(crate) further: Vec<(History, Option<HitRow>)>,
+    pub(crate) record: Vec<RecordPoint>,
 }
 
-/// The wavelength of a run, resolved: fixed (energy in MeV and nm) or a spectrum.
-enum Emission {
+/// `record` filled to `k` points with zero points (label 0).
+fn padded(mut record: Vec<RecordPoint>, k: u32) -> Vec<RecordPoint> {
+    record.resize(k as usize, [0.0; RECORD_COLUMNS]);
+    record
+}
+
+/// Where a run's photons come from, resolved for the scene.
+pub(crate) enum Emitting {
+    Torch { source: Source, emission: Emission },
+    Gensteps(Gensteps),
+}
+
+/// The wavelength of a torch run, resolved: fixed (energy in MeV and nm) or a spectrum.
+pub(crate) enum Emission {
     Fixed { energy: f64, nm: f64 },
     Spectrum(Spectrum),
 }
@@ -388,27 +483,26 @@ struct Lineage {
     history: History,
 }
 
-/// A direction uniform over the sphere and a polarization uniform among those
-/// perpendicular to it (Geant4's draw for re-emitted photons).
-fn isotropic(rng: &mut Rng) -> (V, V) {
-    let cos = 1.0 - 2.0 * rng.next_f64();
-    let sin = ((1.0 - cos) * (1.0 + cos)).sqrt();
-    let phi = std::f64::consts::TAU * rng.next_f64();
-    let dir = V::new(sin * phi.cos(), sin * phi.sin(), cos);
-    let a = std::f64::consts::TAU * rng.next_f64();
-    (
-        dir,
-        rotate_uz(V::new(a.cos(), a.sin(), 0.0), dir).normalized(),
-    )
+/// Where a run's photons come from.
+#[derive(Clone, Debug)]
+pub enum Origin {
+    /// A torch source: every photon starts at time 0 with this wavelength.
+    Torch {
+        /// Where photons start and which way.
+        source: Source,
+        /// Their wavelength: fixed or drawn from a material's spectrum.
+        wavelength: Wavelength,
+    },
+    /// Gensteps: photon `i` of the run is photon `i` of the file (numbered through its rows
+    /// in order).
+    Gensteps(Arc<GenstepFile>),
 }
 
 /// What to propagate.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
-    /// Where photons start.
-    pub source: Source,
-    /// The photons' wavelength: fixed or drawn from a material's spectrum.
-    pub wavelength: Wavelength,
+    /// Where photons come from.
+    pub origin: Origin,
     /// Number of photons.
     pub photons: u64,
     /// Index of the first photon: the run propagates photons `first .. first + photons`,
@@ -421,6 +515,8 @@ pub struct RunOptions {
     pub max_steps: u32,
     /// Keep every photon's packed history in [`PhotonRun::histories`].
     pub keep_histories: bool,
+    /// Step points to record of each photon ([`PhotonRun::records`]; 0: none).
+    pub records: u32,
 }
 
 /// What a run gives back.
@@ -436,6 +532,54 @@ pub struct PhotonRun {
     pub counts: Vec<(String, u64)>,
     /// Seconds spent propagating.
     pub propagate_s: f64,
+    /// The first `records` step points of every photon's own lineage, `records` a photon
+    /// (zero points past its end), when asked for.
+    pub records: Vec<RecordPoint>,
+}
+
+/// The results of one batch of photons, in photon order.
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    /// Hit rows.
+    pub hits: Vec<HitRow>,
+    /// Packed histories, when asked for.
+    pub histories: Vec<u64>,
+    /// Step points, [`RunOptions::records`] a photon, when asked for.
+    pub records: Vec<RecordPoint>,
+}
+
+impl Batch {
+    /// Appends `b`'s results to these.
+    pub fn gather(&mut self, b: Batch) -> Result<(), PhotonError> {
+        self.hits.extend(b.hits);
+        self.histories.extend(b.histories);
+        self.records.extend(b.records);
+        Ok(())
+    }
+}
+
+impl PhotonRun {
+    /// A run's results gathered from all its batches, and its summary.
+    pub fn of(all: Batch, summary: RunSummary) -> PhotonRun {
+        PhotonRun {
+            hits: all.hits,
+            histories: all.histories,
+            counts: summary.counts,
+            propagate_s: summary.propagate_s,
+            records: all.records,
+        }
+    }
+}
+
+/// What a run handed over batch by batch adds up to.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    /// Hits.
+    pub hits: u64,
+    /// Count of each history, as [`PhotonRun::counts`].
+    pub counts: Vec<(String, u64)>,
+    /// Seconds spent propagating (the sink's time included).
+    pub propagate_s: f64,
 }
 
 /// Propagates photons `run.first .. run.first + run.photons` through `scene`, in parallel
@@ -450,62 +594,117 @@ pub fn propagate_reporting(
     run: &RunOptions,
     progress: &dyn Fn(u64),
 ) -> Result<PhotonRun, PhotonError> {
+    let mut all = Batch::default();
+    let summary = propagate_batches(scene, run, BATCH, &mut |b| all.gather(b), progress)?;
+    Ok(PhotonRun::of(all, summary))
+}
+
+/// Propagates photons `run.first .. run.first + run.photons` through `scene`, `batch` at a
+/// time (in parallel over each batch's photons), handing each batch's results to `sink`
+/// in photon order as it finishes (so a run's memory is bounded by its batch), then
+/// calling `progress` with the number of photons done. The results do not depend on
+/// `batch`.
+pub fn propagate_batches(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    batch: u64,
+    sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+    progress: &dyn Fn(u64),
+) -> Result<RunSummary, PhotonError> {
+    let mut on_cpu = |photons: std::ops::Range<u64>, emitting: &Emitting| {
+        Ok::<_, PhotonError>(
+            photons
+                .into_par_iter()
+                .map(|i| scene.photon(i, run, emitting))
+                .collect(),
+        )
+    };
+    drive_batches(scene, run, batch, &mut on_cpu, sink, progress)
+}
+
+/// A batch of photons propagated: the ends of photons `range`, in order.
+pub(crate) type BatchFn<'a, E> =
+    dyn FnMut(std::ops::Range<u64>, &Emitting) -> Result<Vec<PhotonEnd>, E> + 'a;
+
+/// Checks a run, then propagates its photons in batches of `size` with `batch` (the CPU's
+/// or the GPU's), handing each batch's hits, histories and step points to `sink` as it
+/// finishes, and counts the histories.
+pub(crate) fn drive_batches<E: From<PhotonError>>(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    size: u64,
+    batch: &mut BatchFn<E>,
+    sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+    progress: &dyn Fn(u64),
+) -> Result<RunSummary, E> {
     if run.photons == 0 {
-        return Err(PhotonError::Input(
-            "the number of photons (-n) must be at least 1".into(),
-        ));
+        return Err(
+            PhotonError::Input("the number of photons (-n) must be at least 1".into()).into(),
+        );
     }
-    let emission = scene.emission(&run.wavelength)?;
+    if size == 0 {
+        return Err(PhotonError::Input("the batch size must be at least 1".into()).into());
+    }
+    let emitting = scene.emitting(&run.origin)?;
     let Some(end) = run.first.checked_add(run.photons) else {
         return Err(PhotonError::Input(format!(
             "photons {} .. {} + {}: past the last photon index",
             run.first, run.first, run.photons
-        )));
+        ))
+        .into());
     };
     if run.max_steps == 0 {
-        return Err(PhotonError::Input(
-            "the step limit must be at least 1".into(),
-        ));
+        return Err(PhotonError::Input("the step limit must be at least 1".into()).into());
     }
-    let origin = match run.source {
-        Source::Point { position } => position,
-        Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
-    };
-    if scene.tracer.locate_point(origin.to_f64()).is_none() {
-        return Err(PhotonError::Input(format!(
-            "the source at ({}, {}, {}) mm lies outside the world",
-            origin.x, origin.y, origin.z
-        )));
+    match &emitting {
+        Emitting::Torch { source, .. } => {
+            let origin = match *source {
+                Source::Point { position } => position,
+                Source::Beam { centre, .. } | Source::Sphere { centre, .. } => centre,
+            };
+            if scene.tracer.locate_point(origin.to_f64()).is_none() {
+                return Err(PhotonError::Input(format!(
+                    "the source at ({}, {}, {}) mm lies outside the world",
+                    origin.x, origin.y, origin.z
+                ))
+                .into());
+            }
+        }
+        Emitting::Gensteps(g) if end > g.photons() => {
+            return Err(PhotonError::Input(format!(
+                "photons {} .. {end}: the gensteps emit {} photons",
+                run.first,
+                g.photons()
+            ))
+            .into());
+        }
+        Emitting::Gensteps(_) => {}
     }
     let start = Instant::now();
-    let mut hits = Vec::new();
-    let mut histories = Vec::new();
+    let mut hits = 0;
     let mut codes: std::collections::HashMap<u64, u64> = Default::default();
     let mut first = run.first;
     while first < end {
-        let last = first.saturating_add(BATCH).min(end);
-        let batch: Vec<PhotonEnd> = (first..last)
-            .into_par_iter()
-            .map(|i| scene.photon(i, run, &emission))
-            .collect();
-        for end in batch {
+        let last = first.saturating_add(size).min(end);
+        let mut out = Batch::default();
+        for end in batch(first..last, &emitting)? {
             if run.keep_histories {
-                histories.push(end.own.0.code);
+                out.histories.push(end.own.0.code);
             }
+            out.records.extend(end.record);
             for (h, hit) in std::iter::once(end.own).chain(end.further) {
                 *codes.entry(h.code).or_default() += 1;
-                hits.extend(hit);
+                out.hits.extend(hit);
             }
         }
+        hits += out.hits.len() as u64;
+        sink(out).map_err(E::from)?;
         first = last;
         progress(first - run.first);
     }
-    let propagate_s = start.elapsed().as_secs_f64();
-    let counts = sorted_counts(codes);
-    Ok(PhotonRun {
+    Ok(RunSummary {
         hits,
-        histories,
-        counts,
-        propagate_s,
+        counts: sorted_counts(codes),
+        propagate_s: start.elapsed().as_secs_f64(),
     })
 }

@@ -11,6 +11,7 @@ use hytrace_foundry::UNSET;
 
 use hytrace_volume::Rng;
 
+use super::scintillation::Scintillator;
 use super::PhotonError;
 
 /// `h c` in eV nm: photon energy (eV) times wavelength (nm).
@@ -90,6 +91,27 @@ impl Property {
         }
     }
 
+    /// The photon energies of the rows (MeV), not decreasing.
+    pub fn energies(&self) -> &[f64] {
+        &self.energies
+    }
+
+    /// The largest value of the table.
+    pub fn max_value(&self) -> f64 {
+        self.values
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// The `(energy, value)` rows.
+    pub fn rows(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.energies
+            .iter()
+            .copied()
+            .zip(self.values.iter().copied())
+    }
+
     /// The value at photon energy `e` (MeV): linear between rows, the first or last value
     /// outside them.
     pub fn value(&self, e: f64) -> f64 {
@@ -127,6 +149,30 @@ pub struct MaterialOptics {
     /// What a wavelength-shifting absorption emits (WLSCOMPONENT and its constants); none:
     /// the absorbed photon ends there.
     pub wls: Option<Wls>,
+    /// Re-emission of absorbed photons by a scintillator (REEMISSIONPROB); none: an
+    /// absorption ends the photon.
+    pub reemission: Option<Reemission>,
+}
+
+/// Re-emission in the Opticks/JUNO convention: a photon absorbed in the bulk (ABSLENGTH)
+/// of a material with REEMISSIONPROB is emitted again with that probability at its energy,
+/// isotropic with a random polarization, at an energy drawn from the spectrum of one of the
+/// material's scintillation components (chosen in proportion to their yields), delayed by
+/// a time drawn from that component's profile. Geant4 11 has no such process.
+#[derive(Clone, Debug)]
+pub struct Reemission {
+    /// REEMISSIONPROB.
+    pub probability: Property,
+    /// The material's scintillation, which the re-emitted photon follows.
+    pub scintillator: Scintillator,
+}
+
+impl Reemission {
+    /// Whether a photon of energy `energy` (MeV) absorbed here is emitted again, and from
+    /// which scintillation component.
+    pub fn reemits(&self, energy: f64, rng: &mut Rng) -> Option<usize> {
+        (rng.next_f64() < self.probability.value(energy)).then(|| self.scintillator.pick(rng))
+    }
 }
 
 /// An emission spectrum to draw photon energies from, as Geant4 draws its scintillation and
@@ -246,7 +292,11 @@ impl Wls {
 }
 
 /// Looks up a named constant property (a one-value GDML matrix), checked.
-fn constant(list: &[(String, Table)], name: &str, owner: &str) -> Result<Option<f64>, PhotonError> {
+pub(super) fn constant(
+    list: &[(String, Table)],
+    name: &str,
+    owner: &str,
+) -> Result<Option<f64>, PhotonError> {
     let Some((_, t)) = list.iter().find(|(n, _)| n == name) else {
         return Ok(None);
     };
@@ -264,7 +314,7 @@ fn constant(list: &[(String, Table)], name: &str, owner: &str) -> Result<Option<
 const UNMODELLED_MATERIAL_PROPERTIES: [&str; 3] = ["WLSABSLENGTH2", "WLSCOMPONENT2", "MIEHG"];
 
 /// Looks up a named two-column property of a list, checked.
-fn property(
+pub(super) fn property(
     list: &[(String, Table)],
     name: &str,
     owner: &str,
@@ -321,6 +371,28 @@ impl MaterialOptics {
             groupvel,
             wlsabslength: property(&m.properties, "WLSABSLENGTH", &owner)?,
             wls,
+            reemission: match property(&m.properties, "REEMISSIONPROB", &owner)? {
+                // Zero everywhere (as in files written for Geant4, which has no such
+                // process): nothing is re-emitted and the scintillation is not needed.
+                Some(p) if p.max_value() == 0.0 => None,
+                None => None,
+                Some(probability) => {
+                    if probability.max_value() > 1.0 {
+                        return Err(PhotonError::Table {
+                            table: format!("{owner}: property REEMISSIONPROB"),
+                            problem: format!("a probability above 1 ({})", probability.max_value()),
+                        });
+                    }
+                    let scintillator = Scintillator::new(m).map_err(|e| PhotonError::Table {
+                        table: format!("{owner}: property REEMISSIONPROB"),
+                        problem: format!("re-emits as the material scintillates, but {e}"),
+                    })?;
+                    Some(Reemission {
+                        probability,
+                        scintillator,
+                    })
+                }
+            },
         })
     }
 
@@ -790,5 +862,44 @@ mod tests {
             .expect_err("Mie")
             .to_string();
         assert!(e.contains("MIEHG") && e.contains("not modelled"), "{e}");
+    }
+
+    #[test]
+    fn re_emission_needs_a_scintillator_and_a_probability() {
+        let material = |props: Vec<(&str, Table)>| Material {
+            name: "LS".into(),
+            properties: props.into_iter().map(|(n, t)| (n.to_string(), t)).collect(),
+        };
+        let prob = |p: f64| ("REEMISSIONPROB", table(&[2e-6, p, 3e-6, p]));
+        let scint = || {
+            vec![
+                ("SCINTILLATIONCOMPONENT1", table(&[2e-6, 1.0, 3e-6, 1.0])),
+                (
+                    "SCINTILLATIONTIMECONSTANT1",
+                    Table {
+                        columns: 1,
+                        values: vec![4.0],
+                    },
+                ),
+            ]
+        };
+        let ok = MaterialOptics::new(&material([scint(), vec![prob(0.3)]].concat())).unwrap();
+        let r = ok.reemission.expect("re-emits");
+        assert_eq!(r.probability.value(2.5e-6), 0.3);
+        // A probability of zero re-emits nothing and needs no scintillation.
+        let zero = MaterialOptics::new(&material(vec![prob(0.0)])).unwrap();
+        assert!(zero.reemission.is_none());
+        for (props, needle) in [
+            (vec![prob(0.3)], "no SCINTILLATIONCOMPONENT1"),
+            ([scint(), vec![prob(1.5)]].concat(), "above 1"),
+        ] {
+            let e = MaterialOptics::new(&material(props))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("`LS`: property REEMISSIONPROB") && e.contains(needle),
+                "{e}"
+            );
+        }
     }
 }

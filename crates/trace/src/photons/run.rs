@@ -6,7 +6,10 @@ use std::path::Path;
 use crate::error::Context;
 use hytrace_foundry::Foundry;
 
-use super::{propagate_reporting, PhotonRun, PhotonScene, RunOptions};
+use super::{
+    propagate_batches, propagate_reporting, Batch, PhotonError, PhotonRun, PhotonScene, RunOptions,
+    RunSummary,
+};
 use crate::scene::VolumeSurfaces;
 
 /// Prepares the scene `f` read from `path` for photons ([`PhotonScene::new`]), errors
@@ -29,5 +32,19 @@ pub fn propagate_in(
     progress: &dyn Fn(u64),
 ) -> crate::Result<PhotonRun> {
     propagate_reporting(scene, run, progress)
+        .with_context(|| format!("{}: propagating photons", path.display()))
+}
+
+/// Propagates photons through the scene read from `path` `batch` at a time, handing each
+/// batch to `sink` ([`propagate_batches`]), errors naming the file.
+pub fn propagate_batches_in(
+    scene: &PhotonScene,
+    path: &Path,
+    run: &RunOptions,
+    batch: u64,
+    sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
+    progress: &dyn Fn(u64),
+) -> crate::Result<RunSummary> {
+    propagate_batches(scene, run, batch, sink, progress)
         .with_context(|| format!("{}: propagating photons", path.display()))
 }

@@ -43,6 +43,8 @@ pub struct GpuRun {
     pub times: GpuTimes,
     /// What streaming a brick store medium did (a medium read as stored).
     pub stream: Option<StreamStats>,
+    /// The streamed render's first pass (deferred pixels at the coarser level of detail).
+    pub preview: Option<Image>,
 }
 
 /// Renders on the GPU of `ctx` (`progress` as [`GpuRenderer::render`] calls it). Pixels
@@ -72,6 +74,7 @@ fn render_gpu(
             features: gpu.features().to_vec(),
             times: run.times,
             stream: run.stream,
+            preview: run.preview,
         },
     ))
 }

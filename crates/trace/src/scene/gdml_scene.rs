@@ -183,6 +183,7 @@ fn parse_colour(text: &str) -> crate::Result<[f64; 3]> {
 }
 
 /// The border and skin surfaces of a GDML file, by physical volume name and logical volume.
+#[derive(Clone, Debug)]
 struct SurfaceRules {
     border: HashMap<(String, String), u32>,
     skin: HashMap<usize, u32>,
@@ -235,6 +236,7 @@ impl SurfaceRules {
 /// GDML scene, siblings included (the boundary table holds only the crossings between an
 /// instance and its mother): every instance's physical volume and logical volume, and the
 /// file's border and skin surfaces.
+#[derive(Clone, Debug)]
 pub struct VolumeSurfaces {
     rules: SurfaceRules,
     /// Per instance: the physical volume's name (as border surfaces name it) and the
@@ -255,6 +257,32 @@ impl VolumeSurfaces {
         };
         let entered_daughter = self.mother[post as usize] == pre;
         self.rules.between(at(pre), at(post), entered_daughter)
+    }
+
+    /// The skin surface of instance `i`'s logical volume ([`UNSET`] for none).
+    pub fn skin(&self, i: u32) -> u32 {
+        let lv = self.placed[i as usize].1;
+        self.rules.skin.get(&lv).copied().unwrap_or(UNSET)
+    }
+
+    /// Every ordered pair of instances `(pre, post)` that a border surface names, with
+    /// that surface.
+    pub fn border_pairs(&self) -> Vec<(u32, u32, u32)> {
+        let mut by_name: HashMap<&str, Vec<u32>> = HashMap::new();
+        for (i, (pv, _)) in self.placed.iter().enumerate() {
+            by_name.entry(pv.as_str()).or_default().push(i as u32);
+        }
+        let mut pairs = Vec::new();
+        for ((a, b), &s) in &self.rules.border {
+            let (Some(pre), Some(post)) = (by_name.get(a.as_str()), by_name.get(b.as_str())) else {
+                continue;
+            };
+            for &p in pre {
+                pairs.extend(post.iter().map(|&q| (p, q, s)));
+            }
+        }
+        pairs.sort_unstable();
+        pairs
     }
 
     /// Whether a border or skin surface of the file uses surface `s`.

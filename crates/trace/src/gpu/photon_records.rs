@@ -1,0 +1,214 @@
+//! The records of the GPU photon kernel (`shaders/kernels/photons.wgsl`): the run's
+//! parameters, the flattened property tables of materials and surfaces
+//! ([`crate::photons::gpu_tables`]), what every instance needs at a boundary, and one
+//! photon's end. Generated into `shaders/generated/trace_records.wgsl` with the tracers'
+//! records ([`super::records`]), whose test checks naga's layout against Rust's.
+
+use hytrace_csg::gpu_layout::{entry, RecordEntry};
+use hytrace_foundry::record;
+use hytrace_foundry::wgsl::push_struct;
+
+record! {
+    /// What every photon of a GPU run shares: the torch source, the wavelength, the run's
+    /// photons and seed.
+    pub struct PhotonParams {
+        /// Point: the position; beam, sphere: the centre (mm).
+        pub source_at: [f32; 3],
+        /// `PHOTON_SOURCE_*`.
+        pub source_kind: u32,
+        /// Beam: the unit direction.
+        pub source_direction: [f32; 3],
+        /// Beam: the disk's radius; sphere: the sphere's (mm).
+        pub source_radius: f32,
+        /// Beam: cosine of the divergence half-angle (1: parallel).
+        pub cos_divergence: f32,
+        /// Sphere: 1 when photons start inward.
+        pub inward: u32,
+        /// Photon energy (MeV).
+        pub energy: f32,
+        /// Wavelength (nm).
+        pub wavelength_nm: f32,
+        /// Low 32 bits of the index of the batch's first photon.
+        pub first_lo: u32,
+        /// High 32 bits of that index.
+        pub first_hi: u32,
+        /// Photons in this batch.
+        pub photon_count: u32,
+        /// Seed of the random streams.
+        pub seed: u32,
+        /// Steps after which a photon is stopped.
+        pub max_steps: u32,
+        /// 1 for a hierarchical scene (the navigator's answers).
+        pub hierarchical: u32,
+        /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
+        pub probe_trips: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+record! {
+    /// A property table: rows `first .. first + count` of the rows array, `(energy (MeV),
+    /// value)` each, energies not decreasing.
+    pub struct PhotonTable {
+        /// First row.
+        pub first: u32,
+        /// Number of rows (at least 1).
+        pub count: u32,
+    }
+}
+
+record! {
+    /// A material's tables (indices into the tables; `u32::MAX`: none).
+    pub struct PhotonMaterial {
+        /// RINDEX.
+        pub rindex: u32,
+        /// ABSLENGTH (mm).
+        pub abslength: u32,
+        /// RAYLEIGH (mm).
+        pub rayleigh: u32,
+        /// Group velocity (mm/ns).
+        pub groupvel: u32,
+    }
+}
+
+record! {
+    /// An optical surface the kernel models (polished): its type and tables (indices into
+    /// the tables; `u32::MAX`: the default, REFLECTIVITY 1, the others 0).
+    pub struct PhotonSurface {
+        /// `PHOTON_SURFACE_*`.
+        pub kind: u32,
+        /// REFLECTIVITY.
+        pub reflectivity: u32,
+        /// EFFICIENCY.
+        pub efficiency: u32,
+        /// TRANSMITTANCE.
+        pub transmittance: u32,
+    }
+}
+
+record! {
+    /// What a photon needs of an instance: its material, mother and copy number, and the
+    /// optical surfaces of its crossings (`u32::MAX`: none): entering it from its mother,
+    /// leaving it into its mother, and towards or from a sibling when no border surface
+    /// of the pair applies (the first of the volume left, else the second of the one
+    /// entered).
+    pub struct PhotonInstance {
+        /// Material inside.
+        pub material: u32,
+        /// Mother instance.
+        pub mother: u32,
+        /// Copy number.
+        pub copy: i32,
+        /// Surface entering it from its mother.
+        pub enter_surface: u32,
+        /// Surface leaving it into its mother.
+        pub leave_surface: u32,
+        /// Surface leaving it into a sibling.
+        pub sibling_leave: u32,
+        /// Surface entering it from a sibling.
+        pub sibling_enter: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+record! {
+    /// The surface of crossings from instance `pre` into its sibling `post` (a border
+    /// surface), sorted by `(pre, post)`.
+    pub struct PhotonBorder {
+        /// Instance left.
+        pub pre: u32,
+        /// Instance entered.
+        pub post: u32,
+        /// Surface.
+        pub surface: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+record! {
+    /// How one photon ended: its packed history and, when detected, its hit.
+    pub struct PhotonRecord {
+        /// Where it ended (mm).
+        pub position: [f32; 3],
+        /// Time (ns).
+        pub time: f32,
+        /// Direction.
+        pub direction: [f32; 3],
+        /// Wavelength (nm).
+        pub wavelength: f32,
+        /// Polarization.
+        pub polarization: [f32; 3],
+        /// Instance whose surface detected it (`u32::MAX` when not detected).
+        pub instance: u32,
+        /// Packed history, low and high 32 bits.
+        pub history: [u32; 2],
+        /// History mask.
+        pub mask: u32,
+        /// Labels recorded.
+        pub labels: u32,
+        /// Steps taken.
+        pub steps: u32,
+        /// `PHOTON_STATUS_*` bits.
+        pub status: u32,
+        /// Padding.
+        pub pad: [u32; 2],
+    }
+}
+
+/// [`PhotonParams::source_kind`]: isotropic from a point.
+pub const PHOTON_SOURCE_POINT: u32 = 0;
+/// A beam over a disk.
+pub const PHOTON_SOURCE_BEAM: u32 = 1;
+/// From a sphere along its normal.
+pub const PHOTON_SOURCE_SPHERE: u32 = 2;
+/// [`PhotonSurface::kind`]: `dielectric_metal`.
+pub const PHOTON_SURFACE_METAL: u32 = 0;
+/// `dielectric_dielectric`.
+pub const PHOTON_SURFACE_DIELECTRIC: u32 = 1;
+/// [`PhotonRecord::status`] bit: detected (the record is a hit).
+pub const PHOTON_DETECTED: u32 = 1;
+/// Bit: the driver's loop budget cut the photon's loops short (llvmpipe); its record is
+/// wrong and it is propagated again on the CPU.
+pub const PHOTON_LOOPS_CUT: u32 = 2;
+/// Bit: the placement tree was deeper than the navigator's loop bound (never for a
+/// validated scene); propagated again on the CPU.
+pub const PHOTON_DEPTH_LIMIT: u32 = 4;
+
+/// The photon records, in declaration order.
+pub fn photon_records() -> Vec<RecordEntry> {
+    vec![
+        entry::<PhotonParams>(),
+        entry::<PhotonTable>(),
+        entry::<PhotonMaterial>(),
+        entry::<PhotonSurface>(),
+        entry::<PhotonInstance>(),
+        entry::<PhotonBorder>(),
+        entry::<PhotonRecord>(),
+    ]
+}
+
+/// Appends the photon records and constants to the generated WGSL.
+pub fn push_photon_wgsl(out: &mut String) {
+    push_struct::<PhotonParams>(out);
+    push_struct::<PhotonTable>(out);
+    push_struct::<PhotonMaterial>(out);
+    push_struct::<PhotonSurface>(out);
+    push_struct::<PhotonInstance>(out);
+    push_struct::<PhotonBorder>(out);
+    push_struct::<PhotonRecord>(out);
+    for (name, value) in [
+        ("PHOTON_SOURCE_POINT", PHOTON_SOURCE_POINT),
+        ("PHOTON_SOURCE_BEAM", PHOTON_SOURCE_BEAM),
+        ("PHOTON_SOURCE_SPHERE", PHOTON_SOURCE_SPHERE),
+        ("PHOTON_SURFACE_METAL", PHOTON_SURFACE_METAL),
+        ("PHOTON_SURFACE_DIELECTRIC", PHOTON_SURFACE_DIELECTRIC),
+        ("PHOTON_DETECTED", PHOTON_DETECTED),
+        ("PHOTON_LOOPS_CUT", PHOTON_LOOPS_CUT),
+        ("PHOTON_DEPTH_LIMIT", PHOTON_DEPTH_LIMIT),
+    ] {
+        out.push_str(&format!("const {name}: u32 = {value}u;\n"));
+    }
+}

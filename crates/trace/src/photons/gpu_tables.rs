@@ -1,0 +1,329 @@
+//! A photon scene's physics flattened for the GPU kernel (records of
+//! [`crate::gpu::photon_records`]): every property table's rows in one array, each
+//! material's and surface's tables by index, and per instance its material, mother, copy
+//! number and the optical surfaces of its crossings, found as [`SurfaceLookup::between`]
+//! finds them ([`FlatSurfaces::between`] is the twin of the kernel's lookup and is tested
+//! against it on every pair of instances).
+//!
+//! The kernel models part of the CPU's physics; [`GpuTables::new`] refuses the rest,
+//! naming the material, surface or option and the process: wavelengths drawn from a
+//! spectrum, wavelength shifting, and optical surfaces of any finish but polished.
+
+use hytrace_foundry::UNSET;
+
+use super::properties::{Finish, OpticsTables, Property, SurfaceKind};
+use super::sources::Wavelength;
+use super::surfaces::SurfaceLookup;
+use super::{Origin, PhotonScene, RunOptions};
+use crate::gpu::photon_records::{
+    PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable,
+    PHOTON_SURFACE_DIELECTRIC, PHOTON_SURFACE_METAL,
+};
+
+/// What the GPU kernel reads of a photon scene.
+#[derive(Clone, Debug, Default)]
+pub struct GpuTables {
+    /// Property tables.
+    pub tables: Vec<PhotonTable>,
+    /// Their rows, `(energy (MeV), value)`.
+    pub rows: Vec<[f32; 2]>,
+    /// Materials.
+    pub materials: Vec<PhotonMaterial>,
+    /// Surfaces (a record for every surface of the scene; those no crossing meets are
+    /// left at their defaults, never read).
+    pub surfaces: Vec<PhotonSurface>,
+    /// The crossings' surfaces.
+    pub lookup: FlatSurfaces,
+}
+
+/// The optical surface of every crossing, as the kernel looks it up.
+#[derive(Clone, Debug, Default)]
+pub struct FlatSurfaces {
+    /// Per instance.
+    pub instances: Vec<PhotonInstance>,
+    /// Border surfaces between instances that are not mother and daughter, sorted.
+    pub borders: Vec<PhotonBorder>,
+}
+
+impl FlatSurfaces {
+    /// The lookup of a scene's surfaces.
+    pub fn new(lookup: &SurfaceLookup, material: &[u32], mother: &[u32], copy: &[i32]) -> Self {
+        let n = material.len() as u32;
+        // Per instance, the surfaces towards and from a sibling; the border pairs.
+        type Siblings = (Vec<(u32, u32)>, Vec<(u32, u32, u32)>);
+        let (sibling, borders): Siblings = match lookup {
+            SurfaceLookup::Gdml(v) => (
+                (0..n).map(|i| (v.skin(i), v.skin(i))).collect(),
+                v.border_pairs(),
+            ),
+            SurfaceLookup::Boundaries { boundaries, .. } => (
+                boundaries
+                    .iter()
+                    .map(|b| (b.outer_surface, b.inner_surface))
+                    .collect(),
+                Vec::new(),
+            ),
+        };
+        let related = |a: u32, b: u32| mother[a as usize] == b || mother[b as usize] == a;
+        let instances = (0..n)
+            .map(|i| {
+                let m = mother[i as usize];
+                let (enter, leave) = if m == UNSET {
+                    (UNSET, UNSET)
+                } else {
+                    (lookup.between(m, i), lookup.between(i, m))
+                };
+                PhotonInstance {
+                    material: material[i as usize],
+                    mother: m,
+                    copy: copy[i as usize],
+                    enter_surface: enter,
+                    leave_surface: leave,
+                    sibling_leave: sibling[i as usize].0,
+                    sibling_enter: sibling[i as usize].1,
+                    pad: 0,
+                }
+            })
+            .collect();
+        let borders = borders
+            .into_iter()
+            .filter(|&(pre, post, _)| !related(pre, post))
+            .map(|(pre, post, surface)| PhotonBorder {
+                pre,
+                post,
+                surface,
+                pad: 0,
+            })
+            .collect();
+        FlatSurfaces { instances, borders }
+    }
+
+    /// The surface of a crossing from `pre` into `post` ([`UNSET`] for none): the twin of
+    /// `surface_between` in `shaders/photons/surfaces.wgsl`.
+    pub fn between(&self, pre: u32, post: u32) -> u32 {
+        let (a, b) = (
+            &self.instances[pre as usize],
+            &self.instances[post as usize],
+        );
+        if b.mother == pre {
+            return b.enter_surface;
+        }
+        if a.mother == post {
+            return a.leave_surface;
+        }
+        let found = self
+            .borders
+            .binary_search_by(|x| (x.pre, x.post).cmp(&(pre, post)));
+        if let Ok(k) = found {
+            return self.borders[k].surface;
+        }
+        if a.sibling_leave != UNSET {
+            a.sibling_leave
+        } else {
+            b.sibling_enter
+        }
+    }
+}
+
+/// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
+fn push_table(
+    tables: &mut Vec<PhotonTable>,
+    rows: &mut Vec<[f32; 2]>,
+    p: Option<&Property>,
+) -> u32 {
+    let Some(p) = p else {
+        return UNSET;
+    };
+    let first = rows.len() as u32;
+    rows.extend(p.rows().map(|(e, v)| [e as f32, v as f32]));
+    tables.push(PhotonTable {
+        first,
+        count: rows.len() as u32 - first,
+    });
+    tables.len() as u32 - 1
+}
+
+/// Why the GPU kernel cannot propagate `run`'s photons through a scene with `tables`
+/// (the first reason), `None` when it can.
+pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
+    match &run.origin {
+        Origin::Gensteps(_) => {
+            return Some("--gensteps: photons emitted by Cherenkov and scintillation steps".into())
+        }
+        Origin::Torch {
+            wavelength: Wavelength::Spectrum { material, property },
+            ..
+        } => {
+            return Some(format!(
+                "--wavelength {material}:{property}: photon energies drawn from a spectrum"
+            ))
+        }
+        Origin::Torch { .. } => {}
+    }
+    if run.records > 0 {
+        return Some("--records: step points".into());
+    }
+    if let Some(m) = tables.materials.iter().find(|m| m.reemission.is_some()) {
+        return Some(format!(
+            "material `{}`: property REEMISSIONPROB (re-emission)",
+            m.name
+        ));
+    }
+    if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
+        return Some(format!(
+            "material `{}`: property WLSABSLENGTH (wavelength shifting, G4OpWLS)",
+            m.name
+        ));
+    }
+    let rough = tables
+        .surfaces
+        .iter()
+        .flatten()
+        .find(|s| s.finish != Finish::Polished);
+    rough.map(|s| {
+        format!(
+            "optical surface `{}`: finish {:?} (rough and painted surfaces; the kernel has polished ones)",
+            s.name, s.finish
+        )
+    })
+}
+
+impl GpuTables {
+    /// Flattens `scene`'s physics for the kernel.
+    pub fn new(scene: &PhotonScene) -> Self {
+        let (mut tables, mut rows) = (Vec::new(), Vec::new());
+        let t = &scene.tables;
+        let materials = t
+            .materials
+            .iter()
+            .map(|m| PhotonMaterial {
+                rindex: push_table(&mut tables, &mut rows, m.rindex.as_ref()),
+                abslength: push_table(&mut tables, &mut rows, m.abslength.as_ref()),
+                rayleigh: push_table(&mut tables, &mut rows, m.rayleigh.as_ref()),
+                groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
+            })
+            .collect();
+        let surfaces = t
+            .surfaces
+            .iter()
+            .map(|s| match s {
+                None => PhotonSurface::default(),
+                Some(s) => PhotonSurface {
+                    kind: match s.kind {
+                        SurfaceKind::DielectricMetal => PHOTON_SURFACE_METAL,
+                        SurfaceKind::DielectricDielectric => PHOTON_SURFACE_DIELECTRIC,
+                    },
+                    reflectivity: push_table(&mut tables, &mut rows, s.reflectivity.as_ref()),
+                    efficiency: push_table(&mut tables, &mut rows, s.efficiency.as_ref()),
+                    transmittance: push_table(&mut tables, &mut rows, s.transmittance.as_ref()),
+                },
+            })
+            .collect();
+        GpuTables {
+            tables,
+            rows,
+            materials,
+            surfaces,
+            lookup: FlatSurfaces::new(&scene.surfaces, &scene.material, &scene.mother, &scene.copy),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photons::load_photon_scene;
+    use hytrace_foundry::gdml::GdmlOptions;
+
+    /// The kernel's lookup finds the surface Geant4's lookup finds for every ordered pair
+    /// of instances (siblings, mothers and daughters, and farther apart), on files with
+    /// skin surfaces, border surfaces between mothers and daughters, and many border
+    /// surfaces between siblings (pfRICH).
+    #[test]
+    fn flat_lookup_agrees_with_the_surface_lookup_on_every_pair() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut sibling_borders = 0;
+        for file in [
+            "tests/data/photons/every_process.gdml",
+            "tests/data/photons/rough_surfaces.gdml",
+            "../shared/gdml/eic-opticks/opticks_raindrop.gdml",
+            "../shared/gdml/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml",
+            "../shared/gdml/eic-opticks/pfrich_min_FINAL.gdml",
+            "../shared/gdml/eic-opticks/basic_detector.gdml",
+            "../shared/gdml/geant4/opticalsurfaces.gdml",
+        ] {
+            let (f, surfaces) = load_photon_scene(&root.join(file), &GdmlOptions::default())
+                .unwrap_or_else(|e| panic!("{file}: {e:#}"));
+            let scene = PhotonScene::new(&f, surfaces).unwrap();
+            let flat =
+                FlatSurfaces::new(&scene.surfaces, &scene.material, &scene.mother, &scene.copy);
+            sibling_borders += flat.borders.len();
+            let n = scene.material.len() as u32;
+            let mut surfaced = 0;
+            for pre in 0..n {
+                for post in (0..n).filter(|&p| p != pre) {
+                    let s = scene.surfaces.between(pre, post);
+                    assert_eq!(flat.between(pre, post), s, "{file}: {pre} -> {post}");
+                    surfaced += usize::from(s != UNSET);
+                }
+            }
+            assert!(surfaced > 0, "{file}: no crossing has a surface");
+        }
+        assert!(
+            sibling_borders > 0,
+            "no file has border surfaces between siblings"
+        );
+    }
+
+    /// Gensteps, step points and re-emission are refused for the kernel by name; a torch
+    /// run through a scene without them is not.
+    #[test]
+    fn gensteps_records_and_re_emission_are_not_on_the_gpu() {
+        use crate::photons::gensteps::GenstepFile;
+        use crate::photons::sources::Source;
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let tables = |file: &str| {
+            let (f, surfaces) =
+                load_photon_scene(&root.join(file), &GdmlOptions::default()).unwrap();
+            PhotonScene::new(&f, surfaces).unwrap().tables
+        };
+        let torch = RunOptions {
+            origin: Origin::Torch {
+                source: Source::parse("point:0,0,0").unwrap(),
+                wavelength: Wavelength::Fixed(420.0),
+            },
+            photons: 10,
+            first: 0,
+            seed: 0,
+            max_steps: 100,
+            keep_histories: false,
+            records: 0,
+        };
+        let every = tables("tests/data/photons/every_process.gdml");
+        assert_eq!(unsupported(&every, &torch), None);
+        let gensteps = RunOptions {
+            origin: Origin::Gensteps(std::sync::Arc::new(GenstepFile {
+                source: "g.npy".into(),
+                steps: Vec::new(),
+            })),
+            ..torch.clone()
+        };
+        let records = RunOptions {
+            records: 4,
+            ..torch.clone()
+        };
+        let scintillator = tables("tests/data/photons/scintillator.gdml");
+        for (tables, run, needle) in [
+            (&every, &gensteps, "--gensteps"),
+            (&every, &records, "--records"),
+            (
+                &scintillator,
+                &torch,
+                "material `LS`: property REEMISSIONPROB",
+            ),
+        ] {
+            let why = unsupported(tables, run).expect("refused");
+            assert!(why.contains(needle), "{why}");
+        }
+    }
+}

@@ -1,0 +1,295 @@
+//! The GPU photon kernel (`shaders/kernels/photons.wgsl`) against its CPU twin (the
+//! propagator with the f32 tracer) photon by photon, and against the default CPU run (f64
+//! geometry) by the fraction of identical histories and a chi2 on history frequencies,
+//! on the three scenes the kernel's physics covers: the repository's every-process scene,
+//! the raindrop and the 8x8 SiPM files of the shared corpus. Physics the kernel does not
+//! model is refused by `--backend gpu` naming it; `auto` falls back to the CPU.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{gpu_stats, hytrace, repo, stderr};
+use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_foundry::layout::Scalar;
+use hytrace_foundry::npy::read_array;
+use hytrace_trace::gpu::{GpuContext, GpuPhotons};
+use hytrace_trace::photons::output::{compare_histories, HitRow};
+use hytrace_trace::photons::sources::{Source, Wavelength};
+use hytrace_trace::photons::tracer::Precision;
+use hytrace_trace::photons::{
+    load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
+};
+
+fn options(source: &str, photons: u64) -> RunOptions {
+    RunOptions {
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::Fixed(420.0),
+        },
+        photons,
+        first: 7,
+        seed: 11,
+        max_steps: 10_000,
+        keep_histories: true,
+        records: 0,
+    }
+}
+
+fn scene(path: &Path, precision: Precision) -> PhotonScene {
+    let (f, surfaces) = load_photon_scene(path, &GdmlOptions::default()).unwrap();
+    PhotonScene::with_precision(&f, surfaces, precision).unwrap()
+}
+
+/// The hit rows of the photons whose histories are equal in both runs, paired.
+fn paired_hits<'a>(a: &'a PhotonRun, b: &'a PhotonRun) -> Vec<(&'a HitRow, &'a HitRow)> {
+    let first = 7.0;
+    let same = |h: &HitRow| {
+        let i = (h.0[13] - first) as usize;
+        a.histories[i] == b.histories[i]
+    };
+    let (x, y): (Vec<_>, Vec<_>) = (
+        a.hits.iter().filter(|h| same(h)).collect(),
+        b.hits.iter().filter(|h| same(h)).collect(),
+    );
+    assert_eq!(x.len(), y.len());
+    x.into_iter().zip(y).collect()
+}
+
+/// The fraction of photons with identical histories.
+fn same_histories(a: &PhotonRun, b: &PhotonRun) -> f64 {
+    let same = a
+        .histories
+        .iter()
+        .zip(&b.histories)
+        .filter(|(x, y)| x == y)
+        .count();
+    same as f64 / a.histories.len() as f64
+}
+
+/// GPU against the f32 twin photon by photon (histories, then hit rows within f32
+/// rounding of the physics: the kernel computes it in f32, the twin in f64 over the same
+/// f32 geometry), and against the f64 CPU by the histories' frequencies.
+fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usize) {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let run = options(source, photons);
+    let s32 = scene(&path, Precision::F32);
+    let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
+    let gpu = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap();
+    let cpu32 = propagate(&s32, &run).unwrap();
+    let cpu64 = propagate(&scene(&path, Precision::F64), &run).unwrap();
+    let g = &gpu.run;
+    assert_eq!(g.histories.len(), photons as usize);
+    assert!(
+        g.hits.len() >= min_detected,
+        "{name}: {} hits",
+        g.hits.len()
+    );
+    let twin_same = same_histories(g, &cpu32);
+    let f64_same = same_histories(g, &cpu64);
+    let chi2 = compare_histories(&g.counts, &cpu64.counts, 30);
+    eprintln!(
+        "{name}: {photons} photons, {} hits; histories equal to the f32 twin {:.4}, to the f64 CPU {:.4}; \
+         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}",
+        g.hits.len(),
+        twin_same,
+        f64_same,
+        chi2.chi2,
+        chi2.ndf,
+        chi2.p_value,
+        gpu.times.redone_on_cpu
+    );
+    // No photon ran out of lavapipe's loop budget (those are the twin's by construction).
+    assert_eq!(gpu.times.redone_on_cpu, 0, "{name}");
+    // f32 rounding of the physics takes a random decision apart for a few photons.
+    assert!(twin_same >= 0.99, "{name}: {twin_same}");
+    assert!(f64_same >= 0.98, "{name}: {f64_same}");
+    assert!(chi2.p_value > 1e-3, "{name}: {chi2:?}");
+    let pairs = paired_hits(g, &cpu32);
+    assert!(pairs.len() as f64 >= 0.95 * g.hits.len() as f64);
+    // Position, time, direction, wavelength, polarization: f32 physics over the same steps
+    // (an f32 sine of a scattering angle near 0 or pi, or a long path after it, spreads
+    // the rounding); instance, copy number, index, mask and steps exactly.
+    let within = |a: &HitRow, b: &HitRow, r: f64| {
+        (0..11).all(|k| (a.0[k] - b.0[k]).abs() <= r * (1.0 + b.0[k].abs()))
+    };
+    let close = pairs.iter().filter(|(a, b)| within(a, b, 1e-4)).count();
+    eprintln!(
+        "{name}: {close} of {} hits with equal histories within 1e-4 relative",
+        pairs.len()
+    );
+    assert!(close as f64 >= 0.95 * pairs.len() as f64, "{name}");
+    for (a, b) in pairs {
+        assert!(within(a, b, 2e-2), "{name}: {:?} vs {:?}", a.0, b.0);
+        assert_eq!(a.0[11..], b.0[11..], "{name}");
+    }
+}
+
+#[test]
+fn every_process_scene_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/every_process.gdml");
+    twin("every_process point", path.clone(), "point:0,0,0", 3000, 50);
+    twin(
+        "every_process beam",
+        path,
+        "beam:-90,0,5:1,0,0:20:10",
+        2000,
+        20,
+    );
+}
+
+#[test]
+fn raindrop_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("../shared/gdml/eic-opticks/opticks_raindrop.gdml");
+    twin("raindrop point", path.clone(), "point:0,0,70", 3000, 500);
+    twin("raindrop sphere", path, "sphere:0,0,0:40:in", 2000, 500);
+}
+
+#[test]
+fn sipm_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("../shared/gdml/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml");
+    twin("sipm point", path, "point:0.1,0.1,4", 1500, 200);
+}
+
+#[test]
+fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = repo("tests/data/photons/every_process.gdml");
+    let run = |backend: &str| {
+        let out = dir.path().join(format!("{backend}.npy"));
+        let history = dir.path().join(format!("{backend}-history.npy"));
+        let o = hytrace(
+            &[
+                "photons",
+                scene.to_str().unwrap(),
+                "--source",
+                "point:0,0,0",
+                "-n",
+                "500",
+                "-o",
+                out.to_str().unwrap(),
+                &format!("--history={}", history.display()),
+                "--top",
+                "0",
+                "--backend",
+                backend,
+                "--stats",
+            ],
+            &[],
+        );
+        (o, out, history)
+    };
+    let (gpu, gpu_hits, gpu_history) = run("gpu");
+    let stdout = String::from_utf8_lossy(&gpu.stdout).into_owned();
+    let line = stdout.lines().last().unwrap_or_default().to_string();
+    let stats = gpu_stats(&std::process::Output {
+        stdout: line.into_bytes(),
+        ..gpu
+    });
+    assert_eq!(stats["photons"], 500);
+    let (cpu, cpu_hits, cpu_history) = run("cpu");
+    assert!(cpu.status.success(), "{}", stderr(&cpu));
+    // The same layouts: float64 (H, 16) hits, uint64 (500,) histories, nearly all equal.
+    let (g, c) = (
+        read_array(&gpu_hits).unwrap(),
+        read_array(&cpu_hits).unwrap(),
+    );
+    assert_eq!((g.scalar, c.scalar), (Scalar::F64, Scalar::F64));
+    assert_eq!(g.shape, vec![stats["hits"].as_u64().unwrap(), 16]);
+    assert!(
+        g.shape[0].abs_diff(c.shape[0]) <= 2,
+        "{:?} {:?}",
+        g.shape,
+        c.shape
+    );
+    let histories = |p: &PathBuf| {
+        let h = std::fs::read(p).unwrap();
+        assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
+        h[128..]
+            .chunks_exact(8)
+            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let (hg, hc) = (histories(&gpu_history), histories(&cpu_history));
+    assert_eq!((hg.len(), hc.len()), (500, 500));
+    let same = hg.iter().zip(&hc).filter(|(a, b)| a == b).count();
+    assert!(same >= 495, "{same} of 500 histories equal");
+}
+
+#[test]
+fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hits.npy");
+    let cases = [
+        (
+            "tests/data/photons/rough_surfaces.gdml",
+            "beam:-265,0,50:0.5,0,-1:5",
+            "420",
+            "finish",
+        ),
+        (
+            "tests/data/photons/wavelength_shifter.gdml",
+            "beam:-80,0,50:0.2,0,-1:10",
+            "420",
+            "WLSABSLENGTH",
+        ),
+        (
+            "tests/data/photons/every_process.gdml",
+            "point:0,0,0",
+            "Liquid:SCINTILLATIONCOMPONENT1",
+            "spectrum",
+        ),
+    ];
+    for (file, source, wavelength, needle) in cases {
+        let scene = repo(file);
+        let args = |backend: &'static str| {
+            vec![
+                "photons".to_string(),
+                scene.to_str().unwrap().to_string(),
+                "--source".into(),
+                source.into(),
+                "--wavelength".into(),
+                wavelength.into(),
+                "-n".into(),
+                "50".into(),
+                "-o".into(),
+                out.to_str().unwrap().into(),
+                "--backend".into(),
+                backend.into(),
+                "--stats".into(),
+            ]
+        };
+        let gpu_args = args("gpu");
+        let o = hytrace(
+            &gpu_args.iter().map(String::as_str).collect::<Vec<_>>(),
+            &[],
+        );
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{file}: accepted on the GPU");
+        assert!(
+            e.contains(needle)
+                && e.contains("not on the GPU")
+                && e.contains(file.rsplit('/').next().unwrap()),
+            "{file}: {e}"
+        );
+        assert!(!out.exists(), "{file}: an output file after the error");
+        let auto_args = args("auto");
+        let o = hytrace(
+            &auto_args.iter().map(String::as_str).collect::<Vec<_>>(),
+            &[],
+        );
+        assert!(o.status.success(), "{file}: {}", stderr(&o));
+        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(stats["backend"], "cpu", "{file}");
+        assert!(stderr(&o).contains(needle), "{file}: {}", stderr(&o));
+        std::fs::remove_file(&out).unwrap();
+    }
+}

@@ -1,0 +1,43 @@
+// Torch sources: twin of photons::sources::Source::sample.
+// #import photons/bindings
+// #import photons/bulk
+
+struct Start {
+    position: vec3<f32>,
+    direction: vec3<f32>,
+    polarization: vec3<f32>,
+}
+
+fn torch_start(rng: ptr<function, VolumeRng>) -> Start {
+    let at = vec3<f32>(pparams.source_at[0], pparams.source_at[1], pparams.source_at[2]);
+    var position = at;
+    var direction: vec3<f32>;
+    if pparams.source_kind == PHOTON_SOURCE_BEAM {
+        let axis = vec3<f32>(pparams.source_direction[0], pparams.source_direction[1], pparams.source_direction[2]);
+        let r = pparams.source_radius * sqrt(rng_next(rng));
+        let phi = TAU * rng_next(rng);
+        position = at + rotate_uz(vec3<f32>(r * cos(phi), r * sin(phi), 0.0), axis);
+        direction = axis;
+        let cd = pparams.cos_divergence;
+        if cd < 1.0 {
+            // Uniform in solid angle: the cosine uniform in [cos A, 1].
+            let c = 1.0 - (1.0 - cd) * rng_next(rng);
+            let s = sqrt(max(1.0 - c * c, 0.0));
+            let psi = TAU * rng_next(rng);
+            direction = normalized(rotate_uz(vec3<f32>(s * cos(psi), s * sin(psi), c), axis));
+        }
+    } else {
+        let cos_t = 1.0 - 2.0 * rng_next(rng);
+        let sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+        let phi = TAU * rng_next(rng);
+        let n = vec3<f32>(sin_t * cos(phi), sin_t * sin(phi), cos_t);
+        direction = n;
+        if pparams.source_kind == PHOTON_SOURCE_SPHERE {
+            position = at + n * pparams.source_radius;
+            direction = select(n, -n, pparams.inward != 0u);
+        }
+    }
+    let a = TAU * rng_next(rng);
+    let polarization = normalized(rotate_uz(vec3<f32>(cos(a), sin(a), 0.0), direction));
+    return Start(position, direction, polarization);
+}
