@@ -88,6 +88,12 @@ impl Foundry {
         Self::default()
     }
 
+    /// Whether instances are placed inside others (a GDML placement tree): the tracers
+    /// then navigate, answering the boundaries of the volume a point is located in.
+    pub fn is_hierarchical(&self) -> bool {
+        self.inst_mother.iter().any(|m| m.index != UNSET)
+    }
+
     /// Starts a solid; its prims are added through the returned builder.
     pub fn begin_solid(&mut self, name: &str) -> SolidBuilder<'_> {
         let first_prim = self.prim.len();

@@ -391,6 +391,47 @@ pub fn scan_reporting(
     backend: Backend,
     progress: &(dyn Fn(u64) + Sync),
 ) -> crate::Result<(ScanResult, ScanTimes)> {
+    let Some(moved) = started_at_tmin(foundry, rays) else {
+        return scan_from_origins(foundry, rays, precision, backend, progress);
+    };
+    let (mut result, times) = scan_from_origins(foundry, &moved, precision, backend, progress)?;
+    for (hit, r) in result.hits.iter_mut().zip(rays) {
+        if r.tmin > 0.0 && hit[3].is_finite() {
+            hit[3] += r.tmin;
+        }
+    }
+    Ok((result, times))
+}
+
+/// A hierarchical scene's navigator locates a ray's origin and answers the boundaries of
+/// the volume it is in, so a ray whose `tmin` is past a boundary would be answered from a
+/// volume it has left (and miss the next one). Where a scene is hierarchical and some ray
+/// has `tmin > 0`, the rays as they start at `tmin`: origin moved there (in f64), `tmin`
+/// 0 and `tmax` shortened by it; their distances count from there. `None` otherwise.
+fn started_at_tmin(f: &Foundry, rays: &[RayRow]) -> Option<Vec<RayRow>> {
+    if !f.is_hierarchical() || !rays.iter().any(|r| r.tmin > 0.0) {
+        return None;
+    }
+    let moved = |r: &RayRow| match r.tmin > 0.0 {
+        true => RayRow {
+            origin: std::array::from_fn(|k| r.origin[k] + r.tmin * r.direction[k]),
+            direction: r.direction,
+            tmin: 0.0,
+            tmax: r.tmax - r.tmin,
+        },
+        false => *r,
+    };
+    Some(rays.iter().map(moved).collect())
+}
+
+/// [`scan_reporting`] of rays whose `tmin` needs no move ([`started_at_tmin`]).
+fn scan_from_origins(
+    foundry: &Foundry,
+    rays: &[RayRow],
+    precision: Precision,
+    backend: Backend,
+    progress: &(dyn Fn(u64) + Sync),
+) -> crate::Result<(ScanResult, ScanTimes)> {
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],

@@ -376,7 +376,7 @@ impl<T: Real> CpuScene<T> {
                 bounds: world_bounds(aabb, tran),
             });
         }
-        let layout = if f.inst_mother.iter().any(|m| m.index != UNSET) {
+        let layout = if f.is_hierarchical() {
             let mut roots = Vec::new();
             let mut daughters = vec![Vec::new(); f.inst.len()];
             for (i, m) in f.inst_mother.iter().enumerate() {

@@ -64,7 +64,7 @@ fn subtree_sizes(g: &Gdml) -> Vec<u64> {
 /// once; none for a flat scene. Renders leave them transparent so the detector shows.
 pub(crate) fn world_solids(f: &Foundry) -> Vec<String> {
     let mut worlds: Vec<String> = Vec::new();
-    if f.inst_mother.iter().any(|m| m.index != UNSET) {
+    if f.is_hierarchical() {
         for (inst, m) in f.inst.iter().zip(&f.inst_mother) {
             let solid = &f.solid_names[inst.solid as usize];
             if m.index == UNSET && !worlds.contains(solid) {
