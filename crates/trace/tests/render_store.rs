@@ -375,7 +375,9 @@ fn scan_transmittance_reads_a_store_through_a_memory_budget() {
         .collect();
     let rays_path = tmp.path().join("rays.npy");
     write_rays(&rays_path, &rays).unwrap();
-    let scan = |scene: &Path, name: &str, memory: &str| {
+    // `scan --transmittance` of `scene` through a cache of `memory` bytes, `extra`
+    // options after: its output and the transmittance file's path.
+    let scan = |scene: &Path, name: &str, memory: &str, extra: &[&str]| {
         let hits = tmp.path().join(format!("{name}-hits.npy"));
         let t = tmp.path().join(format!("{name}-t.npy"));
         let args = [
@@ -390,11 +392,11 @@ fn scan_transmittance_reads_a_store_through_a_memory_budget() {
             "--memory",
             memory,
         ];
-        (hytrace(&args, &[]), t)
+        (hytrace(&[&args[..], extra].concat(), &[]), t)
     };
-    let (o, lazy) = scan(&stored, "stored", &least);
+    let (o, lazy) = scan(&stored, "stored", &least, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let (o, whole) = scan(&in_core, "in-core", "1G");
+    let (o, whole) = scan(&in_core, "in-core", "1G", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (lazy, whole) = (read_values(&lazy), read_values(&whole));
     assert!(lazy.iter().any(|&v| v < 0.5), "no ray crosses the cloud");
@@ -402,8 +404,13 @@ fn scan_transmittance_reads_a_store_through_a_memory_budget() {
         lazy.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
         whole.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
     );
-    let (o, t) = scan(&stored, "refused", "1");
+    let (o, t) = scan(&stored, "refused", "1", &[]);
     assert!(!o.status.success() && !t.exists());
+    assert!(
+        stderr(&o).contains("cloud.bricks") && stderr(&o).contains("too small"),
+        "{}",
+        stderr(&o)
+    );
     // On the GPU the store streams through a brick pool of that budget (at least what the
     // pool needs): the exact estimator's answers agree with the CPU's ray by ray.
     let Some(ctx) = GpuContext::for_tests() else {
@@ -415,38 +422,15 @@ fn scan_transmittance_reads_a_store_through_a_memory_budget() {
         other => panic!("a 1-byte budget: {:?}", other.err()),
     };
     let budget = least.parse::<u64>().unwrap().max(gpu_least).to_string();
-    let exact = |backend: &str, name: &str| {
-        let t = tmp.path().join(format!("{name}-exact.npy"));
-        let hits = tmp.path().join(format!("{name}-exact-hits.npy"));
-        let args = [
-            "scan",
-            stored.to_str().unwrap(),
-            "--rays",
-            rays_path.to_str().unwrap(),
-            "--out",
-            hits.to_str().unwrap(),
-            "--transmittance",
-            t.to_str().unwrap(),
-            "--estimator",
-            "exact",
-            "--memory",
-            &budget,
-            "--backend",
-            backend,
-            "--stats",
-        ];
-        let o = hytrace(&args, &[]);
+    let exact = |backend: &str| {
+        let extra = ["--estimator", "exact", "--backend", backend];
+        let (o, t) = scan(&stored, &format!("{backend}-exact"), &budget, &extra);
         assert!(o.status.success(), "{}", stderr(&o));
         read_values(&t)
     };
-    let (cpu, gpu) = (exact("cpu", "cpu"), exact("gpu", "gpu"));
+    let (cpu, gpu) = (exact("cpu"), exact("gpu"));
     let worst = (cpu.iter().zip(&gpu))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(worst < 1e-4, "GPU and CPU differ by up to {worst}");
-    assert!(
-        stderr(&o).contains("cloud.bricks") && stderr(&o).contains("too small"),
-        "{}",
-        stderr(&o)
-    );
 }
