@@ -142,6 +142,12 @@ struct Step {
     inside_before: bool,
 }
 
+// The least start of a span that `first_crossing_of_spans` skipped as a touch although it
+// ended past the search's start, since the caller last set it to INF: the twin of
+// hytrace_csg::kernel::Step::dropped, which the CPU carries in its steps (here one value
+// per invocation, read by the scan kernel after each prim's first crossing).
+var<private> dropped_span: f32 = INF;
+
 fn step_miss(inside: bool) -> Step {
     return Step(INF, vec3<f32>(0.0), inside);
 }
@@ -162,6 +168,10 @@ fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, to
     for (var i = 0u; i < spans.len; i += 1u) {
         let s = spans.items[i];
         if s.t1 - s.t0 <= touch {
+            // (Spans of empty parts sit at INF, where the CPU's infinite ones never pass.)
+            if s.t1 + shift > after && s.t0 < INF {
+                dropped_span = min(dropped_span, s.t0 + shift);
+            }
             continue;
         }
         let t0 = s.t0 + shift;

@@ -299,6 +299,15 @@ fn csg_decide(code: u32, a: Step, b: Step, scale: f32) -> CsgDecision {
     let a_after = a.inside_before != cross_a;
     let b_after = b.inside_before != cross_b;
     if csg_operator_inside(code, a_after, b_after) == before {
+        // A chord through an edge where the children meet (or a gap between them) dropped
+        // (decide's sliver): noted in `dropped_span`.
+        var between = csg_operator_inside(code, a.inside_before, b_after);
+        if a.t < b.t {
+            between = csg_operator_inside(code, a_after, b.inside_before);
+        }
+        if cross_a && cross_b && between != before && a.t != b.t {
+            dropped_span = min(dropped_span, t);
+        }
         return CsgDecision(false, step_miss(false), cross_a, cross_b);
     }
     // The crossing child that changes the result on its own gives the surface.

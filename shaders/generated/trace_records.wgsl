@@ -101,7 +101,8 @@ struct SearchList {
     root: u32,
     unbounded_first: u32,
     unbounded_count: u32,
-    pad: array<u32, 2>,
+    largest: f32,
+    pad: u32,
 }
 
 struct Placement {
@@ -109,7 +110,7 @@ struct Placement {
     lo: array<f32, 3>,
     solid: u32,
     hi: array<f32, 3>,
-    pad: u32,
+    sdf_decides: u32,
     origin_lo: array<f32, 3>,
     pad_lo: u32,
     centre: array<f32, 3>,
@@ -334,6 +335,9 @@ const PHOTON_LOOPS_CUT: u32 = 2u;
 const PHOTON_DEPTH_LIMIT: u32 = 4u;
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 const STATUS_LOOPS_CUT: u32 = 2u;
+const STATUS_START_NEAR: u32 = 4u;
+const STATUS_START_BAND: u32 = 8u;
+const STATUS_DROPPED_SPAN: u32 = 16u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).
 const SURFACE_TOLERANCE: f32 = 2e-6;
 // The gap between 1 and the next f32 (hytrace_csg::Real::EPSILON).

@@ -53,6 +53,12 @@ fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         status = hits[i].status;
     }
     let h = cross_from(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin, min(r.tmax, INF));
+    // What the f32 trace could not decide (CpuScene::trace_flagged): the host traces such
+    // rays again in f64.
+    if trace_dropped {
+        status |= STATUS_DROPPED_SPAN;
+    }
+    status |= start_flags(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin);
     var out: HitRecord;
     out.normal = array<f32, 3>(h.normal.x, h.normal.y, h.normal.z);
     out.t = h.t;

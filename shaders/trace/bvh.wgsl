@@ -205,9 +205,14 @@ fn holds(lo: vec3<f32>, hi: vec3<f32>, x: vec3<f32>) -> bool {
     return all(x >= lo) && all(x <= hi);
 }
 
+// Whether the box lo..hi widened by `margin` holds x (bvh::holds_within).
+fn holds_within(lo: vec3<f32>, hi: vec3<f32>, x: vec3<f32>, margin: f32) -> bool {
+    return all(x >= lo - vec3<f32>(margin)) && all(x <= hi + vec3<f32>(margin));
+}
+
 // The state of one point query over a search list: its members last first (no BVH, as
-// positions), or every item whose node boxes contain the point (a superset of those whose
-// own boxes do), in no particular order.
+// positions), or every item whose node boxes, widened by the query's margin, contain the
+// point (a superset of those whose own boxes do), in no particular order.
 struct PointWalk {
     linear: bool,
     nodes: array<u32, BVH_STACK>,
@@ -235,7 +240,7 @@ fn point_walk(list: SearchList) -> PointWalk {
     return w;
 }
 
-fn point_next(w: ptr<function, PointWalk>, x: vec3<f32>) -> u32 {
+fn point_next(w: ptr<function, PointWalk>, x: vec3<f32>, margin: f32) -> u32 {
     if (*w).linear {
         if (*w).end > 0u {
             (*w).end -= 1u;
@@ -254,7 +259,7 @@ fn point_next(w: ptr<function, PointWalk>, x: vec3<f32>) -> u32 {
         }
         (*w).len -= 1u;
         let node = box_node((*w).nodes[(*w).len]);
-        if !holds(node_lo(node), node_hi(node), x) {
+        if !holds_within(node_lo(node), node_hi(node), x, margin) {
             continue;
         }
         if node.count > 0u {

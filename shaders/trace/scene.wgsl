@@ -59,6 +59,10 @@ fn prim_first_crossing(p: SurfacePrim, o: vec3<f32>, d: vec3<f32>, tmin: f32) ->
     return step_miss(false);
 }
 
+// Whether a prim of the trace skipped a short span as a touch before its search's limit
+// (the CPU's Crossings::note_dropped): the scan reports STATUS_DROPPED_SPAN.
+var<private> trace_dropped: bool = false;
+
 fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
     // #if csg
     if p.kind == PRIM_CSG {
@@ -97,7 +101,12 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) ->
         if !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
             continue;
         }
+        dropped_span = INF;
         let step = prim_first_crossing(p, o, d, tmin);
+        // A span skipped as a touch before the limit: within rounding (the f64 fallback).
+        if dropped_span < INF && dropped_span < within {
+            trace_dropped = true;
+        }
         let tie_won = step.t == within && found && i < best_index;
         if step.t > tmin && (step.t < within || tie_won) {
             best_index = i;
@@ -132,17 +141,17 @@ fn placement_offset_of(p: Placement, o: vec3<f32>, o_lo: vec3<f32>) -> vec3<f32>
     return frame_linear(f, hi + lo);
 }
 
-// The nearer of `best` and the first crossing of instance `index`'s surface. The ray is
-// taken into the solid's frame as Placement::rebase takes it (a ray starting beyond the
-// solid's reach moved along itself to its closest approach to the centre of the solid's
-// box), the solid asked up to a few ulps past the local limit (LocalRay::past_local) and
-// its crossing kept if its world parameter is below the limit.
-fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
-    let p = placement(index);
-    let limit = hit_limit(best, tmax);
-    if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
-        return best;
-    }
+// A world ray in a placed solid's frame (LocalRay): t_world = shift + t_local.
+struct LocalRay {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    shift: f32,
+}
+
+// The world ray o + o_lo, d taken into the solid's frame as Placement::rebase takes it: a
+// ray starting beyond the solid's reach is moved along itself to its closest approach to
+// the centre of the solid's box.
+fn placement_rebase(p: Placement, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>) -> LocalRay {
     let offset = placement_offset_of(p, o, o_lo);
     let ld = frame_linear(placement_frame(p), d);
     let centre = vec3<f32>(p.centre[0], p.centre[1], p.centre[2]);
@@ -153,9 +162,24 @@ fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin:
     if !is_finite_t(shift) {
         shift = 0.0;
     }
+    return LocalRay(offset + ld * shift, ld, shift);
+}
+
+// The nearer of `best` and the first crossing of instance `index`'s surface. The ray is
+// taken into the solid's frame (`placement_rebase`), the solid asked up to a few ulps past
+// the local limit (LocalRay::past_local) and its crossing kept if its world parameter is
+// below the limit.
+fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
+    let p = placement(index);
+    let limit = hit_limit(best, tmax);
+    if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
+        return best;
+    }
+    let local = placement_rebase(p, o, o_lo, d);
+    let shift = local.shift;
     let past = limit - shift;
     let limit_local = past + 4.0 * EPSILON * abs(past);
-    var c = solid_cross(p.solid, offset + ld * shift, ld, tmin - shift, limit_local);
+    var c = solid_cross(p.solid, local.o, local.d, tmin - shift, limit_local);
     if !c.found {
         return best;
     }
@@ -282,7 +306,7 @@ fn locate_point(x: vec3<f32>, x_lo: vec3<f32>, status: ptr<function, u32>) -> u3
     let levels = arrayLength(&placements) + 1u;
     var level = 0u;
     loop {
-        let k = point_next(&w, x);
+        let k = point_next(&w, x, 0.0);
         if k == UNSET {
             // The group is done: descend into the daughters of the member found.
             if found == UNSET {
@@ -315,4 +339,76 @@ fn locate_point(x: vec3<f32>, x_lo: vec3<f32>, status: ptr<function, u32>) -> u3
         }
     }
     return current;
+}
+
+// The tolerance band about a start at tmin for solids of size up to `size` (cpu::band).
+fn start_band(size: f32, tmin: f32) -> f32 {
+    return 8.0 * SURFACE_TOLERANCE * (size + abs(tmin));
+}
+
+// Whether a point of solid `solid`'s frame lies within `band` of a CSG prim's surface by
+// the prim's signed distance (SolidAccel::near_surface; meshes have none).
+fn solid_near_surface(solid: u32, x: vec3<f32>, band: f32) -> bool {
+    // #if csg
+    let list = solid_list(solid);
+    for (var i = 0u; i < list.count; i += 1u) {
+        let p = surface_prim(list.first + i);
+        if p.kind == PRIM_CSG && abs(csg_tree_sdf(p.index, x)) <= band {
+            return true;
+        }
+    }
+    // #endif
+    return false;
+}
+
+// Instance `index`'s part of `start_flags` (CpuScene::start_flag).
+fn start_flag(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, start: vec3<f32>, tmin: f32, pad: f32) -> u32 {
+    let p = placement(index);
+    let lo = placement_lo(p);
+    let hi = placement_hi(p);
+    let b = start_band(max(hi.x - lo.x, max(hi.y - lo.y, hi.z - lo.z)), tmin);
+    if !holds_within(lo, hi, start, b + pad) {
+        return 0u;
+    }
+    let local = placement_rebase(p, o, o_lo, d);
+    let x = local.o + local.d * (tmin - local.shift);
+    if solid_near_surface(p.solid, x, b) {
+        return STATUS_START_NEAR;
+    }
+    if p.sdf_decides != 0u {
+        return 0u;
+    }
+    return STATUS_START_BAND;
+}
+
+// Whether the ray starts within the tolerance band of a surface of the instances the trace
+// asks about there: the one its origin is located in (`located`, UNSET for none and in flat
+// scenes) and the members of its group (CpuScene::start_flags, the same bits).
+fn start_flags(located: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32) -> u32 {
+    let start = o + d * tmin;
+    let pad = 4.0 * EPSILON * (v3_max_abs(start) + abs(tmin));
+    var g = 0u;
+    if located != UNSET {
+        g = located + 1u;
+    }
+    let list = group_list(g);
+    let margin = start_band(list.largest, tmin) + pad;
+    var w = point_walk(list);
+    // The located instance first, then the group's members near the start (one call site
+    // of `start_flag`, which drivers inline).
+    var pending = located;
+    var flags = 0u;
+    loop {
+        var index = pending;
+        pending = UNSET;
+        if index == UNSET {
+            let k = point_next(&w, start, margin);
+            if k == UNSET {
+                break;
+            }
+            index = select(k, group_member(list.first + k), w.linear);
+        }
+        flags |= start_flag(index, o, o_lo, d, start, tmin, pad);
+    }
+    return flags;
 }

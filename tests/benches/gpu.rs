@@ -33,6 +33,7 @@ use hytrace_foundry::Foundry;
 use hytrace_tests::gdml::{gdml_dir, gdml_files};
 use hytrace_trace::accuracy::utc_date;
 use hytrace_trace::cpu::CpuScene;
+use hytrace_trace::gpu::records::STATUS_CUT_SHORT;
 use hytrace_trace::gpu::{GpuContext, GpuTracer, GPU_INF};
 use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::scene::{load_scene, scene_from_toml};
@@ -144,7 +145,10 @@ fn measure(ctx: &GpuContext, tracer: &GpuTracer, rows: &[RayRow]) -> (Measured, 
     let measured = Measured {
         rays: rows.len(),
         hits: hits.iter().filter(|h| h.t < GPU_INF).count(),
-        cut_short: hits.iter().filter(|h| h.status != 0).count(),
+        cut_short: hits
+            .iter()
+            .filter(|h| h.status & STATUS_CUT_SHORT != 0)
+            .count(),
         kernel_s: median(kernel),
         end_to_end_s: median(end_to_end),
     };

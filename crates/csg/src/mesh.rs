@@ -556,6 +556,7 @@ impl<T: Real> MeshPrim<T> {
                 t: t + shift,
                 normal,
                 inside_before: normal.dot(ray.direction) > T::ZERO,
+                dropped: T::INFINITY,
             },
             None => Step::miss(false),
         }

@@ -240,8 +240,9 @@ fn operator_inside(code: TypeCode, a: bool, b: bool) -> bool {
 enum Decision<T> {
     /// The operator's first crossing (or miss).
     Done(Step<T>),
-    /// Query again the children that cross first (left, right) after their crossings.
-    Advance(bool, bool),
+    /// Query again the children that cross first (left, right) after their crossings; the
+    /// third field is [`Step::dropped`] of the crossings merged (`+inf`: none dropped).
+    Advance(bool, bool, T),
 }
 
 /// The state table of a binary operator: combines the children's next crossings.
@@ -260,7 +261,16 @@ fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decisi
     let a_after = a.inside_before != cross_a;
     let b_after = b.inside_before != cross_b;
     if operator_inside(code, a_after, b_after) == before {
-        return Decision::Advance(cross_a, cross_b);
+        // Both children crossing within the tolerance at different points, the result
+        // between their crossings other than before and after: a chord through an edge
+        // where they meet (or a gap between them) is dropped.
+        let between = match a.t < b.t {
+            true => operator_inside(code, a_after, b.inside_before),
+            false => operator_inside(code, a.inside_before, b_after),
+        };
+        let sliver = cross_a && cross_b && between != before && a.t != b.t;
+        let dropped = if sliver { t } else { T::INFINITY };
+        return Decision::Advance(cross_a, cross_b, dropped);
     }
     // The crossing child that changes the result on its own gives the surface.
     let use_a = cross_a && (!cross_b || operator_inside(code, a_after, b.inside_before) != before);
@@ -279,6 +289,7 @@ fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decisi
             t: b.t,
             normal,
             inside_before: before,
+            dropped: b.dropped,
         }
     };
     Decision::Done(crossing)
@@ -447,15 +458,20 @@ impl<T: Real> PrimTree<T> {
         let (l, r) = (2 * position, 2 * position + 1);
         let mut left = self.node_step(l, ray, tmin);
         let mut right = self.node_step(r, ray, tmin);
+        // Spans dropped by any of the children's steps, the ones advanced past included.
+        let mut dropped = left.dropped.min(right.dropped);
         loop {
             match decide(code, &left, &right, self.scale) {
-                Decision::Done(step) => return step,
-                Decision::Advance(again_left, again_right) => {
+                Decision::Done(step) => return Step { dropped, ..step },
+                Decision::Advance(again_left, again_right, sliver) => {
+                    dropped = dropped.min(sliver);
                     if again_left {
                         left = self.node_step(l, ray, left.t);
+                        dropped = dropped.min(left.dropped);
                     }
                     if again_right {
                         right = self.node_step(r, ray, right.t);
+                        dropped = dropped.min(right.dropped);
                     }
                 }
             }
@@ -496,6 +512,7 @@ impl<T: Real> PrimTree<T> {
             return Step::miss(false);
         }
         let mut tau = tmin;
+        let mut dropped = T::INFINITY;
         loop {
             let (mut best, mut count) = (T::INFINITY, 0usize);
             let (mut entries, mut exits) = (0usize, 0usize);
@@ -505,6 +522,7 @@ impl<T: Real> PrimTree<T> {
                     continue;
                 }
                 let s = leaf.step(&self.planes, ray, tau, self.tol(tau), false);
+                dropped = dropped.min(s.dropped);
                 count += s.inside_before as usize;
                 if !s.is_hit() {
                     continue;
@@ -525,7 +543,10 @@ impl<T: Real> PrimTree<T> {
                 }
             }
             if best == T::INFINITY {
-                return Step::miss(inside(count));
+                return Step {
+                    dropped,
+                    ..Step::miss(inside(count))
+                };
             }
             let after = count + entries - exits;
             if inside(count) != inside(after) {
@@ -537,6 +558,7 @@ impl<T: Real> PrimTree<T> {
                         exit_normal
                     },
                     inside_before: inside(count),
+                    dropped,
                 };
             }
             tau = best;

@@ -23,8 +23,12 @@ use serde_json::json;
 use hytrace_volume::{TransmittanceParams, DEFAULT_STORE_BUDGET};
 
 use crate::cpu::media::{MediumSegment, SceneMedia};
-use crate::cpu::{CpuScene, Hit, TraceScratch, BATCH};
-use crate::gpu::records::{split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_LOOPS_CUT};
+use crate::cpu::{
+    CpuScene, Hit, TraceScratch, BATCH, STATUS_DROPPED_SPAN, STATUS_START_BAND, STATUS_START_NEAR,
+};
+use crate::gpu::records::{
+    split_f64, RayRecord, STATUS_DEPTH_LIMIT, STATUS_FLAGS, STATUS_LOOPS_CUT,
+};
 use crate::gpu::{
     gpu_or_cpu, warn_redone, GpuContext, GpuStreamedVolume, GpuTimes, GpuTracer, GpuVolume, GPU_INF,
 };
@@ -262,29 +266,52 @@ fn answers<T: Real>(
         .collect()
 }
 
+/// Every ray's answer from the CPU tracer and its trace's flags
+/// ([`CpuScene::trace_batch_flagged`]: what the f32 fallback needs).
+pub(crate) fn cpu_answers_flagged<T: Real>(
+    scene: &CpuScene<T>,
+    rays: &[RayRow],
+) -> (Vec<Answer>, Vec<u32>) {
+    let mut flags = vec![0; rays.len()];
+    let answers = cpu_answers_reporting(scene, rays, &|_| (), Some(&mut flags));
+    (answers, flags)
+}
+
 /// Every ray's answer from the CPU tracer, handed rays in batches
 /// ([`CpuScene::trace_batch`]: the same answers as its `trace`, sooner).
 pub(crate) fn cpu_answers<T: Real>(scene: &CpuScene<T>, rays: &[RayRow]) -> Vec<Answer> {
-    cpu_answers_reporting(scene, rays, &|_| ())
+    cpu_answers_reporting(scene, rays, &|_| (), None)
 }
 
-/// [`cpu_answers`], calling `progress` with the number of rays answered after each batch.
+/// [`cpu_answers`], calling `progress` with the number of rays answered after each batch;
+/// with `flags`, each ray's flags written there too ([`cpu_answers_flagged`]).
 fn cpu_answers_reporting<T: Real>(
     scene: &CpuScene<T>,
     rays: &[RayRow],
     progress: &(dyn Fn(u64) + Sync),
+    flags: Option<&mut [u32]>,
 ) -> Vec<Answer> {
     let done = std::sync::atomic::AtomicU64::new(0);
     let mut answers = vec![answer_of::<T>(None); rays.len()];
+    let flagged = flags.is_some();
+    // Unflagged scans write no flags: an empty chunk per batch keeps the chunks paired.
+    let mut unused = vec![0; if flagged { 0 } else { rays.len() }];
+    let flags = flags.unwrap_or(&mut unused);
     answers
         .par_chunks_mut(BATCH)
         .zip(rays.par_chunks(BATCH))
+        .zip(flags.par_chunks_mut(BATCH))
         .for_each_init(
-            || (TraceScratch::default(), Vec::new(), Vec::new()),
-            |(scratch, queries, hits), (answers, chunk)| {
+            || (TraceScratch::default(), Vec::new(), Vec::new(), Vec::new()),
+            |(scratch, queries, hits, chunk_flags), ((answers, chunk), flags)| {
                 queries.clear();
                 queries.extend(chunk.iter().map(query_of));
-                scene.trace_batch(queries, scratch, hits);
+                if flagged {
+                    scene.trace_batch_flagged(queries, scratch, hits, chunk_flags);
+                    flags.copy_from_slice(chunk_flags);
+                } else {
+                    scene.trace_batch(queries, scratch, hits);
+                }
                 for (a, h) in answers.iter_mut().zip(hits.iter()) {
                     *a = answer_of(*h);
                 }
@@ -348,6 +375,9 @@ pub struct ScanTimes {
     /// (starts within the f32 tolerance of a surface, grazing crossings, torus crossings
     /// off the f64 surface; see `docs/f32-precision.md`).
     pub redone_in_f64: usize,
+    /// Seconds of `trace_s` spent on the f64 fallback: choosing the rays from the flags and
+    /// answers, building the f64 scene and tracing them again.
+    pub fallback_s: f64,
 }
 
 /// What a GPU scan ran on and where its time went.
@@ -359,6 +389,9 @@ pub struct GpuScanInfo {
     pub features: Vec<&'static str>,
     /// Upload, kernel and readback seconds (host wall clock).
     pub times: GpuTimes,
+    /// Seconds of host work per ray in a scan: building the ray records, converting the
+    /// answers (0 for the transmittance kernels).
+    pub host_s: f64,
 }
 
 /// Traces every ray against the scene's CSG and mesh solids in the given precision, on the
@@ -432,36 +465,46 @@ fn scan_from_origins(
     backend: Backend,
     progress: &(dyn Fn(u64) + Sync),
 ) -> crate::Result<(ScanResult, ScanTimes)> {
+    /// A CPU scan; `finish` (the f32 fallback, given the traces' flags when `flagged`)
+    /// returns how many rays it traced again.
     fn cpu<T: Real>(
         f: &Foundry,
         rays: &[RayRow],
         progress: &(dyn Fn(u64) + Sync),
-        finish: impl FnOnce(&CpuScene<T>, &mut [Answer]) -> crate::Result<usize>,
+        flagged: bool,
+        finish: impl FnOnce(&CpuScene<T>, &mut [Answer], &[u32]) -> crate::Result<usize>,
     ) -> crate::Result<(ScanResult, ScanTimes)> {
         let t0 = Instant::now();
         let scene = CpuScene::<T>::new(f)?;
         let build_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let mut answers = cpu_answers_reporting(&scene, rays, progress);
-        let redone_in_f64 = finish(&scene, &mut answers)?;
+        let mut flags = vec![0; if flagged { rays.len() } else { 0 }];
+        let flags_out = flagged.then_some(&mut flags[..]);
+        let mut answers = cpu_answers_reporting(&scene, rays, progress, flags_out);
+        let t2 = Instant::now();
+        let redone_in_f64 = finish(&scene, &mut answers, &flags)?;
+        let fallback_s = t2.elapsed().as_secs_f64();
         let result = result_from(f, &answers);
         let trace_s = t1.elapsed().as_secs_f64();
         let times = ScanTimes {
             build_s,
             trace_s,
             redone_in_f64,
+            fallback_s,
             ..Default::default()
         };
         Ok((result, times))
     }
     let f32_cpu = || {
-        cpu::<f32>(foundry, rays, progress, |scene, answers| {
-            redo_uncertain_in_f64(foundry, scene, rays, answers)
+        cpu::<f32>(foundry, rays, progress, true, |scene, answers, flags| {
+            redo_flagged_in_f64(foundry, scene, rays, answers, flags)
         })
     };
     match (backend, precision) {
         (Backend::Cpu, Precision::F32) => f32_cpu(),
-        (Backend::Cpu, Precision::F64) => cpu::<f64>(foundry, rays, progress, |_, _| Ok(0)),
+        (Backend::Cpu, Precision::F64) => {
+            cpu::<f64>(foundry, rays, progress, false, |_, _, _| Ok(0))
+        }
         (Backend::Embree, Precision::F64) => {
             bail!("the Embree backend traces in f32: use --precision f32 (the default)")
         }
@@ -490,21 +533,34 @@ fn grazes(ray: &RayRow, answer: &Answer) -> bool {
 }
 
 /// Traces again in f64 the rays of an f32 scan whose answers the f32 tolerance or f32
-/// rounding may have decided, as Geant4 (in f64) would not: rays that start within the
-/// tolerance of a surface ([`CpuScene::starts_near_surface`]: which side the start lies
-/// on, and whether a crossing there is the surface it starts on, are within rounding),
-/// rays that cross at grazing incidence ([`GRAZING_COSINE`]), and crossings of solids with
-/// a torus whose point lies off the f64 surface by more than an eighth of the f32 band (so
-/// off by the band at most at the incidences the grazing test lets through: the f32 roots
-/// of the quartic can stray further than its tolerance). Every other ray keeps its f32
-/// answer. `scene` is the scan's f32 scene; the f64 scene is built only when some ray
-/// needs it. Returns how many rays were traced again.
-pub(crate) fn redo_uncertain_in_f64(
+/// rounding may have decided, as Geant4 (in f64) would not. The trace reports what it could
+/// not decide (`flags`, [`CpuScene::trace_flagged`] or the GPU kernel's status bits): rays
+/// that start within the tolerance band of a CSG surface ([`STATUS_START_NEAR`]: which side
+/// the start lies on, and whether a crossing there is the surface it starts on, are within
+/// rounding), rays along which a prim dropped a span shorter than the tolerance as a touch
+/// ([`STATUS_DROPPED_SPAN`]), and rays starting in the band of a solid whose signed
+/// distance does not decide ([`STATUS_START_BAND`]), which are searched here
+/// ([`CpuScene::starts_near_surface`]). From the answers: rays that cross at grazing
+/// incidence ([`GRAZING_COSINE`]), and crossings of solids with a torus whose point lies
+/// off the f64 surface by more than an eighth of the f32 band (so off by the band at most
+/// at the incidences the grazing test lets through: the f32 roots of the quartic can stray
+/// further than its tolerance). Every other ray keeps its f32 answer; no origin is located
+/// again but those of [`STATUS_START_BAND`] rays. `scene` is the scan's f32 scene; the f64
+/// scene is built only when some ray needs it. Returns how many rays were traced again.
+pub(crate) fn redo_flagged_in_f64(
     f: &Foundry,
     scene: &CpuScene<f32>,
     rays: &[RayRow],
     answers: &mut [Answer],
+    flags: &[u32],
 ) -> crate::Result<usize> {
+    crate::error::ensure!(
+        flags.len() == rays.len() && answers.len() == rays.len(),
+        "{} rays, {} answers and {} flags",
+        rays.len(),
+        answers.len(),
+        flags.len()
+    );
     let torus: Vec<bool> = (0..scene.instances() as u32)
         .map(|i| scene.has_torus(i))
         .collect();
@@ -512,10 +568,16 @@ pub(crate) fn redo_uncertain_in_f64(
     let (mut again, checked): (Vec<usize>, Vec<usize>) = rays
         .par_iter()
         .zip(answers.par_iter())
+        .zip(flags.par_iter())
         .enumerate()
-        .map_init(Vec::new, |candidates, (i, (r, a))| {
-            let (ray, tmin, _) = query_of::<f32>(r);
-            if grazes(r, a) || scene.starts_near_surface(&ray, tmin, candidates) {
+        .map_init(Vec::new, |candidates, (i, ((r, a), &flag))| {
+            let uncertain = flag & (STATUS_START_NEAR | STATUS_DROPPED_SPAN) != 0
+                || grazes(r, a)
+                || (flag & STATUS_START_BAND != 0 && {
+                    let (ray, tmin, _) = query_of::<f32>(r);
+                    scene.starts_near_surface(&ray, tmin, candidates)
+                });
+            if uncertain {
                 Some((i, true))
             } else {
                 on_torus(a).then_some((i, false))
@@ -571,19 +633,24 @@ fn gpu_scan(
     let tracer = GpuTracer::new(&ctx, &cpu)?;
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let (mut answers, gpu_times) = gpu_trace(&ctx, &tracer, &cpu, rays)?;
-    let redone_in_f64 = redo_uncertain_in_f64(f, &cpu, rays, &mut answers)?;
+    let traced = gpu_trace(&ctx, &tracer, &cpu, rays)?;
+    let (mut answers, flags) = (traced.answers, traced.flags);
+    let t2 = Instant::now();
+    let redone_in_f64 = redo_flagged_in_f64(f, &cpu, rays, &mut answers, &flags)?;
+    let fallback_s = t2.elapsed().as_secs_f64();
     let trace_s = t1.elapsed().as_secs_f64();
     let gpu = GpuScanInfo {
         adapter: ctx.describe(),
         features: tracer.features().to_vec(),
-        times: gpu_times,
+        times: traced.times,
+        host_s: traced.host_s,
     };
     let times = ScanTimes {
         build_s,
         trace_s,
         gpu: Some(gpu),
         redone_in_f64,
+        fallback_s,
     };
     Ok((result_from(f, &answers), times))
 }
@@ -591,45 +658,75 @@ fn gpu_scan(
 /// A ray's answer: `nx ny nz t` and the instance crossed (-1 on a miss).
 pub(crate) type Answer = ([f64; 4], i32);
 
-/// Every ray through the GPU scan kernel: `(nx ny nz t, instance)` per ray (`t = inf`,
-/// instance -1 on a miss) and the kernel's times. A placement tree deeper than the
-/// kernel's bound is an error; rays whose loops the driver's budget cut short (llvmpipe)
-/// are traced again by the kernel's twin `cpu`.
-fn gpu_trace(
+/// What the GPU scan kernel answered for every ray, as the host uses it.
+pub(crate) struct GpuTraced {
+    /// `(nx ny nz t, instance)` per ray (`t = inf`, instance -1 on a miss).
+    pub answers: Vec<Answer>,
+    /// The trace's flags per ray ([`crate::cpu::Traced::flags`]).
+    pub flags: Vec<u32>,
+    /// The kernel's times.
+    pub times: GpuTimes,
+    /// Seconds of host work per ray: ray records before, answers and flags after.
+    pub host_s: f64,
+}
+
+/// Every ray through the GPU scan kernel. A placement tree deeper than the kernel's bound
+/// is an error; rays whose loops the driver's budget cut short (llvmpipe) are traced again
+/// by the kernel's twin `cpu`, flags included. Ray records and answers are made in
+/// parallel, each straight into its place.
+pub(crate) fn gpu_trace(
     ctx: &GpuContext,
     tracer: &GpuTracer,
     cpu: &CpuScene<f32>,
     rays: &[RayRow],
-) -> crate::Result<(Vec<Answer>, GpuTimes)> {
-    let records: Vec<RayRecord> = rays.iter().map(ray_record).collect();
+) -> crate::Result<GpuTraced> {
+    let t0 = Instant::now();
+    let records: Vec<RayRecord> = rays.par_iter().map(ray_record).collect();
+    let records_s = t0.elapsed().as_secs_f64();
     let (hits, mut times) = tracer.trace(ctx, &records)?;
-    if let Some(i) = hits.iter().position(|h| h.status & STATUS_DEPTH_LIMIT != 0) {
+    drop(records);
+    let t1 = Instant::now();
+    if let Some(i) = hits
+        .par_iter()
+        .position_first(|h| h.status & STATUS_DEPTH_LIMIT != 0)
+    {
         bail!(
             "GPU scan: ray {i} was cut short: the placement tree is deeper than the kernel's \
              bound"
         );
     }
+    let (mut answers, mut flags): (Vec<Answer>, Vec<u32>) = hits
+        .par_iter()
+        .map(|h| {
+            let answer = match h.t < GPU_INF {
+                true => {
+                    let n = h.normal.map(f64::from);
+                    ([n[0], n[1], n[2], f64::from(h.t)], h.instance as i32)
+                }
+                false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
+            };
+            (answer, h.status & STATUS_FLAGS)
+        })
+        .unzip();
     let cut: Vec<usize> = (0..hits.len())
+        .into_par_iter()
         .filter(|&i| hits[i].status & STATUS_LOOPS_CUT != 0)
         .collect();
+    let host_s = records_s + t1.elapsed().as_secs_f64();
     let cut_rows: Vec<RayRow> = cut.iter().map(|&i| rays[i]).collect();
-    let again = cpu_answers(cpu, &cut_rows);
+    let (again, again_flags) = cpu_answers_flagged(cpu, &cut_rows);
     times.redone_on_cpu = cut.len() as u64;
     warn_redone(&ctx.describe(), &times, rays.len(), "rays");
-    let mut answers: Vec<Answer> = hits
-        .iter()
-        .map(|h| match h.t < GPU_INF {
-            true => {
-                let n = h.normal.map(f64::from);
-                ([n[0], n[1], n[2], f64::from(h.t)], h.instance as i32)
-            }
-            false => ([0.0, 0.0, 0.0, f64::INFINITY], -1),
-        })
-        .collect();
-    for (&i, answer) in cut.iter().zip(again) {
+    for ((&i, answer), flag) in cut.iter().zip(again).zip(again_flags) {
         answers[i] = answer;
+        flags[i] = flag;
     }
-    Ok((answers, times))
+    Ok(GpuTraced {
+        answers,
+        flags,
+        times,
+        host_s,
+    })
 }
 
 /// The transmittances of `scan --transmittance` and where their time went.
@@ -897,6 +994,7 @@ fn gpu_transmittance(
             adapter: ctx.describe(),
             features: vec!["transmittance"],
             times,
+            host_s: 0.0,
         }),
     })
 }
@@ -1048,9 +1146,11 @@ pub fn stats_json(
         "rays_per_s": if times.trace_s > 0.0 { rays as f64 / times.trace_s } else { 0.0 },
         "threads": rayon::current_num_threads(),
         "redone_in_f64": times.redone_in_f64,
+        "fallback_s": times.fallback_s,
     });
     if let Some(g) = &times.gpu {
         crate::gpu::add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+        line["gpu_host_s"] = g.host_s.into();
     }
     line
 }

@@ -247,6 +247,11 @@ pub struct Step<T> {
     pub normal: V3<T>,
     /// Whether the ray is inside the node's region just before `t` (for a miss: all along).
     pub inside_before: bool,
+    /// The smallest start of a span that the evaluation skipped as a touch (no longer
+    /// than the tolerance) although it ended past the start of the search; `+inf` when
+    /// none was. Such a span is a decision within rounding: a chord through an edge or a
+    /// near-tangent that an exact evaluation may keep (scans trace such rays again in f64).
+    pub dropped: T,
 }
 
 impl<T: Real> Step<T> {
@@ -256,6 +261,7 @@ impl<T: Real> Step<T> {
             t: T::INFINITY,
             normal: V3::zero(),
             inside_before: inside,
+            dropped: T::INFINITY,
         }
     }
 
@@ -275,13 +281,15 @@ impl<T: Real> Step<T> {
             t: self.t,
             normal: -self.normal,
             inside_before: !self.inside_before,
+            dropped: self.dropped,
         }
     }
 }
 
 /// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
-/// spans no longer than `touch` (tangent touches, not crossings). Normals are oriented
-/// outward from the span's role (entries face against the ray, exits along it).
+/// spans no longer than `touch` (tangent touches, not crossings; the least start of those
+/// skipped that end after `tmin + tol` is reported as [`Step::dropped`]). Normals are oriented outward
+/// from the span's role (entries face against the ray, exits along it).
 pub fn first_crossing<T: Real>(
     spans: &Spans<T>,
     shift: T,
@@ -291,8 +299,12 @@ pub fn first_crossing<T: Real>(
     touch: T,
 ) -> Step<T> {
     let after = tmin + tol;
+    let mut dropped = T::INFINITY;
     for s in spans.as_slice() {
         if s.t1 - s.t0 <= touch {
+            if s.t1 + shift > after && s.t0 < T::INFINITY {
+                dropped = dropped.min(s.t0 + shift);
+            }
             continue;
         }
         let (t0, t1) = (s.t0 + shift, s.t1 + shift);
@@ -302,6 +314,7 @@ pub fn first_crossing<T: Real>(
                 t: t0,
                 normal: n,
                 inside_before: false,
+                dropped,
             };
         }
         if t1 > after {
@@ -310,10 +323,14 @@ pub fn first_crossing<T: Real>(
                 t: t1,
                 normal: n,
                 inside_before: true,
+                dropped,
             };
         }
     }
-    Step::miss(false)
+    Step {
+        dropped,
+        ..Step::miss(false)
+    }
 }
 
 impl<T: Real> Leaf<T> {

@@ -17,7 +17,7 @@ use super::dd::Dd;
 use super::{Row, Settings, Timer};
 use crate::cpu::CpuScene;
 use crate::error::Context;
-use crate::scan::{cpu_answers, redo_uncertain_in_f64, Answer, RayRow};
+use crate::scan::{cpu_answers, cpu_answers_flagged, redo_flagged_in_f64, Answer, RayRow};
 
 /// How far the solids are from the world origin (mm).
 const DISTANCES: [f64; 4] = [1e3, 2e4, 1e5, 1e6];
@@ -228,8 +228,8 @@ fn distance_rows(
     let f32_scene = CpuScene::<f32>::new(&f).context(component)?;
     let f64_scene = CpuScene::<f64>::new(&f).context(component)?;
     let with_fallback = || -> crate::Result<Vec<Answer>> {
-        let mut answers = cpu_answers(&f32_scene, &rays);
-        redo_uncertain_in_f64(&f, &f32_scene, &rays, &mut answers).context(component)?;
+        let (mut answers, flags) = cpu_answers_flagged(&f32_scene, &rays);
+        redo_flagged_in_f64(&f, &f32_scene, &rays, &mut answers, &flags).context(component)?;
         Ok(answers)
     };
     let timer = Timer::new(settings);

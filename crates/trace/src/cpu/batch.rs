@@ -56,6 +56,10 @@ pub(super) trait Crossings<'a, T> {
 
     /// The deepest instance containing the ray's origin, which `locate` finds.
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32>;
+
+    /// A prim asked for its first crossing skipped a short span as a touch before the
+    /// search's limit ([`Step::dropped`]): the answer is within rounding of a decision.
+    fn note_dropped(&mut self);
 }
 
 /// Every crossing computed when asked: the per-ray trace.
@@ -81,6 +85,45 @@ impl<'a, T: Real> Crossings<'a, T> for Direct {
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
         locate()
     }
+
+    #[inline(always)]
+    fn note_dropped(&mut self) {}
+}
+
+/// Every crossing computed when asked, noting what the f32 fallback asks of the trace
+/// ([`CpuScene::trace_flagged`]): where the origin was located and whether a span was
+/// dropped.
+#[derive(Default)]
+pub(super) struct Noting {
+    /// Where the origin was located, once it was.
+    pub located: Option<Option<u32>>,
+    /// Whether a prim dropped a short span before its search's limit.
+    pub dropped: bool,
+}
+
+impl<'a, T: Real> Crossings<'a, T> for Noting {
+    #[inline(always)]
+    fn first_crossing(
+        &mut self,
+        prim: &'a PreparedPrim<T>,
+        ray: &Ray<T>,
+        tmin: T,
+    ) -> Option<Step<T>> {
+        Some(prim.first_crossing(ray, tmin))
+    }
+
+    #[inline(always)]
+    fn abandoned(&self) -> bool {
+        false
+    }
+
+    fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
+        *self.located.get_or_insert_with(locate)
+    }
+
+    fn note_dropped(&mut self) {
+        self.dropped = true;
+    }
 }
 
 /// What a batch keeps of one ray between its replays.
@@ -90,6 +133,9 @@ struct RayLog<T> {
     answers: Vec<Step<T>>,
     /// Where its origin was located, once it was.
     located: Option<Option<u32>>,
+    /// Whether a prim dropped a short span before its search's limit (a replay repeats the
+    /// decisions of the one before, so the last one's notes are all of them).
+    dropped: bool,
 }
 
 impl<T> Default for RayLog<T> {
@@ -97,6 +143,7 @@ impl<T> Default for RayLog<T> {
         RayLog {
             answers: Vec::new(),
             located: None,
+            dropped: false,
         }
     }
 }
@@ -148,6 +195,10 @@ impl<'a, T: Real> Crossings<'a, T> for Replay<'a, '_, T> {
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
         *self.log.located.get_or_insert_with(locate)
     }
+
+    fn note_dropped(&mut self) {
+        self.log.dropped = true;
+    }
 }
 
 /// Working space of [`CpuScene::trace_batch`], kept by each thread from batch to batch
@@ -196,18 +247,59 @@ impl<T: Real> CpuScene<T> {
         scratch: &mut TraceScratch<T>,
         out: &mut Vec<Option<Hit<T>>>,
     ) {
+        self.trace_batch_noting(rays, scratch, out, None);
+    }
+
+    /// [`Self::trace_batch`] that also reports, in `flags` (cleared first), what each ray's
+    /// trace could not decide, as [`Self::trace_flagged`] does: the same hits and flags.
+    pub fn trace_batch_flagged(
+        &self,
+        rays: &[(Ray<f64>, T, T)],
+        scratch: &mut TraceScratch<T>,
+        out: &mut Vec<Option<Hit<T>>>,
+        flags: &mut Vec<u32>,
+    ) {
+        self.trace_batch_noting(rays, scratch, out, Some(flags));
+    }
+
+    /// [`Self::trace_batch`], with the flags of [`Self::trace_flagged`] when `flags` is
+    /// given.
+    fn trace_batch_noting(
+        &self,
+        rays: &[(Ray<f64>, T, T)],
+        scratch: &mut TraceScratch<T>,
+        out: &mut Vec<Option<Hit<T>>>,
+        flags: Option<&mut Vec<u32>>,
+    ) {
         out.clear();
         if T::NAME != "f32" || self.largest_mesh_bytes < scratch.min_bytes {
-            out.extend(
-                rays.iter()
-                    .map(|(r, tmin, tmax)| self.trace(r, *tmin, *tmax)),
-            );
+            match flags {
+                None => out.extend(
+                    rays.iter()
+                        .map(|(r, tmin, tmax)| self.trace(r, *tmin, *tmax)),
+                ),
+                Some(flags) => {
+                    flags.clear();
+                    for (r, tmin, tmax) in rays {
+                        let traced = self.trace_flagged(r, *tmin, *tmax);
+                        out.push(traced.hit);
+                        flags.push(traced.flags);
+                    }
+                }
+            }
             return;
         }
         out.resize(rays.len(), None);
         if let Some((index, mesh)) = self.lone_mesh() {
             if mesh.bvh_bytes() >= scratch.min_bytes {
                 self.trace_lone_mesh(index, mesh, rays, scratch, out);
+                if let Some(flags) = flags {
+                    flags.clear();
+                    flags.extend(rays.iter().map(|(r, tmin, _)| {
+                        let world = WorldRay::new(r);
+                        self.flags_of(&world, *tmin, None, false)
+                    }));
+                }
                 return;
             }
         }
@@ -224,6 +316,7 @@ impl<T: Real> CpuScene<T> {
         for log in &mut logs[..rays.len()] {
             log.answers.clear();
             log.located = None;
+            log.dropped = false;
         }
         // The rays still open: all at first, then those whose last replay was abandoned.
         askers.clear();
@@ -254,6 +347,12 @@ impl<T: Real> CpuScene<T> {
             for (&i, step) in askers.iter().zip(steps.iter()) {
                 logs[i].answers.push(*step);
             }
+        }
+        if let Some(flags) = flags {
+            flags.clear();
+            flags.extend(rays.iter().zip(logs.iter()).map(|((r, tmin, _), log)| {
+                self.flags_of(&WorldRay::new(r), *tmin, log.located, log.dropped)
+            }));
         }
     }
 }

@@ -315,7 +315,12 @@ impl<T: Real> BoxBvh<T> {
     /// Appends to `out` every item whose node boxes, widened by `margin`, contain `x` (a
     /// superset of those whose own bounds do), in no particular order.
     pub(super) fn candidates_near(&self, x: V3<T>, margin: T, out: &mut Vec<u32>) {
-        out.extend_from_slice(&self.unbounded);
+        self.visit_near(x, margin, |i| out.push(i));
+    }
+
+    /// Calls `visit` with what [`Self::candidates_near`] returns, in the same order.
+    pub(super) fn visit_near(&self, x: V3<T>, margin: T, mut visit: impl FnMut(u32)) {
+        self.unbounded.iter().for_each(|&i| visit(i));
         if self.nodes.is_empty() {
             return;
         }
@@ -327,9 +332,9 @@ impl<T: Real> BoxBvh<T> {
                 continue;
             }
             if node.count > 0 {
-                out.extend_from_slice(
-                    &self.items[node.first as usize..(node.first + node.count) as usize],
-                );
+                self.items[node.first as usize..(node.first + node.count) as usize]
+                    .iter()
+                    .for_each(|&i| visit(i));
             } else {
                 stack.push(node.first);
                 stack.push(node.first + 1);

@@ -64,7 +64,10 @@ impl SceneArrays {
         let first = self.group_members.len() as u32;
         self.group_members.extend_from_slice(&group.members);
         let list = self.search_list(first, group.members.len() as u32, group.bvh.as_deref());
-        self.groups.push(list);
+        self.groups.push(SearchList {
+            largest: group.largest,
+            ..list
+        });
     }
 }
 
@@ -102,7 +105,7 @@ impl CpuScene<f32> {
                     lo,
                     solid: p.solid as u32,
                     hi,
-                    pad: 0,
+                    sdf_decides: (self.solids[p.solid].sdf_decides && p.rigid) as u32,
                     origin_lo: p.origin_lo.to_f64().map(|c| c as f32),
                     pad_lo: 0,
                     centre: p.centre.to_f64().map(|c| c as f32),

@@ -53,7 +53,8 @@ pub(crate) mod solid;
 #[cfg(test)]
 mod tests;
 
-use batch::{Crossings, Direct};
+pub use crate::gpu::records::{STATUS_DROPPED_SPAN, STATUS_START_BAND, STATUS_START_NEAR};
+use batch::{Crossings, Direct, Noting};
 pub use batch::{TraceScratch, INTERLEAVE_MIN_BYTES};
 use bvh::{holds, holds_within, BoxBvh, RaySlabs};
 
@@ -101,6 +102,16 @@ pub struct Hit<T> {
     pub instance: u32,
     /// Index of the Foundry prim crossed (the solid's and boundary are the instance's).
     pub prim: u32,
+}
+
+/// A ray's answer and what its trace could not decide ([`CpuScene::trace_flagged`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Traced<T> {
+    /// The first crossing, as [`CpuScene::trace`] answers it.
+    pub hit: Option<Hit<T>>,
+    /// [`STATUS_START_NEAR`], [`STATUS_START_BAND`] and [`STATUS_DROPPED_SPAN`] bits (the
+    /// GPU scan kernel reports the same bits in its hit records).
+    pub flags: u32,
 }
 
 /// Instances searched together, in placement order (which is also increasing instance
@@ -273,15 +284,21 @@ impl<T: Real> Group<T> {
         })
     }
 
-    /// Appends to `out` the members whose bounds, widened by `margin`, may hold `x`.
-    fn near(&self, placements: &[Placement<T>], x: V3<T>, margin: T, out: &mut Vec<u32>) {
+    /// Calls `visit` with every member whose bounds, widened by `margin`, may hold `x`.
+    fn visit_near(
+        &self,
+        placements: &[Placement<T>],
+        x: V3<T>,
+        margin: T,
+        mut visit: impl FnMut(u32),
+    ) {
         match &self.bvh {
-            Some(bvh) => bvh.candidates_near(x, margin, out),
-            None => out.extend(
-                self.members
-                    .iter()
-                    .filter(|&&i| holds_within(&placements[i as usize].bounds, x, margin)),
-            ),
+            Some(bvh) => bvh.visit_near(x, margin, visit),
+            None => self
+                .members
+                .iter()
+                .filter(|&&i| holds_within(&placements[i as usize].bounds, x, margin))
+                .for_each(|&i| visit(i)),
         }
     }
 }
@@ -298,6 +315,10 @@ fn extent<T: Real>(b: &Bounds<T>) -> T {
 fn band<T: Real>(size: T, tmin: T) -> T {
     T::from_f64(8.0) * T::SURFACE_TOLERANCE * (size + tmin.abs())
 }
+
+/// The instance a ray's origin is located in (none in a flat scene, or outside a
+/// hierarchy's roots) and the group searched from there.
+type StartGroup<'a, T> = (Option<u32>, &'a Group<T>);
 
 /// The placement tree of a hierarchical scene.
 #[derive(Clone, Debug)]
@@ -646,6 +667,91 @@ impl<T: Real> CpuScene<T> {
         self.trace_with(&WorldRay::new(ray), tmin, tmax, &mut Direct)
     }
 
+    /// [`Self::trace`], and what the trace could not decide within its rounding: the
+    /// checks of the f32 scan's fallback to f64, made from the trace's own location of the
+    /// origin ([`Self::flags_of`]). The GPU scan kernel reports the same flags.
+    pub fn trace_flagged(&self, ray: &Ray<f64>, tmin: T, tmax: T) -> Traced<T> {
+        let world = WorldRay::new(ray);
+        let mut noting = Noting::default();
+        let hit = self.trace_with(&world, tmin, tmax, &mut noting);
+        Traced {
+            hit,
+            flags: self.flags_of(&world, tmin, noting.located, noting.dropped),
+        }
+    }
+
+    /// The flags of a trace of `ray` from `tmin`: [`STATUS_DROPPED_SPAN`] when `dropped`
+    /// (a prim skipped a short span before its search's limit), and the start's flags
+    /// ([`Self::start_flags`]) from the instance the trace located the origin in
+    /// (`located`; a hierarchical scene's trace always locates it, a flat one's never).
+    fn flags_of(
+        &self,
+        ray: &WorldRay<T>,
+        tmin: T,
+        located: Option<Option<u32>>,
+        dropped: bool,
+    ) -> u32 {
+        let group = match &self.layout {
+            Layout::Tree(h) => {
+                let current = located.unwrap_or_else(|| self.locate_deepest(h, &ray.origin));
+                (
+                    current,
+                    current.map_or(&h.roots, |c| &h.daughters[c as usize]),
+                )
+            }
+            Layout::Flat(all) => (None, all),
+        };
+        let dropped = if dropped { STATUS_DROPPED_SPAN } else { 0 };
+        dropped | self.start_flags(ray, tmin, group)
+    }
+
+    /// Whether the ray starts (at `tmin`) within the tracer's tolerance band of a surface
+    /// among the instances the trace asks about there (`current`, the instance the origin
+    /// is located in, and the members of `group`, its daughters or a flat scene's
+    /// instances): [`STATUS_START_NEAR`] when the start lies within the band of a CSG
+    /// surface by the signed distance, [`STATUS_START_BAND`] when it lies within the band
+    /// of the box of a solid whose signed distance does not decide (meshes, frames that
+    /// scale distances), whose band only a search decides
+    /// ([`Self::starts_near_surface`]). The start is computed in `T` from the rounded
+    /// origin, and the boxes are widened by its rounding, so that every instance
+    /// [`Self::starts_near_surface`] asks about is asked about here.
+    fn start_flags(&self, ray: &WorldRay<T>, tmin: T, (current, group): StartGroup<'_, T>) -> u32 {
+        let start = ray.rounded.origin.at(ray.rounded.direction, tmin);
+        let pad = T::from_f64(4.0) * T::EPSILON * (start.max_abs() + tmin.abs());
+        let mut flags = current.map_or(0, |c| self.start_flag(c, ray, start, tmin, pad));
+        let margin = band(group.largest, tmin) + pad;
+        group.visit_near(&self.placements, start, margin, |i| {
+            flags |= self.start_flag(i, ray, start, tmin, pad);
+        });
+        flags
+    }
+
+    /// Instance `index`'s part of [`Self::start_flags`]: none unless its box, widened by
+    /// the band and `pad`, holds `start`; then [`STATUS_START_NEAR`] when the ray's start
+    /// (at `tmin`, in the solid's frame as the trace takes it) lies within the band of a
+    /// CSG surface by the signed distance, else [`STATUS_START_BAND`] when that distance
+    /// does not decide.
+    fn start_flag(&self, index: u32, ray: &WorldRay<T>, start: V3<T>, tmin: T, pad: T) -> u32 {
+        let p = &self.placements[index as usize];
+        let b = band(extent(&p.bounds), tmin);
+        if !holds_within(&p.bounds, start, b + pad) {
+            return 0;
+        }
+        let local = p.rebase(ray);
+        let x = local
+            .ray
+            .origin
+            .at(local.ray.direction, local.local_t(tmin));
+        let solid = &self.solids[p.solid];
+        if solid.near_surface(x, b) {
+            STATUS_START_NEAR
+        } else if solid.sdf_decides && p.rigid {
+            0
+        } else {
+            STATUS_START_BAND
+        }
+    }
+
     /// Geant4's navigator step from a volume the caller already knows, as a tracking
     /// navigator keeps it between steps: in a hierarchical scene, the nearer of leaving
     /// instance `current` (the roots' surfaces when `None`: outside the world) and entering
@@ -741,32 +847,23 @@ impl<T: Real> CpuScene<T> {
             }
             Layout::Flat(all) => all,
         };
-        group.near(
-            &self.placements,
-            start,
-            band(group.largest, tmin),
-            candidates,
-        );
-        candidates.iter().any(|&i| {
-            let p = &self.placements[i as usize];
-            let b = band(extent(&p.bounds), tmin);
-            if !holds_within(&p.bounds, start, b) {
-                return false;
-            }
-            let local = p.rebase(&world);
-            let t = local.local_t(tmin);
-            let x = local.ray.origin.at(local.ray.direction, t);
-            let solid = &self.solids[p.solid];
-            if solid.near_surface(x, b) {
-                return true;
-            }
-            // The signed distance says "not near" for certain only when it measures true
-            // distances, in a placement that keeps them: otherwise the band is searched.
-            !(solid.sdf_decides && p.rigid)
-                && self
-                    .cross_instance(i as usize, &world, None, tmin - b, tmin + b, &mut Direct)
-                    .is_some()
-        })
+        group.visit_near(&self.placements, start, band(group.largest, tmin), |i| {
+            candidates.push(i)
+        });
+        candidates.iter().any(
+            |&i| match self.start_flag(i, &world, start, tmin, T::ZERO) {
+                STATUS_START_NEAR => true,
+                // The signed distance says "not near" for certain only when it measures
+                // true distances, in a placement that keeps them: otherwise the band is
+                // searched.
+                STATUS_START_BAND => {
+                    let b = band(extent(&self.placements[i as usize].bounds), tmin);
+                    self.cross_instance(i as usize, &world, None, tmin - b, tmin + b, &mut Direct)
+                        .is_some()
+                }
+                _ => false,
+            },
+        )
     }
 
     /// Whether instance `instance`'s solid has a torus among its CSG primitives (whose f32

@@ -162,6 +162,9 @@ impl<T: Real> SolidAccel<T> {
     ) -> Option<PrimCrossing<T>> {
         if boxed && self.prims.len() == 1 {
             let step = crossings.first_crossing(&self.prims[0], ray, tmin)?;
+            if step.dropped < limit {
+                crossings.note_dropped();
+            }
             return self.lone_crossing(&step, tmin, limit);
         }
         // (local prim index, t, normal)
@@ -186,6 +189,10 @@ impl<T: Real> SolidAccel<T> {
                 let Some(step) = crossings.first_crossing(prim, ray, tmin) else {
                     return false;
                 };
+                // A span skipped as a touch before the limit: within rounding (the fallback).
+                if step.dropped < within {
+                    crossings.note_dropped();
+                }
                 let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
                 if step.t > tmin && (step.t < within || tie_won) {
                     *best = Some((i, step.t, step.normal));

@@ -46,8 +46,11 @@ record! {
         pub unbounded_first: u32,
         /// Number of unbounded items.
         pub unbounded_count: u32,
+        /// A group's largest member extent (the widest tolerance band about its members,
+        /// `CpuScene::start_flags`); 0 for a solid's prims.
+        pub largest: f32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
     }
 }
 
@@ -63,8 +66,9 @@ record! {
         pub solid: u32,
         /// Upper corner of the world bounds.
         pub hi: [f32; 3],
-        /// Padding.
-        pub pad: u32,
+        /// 1 when the solid's signed distance bounds true distances in this placement (its
+        /// CSG prims' and the frame's): nearness to its surface is then decided by it.
+        pub sdf_decides: u32,
         /// The rest of the frame's origin (the translation) after rounding to f32 (the
         /// rows' `w`): rays are taken into the frame part by part.
         pub origin_lo: [f32; 3],
@@ -161,6 +165,22 @@ pub const STATUS_DEPTH_LIMIT: u32 = 1;
 /// [`HitRecord::status`] bit: the driver's loop budget cut the ray's loops short (llvmpipe:
 /// `shaders/loop_budget.wgsl`); its answer is wrong.
 pub const STATUS_LOOPS_CUT: u32 = 2;
+/// [`HitRecord::status`] (and [`crate::cpu::Traced::flags`]) bit: the ray starts within the
+/// tolerance band of a CSG surface by its signed distance (which side it starts on, and
+/// whether a crossing there is the surface it starts on, are within rounding).
+pub const STATUS_START_NEAR: u32 = 4;
+/// Status bit: the ray starts within the band of the box of a solid whose signed distance
+/// does not decide nearness (meshes, frames that scale distances): the host searches the
+/// band ([`crate::cpu::CpuScene::starts_near_surface`]).
+pub const STATUS_START_BAND: u32 = 8;
+/// Status bit: a prim skipped a span shorter than the tolerance as a touch before the
+/// limit of its search (a chord through an edge, a near-tangent), a decision within
+/// rounding.
+pub const STATUS_DROPPED_SPAN: u32 = 16;
+/// The status bits of a ray whose search was cut short (its answer is not the trace's).
+pub const STATUS_CUT_SHORT: u32 = STATUS_DEPTH_LIMIT | STATUS_LOOPS_CUT;
+/// The status bits that are the trace's flags ([`crate::cpu::Traced::flags`]).
+pub const STATUS_FLAGS: u32 = STATUS_START_NEAR | STATUS_START_BAND | STATUS_DROPPED_SPAN;
 
 record! {
     /// What every ray of a GPU transmittance batch shares (`shaders/kernels/transmittance.wgsl`):
@@ -516,6 +536,9 @@ pub fn generate() -> String {
     out.push_str(&format!(
         "const STATUS_DEPTH_LIMIT: u32 = {STATUS_DEPTH_LIMIT}u;\n\
          const STATUS_LOOPS_CUT: u32 = {STATUS_LOOPS_CUT}u;\n\
+         const STATUS_START_NEAR: u32 = {STATUS_START_NEAR}u;\n\
+         const STATUS_START_BAND: u32 = {STATUS_START_BAND}u;\n\
+         const STATUS_DROPPED_SPAN: u32 = {STATUS_DROPPED_SPAN}u;\n\
          // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).\n\
          const SURFACE_TOLERANCE: f32 = {:e};\n\
          // The gap between 1 and the next f32 (hytrace_csg::Real::EPSILON).\n\

@@ -12,6 +12,7 @@ use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::{CpuScene, Hit};
+use hytrace_trace::gpu::records::{STATUS_CUT_SHORT, STATUS_FLAGS};
 use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
 use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
@@ -206,8 +207,10 @@ pub fn rays_for(f: &Foundry, count: usize, random: usize) -> Vec<RayRow> {
 pub struct GpuRun {
     /// The answer for every ray, as the CPU tracer gives it.
     pub hits: Vec<Option<Hit<f32>>>,
-    /// Rays whose search was cut short (a nonzero `status`).
+    /// Rays whose search was cut short (`STATUS_CUT_SHORT` bits).
     pub cut_short: usize,
+    /// The trace's flags for every ray (`STATUS_FLAGS` bits, `CpuScene::trace_flagged`).
+    pub flags: Vec<u32>,
     /// Uploading the scene and compiling its scan kernel.
     pub build_s: f64,
     /// Tracing all the rays (uploads and readbacks included).
@@ -225,7 +228,11 @@ pub fn gpu_run(ctx: &GpuContext, f: &Foundry, rays: &[RayRow]) -> Result<GpuRun,
     let records: Vec<_> = rays.iter().map(ray_record).collect();
     let (hits, _) = tracer.trace(ctx, &records)?;
     Ok(GpuRun {
-        cut_short: hits.iter().filter(|h| h.status != 0).count(),
+        cut_short: hits
+            .iter()
+            .filter(|h| h.status & STATUS_CUT_SHORT != 0)
+            .count(),
+        flags: hits.iter().map(|h| h.status & STATUS_FLAGS).collect(),
         hits: hits
             .iter()
             .map(|h| {
