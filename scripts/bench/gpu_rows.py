@@ -102,6 +102,32 @@ def compare(label, a_path, b_path):
     )
 
 
+def split(label, stats):
+    """Where a GPU scan's trace time went: the kernel's pass (uploads, kernel, readback),
+    host work per ray (ray records, answers), the f64 fallback, and the rest."""
+    if not stats or "gpu_kernel_s" not in stats:
+        return
+    parts = {
+        "upload_s": stats["gpu_upload_s"],
+        "kernel_s": stats["gpu_kernel_s"],
+        "readback_s": stats["gpu_readback_s"],
+        "host_s": stats.get("gpu_host_s", 0.0),
+        "fallback_s": stats.get("fallback_s", 0.0),
+    }
+    parts["rest_s"] = stats["trace_s"] - sum(parts.values())
+    rays = max(stats["rays"], 1)
+    record(
+        {
+            "label": label + " split",
+            **parts,
+            "kernel_timestamps_s": stats.get("gpu_kernel_timestamps_s"),
+            "trace_s": stats["trace_s"],
+            "flagged_fraction": stats.get("flagged", 0) / rays,
+            "redone_fraction": stats["redone_in_f64"] / rays,
+        }
+    )
+
+
 def scans():
     files = [
         "default",
@@ -124,12 +150,14 @@ def scans():
         outs = {}
         for be in ["cpu", "gpu"]:
             out = f"{TMP}/{name}.{be}.npy"
-            run(f"scan {name} incoherent {be}", ["scan", f, "--rays", rays, "--out", out, "--stats", "--backend", be])
+            label = f"scan {name} incoherent {be}"
+            split(label, run(label, ["scan", f, "--rays", rays, "--out", out, "--stats", "--backend", be]))
             outs[be] = out
         compare(f"scan {name} gpu vs cpu", outs["cpu"], outs["gpu"])
         count = str(int(2000 * SCALE**0.5))
         for be in ["cpu", "gpu"]:
-            run(f"scan {name} rect {be}", ["scan", f, "--sweep", "rect", "--count", count, "--out", f"{TMP}/r.{be}.npy", "--stats", "--backend", be])
+            label = f"scan {name} rect {be}"
+            split(label, run(label, ["scan", f, "--sweep", "rect", "--count", count, "--out", f"{TMP}/r.{be}.npy", "--stats", "--backend", be]))
         compare(f"scan {name} rect gpu vs cpu", f"{TMP}/r.cpu.npy", f"{TMP}/r.gpu.npy")
 
 

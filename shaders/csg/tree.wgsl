@@ -220,6 +220,8 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
     var result = step_miss(false);
     loop {
         var best = INF;
+        // The last of the crossings merged with the first (`best`).
+        var last = INF;
         var count = 0u;
         var entries = 0u;
         var exits = 0u;
@@ -238,12 +240,14 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
             let tol = csg_tolerance(scale, s.t);
             if s.t < best - tol {
                 best = s.t;
+                last = s.t;
                 entries = 0u;
                 exits = 0u;
             } else if s.t > best + tol {
                 continue;
             }
             best = min(best, s.t);
+            last = max(last, s.t);
             if s.inside_before {
                 exits += 1u;
                 exit_normal = s.normal;
@@ -258,6 +262,11 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
             break;
         }
         let after = csg_list_inside(n.code, count + entries - exits, all);
+        // Entries and exits merged at different points with the result unchanged: a chord
+        // or a gap between members may lie between them (list_step's, noted).
+        if entries > 0u && exits > 0u && last != best && before == after {
+            dropped_span = min(dropped_span, best);
+        }
         if before != after {
             result = Step(best, select(exit_normal, entry_normal, after), before);
             break;

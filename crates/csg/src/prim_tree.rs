@@ -515,6 +515,8 @@ impl<T: Real> PrimTree<T> {
         let mut dropped = T::INFINITY;
         loop {
             let (mut best, mut count) = (T::INFINITY, 0usize);
+            // The last of the crossings merged with the first (`best`).
+            let mut last = T::INFINITY;
             let (mut entries, mut exits) = (0usize, 0usize);
             let (mut entry_normal, mut exit_normal) = (V3::zero(), V3::zero());
             for (leaf, b) in &self.members[members.clone()] {
@@ -529,11 +531,12 @@ impl<T: Real> PrimTree<T> {
                 }
                 let tol = self.tol(s.t);
                 if s.t < best - tol {
-                    (best, entries, exits) = (s.t, 0, 0);
+                    (best, last, entries, exits) = (s.t, s.t, 0, 0);
                 } else if s.t > best + tol {
                     continue;
                 }
                 best = best.min(s.t);
+                last = last.max(s.t);
                 if s.inside_before {
                     exits += 1;
                     exit_normal = s.normal;
@@ -549,6 +552,11 @@ impl<T: Real> PrimTree<T> {
                 };
             }
             let after = count + entries - exits;
+            // Entries and exits merged at different points with the result unchanged: a
+            // chord or a gap between members may lie between them (decide's sliver).
+            if entries > 0 && exits > 0 && last != best && inside(count) == inside(after) {
+                dropped = dropped.min(best);
+            }
             if inside(count) != inside(after) {
                 return Step {
                     t: best,

@@ -378,6 +378,9 @@ pub struct ScanTimes {
     /// Seconds of `trace_s` spent on the f64 fallback: choosing the rays from the flags and
     /// answers, building the f64 scene and tracing them again.
     pub fallback_s: f64,
+    /// Rays of an f32 scan its trace flagged as within rounding of a decision
+    /// ([`crate::cpu::Traced::flags`]), before the fallback's own checks.
+    pub flagged: usize,
 }
 
 /// What a GPU scan ran on and where its time went.
@@ -482,6 +485,7 @@ fn scan_from_origins(
         let flags_out = flagged.then_some(&mut flags[..]);
         let mut answers = cpu_answers_reporting(&scene, rays, progress, flags_out);
         let t2 = Instant::now();
+        let flagged = flags.par_iter().filter(|&&f| f != 0).count();
         let redone_in_f64 = finish(&scene, &mut answers, &flags)?;
         let fallback_s = t2.elapsed().as_secs_f64();
         let result = result_from(f, &answers);
@@ -491,6 +495,7 @@ fn scan_from_origins(
             trace_s,
             redone_in_f64,
             fallback_s,
+            flagged,
             ..Default::default()
         };
         Ok((result, times))
@@ -636,6 +641,7 @@ fn gpu_scan(
     let traced = gpu_trace(&ctx, &tracer, &cpu, rays)?;
     let (mut answers, flags) = (traced.answers, traced.flags);
     let t2 = Instant::now();
+    let flagged = flags.par_iter().filter(|&&f| f != 0).count();
     let redone_in_f64 = redo_flagged_in_f64(f, &cpu, rays, &mut answers, &flags)?;
     let fallback_s = t2.elapsed().as_secs_f64();
     let trace_s = t1.elapsed().as_secs_f64();
@@ -651,6 +657,7 @@ fn gpu_scan(
         gpu: Some(gpu),
         redone_in_f64,
         fallback_s,
+        flagged,
     };
     Ok((result_from(f, &answers), times))
 }
@@ -1147,6 +1154,7 @@ pub fn stats_json(
         "threads": rayon::current_num_threads(),
         "redone_in_f64": times.redone_in_f64,
         "fallback_s": times.fallback_s,
+        "flagged": times.flagged,
     });
     if let Some(g) = &times.gpu {
         crate::gpu::add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);

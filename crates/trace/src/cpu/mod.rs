@@ -669,7 +669,7 @@ impl<T: Real> CpuScene<T> {
 
     /// [`Self::trace`], and what the trace could not decide within its rounding: the
     /// checks of the f32 scan's fallback to f64, made from the trace's own location of the
-    /// origin ([`Self::flags_of`]). The GPU scan kernel reports the same flags.
+    /// origin (see [`Traced::flags`]). The GPU scan kernel reports the same flags.
     pub fn trace_flagged(&self, ray: &Ray<f64>, tmin: T, tmax: T) -> Traced<T> {
         let world = WorldRay::new(ray);
         let mut noting = Noting::default();
