@@ -42,17 +42,25 @@ pub const INTERLEAVE_MIN_BYTES: usize = 1 << 20;
 
 /// Where a trace gets its prims' first crossings (in the solid's frame) and the location
 /// of its origin.
-pub(super) trait Crossings<'a, T> {
-    /// `prim.first_crossing(ray, tmin)`, or `None` to abandon the trace.
+pub(super) trait Crossings<'a, T: Real> {
+    /// `prim.first_crossing(ray, tmin)`, or `None` to abandon the trace (computed at once
+    /// unless the implementation says otherwise).
+    #[inline(always)]
     fn first_crossing(
         &mut self,
         prim: &'a PreparedPrim<T>,
         ray: &Ray<T>,
         tmin: T,
-    ) -> Option<Step<T>>;
+    ) -> Option<Step<T>> {
+        Some(prim.first_crossing(ray, tmin))
+    }
 
-    /// Whether the trace was abandoned: its answer means nothing and it should stop.
-    fn abandoned(&self) -> bool;
+    /// Whether the trace was abandoned: its answer means nothing and it should stop
+    /// (never, unless the implementation says otherwise).
+    #[inline(always)]
+    fn abandoned(&self) -> bool {
+        false
+    }
 
     /// The deepest instance containing the ray's origin, which `locate` finds.
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32>;
@@ -65,22 +73,7 @@ pub(super) trait Crossings<'a, T> {
 /// Every crossing computed when asked: the per-ray trace.
 pub(super) struct Direct;
 
-impl<'a, T: Real> Crossings<'a, T> for Direct {
-    #[inline(always)]
-    fn first_crossing(
-        &mut self,
-        prim: &'a PreparedPrim<T>,
-        ray: &Ray<T>,
-        tmin: T,
-    ) -> Option<Step<T>> {
-        Some(prim.first_crossing(ray, tmin))
-    }
-
-    #[inline(always)]
-    fn abandoned(&self) -> bool {
-        false
-    }
-
+impl<T: Real> Crossings<'_, T> for Direct {
     #[inline(always)]
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
         locate()
@@ -101,22 +94,7 @@ pub(super) struct Noting {
     pub dropped: bool,
 }
 
-impl<'a, T: Real> Crossings<'a, T> for Noting {
-    #[inline(always)]
-    fn first_crossing(
-        &mut self,
-        prim: &'a PreparedPrim<T>,
-        ray: &Ray<T>,
-        tmin: T,
-    ) -> Option<Step<T>> {
-        Some(prim.first_crossing(ray, tmin))
-    }
-
-    #[inline(always)]
-    fn abandoned(&self) -> bool {
-        false
-    }
-
+impl<T: Real> Crossings<'_, T> for Noting {
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
         *self.located.get_or_insert_with(locate)
     }
