@@ -1,6 +1,8 @@
-// The scan kernels (hytrace scan --backend gpu), twins of CpuScene::<f32>::trace, compared
-// ray by ray in crates/trace/tests/gpu_scan.rs. Hierarchical scenes run `locate_rays`
-// (the navigator's locate of every origin) and then `scan`; flat scenes `scan` alone.
+// The scan kernels (hytrace scan --backend gpu), twins of CpuScene::<f32>::trace_flagged,
+// compared ray by ray in crates/trace/tests/gpu_scan.rs. Every scene runs `locate_rays`
+// (in hierarchical scenes the navigator's locate of every origin; in all, the flags of
+// starts near a surface) and then `scan`. The start's flags are the first pass's: in the
+// scan kernel their signed distances made it several times slower on lavapipe.
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
@@ -8,7 +10,8 @@
 @group(2) @binding(0) var<storage, read> params: ScanParams;
 @group(2) @binding(1) var<storage, read> rays: array<RayRecord>;
 @group(2) @binding(2) var<storage, read_write> hits: array<HitRecord>;
-// The instance each ray's origin is located in (UNSET: none), from `locate_rays`.
+// The instance each ray's origin is located in (UNSET: none), from `locate_rays`
+// (hierarchical scenes only).
 @group(2) @binding(3) var<storage, read_write> located: array<u32>;
 
 fn ray_index(gid: vec3<u32>, groups_: vec3<u32>) -> u32 {
@@ -31,7 +34,15 @@ fn locate_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
         return;
     }
     var status = 0u;
-    located[i] = locate_point(ray_origin(rays[i]), ray_origin_lo(rays[i]), &status);
+    let r = rays[i];
+    var start_in = UNSET;
+    if params.hierarchical != 0u {
+        start_in = locate_point(ray_origin(r), ray_origin_lo(r), &status);
+        located[i] = start_in;
+    }
+    // What the f32 trace cannot decide where the ray starts (CpuScene::trace_flagged).
+    let d = vec3<f32>(r.direction[0], r.direction[1], r.direction[2]);
+    status |= start_flags(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin);
     if loops_cut_short(params.probe_trips) {
         status |= STATUS_LOOPS_CUT;
     }
@@ -47,18 +58,16 @@ fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let r = rays[i];
     let d = vec3<f32>(r.direction[0], r.direction[1], r.direction[2]);
     var start_in = UNSET;
-    var status = 0u;
+    // The first pass's status: its locate's and the start's flags.
+    var status = hits[i].status;
     if params.hierarchical != 0u {
         start_in = located[i];
-        status = hits[i].status;
     }
     let h = cross_from(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin, min(r.tmax, INF));
-    // What the f32 trace could not decide (CpuScene::trace_flagged): the host traces such
-    // rays again in f64.
+    // A short span dropped (CpuScene::trace_flagged): the host traces such rays again in f64.
     if trace_dropped {
         status |= STATUS_DROPPED_SPAN;
     }
-    status |= start_flags(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin);
     var out: HitRecord;
     out.normal = array<f32, 3>(h.normal.x, h.normal.y, h.normal.z);
     out.t = h.t;

@@ -161,8 +161,9 @@ pub(super) fn kernel_source(kernel: &str, features: &[&str]) -> Result<String, G
 /// A scene on the GPU with its scan pipeline.
 pub struct GpuTracer {
     pipeline: wgpu::ComputePipeline,
-    /// The navigator's locate, for hierarchical scenes.
-    locate: Option<wgpu::ComputePipeline>,
+    /// The first pass over the rays: the navigator's locate (hierarchical scenes) and the
+    /// flags of starts near a surface.
+    locate: wgpu::ComputePipeline,
     ray_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
     hierarchical: bool,
@@ -187,7 +188,7 @@ impl GpuTracer {
                 |name: &str| compute_pipeline(ctx, &pipeline_layout, &module, name, &constants);
             GpuTracer {
                 pipeline: entry("scan"),
-                locate: upload.hierarchical.then(|| entry("locate_rays")),
+                locate: entry("locate_rays"),
                 ray_layout,
                 scene_group: upload.group.clone(),
                 hierarchical: upload.hierarchical,
@@ -245,7 +246,7 @@ impl GpuTracer {
             let located = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("located"),
                 // Flat scenes locate nothing: a minimal binding, never read.
-                size: if self.locate.is_some() {
+                size: if self.hierarchical {
                     (n.max(4) * 4) as u64
                 } else {
                     16
@@ -264,8 +265,8 @@ impl GpuTracer {
                 layout: &self.ray_layout,
                 entries: &whole_buffer_entries(&buffers),
             });
-            // Every origin is located before the scan runs.
-            let pipelines: Vec<_> = self.locate.iter().chain([&self.pipeline]).collect();
+            // Every origin is located (and its start flagged) before the scan runs.
+            let pipelines = [&self.locate, &self.pipeline];
             ctx.submit_pass(
                 "scan",
                 &pipelines,
