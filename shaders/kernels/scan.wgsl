@@ -1,8 +1,8 @@
 // The scan kernels (hytrace scan --backend gpu), twins of CpuScene::<f32>::trace_flagged,
 // compared ray by ray in crates/trace/tests/gpu_scan.rs. Every scene runs `locate_rays`
 // (in hierarchical scenes the navigator's locate of every origin; in all, the flags of
-// starts near a surface) and then `scan`. The start's flags are the first pass's: in the
-// scan kernel their signed distances made it several times slower on lavapipe.
+// starts near a surface, whose signed distances stay out of the scan kernel's code) and
+// then `scan`.
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
