@@ -5,9 +5,7 @@
 // (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
 // (surfaces.rs), photons/bindings (the flattened tables, gpu_tables.rs, and the history,
 // output.rs). The geometry is the scan's scene traversal (trace/scene): the navigator's
-// step from the volume the photon is in (`cross_from`) and the locate (`locate_point`),
-// each called from one place (a boundary reached is crossed at the top of the next
-// iteration, after the locate the start and the exits share).
+// step from the volume the photon is in (`cross_from`) and the locate (`locate_point`).
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
@@ -41,6 +39,20 @@ fn next_boundary(pos: vec3<f32>, dir: vec3<f32>, current: u32) -> Hit {
         found = h;
     }
     return found;
+}
+
+// Twin of PhotonScene::next_volume: the instance past the boundary `h` (UNSET: outside
+// the world).
+fn next_volume(pos: vec3<f32>, dir: vec3<f32>, current: u32, h: Hit, status: ptr<function, u32>) -> u32 {
+    if pparams.hierarchical != 0u && h.instance != current {
+        return h.instance;
+    }
+    let probe = pos + dir * (1e-6 * max(v3_max_abs(pos), 1.0));
+    let c = locate_point(probe, vec3<f32>(0.0), status);
+    if c != UNSET && c != current {
+        return c;
+    }
+    return pinstances[current].mother;
 }
 
 fn velocity(m: u32, e: f32) -> f32 {
@@ -82,63 +94,14 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     var dp = DirPol(start.direction, start.polarization);
     var time = 0.0;
     var steps = 0u;
-    // The instance the photon is in (UNSET until it is located).
-    var current = UNSET;
-    // The boundary the last step reached, crossed at the top of the next iteration.
-    var h = no_hit();
-    var crossing = false;
-    // Where to locate at the top of the next iteration: the start, then the point just
-    // past a boundary (twin of PhotonScene::next_volume) the photon leaves its volume
-    // through (in a flat scene, any boundary). One call site: drivers inline every call,
-    // and the locate carries the solids' inside tests.
-    var locate = true;
-    var probe = pos;
+    var current = locate_point(pos, vec3<f32>(0.0), &nav);
+    var ended = current == UNSET;
+    if ended {
+        history_push(&history, LABEL_MI);
+    }
     loop {
-        var found = UNSET;
-        if locate {
-            found = locate_point(probe, vec3<f32>(0.0), &nav);
-            locate = false;
-        }
-        if crossing {
-            crossing = false;
-            // The daughter entered, else the volume found just past the surface (a
-            // touching sibling), else the mother; UNSET: outside the world.
-            var post = h.instance;
-            if pparams.hierarchical == 0u || h.instance == current {
-                post = select(pinstances[current].mother, found, found != UNSET && found != current);
-            }
-            if post == UNSET {
-                history_push(&history, LABEL_MI);
-                break;
-            }
-            var normal = h.normal;
-            if v3_dot(normal, dp.dir) > 0.0 {
-                normal = -normal;
-            }
-            let surface = surface_between(current, post);
-            let what = cross_boundary(pinstances[current].material, pinstances[post].material, surface, &dp, energy, normal, &rng);
-            if what == CROSS_TRANSMITTED {
-                history_push(&history, LABEL_BT);
-                current = post;
-            } else if what == CROSS_REFLECTED {
-                history_push(&history, LABEL_BR);
-            } else if what == CROSS_SURFACE_REFLECTED {
-                history_push(&history, LABEL_SR);
-            } else if what == CROSS_ABSORBED {
-                history_push(&history, LABEL_SA);
-                break;
-            } else {
-                history_push(&history, LABEL_SD);
-                out.instance = h.instance;
-                status |= PHOTON_DETECTED;
-                break;
-            }
-        } else if current == UNSET {
-            current = found;
-            if current == UNSET {
-                history_push(&history, LABEL_MI);
-                break;
-            }
+        if ended {
+            break;
         }
         if steps >= pparams.max_steps {
             history_push(&history, LABEL_TR);
@@ -152,7 +115,7 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             d_abs = draw_distance(pmaterials[m].abslength, energy, &rng);
             d_sc = draw_distance(pmaterials[m].rayleigh, energy, &rng);
         }
-        h = next_boundary(pos, dp.dir, current);
+        let h = next_boundary(pos, dp.dir, current);
         let t_b = select(INF, h.t, h.found);
         let step = min(min(t_b, d_abs), d_sc);
         if step >= INF {
@@ -170,9 +133,33 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_SC);
             continue;
         }
-        crossing = true;
-        locate = pparams.hierarchical == 0u || h.instance == current;
-        probe = pos + dp.dir * (1e-6 * max(v3_max_abs(pos), 1.0));
+        let post = next_volume(pos, dp.dir, current, h, &nav);
+        if post == UNSET {
+            history_push(&history, LABEL_MI);
+            break;
+        }
+        var normal = h.normal;
+        if v3_dot(normal, dp.dir) > 0.0 {
+            normal = -normal;
+        }
+        let surface = surface_between(current, post);
+        let what = cross_boundary(m, pinstances[post].material, surface, &dp, energy, normal, &rng);
+        if what == CROSS_TRANSMITTED {
+            history_push(&history, LABEL_BT);
+            current = post;
+        } else if what == CROSS_REFLECTED {
+            history_push(&history, LABEL_BR);
+        } else if what == CROSS_SURFACE_REFLECTED {
+            history_push(&history, LABEL_SR);
+        } else if what == CROSS_ABSORBED {
+            history_push(&history, LABEL_SA);
+            break;
+        } else {
+            history_push(&history, LABEL_SD);
+            out.instance = h.instance;
+            status |= PHOTON_DETECTED;
+            break;
+        }
     }
     out.position = array<f32, 3>(pos.x, pos.y, pos.z);
     out.time = time;

@@ -193,8 +193,9 @@ impl GpuPhotons {
             batch: Self::batch_size(ctx, batch),
             ..Default::default()
         };
-        // A batch of 0 is refused by the batches' loop, before any buffer is bound.
-        let outputs = self.outputs(ctx, host.batch.max(1))?;
+        // Room for the run's largest batch (wgpu clears a buffer before its first use); a
+        // batch of 0 is refused by the batches' loop, before any buffer is bound.
+        let outputs = self.outputs(ctx, host.batch.min(run.photons).max(1))?;
         let mut flight: Option<InFlight> = None;
         let mut on_gpu = |range: Range<u64>, next: Option<Range<u64>>, emitting: &Emitting| {
             if flight.as_ref().map(|f| &f.range) != Some(&range) {
