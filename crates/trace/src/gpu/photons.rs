@@ -337,16 +337,20 @@ fn ends(
         mut records,
     } = back;
     records.sort_unstable_by_key(|r| r.photon);
-    let again: Vec<Option<PhotonEnd>> = records
-        .par_iter()
-        .map(|r| {
-            (r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0)
-                .then(|| scene.photon(first + u64::from(r.photon), run, emitting))
-        })
-        .collect();
+    let cut = |r: &PhotonRecord| r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0;
+    // Threads only where some photon is to be propagated again (lavapipe alone).
+    let again: Vec<Option<PhotonEnd>> = if records.iter().any(cut) {
+        records
+            .par_iter()
+            .map(|r| cut(r).then(|| scene.photon(first + u64::from(r.photon), run, emitting)))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut again = again.into_iter();
     let mut out = BatchEnds::default();
-    for (r, again) in records.iter().zip(again) {
-        match again {
+    for r in &records {
+        match again.next().flatten() {
             Some(end) => {
                 times.redone_on_cpu += 1;
                 histories[r.photon as usize] = out.add_lineages(end);
