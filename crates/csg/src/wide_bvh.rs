@@ -36,6 +36,10 @@ use wide::f32x8;
 
 use crate::real::{Ray, Real, V3};
 
+mod packet;
+
+pub use packet::{PacketSlabs, PACKET};
+
 /// Children per node.
 pub const WIDTH: usize = 8;
 

@@ -1,0 +1,197 @@
+//! Packets of coherent rays walking a [`WideTree`] together: each inner node is fetched and
+//! tested once for the whole packet, by one slab test of the packet's bounds (the interval
+//! of its origins and of its reciprocal directions, per axis), and only the nodes that hold
+//! leaves are tested ray by ray, to hand each ray exactly the leaves its own test accepts.
+//!
+//! The packet's test accepts every box any of its rays' tests ([`WideSlabs::entries`])
+//! accepts, and its entry is never beyond theirs: rounding is monotonic, so bounding each
+//! operand of the per-ray test by the packet's interval bounds each rounded result. Each
+//! ray thus reaches every leaf its own walk would (and maybe more), and a caller whose
+//! answers do not depend on the order leaves are visited in (the nearest crossing, ties by
+//! a fixed numbering) gets, ray by ray, the answers of [`WideTree::walk`].
+
+use std::mem::MaybeUninit;
+
+use wide::{f32x8, u32x8};
+
+use super::{enter, resume, Axis, Postponed, WideNode, WideSlabs, WideTree, STACK, WIDTH};
+use crate::real::Ray;
+
+/// Most rays a packet holds.
+pub const PACKET: usize = 8;
+
+/// The per-packet part of the node-wide slab test: per axis, bounds of the rays' origins
+/// and reciprocal direction components, the rays all of one sign on each axis.
+pub struct PacketSlabs {
+    /// Per axis, the origin bound that gives the lowest entry: the highest origin for a
+    /// positive direction, the lowest for a negative one; for a zero component, the
+    /// highest origin.
+    entry_origin: [f32x8; 3],
+    /// Per axis, the origin bound that gives the highest exit (the other one).
+    exit_origin: [f32x8; 3],
+    /// Per axis, the lowest and highest reciprocal direction component.
+    scale: [[f32x8; 2]; 3],
+    /// Which of the node's planes is each axis' entry plane (min for a positive component).
+    near: [usize; 3],
+    /// Per axis: whether the rays' components are all zero.
+    parallel: [bool; 3],
+}
+
+impl PacketSlabs {
+    /// The packet form of `rays` (at most [`PACKET`], at least one), or `None` when it has
+    /// none: on some axis the rays' direction components differ in sign, some are zero and
+    /// some not, or one has no finite reciprocal.
+    pub fn new(rays: &[Ray<f32>]) -> Option<Self> {
+        let first = rays.first()?;
+        let mut packet = PacketSlabs {
+            entry_origin: [f32x8::ZERO; 3],
+            exit_origin: [f32x8::ZERO; 3],
+            scale: [[f32x8::ZERO; 2]; 3],
+            near: [0; 3],
+            parallel: [false; 3],
+        };
+        for k in 0..3 {
+            let axis = |d: f32| match (d == 0.0, (1.0 / d).is_finite()) {
+                (true, _) => Axis::Parallel,
+                (false, true) => Axis::Multiply,
+                (false, false) => Axis::Divide,
+            };
+            let d0 = first.direction.get(k);
+            let (class, positive) = (axis(d0), d0 >= 0.0);
+            let (mut olo, mut ohi) = (f32::INFINITY, f32::NEG_INFINITY);
+            let (mut ilo, mut ihi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for ray in rays {
+                let d = ray.direction.get(k);
+                if axis(d) != class || (d >= 0.0) != positive {
+                    return None;
+                }
+                let o = ray.origin.get(k);
+                (olo, ohi) = (olo.min(o), ohi.max(o));
+                let inv = 1.0 / d;
+                (ilo, ihi) = (ilo.min(inv), ihi.max(inv));
+            }
+            if class == Axis::Divide {
+                return None;
+            }
+            // The entry (near plane - origin) * inverse is lowest for the highest origin
+            // when the inverse is positive (a zero component counts as positive here).
+            let (entry_o, exit_o) = if positive { (ohi, olo) } else { (olo, ohi) };
+            packet.entry_origin[k] = f32x8::splat(entry_o);
+            packet.exit_origin[k] = f32x8::splat(exit_o);
+            packet.scale[k] = [f32x8::splat(ilo), f32x8::splat(ihi)];
+            packet.near[k] = if positive { k } else { k + 3 };
+            packet.parallel[k] = class == Axis::Parallel;
+        }
+        Some(packet)
+    }
+
+    /// Which children's boxes some ray of the packet may enter within `[after, limit]` (bit
+    /// per lane), and a lower bound of each one's entry for every ray: `after` is the
+    /// lowest of the rays' and `limit` the highest.
+    #[inline(always)]
+    fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
+        let mut entry = f32x8::splat(f32::NEG_INFINITY);
+        let mut exit = f32x8::splat(f32::INFINITY);
+        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        for k in 0..3 {
+            let near = f32x8::from(node.planes[self.near[k]]);
+            let far = f32x8::from(node.planes[(self.near[k] + 3) % 6]);
+            if self.parallel[k] {
+                // Some origin inside the slab, at every distance.
+                inside = inside & near.simd_le(self.entry_origin[k]);
+                inside = inside & self.exit_origin[k].simd_le(far);
+                continue;
+            }
+            // Each ray's (near - o) * inv is at least the lowest product of the bounding
+            // difference with either end of the reciprocals' interval (the product is
+            // monotonic in each factor, and so is its rounding); likewise for the exit.
+            let [lo, hi] = self.scale[k];
+            let x0 = near - self.entry_origin[k];
+            let x1 = far - self.exit_origin[k];
+            entry = entry.fast_max((x0 * lo).fast_min(x0 * hi));
+            exit = exit.fast_min((x1 * lo).fast_max(x1 * hi));
+        }
+        // The per-ray test's widening, a monotonic function of the entry and of the exit.
+        let (less, more) = (
+            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
+            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
+        );
+        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
+        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(f32x8::splat(after));
+        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(f32x8::splat(limit));
+        let hit = (entry.simd_le(exit) & inside).to_bitmask();
+        (hit, entry.to_array())
+    }
+}
+
+/// The lanes of `node` that hold leaves (bit per lane).
+#[inline(always)]
+fn leaf_lanes(node: &WideNode) -> u32 {
+    !u32x8::from(node.count).simd_eq(u32x8::ZERO).to_bitmask() & ((1 << WIDTH) - 1)
+}
+
+impl WideTree {
+    /// [`WideTree::walk`] of a packet of rays (`packet`, and each ray's `slabs`, `after`
+    /// and `limits`, at most [`PACKET`]): calls `leaf(ray, child, count)` for every leaf
+    /// whose boxes ray `ray` meets within `[after[ray], limits[ray]]`, and sets the ray's
+    /// limit to what it returns (the nearest crossing so far; never below its `after`).
+    /// Inner nodes are visited once for the packet, nearer boxes first by the packet's
+    /// entries; a ray's leaves under one node are visited nearest first.
+    #[inline(always)]
+    pub fn walk_packet(
+        &self,
+        packet: &PacketSlabs,
+        slabs: &[WideSlabs],
+        after: &[f32],
+        limits: &mut [f32],
+        mut leaf: impl FnMut(usize, u32, u32) -> f32,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let lowest_after = after.iter().copied().fold(f32::INFINITY, f32::min);
+        let highest = |limits: &[f32]| limits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let mut limit = highest(limits);
+        let mut stack = [MaybeUninit::<Postponed>::uninit(); STACK];
+        let mut top = 0;
+        let mut child = 0u32;
+        loop {
+            let node = &self.nodes[child as usize];
+            let (hit, entries) = packet.entries(node, lowest_after, limit);
+            let leaves = hit & leaf_lanes(node);
+            if leaves != 0 {
+                for (ray, slabs) in slabs.iter().enumerate() {
+                    let (own, own_entries) = slabs.entries(node, after[ray], limits[ray]);
+                    let mut lanes = own & leaves;
+                    while lanes != 0 {
+                        // The nearest of the ray's leaves left.
+                        let mut lane = lanes.trailing_zeros() as usize;
+                        let mut rest = lanes & (lanes - 1);
+                        while rest != 0 {
+                            let other = rest.trailing_zeros() as usize;
+                            rest &= rest - 1;
+                            if own_entries[other] < own_entries[lane] {
+                                lane = other;
+                            }
+                        }
+                        lanes &= !(1 << lane);
+                        if own_entries[lane] <= limits[ray] {
+                            limits[ray] = leaf(ray, node.child[lane], node.count[lane]);
+                        }
+                    }
+                }
+                limit = highest(limits);
+            }
+            let inner = hit & !leaves;
+            let next = if inner != 0 {
+                Some(enter(node, inner, &entries, &mut stack, &mut top))
+            } else {
+                resume(&stack, &mut top, limit)
+            };
+            match next {
+                Some((next, _)) => child = next,
+                None => return,
+            }
+        }
+    }
+}
