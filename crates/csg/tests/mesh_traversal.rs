@@ -397,3 +397,88 @@ fn interleaved_searches_answer_as_one_at_a_time() {
     interleaved_case::<f32>();
     interleaved_case::<f64>();
 }
+
+/// Queries in runs of one mesh whose rays run close together, as a camera's rows and a
+/// sweep give them: the searches take them as packets (8 at a time), and still answer as
+/// [`MeshPrim::first_crossing`] does, bit for bit, in f32 and f64.
+fn packet_case<T: Real>() {
+    let mut rng = Rng(23);
+    let heights: Vec<f64> = (0..33 * 33).map(|_| rng.range(0.0, 3.0)).collect();
+    let hills = grid(32, |x, y| heights[x as usize * 33 + y as usize]);
+    let far = [3.0e4, -2.0e4, 1.0e4];
+    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [[0.0; 3], far]
+        .into_iter()
+        .map(|by| {
+            let tris: Vec<Tri> = hills
+                .iter()
+                .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
+                .collect();
+            (MeshPrim::<T>::new(&tris).unwrap(), by)
+        })
+        .collect();
+    let mut queries = Vec::new();
+    for (mesh, by) in &meshes {
+        // A camera's rows, from far above one corner; some rows from the surface's height
+        // on (`tmin`).
+        let eye = [by[0] - 40.0, by[1] - 40.0, by[2] + 60.0];
+        for row in 0..64 {
+            for col in 0..64 {
+                let d = [
+                    0.6 + f64::from(col) / 512.0,
+                    0.6 + f64::from(row) / 96.0,
+                    -1.0,
+                ];
+                let tmin = if row % 4 == 3 { 70.0 } else { 0.0 };
+                queries.push(MeshQuery {
+                    mesh,
+                    ray: Ray::from_f64(eye, unit(d)),
+                    tmin: T::from_f64(tmin),
+                });
+            }
+        }
+        // A sweep straight down onto vertices and edges (two zero components), and one
+        // starting past the field (every ray a miss).
+        for z in [10.0, -10.0] {
+            for k in 0..32 * 64 {
+                let (x, y) = (f64::from(k % 64) / 64.0 + 8.0, f64::from(k / 64));
+                queries.push(MeshQuery {
+                    mesh,
+                    ray: Ray::from_f64([by[0] + x, by[1] + y, by[2] + z], [0.0, 0.0, -1.0]),
+                    tmin: T::ZERO,
+                });
+            }
+        }
+    }
+    let mut scratch = CrossingScratch::default();
+    let mut out = Vec::new();
+    let mut hits = 0;
+    for len in [5, 8, 13, 256] {
+        for batch in queries.chunks(len) {
+            MeshPrim::first_crossings(batch, &mut scratch, &mut out);
+            for (q, got) in batch.iter().zip(&out) {
+                let want = q.mesh.first_crossing(&q.ray, q.tmin);
+                let bits = |s: &hytrace_csg::kernel::Step<T>| {
+                    (
+                        s.t.to_f64().to_bits(),
+                        s.normal.to_f64().map(f64::to_bits),
+                        s.inside_before,
+                    )
+                };
+                assert_eq!(
+                    bits(got),
+                    bits(&want),
+                    "{} query {q:?} in batches of {len}",
+                    T::NAME
+                );
+                hits += got.t.is_finite() as usize;
+            }
+        }
+    }
+    assert!(hits > 20_000, "only {hits} {} crossings", T::NAME);
+}
+
+#[test]
+fn packet_searches_answer_as_one_at_a_time() {
+    packet_case::<f32>();
+    packet_case::<f64>();
+}

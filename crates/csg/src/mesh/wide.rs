@@ -16,8 +16,8 @@ use wide::f32x4;
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
 use crate::wide_bvh::{
-    point_f32, prefetch_lines, BinaryNode, PacketSlabs, Walker, WideBvhError, WideSlabs,
-    WideTree, PACKET,
+    point_f32, prefetch_lines, BinaryNode, PacketSlabs, Walker, WideBvhError, WideSlabs, WideTree,
+    PACKET,
 };
 
 /// Triangles per block.
@@ -129,23 +129,30 @@ impl WideBvh {
         out: &mut [Option<(f32, usize, V3<f32>)>],
     ) {
         let n = rays.len();
-        let ray = |i: usize| &rays[i.min(n - 1)];
-        let slabs: [WideSlabs; PACKET] = std::array::from_fn(|i| WideSlabs::new(ray(i)));
-        let triangles: [WideRay; PACKET] = std::array::from_fn(|i| WideRay::new(ray(i)));
+        let triangles: [WideRay; PACKET] =
+            std::array::from_fn(|i| WideRay::new(&rays[i.min(n - 1)]));
         let mut best: [Best; PACKET] = std::array::from_fn(|_| Best::none(f32::INFINITY));
-        let mut limits = [f32::INFINITY; PACKET];
-        self.tree.walk_packet(
-            packet,
-            &slabs[..n],
-            after,
-            &mut limits[..n],
-            |r, first, count| {
+        let lanes = std::array::from_fn(|i| after[i.min(n - 1)]);
+        let mut limits = std::array::from_fn(|i| {
+            if i < n {
+                f32::INFINITY
+            } else {
+                f32::NEG_INFINITY
+            }
+        });
+        self.tree
+            .walk_packet(packet, &lanes, &mut limits, |r, first, count| {
                 for b in first..first + count {
-                    triangles[r].test(&self.blocks[b as usize], b, &rays[r], after[r], &mut best[r]);
+                    triangles[r].test(
+                        &self.blocks[b as usize],
+                        b,
+                        &rays[r],
+                        after[r],
+                        &mut best[r],
+                    );
                 }
                 best[r].t
-            },
-        );
+            });
         for (slot, best) in out.iter_mut().zip(&best[..n]) {
             *slot = self.found(best);
         }
@@ -564,10 +571,20 @@ mod tests {
         for k in 0..4000 {
             // Rays of one octant from anywhere (the packet test accepts them, loosely),
             // packets of 1 to 8; some rays start far away and are recentred.
-            let sign = [0; 3].map(|_| if rng.range(-1.0, 1.0) < 0.0 { -1.0 } else { 1.0 });
+            let sign = [0; 3].map(|_| {
+                if rng.range(-1.0, 1.0) < 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                }
+            });
             let packet: Vec<_> = (0..1 + k % 8)
                 .map(|_| {
-                    let far = if rng.range(0.0, 1.0) < 0.2 { 100.0 } else { 1.0 };
+                    let far = if rng.range(0.0, 1.0) < 0.2 {
+                        100.0
+                    } else {
+                        1.0
+                    };
                     let o = [0; 3].map(|_| far * rng.range(-15.0, 15.0));
                     let d = rng.direction();
                     (o, [0, 1, 2].map(|c| sign[c] * d[c].abs()))

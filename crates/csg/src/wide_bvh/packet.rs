@@ -14,11 +14,16 @@ use std::mem::MaybeUninit;
 
 use wide::{f32x8, u32x8};
 
-use super::{enter, resume, Axis, Postponed, WideNode, WideSlabs, WideTree, STACK, WIDTH};
+use super::{enter, resume, Axis, Postponed, WideNode, WideTree, STACK, WIDTH};
 use crate::real::Ray;
 
-/// Most rays a packet holds.
+/// Most rays a packet holds: one per lane of `f32x8`.
 pub const PACKET: usize = 8;
+
+/// An array of `f(lane)` for every lane of a packet.
+fn lanes(f: impl Fn(usize) -> f32) -> [f32; PACKET] {
+    std::array::from_fn(f)
+}
 
 /// The per-packet part of the node-wide slab test: per axis, bounds of the rays' origins
 /// and reciprocal direction components, the rays all of one sign on each axis.
@@ -35,6 +40,12 @@ pub struct PacketSlabs {
     near: [usize; 3],
     /// Per axis: whether the rays' components are all zero.
     parallel: [bool; 3],
+    /// The rays lane by lane (lanes past the last ray repeat it): per axis, the origin and
+    /// the reciprocal direction component, as [`WideSlabs`] holds them for one ray.
+    origin: [f32x8; 3],
+    inverse: [f32x8; 3],
+    /// The rays, in lanes from the first.
+    rays: usize,
 }
 
 impl PacketSlabs {
@@ -43,12 +54,19 @@ impl PacketSlabs {
     /// some not, or one has no finite reciprocal.
     pub fn new(rays: &[Ray<f32>]) -> Option<Self> {
         let first = rays.first()?;
+        if rays.len() > PACKET {
+            return None;
+        }
+        let lane = |i: usize| &rays[i.min(rays.len() - 1)];
         let mut packet = PacketSlabs {
             entry_origin: [f32x8::ZERO; 3],
             exit_origin: [f32x8::ZERO; 3],
             scale: [[f32x8::ZERO; 2]; 3],
             near: [0; 3],
             parallel: [false; 3],
+            origin: [0, 1, 2].map(|k| f32x8::from(lanes(|i| lane(i).origin.get(k)))),
+            inverse: [0, 1, 2].map(|k| f32x8::from(lanes(|i| 1.0 / lane(i).direction.get(k)))),
+            rays: rays.len(),
         };
         for k in 0..3 {
             let axis = |d: f32| match (d == 0.0, (1.0 / d).is_finite()) {
@@ -124,6 +142,44 @@ impl PacketSlabs {
     }
 }
 
+impl PacketSlabs {
+    /// Which rays of the packet (bit per ray) enter the box of lane `lane` of `node` within
+    /// `[after, limit]` (each ray's, lane by lane), and where: for each ray, what
+    /// [`WideSlabs::entries`] answers for that box, by the same operations.
+    #[inline(always)]
+    fn rays_entering(
+        &self,
+        node: &WideNode,
+        lane: usize,
+        after: f32x8,
+        limit: f32x8,
+    ) -> (u32, [f32; PACKET]) {
+        let mut entry = f32x8::splat(f32::NEG_INFINITY);
+        let mut exit = f32x8::splat(f32::INFINITY);
+        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        for k in 0..3 {
+            let near = f32x8::splat(node.planes[self.near[k]][lane]);
+            let far = f32x8::splat(node.planes[(self.near[k] + 3) % 6][lane]);
+            let o = self.origin[k];
+            if self.parallel[k] {
+                inside = inside & near.simd_le(o) & o.simd_le(far);
+                continue;
+            }
+            entry = entry.fast_max((near - o) * self.inverse[k]);
+            exit = exit.fast_min((far - o) * self.inverse[k]);
+        }
+        let (less, more) = (
+            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
+            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
+        );
+        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
+        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(after);
+        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(limit);
+        let hit = (entry.simd_le(exit) & inside).to_bitmask() & ((1 << self.rays) - 1);
+        (hit, entry.to_array())
+    }
+}
+
 /// The lanes of `node` that hold leaves (bit per lane).
 #[inline(always)]
 fn leaf_lanes(node: &WideNode) -> u32 {
@@ -131,25 +187,26 @@ fn leaf_lanes(node: &WideNode) -> u32 {
 }
 
 impl WideTree {
-    /// [`WideTree::walk`] of a packet of rays (`packet`, and each ray's `slabs`, `after`
-    /// and `limits`, at most [`PACKET`]): calls `leaf(ray, child, count)` for every leaf
-    /// whose boxes ray `ray` meets within `[after[ray], limits[ray]]`, and sets the ray's
-    /// limit to what it returns (the nearest crossing so far; never below its `after`).
-    /// Inner nodes are visited once for the packet, nearer boxes first by the packet's
-    /// entries; a ray's leaves under one node are visited nearest first.
+    /// [`WideTree::walk`] of a packet of rays (`packet`; each ray's `after` and `limits` in
+    /// its lane, lanes past the last ray holding a limit of -inf): calls
+    /// `leaf(ray, child, count)` for every leaf whose boxes ray `ray` meets within
+    /// `[after[ray], limits[ray]]`, and sets the ray's limit to what it returns (the
+    /// nearest crossing so far; never below its `after`). Inner nodes are visited once for
+    /// the packet, nearer boxes first by the packet's entries; so are the leaves under a
+    /// node, each tested against every ray at once ([`PacketSlabs::rays_entering`]).
     #[inline(always)]
     pub fn walk_packet(
         &self,
         packet: &PacketSlabs,
-        slabs: &[WideSlabs],
-        after: &[f32],
-        limits: &mut [f32],
+        after: &[f32; PACKET],
+        limits: &mut [f32; PACKET],
         mut leaf: impl FnMut(usize, u32, u32) -> f32,
     ) {
         if self.nodes.is_empty() {
             return;
         }
         let lowest_after = after.iter().copied().fold(f32::INFINITY, f32::min);
+        let after_lanes = f32x8::from(*after);
         let highest = |limits: &[f32]| limits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let mut limit = highest(limits);
         let mut stack = [MaybeUninit::<Postponed>::uninit(); STACK];
@@ -159,27 +216,28 @@ impl WideTree {
             let node = &self.nodes[child as usize];
             let (hit, entries) = packet.entries(node, lowest_after, limit);
             let leaves = hit & leaf_lanes(node);
-            if leaves != 0 {
-                for (ray, slabs) in slabs.iter().enumerate() {
-                    let (own, own_entries) = slabs.entries(node, after[ray], limits[ray]);
-                    let mut lanes = own & leaves;
-                    while lanes != 0 {
-                        // The nearest of the ray's leaves left.
-                        let mut lane = lanes.trailing_zeros() as usize;
-                        let mut rest = lanes & (lanes - 1);
-                        while rest != 0 {
-                            let other = rest.trailing_zeros() as usize;
-                            rest &= rest - 1;
-                            if own_entries[other] < own_entries[lane] {
-                                lane = other;
-                            }
-                        }
-                        lanes &= !(1 << lane);
-                        if own_entries[lane] <= limits[ray] {
-                            limits[ray] = leaf(ray, node.child[lane], node.count[lane]);
-                        }
+            let mut lanes = leaves;
+            while lanes != 0 {
+                // The leaf the packet enters first among those left.
+                let mut lane = lanes.trailing_zeros() as usize;
+                let mut rest = lanes & (lanes - 1);
+                while rest != 0 {
+                    let other = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    if entries[other] < entries[lane] {
+                        lane = other;
                     }
                 }
+                lanes &= !(1 << lane);
+                let (mut rays, _) =
+                    packet.rays_entering(node, lane, after_lanes, f32x8::from(*limits));
+                while rays != 0 {
+                    let ray = rays.trailing_zeros() as usize;
+                    rays &= rays - 1;
+                    limits[ray] = leaf(ray, node.child[lane], node.count[lane]);
+                }
+            }
+            if leaves != 0 {
                 limit = highest(limits);
             }
             let inner = hit & !leaves;
