@@ -140,8 +140,11 @@ impl WideBvh {
                 f32::NEG_INFINITY
             }
         });
-        self.tree
-            .walk_packet(packet, &lanes, &mut limits, |r, first, count| {
+        self.tree.walk_packet(
+            packet,
+            &lanes,
+            &mut limits,
+            |r, first, count| {
                 for b in first..first + count {
                     triangles[r].test(
                         &self.blocks[b as usize],
@@ -152,7 +155,13 @@ impl WideBvh {
                     );
                 }
                 best[r].t
-            });
+            },
+            |first, count| {
+                for block in &self.blocks[first as usize..(first + count) as usize] {
+                    prefetch_lines(block);
+                }
+            },
+        );
         for (slot, best) in out.iter_mut().zip(&best[..n]) {
             *slot = self.found(best);
         }

@@ -14,7 +14,7 @@ use std::mem::MaybeUninit;
 
 use wide::{f32x8, u32x8};
 
-use super::{enter, resume, Axis, Postponed, WideNode, WideTree, STACK, WIDTH};
+use super::{enter, prefetch_lines, resume, Axis, Postponed, WideNode, WideTree, STACK, WIDTH};
 use crate::real::Ray;
 
 /// Most rays a packet holds: one per lane of `f32x8`.
@@ -193,7 +193,10 @@ impl WideTree {
     /// `[after[ray], limits[ray]]`, and sets the ray's limit to what it returns (the
     /// nearest crossing so far; never below its `after`). Inner nodes are visited once for
     /// the packet, nearer boxes first by the packet's entries; so are the leaves under a
-    /// node, each tested against every ray at once ([`PacketSlabs::rays_entering`]).
+    /// node, each tested against every ray at once ([`PacketSlabs::rays_entering`]). Each
+    /// visit asks for the memory of every child the packet enters (a node, or through
+    /// `prefetch_leaf(child, count)` a leaf's items): a coherent packet visits most of
+    /// them, and their misses then overlap.
     #[inline(always)]
     pub fn walk_packet(
         &self,
@@ -201,6 +204,7 @@ impl WideTree {
         after: &[f32; PACKET],
         limits: &mut [f32; PACKET],
         mut leaf: impl FnMut(usize, u32, u32) -> f32,
+        prefetch_leaf: impl Fn(u32, u32),
     ) {
         if self.nodes.is_empty() {
             return;
@@ -216,6 +220,16 @@ impl WideTree {
             let node = &self.nodes[child as usize];
             let (hit, entries) = packet.entries(node, lowest_after, limit);
             let leaves = hit & leaf_lanes(node);
+            let mut lanes = hit;
+            while lanes != 0 {
+                let lane = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                if node.count[lane] == 0 {
+                    prefetch_lines(&self.nodes[node.child[lane] as usize]);
+                } else {
+                    prefetch_leaf(node.child[lane], node.count[lane]);
+                }
+            }
             let mut lanes = leaves;
             while lanes != 0 {
                 // The leaf the packet enters first among those left.
