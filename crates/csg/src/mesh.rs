@@ -57,10 +57,10 @@ pub const INTERLEAVED: usize = 8;
 
 /// How far apart, relative to a mesh's half size, the (recentred) origins of a packet's
 /// rays may lie on each axis ([`MeshPrim::first_crossings`]).
-const PACKET_SPREAD: f32 = 1.0 / 32.0;
+pub const PACKET_SPREAD: f32 = 1.0 / 32.0;
 
 /// How far apart, in radians, the directions of a packet's rays may point.
-const PACKET_ANGLE: f32 = 0.05;
+pub const PACKET_ANGLE: f32 = 0.05;
 
 /// A first-crossing query of a mesh ([`MeshPrim::first_crossings`]).
 #[derive(Clone, Copy, Debug)]
@@ -593,7 +593,8 @@ impl<T: Real> MeshPrim<T> {
 
     /// [`Self::first_crossing`] of every query, in `out` (cleared first), bit for bit. In
     /// f32, consecutive queries of one mesh whose rays run close together (camera rays,
-    /// sweeps: [`coherent`]) are searched [`PACKET`] at a time as a packet, each node
+    /// fine sweeps: origins within [`PACKET_SPREAD`] of the mesh's half size, directions
+    /// within [`PACKET_ANGLE`]) are searched [`PACKET`] at a time as a packet, each node
     /// fetched and tested once for all of them ([`WideTree::walk_packet`]); the other
     /// searches run [`INTERLEAVED`] at a time on this thread, one step of each in turn,
     /// each step asking for the memory its next one reads: a search of a large mesh mostly

@@ -193,7 +193,8 @@ impl WideTree {
     /// `[after[ray], limits[ray]]`, and sets the ray's limit to what it returns (the
     /// nearest crossing so far; never below its `after`). Inner nodes are visited once for
     /// the packet, nearer boxes first by the packet's entries; so are the leaves under a
-    /// node, each tested against every ray at once ([`PacketSlabs::rays_entering`]). Each
+    /// node, each tested against every ray at once (by the operations of
+    /// [`WideTree::walk`]'s test, lane by lane). Each
     /// visit asks for the memory of every child the packet enters (a node, or through
     /// `prefetch_leaf(child, count)` a leaf's items): a coherent packet visits most of
     /// them, and their misses then overlap.
