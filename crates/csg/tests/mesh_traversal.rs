@@ -332,33 +332,14 @@ fn mixed_queries<'a, T: Real>(
         .collect()
 }
 
-fn interleaved_case<T: Real>() {
-    let mut rng = Rng(17);
-    let heights: Vec<f64> = (0..17 * 17).map(|_| rng.range(0.0, 3.0)).collect();
-    let hills = grid(16, |x, y| heights[x as usize * 17 + y as usize]);
-    let shifted = |tris: &[Tri], by: [f64; 3]| -> Vec<Tri> {
-        tris.iter()
-            .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
-            .collect()
-    };
-    let far = [1.0e5, -2.0e5, 3.0e4];
-    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [
-        (shifted(&hills, [-8.0, -8.0, 0.0]), [0.0, 0.0, 1.5]),
-        (
-            shifted(&hills, far),
-            [far[0] + 8.0, far[1] + 8.0, far[2] + 1.5],
-        ),
-        (cube([1.0, 2.0, 3.0], 4.0), [1.0, 2.0, 3.0]),
-    ]
-    .into_iter()
-    .map(|(tris, centre)| (MeshPrim::<T>::new(&tris).unwrap(), centre))
-    .collect();
-    let queries = mixed_queries(&meshes, &mut rng);
+/// Checks that [`MeshPrim::first_crossings`] of `queries`, in windows of each length of
+/// `windows`, answers every query bit for bit as [`MeshPrim::first_crossing`] does;
+/// returns how many crossings it found.
+fn answers_as_one_at_a_time<T: Real>(queries: &[MeshQuery<'_, T>], windows: &[usize]) -> usize {
     let mut scratch = CrossingScratch::default();
     let mut out = Vec::new();
     let mut hits = 0;
-    // Windows of every size up to past the interleaving width, then all at once.
-    for len in (1..=INTERLEAVED + 3).chain([queries.len()]) {
+    for &len in windows {
         for batch in queries.chunks(len) {
             MeshPrim::first_crossings(batch, &mut scratch, &mut out);
             assert_eq!(out.len(), batch.len());
@@ -381,6 +362,34 @@ fn interleaved_case<T: Real>() {
             }
         }
     }
+    hits
+}
+
+fn interleaved_case<T: Real>() {
+    let mut rng = Rng(17);
+    let heights: Vec<f64> = (0..17 * 17).map(|_| rng.range(0.0, 3.0)).collect();
+    let hills = grid(16, |x, y| heights[x as usize * 17 + y as usize]);
+    let shifted = |tris: &[Tri], by: [f64; 3]| -> Vec<Tri> {
+        tris.iter()
+            .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
+            .collect()
+    };
+    let far = [1.0e5, -2.0e5, 3.0e4];
+    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [
+        (shifted(&hills, [-8.0, -8.0, 0.0]), [0.0, 0.0, 1.5]),
+        (
+            shifted(&hills, far),
+            [far[0] + 8.0, far[1] + 8.0, far[2] + 1.5],
+        ),
+        (cube([1.0, 2.0, 3.0], 4.0), [1.0, 2.0, 3.0]),
+    ]
+    .into_iter()
+    .map(|(tris, centre)| (MeshPrim::<T>::new(&tris).unwrap(), centre))
+    .collect();
+    let queries = mixed_queries(&meshes, &mut rng);
+    // Windows of every size up to past the interleaving width, then all at once.
+    let windows: Vec<usize> = (1..=INTERLEAVED + 3).chain([queries.len()]).collect();
+    let hits = answers_as_one_at_a_time(&queries, &windows);
     assert!(
         hits > 2000,
         "only {hits} crossings among the {} {} queries",
@@ -449,31 +458,7 @@ fn packet_case<T: Real>() {
             }
         }
     }
-    let mut scratch = CrossingScratch::default();
-    let mut out = Vec::new();
-    let mut hits = 0;
-    for len in [5, 8, 13, 256] {
-        for batch in queries.chunks(len) {
-            MeshPrim::first_crossings(batch, &mut scratch, &mut out);
-            for (q, got) in batch.iter().zip(&out) {
-                let want = q.mesh.first_crossing(&q.ray, q.tmin);
-                let bits = |s: &hytrace_csg::kernel::Step<T>| {
-                    (
-                        s.t.to_f64().to_bits(),
-                        s.normal.to_f64().map(f64::to_bits),
-                        s.inside_before,
-                    )
-                };
-                assert_eq!(
-                    bits(got),
-                    bits(&want),
-                    "{} query {q:?} in batches of {len}",
-                    T::NAME
-                );
-                hits += got.t.is_finite() as usize;
-            }
-        }
-    }
+    let hits = answers_as_one_at_a_time(&queries, &[5, 8, 13, 256]);
     assert!(hits > 20_000, "only {hits} {} crossings", T::NAME);
 }
 

@@ -409,6 +409,21 @@ mod tests {
             .collect()
     }
 
+    /// 3000 random triangles of sizes 0.01 to 2 in a 20-wide cube about the origin.
+    fn random_soup(rng: &mut Rng) -> MeshPrim<f32> {
+        let soup: Vec<_> = (0..3000)
+            .map(|_| {
+                let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
+                let size = rng.range(0.01, 2.0);
+                [0; 3].map(|_| {
+                    let e = rng.direction();
+                    [0, 1, 2].map(|k| c[k] + size * e[k])
+                })
+            })
+            .collect();
+        MeshPrim::<f32>::new(&soup).unwrap()
+    }
+
     /// Runs both searches on a ray and its recentred form; returns whether it hit.
     fn both_agree(mesh: &MeshPrim<f32>, origin: [f64; 3], direction: [f64; 3]) -> bool {
         let wide = mesh.wide.as_ref().expect("f32 meshes have a wide BVH");
@@ -435,16 +450,7 @@ mod tests {
     #[test]
     fn wide_search_equals_the_binary_one_bit_for_bit_on_random_rays() {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-        let mut soup = Vec::new();
-        for _ in 0..3000 {
-            let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
-            let size = rng.range(0.01, 2.0);
-            soup.push([0; 3].map(|_| {
-                let e = rng.direction();
-                [0, 1, 2].map(|k| c[k] + size * e[k])
-            }));
-        }
-        let mesh = MeshPrim::<f32>::new(&soup).unwrap();
+        let mesh = random_soup(&mut rng);
         let mut hits = 0;
         for _ in 0..20_000 {
             let o = [0; 3].map(|_| rng.range(-15.0, 15.0));
@@ -566,16 +572,7 @@ mod tests {
     #[test]
     fn packet_search_equals_single_searches_on_divergent_packets() {
         let mut rng = Rng(0x5851_f42d_4c95_7f2d);
-        let mut soup = Vec::new();
-        for _ in 0..3000 {
-            let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
-            let size = rng.range(0.01, 2.0);
-            soup.push([0; 3].map(|_| {
-                let e = rng.direction();
-                [0, 1, 2].map(|k| c[k] + size * e[k])
-            }));
-        }
-        let mesh = MeshPrim::<f32>::new(&soup).unwrap();
+        let mesh = random_soup(&mut rng);
         let (mut hits, mut packets) = (0, 0);
         for k in 0..4000 {
             // Rays of one octant from anywhere (the packet test accepts them, loosely),

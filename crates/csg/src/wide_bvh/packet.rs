@@ -14,7 +14,9 @@ use std::mem::MaybeUninit;
 
 use wide::{f32x8, u32x8};
 
-use super::{enter, prefetch_lines, resume, Axis, Postponed, WideNode, WideTree, STACK, WIDTH};
+use super::{
+    enter, prefetch_lines, resume, Axis, Postponed, SlabSpan, WideNode, WideTree, STACK, WIDTH,
+};
 use crate::real::Ray;
 
 /// Most rays a packet holds: one per lane of `f32x8`.
@@ -108,16 +110,13 @@ impl PacketSlabs {
     /// lowest of the rays' and `limit` the highest.
     #[inline(always)]
     fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
-        let mut entry = f32x8::splat(f32::NEG_INFINITY);
-        let mut exit = f32x8::splat(f32::INFINITY);
-        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        let mut span = SlabSpan::new();
         for k in 0..3 {
-            let near = f32x8::from(node.planes[self.near[k]]);
-            let far = f32x8::from(node.planes[(self.near[k] + 3) % 6]);
+            let (near, far) = SlabSpan::planes(node, self.near[k]);
             if self.parallel[k] {
                 // Some origin inside the slab, at every distance.
-                inside = inside & near.simd_le(self.entry_origin[k]);
-                inside = inside & self.exit_origin[k].simd_le(far);
+                span.inside = span.inside & near.simd_le(self.entry_origin[k]);
+                span.inside = span.inside & self.exit_origin[k].simd_le(far);
                 continue;
             }
             // Each ray's (near - o) * inv is at least the lowest product of the bounding
@@ -126,19 +125,11 @@ impl PacketSlabs {
             let [lo, hi] = self.scale[k];
             let x0 = near - self.entry_origin[k];
             let x1 = far - self.exit_origin[k];
-            entry = entry.fast_max((x0 * lo).fast_min(x0 * hi));
-            exit = exit.fast_min((x1 * lo).fast_max(x1 * hi));
+            span.entry = span.entry.fast_max((x0 * lo).fast_min(x0 * hi));
+            span.exit = span.exit.fast_min((x1 * lo).fast_max(x1 * hi));
         }
-        // The per-ray test's widening, a monotonic function of the entry and of the exit.
-        let (less, more) = (
-            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
-            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
-        );
-        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
-        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(f32x8::splat(after));
-        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(f32x8::splat(limit));
-        let hit = (entry.simd_le(exit) & inside).to_bitmask();
-        (hit, entry.to_array())
+        // The per-ray test's widening, monotonic in the entry and in the exit.
+        span.hits(f32x8::splat(after), f32x8::splat(limit))
     }
 }
 
@@ -154,29 +145,20 @@ impl PacketSlabs {
         after: f32x8,
         limit: f32x8,
     ) -> (u32, [f32; PACKET]) {
-        let mut entry = f32x8::splat(f32::NEG_INFINITY);
-        let mut exit = f32x8::splat(f32::INFINITY);
-        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        let mut span = SlabSpan::new();
         for k in 0..3 {
             let near = f32x8::splat(node.planes[self.near[k]][lane]);
             let far = f32x8::splat(node.planes[(self.near[k] + 3) % 6][lane]);
             let o = self.origin[k];
             if self.parallel[k] {
-                inside = inside & near.simd_le(o) & o.simd_le(far);
+                span.inside = span.inside & near.simd_le(o) & o.simd_le(far);
                 continue;
             }
-            entry = entry.fast_max((near - o) * self.inverse[k]);
-            exit = exit.fast_min((far - o) * self.inverse[k]);
+            span.entry = span.entry.fast_max((near - o) * self.inverse[k]);
+            span.exit = span.exit.fast_min((far - o) * self.inverse[k]);
         }
-        let (less, more) = (
-            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
-            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
-        );
-        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
-        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(after);
-        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(limit);
-        let hit = (entry.simd_le(exit) & inside).to_bitmask() & ((1 << self.rays) - 1);
-        (hit, entry.to_array())
+        let (hit, entries) = span.hits(after, limit);
+        (hit & ((1 << self.rays) - 1), entries)
     }
 }
 
