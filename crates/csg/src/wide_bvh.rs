@@ -522,7 +522,7 @@ impl WideSlabs {
                 Axis::Divide => ((near - o) / self.scale[k], (far - o) / self.scale[k]),
                 Axis::Parallel => {
                     // Inside the slab or not, at every distance.
-                    span.inside = span.inside & near.simd_le(o) & o.simd_le(far);
+                    span.inside &= near.simd_le(o) & o.simd_le(far);
                     continue;
                 }
             };

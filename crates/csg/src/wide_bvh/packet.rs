@@ -115,8 +115,8 @@ impl PacketSlabs {
             let (near, far) = SlabSpan::planes(node, self.near[k]);
             if self.parallel[k] {
                 // Some origin inside the slab, at every distance.
-                span.inside = span.inside & near.simd_le(self.entry_origin[k]);
-                span.inside = span.inside & self.exit_origin[k].simd_le(far);
+                span.inside &= near.simd_le(self.entry_origin[k]);
+                span.inside &= self.exit_origin[k].simd_le(far);
                 continue;
             }
             // Each ray's (near - o) * inv is at least the lowest product of the bounding
@@ -151,7 +151,7 @@ impl PacketSlabs {
             let far = f32x8::splat(node.planes[(self.near[k] + 3) % 6][lane]);
             let o = self.origin[k];
             if self.parallel[k] {
-                span.inside = span.inside & near.simd_le(o) & o.simd_le(far);
+                span.inside &= near.simd_le(o) & o.simd_le(far);
                 continue;
             }
             span.entry = span.entry.fast_max((near - o) * self.inverse[k]);
