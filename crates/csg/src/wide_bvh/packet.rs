@@ -14,9 +14,7 @@ use std::mem::MaybeUninit;
 
 use wide::{f32x8, u32x8};
 
-use super::{
-    enter, prefetch_lines, resume, Axis, Postponed, SlabSpan, WideNode, WideTree, STACK, WIDTH,
-};
+use super::{enter, prefetch_lines, resume, Postponed, SlabSpan, WideNode, WideTree, STACK, WIDTH};
 use crate::real::Ray;
 
 /// Most rays a packet holds: one per lane of `f32x8`.
@@ -55,10 +53,10 @@ impl PacketSlabs {
     /// none: on some axis the rays' direction components differ in sign, some are zero and
     /// some not, or one has no finite reciprocal.
     pub fn new(rays: &[Ray<f32>]) -> Option<Self> {
-        let first = rays.first()?;
-        if rays.len() > PACKET {
+        if rays.is_empty() || rays.len() > PACKET {
             return None;
         }
+        // Lanes past the last ray repeat it, so bounds over all lanes are the rays' bounds.
         let lane = |i: usize| &rays[i.min(rays.len() - 1)];
         let mut packet = PacketSlabs {
             entry_origin: [f32x8::ZERO; 3],
@@ -66,41 +64,40 @@ impl PacketSlabs {
             scale: [[f32x8::ZERO; 2]; 3],
             near: [0; 3],
             parallel: [false; 3],
-            origin: [0, 1, 2].map(|k| f32x8::from(lanes(|i| lane(i).origin.get(k)))),
-            inverse: [0, 1, 2].map(|k| f32x8::from(lanes(|i| 1.0 / lane(i).direction.get(k)))),
+            origin: [f32x8::ZERO; 3],
+            inverse: [f32x8::ZERO; 3],
             rays: rays.len(),
         };
         for k in 0..3 {
-            let axis = |d: f32| match (d == 0.0, (1.0 / d).is_finite()) {
-                (true, _) => Axis::Parallel,
-                (false, true) => Axis::Multiply,
-                (false, false) => Axis::Divide,
-            };
-            let d0 = first.direction.get(k);
-            let (class, positive) = (axis(d0), d0 >= 0.0);
-            let (mut olo, mut ohi) = (f32::INFINITY, f32::NEG_INFINITY);
-            let (mut ilo, mut ihi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for ray in rays {
-                let d = ray.direction.get(k);
-                if axis(d) != class || (d >= 0.0) != positive {
-                    return None;
-                }
-                let o = ray.origin.get(k);
-                (olo, ohi) = (olo.min(o), ohi.max(o));
-                let inv = 1.0 / d;
-                (ilo, ihi) = (ilo.min(inv), ihi.max(inv));
-            }
-            if class == Axis::Divide {
+            let d = lanes(|i| lane(i).direction.get(k));
+            let o = lanes(|i| lane(i).origin.get(k));
+            let inverse = f32x8::splat(1.0) / f32x8::from(d);
+            let inv = inverse.to_array();
+            let (positive, parallel) = (d[0] >= 0.0, d[0] == 0.0);
+            let alike = (0..PACKET).all(|i| {
+                (d[i] >= 0.0) == positive
+                    && (d[i] == 0.0) == parallel
+                    && (parallel || inv[i].is_finite())
+            });
+            if !alike {
                 return None;
             }
+            let low = |v: &[f32; PACKET]| v.iter().copied().fold(f32::INFINITY, f32::min);
+            let high = |v: &[f32; PACKET]| v.iter().copied().fold(f32::NEG_INFINITY, f32::max);
             // The entry (near plane - origin) * inverse is lowest for the highest origin
             // when the inverse is positive (a zero component counts as positive here).
-            let (entry_o, exit_o) = if positive { (ohi, olo) } else { (olo, ohi) };
+            let (entry_o, exit_o) = if positive {
+                (high(&o), low(&o))
+            } else {
+                (low(&o), high(&o))
+            };
             packet.entry_origin[k] = f32x8::splat(entry_o);
             packet.exit_origin[k] = f32x8::splat(exit_o);
-            packet.scale[k] = [f32x8::splat(ilo), f32x8::splat(ihi)];
+            packet.scale[k] = [f32x8::splat(low(&inv)), f32x8::splat(high(&inv))];
             packet.near[k] = if positive { k } else { k + 3 };
-            packet.parallel[k] = class == Axis::Parallel;
+            packet.parallel[k] = parallel;
+            packet.origin[k] = f32x8::from(o);
+            packet.inverse[k] = inverse;
         }
         Some(packet)
     }
