@@ -8,25 +8,30 @@
 use std::ops::Range;
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::photon_records::{
     PhotonParams, PhotonRecord, PHOTON_DEPTH_LIMIT, PHOTON_DETECTED, PHOTON_LOOPS_CUT,
     PHOTON_SOURCE_BEAM, PHOTON_SOURCE_POINT, PHOTON_SOURCE_SPHERE,
 };
-use super::timing::{finish_batch, GpuTimes, PassTimer};
+use super::timing::{finish_pass, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use crate::photons::gpu_tables::{unsupported, GpuTables};
-use crate::photons::output::{History, HitRow};
-use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
+use crate::photons::output::HitRow;
+use crate::photons::propagate::{drive_batches, BatchEnds, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
 use crate::photons::{Batch, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
 
 const KERNEL: &str = "kernels/photons";
-/// Photons per dispatch at most (records of 80 bytes: 84 MB).
+/// Photons per dispatch at most.
 const BATCH: u64 = 1 << 20;
 /// Storage buffers of the photon group (group 2).
-const PHOTON_BINDINGS: u32 = 8;
+const PHOTON_BINDINGS: u32 = 10;
+/// GPU memory a photon in flight takes (bytes): its packed history and room for its
+/// record (every photon of a batch may be detected).
+pub const BYTES_PER_PHOTON: u64 = (size_of::<PhotonRecord>() + size_of::<[u32; 2]>()) as u64;
 
 /// A photon scene on the GPU with its kernel.
 pub struct GpuPhotons {
@@ -46,6 +51,38 @@ pub struct GpuPhotonRun {
     /// Where the time went; `redone_on_cpu` counts the photons the CPU twin propagated
     /// again.
     pub times: GpuTimes,
+}
+
+/// Where a GPU photon run's time went beyond the GPU's phases, and its batches.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PhotonHostWork {
+    /// Seconds the host spent on the batches' results: the records put in photon order
+    /// and turned into hit rows, the photons cut short propagated again on the CPU.
+    pub host_s: f64,
+    /// Photons a batch (each in flight at once on the GPU).
+    pub batch: u64,
+}
+
+/// The buffers every batch of a run writes (made once a run): the records appended, the
+/// histories and the number of records.
+struct Outputs {
+    records: wgpu::Buffer,
+    histories: wgpu::Buffer,
+    count: wgpu::Buffer,
+}
+
+/// A batch submitted to the GPU and not yet read back, with what it binds.
+struct InFlight {
+    range: Range<u64>,
+    timer: Option<PassTimer>,
+    _bound: (wgpu::Buffer, wgpu::BindGroup),
+}
+
+/// What a batch's kernel gives back: every photon's packed history, and the records of
+/// the photons detected or cut short, in the order they finished.
+struct Readback {
+    histories: Vec<u64>,
+    records: Vec<PhotonRecord>,
 }
 
 impl GpuPhotons {
@@ -74,7 +111,7 @@ impl GpuPhotons {
         let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
-            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7]);
+            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7, 8, 9]);
             // Group 0 (the Foundry's own arrays) is not used.
             let pipeline_layout =
                 ctx.pipeline_layout("photons", &[None, Some(&upload.layout), Some(&layout)]);
@@ -111,6 +148,14 @@ impl GpuPhotons {
         &self.features
     }
 
+    /// Photons a batch for runs asking for at most `batch` a dispatch: by default as many
+    /// as fill the GPU, up to 2^20, within the device's binding limit for the records.
+    pub fn batch_size(ctx: &GpuContext, batch: Option<u64>) -> u64 {
+        let record = size_of::<PhotonRecord>() as u64;
+        let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
+        batch.map_or(most, |b| b.min(most))
+    }
+
     /// Propagates `run`'s photons through `scene` (the one the kernel was built for), in
     /// batches, gathering their results; `progress` hears the photons done after each.
     pub fn propagate(
@@ -121,7 +166,7 @@ impl GpuPhotons {
         progress: &dyn Fn(u64),
     ) -> crate::Result<GpuPhotonRun> {
         let mut all = Batch::default();
-        let (summary, times) =
+        let (summary, times, _) =
             self.propagate_into(ctx, scene, run, None, &mut |b| all.gather(b), progress)?;
         Ok(GpuPhotonRun {
             run: PhotonRun::of(all, summary),
@@ -129,11 +174,11 @@ impl GpuPhotons {
         })
     }
 
-    /// Propagates `run`'s photons through `scene` (the one the kernel was built for) at
-    /// most `batch` a dispatch (by default as many as fill the GPU, up to 2^20), handing
-    /// each batch's results to `sink` as it finishes
-    /// ([`crate::photons::propagate_batches`] on the GPU); `progress` hears the photons
-    /// done after each.
+    /// Propagates `run`'s photons through `scene` (the one the kernel was built for)
+    /// [`GpuPhotons::batch_size`] a dispatch, handing each batch's results to `sink` as it
+    /// finishes ([`crate::photons::propagate_batches`] on the GPU); `progress` hears the
+    /// photons done after each. The next batch runs on the GPU while the host works
+    /// through the results of the one before and the sink writes them.
     pub fn propagate_into(
         &self,
         ctx: &GpuContext,
@@ -142,29 +187,61 @@ impl GpuPhotons {
         batch: Option<u64>,
         sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
         progress: &dyn Fn(u64),
-    ) -> crate::Result<(RunSummary, GpuTimes)> {
+    ) -> crate::Result<(RunSummary, GpuTimes, PhotonHostWork)> {
         let mut times = GpuTimes::default();
-        // Batches fill a large GPU, within the binding limit of the records.
-        let record = size_of::<PhotonRecord>() as u64;
-        let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
-        let mut on_gpu =
-            |range, emitting: &Emitting| self.batch(ctx, scene, run, range, emitting, &mut times);
-        let size = batch.map_or(most, |b| b.min(most));
-        let summary = drive_batches(scene, run, size, &mut on_gpu, sink, progress)?;
-        Ok((summary, times))
+        let mut host = PhotonHostWork {
+            batch: Self::batch_size(ctx, batch),
+            ..Default::default()
+        };
+        // Room for the run's largest batch (wgpu clears a buffer before its first use); a
+        // batch of 0 is refused by the batches' loop, before any buffer is bound.
+        let outputs = self.outputs(ctx, host.batch.min(run.photons).max(1))?;
+        let mut flight: Option<InFlight> = None;
+        let mut on_gpu = |range: Range<u64>, next: Option<Range<u64>>, emitting: &Emitting| {
+            if flight.as_ref().map(|f| &f.range) != Some(&range) {
+                flight =
+                    Some(self.submit(ctx, run, emitting, &outputs, range.clone(), &mut times)?);
+            }
+            let done = flight.take().expect("the batch was submitted above");
+            let back = self.finish(ctx, done, &outputs, &mut times)?;
+            if let Some(next) = next {
+                flight = Some(self.submit(ctx, run, emitting, &outputs, next, &mut times)?);
+            }
+            let t = Instant::now();
+            let ends = ends(scene, run, emitting, range.start, back, &mut times);
+            host.host_s += t.elapsed().as_secs_f64();
+            Ok::<_, crate::Error>(ends)
+        };
+        let summary = drive_batches(scene, run, host.batch, &mut on_gpu, sink, progress)?;
+        Ok((summary, times, host))
     }
 
-    /// One batch: the kernel's records turned into the photons' ends, those cut short
-    /// propagated again on the CPU.
-    fn batch(
+    /// The output buffers of batches of `batch` photons.
+    fn outputs(&self, ctx: &GpuContext, batch: u64) -> Result<Outputs, GpuError> {
+        ctx.checked("photon output buffers", || Outputs {
+            records: ctx.output_buffer("photon records", batch * size_of::<PhotonRecord>() as u64),
+            histories: ctx.output_buffer("photon histories", batch * size_of::<[u32; 2]>() as u64),
+            count: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("photon record count"),
+                size: 4,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        })
+    }
+
+    /// Submits the kernel on the photons `range` of `run`, writing into `outputs`.
+    fn submit(
         &self,
         ctx: &GpuContext,
-        scene: &PhotonScene,
         run: &RunOptions,
-        range: Range<u64>,
         emitting: &Emitting,
+        outputs: &Outputs,
+        range: Range<u64>,
         times: &mut GpuTimes,
-    ) -> crate::Result<Vec<PhotonEnd>> {
+    ) -> crate::Result<InFlight> {
         let Emitting::Torch {
             source,
             emission: Emission::Fixed { energy, nm },
@@ -175,55 +252,118 @@ impl GpuPhotons {
             )
             .into());
         };
-        let n = (range.end - range.start) as usize;
-        let params = params(run, source, &range, energy, nm, self.hierarchical);
-        let out_size = (n.max(1) * size_of::<PhotonRecord>()) as u64;
         let t0 = Instant::now();
+        let params = params(run, source, &range, energy, nm, self.hierarchical);
         let timer = PassTimer::new(ctx, "photon timestamps");
-        let (out, _keep) = ctx.checked("photon dispatch", || {
+        let bound = ctx.checked("photon dispatch", || {
             let mut buffers = vec![ctx.input_buffer("photon params", &binding_bytes(&[params]))];
             buffers.extend(self.tables.iter().cloned());
-            buffers.push(ctx.output_buffer("photon records", out_size));
+            buffers
+                .extend([&outputs.records, &outputs.histories, &outputs.count].map(Clone::clone));
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("photons"),
                 layout: &self.layout,
                 entries: &whole_buffer_entries(&buffers),
             });
+            ctx.queue
+                .write_buffer(&outputs.count, 0, &0u32.to_le_bytes());
             ctx.submit_pass(
                 "photons",
                 &[&self.pipeline],
                 &[(1, &self.scene_group), (2, &group)],
-                n as u32,
+                (range.end - range.start) as u32,
                 timer.as_ref(),
             );
-            (buffers[7].clone(), (buffers, group))
+            (buffers.swap_remove(0), group)
         })?;
-        let bytes = finish_batch(
+        times.upload_s += t0.elapsed().as_secs_f64();
+        Ok(InFlight {
+            range,
+            timer,
+            _bound: bound,
+        })
+    }
+
+    /// Waits for the batch `done` and reads back its histories and records.
+    fn finish(
+        &self,
+        ctx: &GpuContext,
+        done: InFlight,
+        outputs: &Outputs,
+        times: &mut GpuTimes,
+    ) -> Result<Readback, GpuError> {
+        // Timed from now: the kernel's time the host's work did not hide.
+        finish_pass(
             ctx,
             "photon kernel",
-            t0,
-            &out,
-            out_size,
-            timer.as_ref(),
+            Instant::now(),
+            done.timer.as_ref(),
             times,
         )?;
-        let records: Vec<PhotonRecord> =
-            bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<PhotonRecord>()]);
-        Ok(range
-            .zip(records)
-            .map(|(index, r)| {
-                if r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0 {
-                    times.redone_on_cpu += 1;
-                    return scene.photon(index, run, emitting);
-                }
-                PhotonEnd {
-                    own: end_of(&r, index, &scene.copy),
-                    further: Vec::new(),
-                    record: Vec::new(),
-                }
-            })
-            .collect())
+        let t = Instant::now();
+        let n = done.range.end - done.range.start;
+        let count: u32 = bytemuck::pod_read_unaligned(&ctx.read_buffer(&outputs.count, 4)?);
+        let words: Vec<[u32; 2]> = bytemuck::pod_collect_to_vec(
+            &ctx.read_buffer(&outputs.histories, n * size_of::<[u32; 2]>() as u64)?,
+        );
+        let records = match u64::from(count) * size_of::<PhotonRecord>() as u64 {
+            0 => Vec::new(),
+            bytes => bytemuck::pod_collect_to_vec(&ctx.read_buffer(&outputs.records, bytes)?),
+        };
+        times.readback_s += t.elapsed().as_secs_f64();
+        Ok(Readback {
+            histories: words
+                .into_iter()
+                .map(|[lo, hi]| u64::from(lo) | (u64::from(hi) << 32))
+                .collect(),
+            records,
+        })
     }
+}
+
+/// The ends of a batch's photons (the first `first`) from what its kernel gave back: the
+/// records put in photon order, those detected turned into hit rows, those cut short
+/// propagated again by the CPU twin (in parallel).
+fn ends(
+    scene: &PhotonScene,
+    run: &RunOptions,
+    emitting: &Emitting,
+    first: u64,
+    back: Readback,
+    times: &mut GpuTimes,
+) -> BatchEnds {
+    let Readback {
+        mut histories,
+        mut records,
+    } = back;
+    records.sort_unstable_by_key(|r| r.photon);
+    let cut = |r: &PhotonRecord| r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0;
+    // Threads only where some photon is to be propagated again (lavapipe alone).
+    let again: Vec<Option<PhotonEnd>> = if records.iter().any(cut) {
+        records
+            .par_iter()
+            .map(|r| cut(r).then(|| scene.photon(first + u64::from(r.photon), run, emitting)))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut again = again.into_iter();
+    let mut out = BatchEnds::default();
+    for r in &records {
+        match again.next().flatten() {
+            Some(end) => {
+                times.redone_on_cpu += 1;
+                histories[r.photon as usize] = out.add_lineages(end);
+            }
+            None if r.status & PHOTON_DETECTED != 0 => {
+                out.hits
+                    .push(hit_row(r, first + u64::from(r.photon), &scene.copy));
+            }
+            None => {}
+        }
+    }
+    out.histories = histories;
+    out
 }
 
 /// The kernel's parameters for the photons `range` of `run` from `source`.
@@ -280,35 +420,27 @@ fn params(
     p
 }
 
-/// A photon's history and hit row from its record.
-fn end_of(r: &PhotonRecord, index: u64, copy: &[i32]) -> (History, Option<HitRow>) {
-    let history = History {
-        code: u64::from(r.history[0]) | (u64::from(r.history[1]) << 32),
-        len: r.labels,
-        mask: r.mask,
-    };
-    let hit = (r.status & PHOTON_DETECTED != 0).then(|| {
-        let [x, y, z] = r.position.map(f64::from);
-        let [dx, dy, dz] = r.direction.map(f64::from);
-        let [px, py, pz] = r.polarization.map(f64::from);
-        HitRow([
-            x,
-            y,
-            z,
-            f64::from(r.time),
-            dx,
-            dy,
-            dz,
-            f64::from(r.wavelength),
-            px,
-            py,
-            pz,
-            f64::from(r.instance),
-            f64::from(copy[r.instance as usize]),
-            index as f64,
-            f64::from(r.mask),
-            f64::from(r.steps),
-        ])
-    });
-    (history, hit)
+/// The hit row of a detected photon's record.
+fn hit_row(r: &PhotonRecord, index: u64, copy: &[i32]) -> HitRow {
+    let [x, y, z] = r.position.map(f64::from);
+    let [dx, dy, dz] = r.direction.map(f64::from);
+    let [px, py, pz] = r.polarization.map(f64::from);
+    HitRow([
+        x,
+        y,
+        z,
+        f64::from(r.time),
+        dx,
+        dy,
+        dz,
+        f64::from(r.wavelength),
+        px,
+        py,
+        pz,
+        f64::from(r.instance),
+        f64::from(copy[r.instance as usize]),
+        index as f64,
+        f64::from(r.mask),
+        f64::from(r.steps),
+    ])
 }
