@@ -412,14 +412,15 @@ fn hit_bits<T: Real>(h: &Option<Hit<T>>) -> HitBits {
 }
 
 /// Asserts that `trace_batch` answers `rays` as `want` (their `trace`s) bit for bit, in
-/// batches of several sizes, interleaving the searches of meshes of at least `min_bytes`.
+/// batches of several sizes, interleaving the searches of meshes of at least `min_bytes`;
+/// and `trace_batch_flagged` the same, with each ray's `trace_flagged` flags.
 fn assert_batches_answer<T: Real>(
     scene: &CpuScene<T>,
     rays: &[(Ray<f64>, T, T)],
     want: &[Option<Hit<T>>],
     min_bytes: usize,
 ) {
-    let mut out = Vec::new();
+    let (mut out, mut flags) = (Vec::new(), Vec::new());
     let mut scratch = TraceScratch::interleaving_from(min_bytes);
     for size in [1, 3, 8, 13, BATCH] {
         for (chunk, want) in rays.chunks(size).zip(want.chunks(size)) {
@@ -430,6 +431,17 @@ fn assert_batches_answer<T: Real>(
                     hit_bits(got),
                     hit_bits(want),
                     "{} batches of {size}, interleaving from {min_bytes} bytes, ray {ray:?}",
+                    T::NAME
+                );
+            }
+            scene.trace_batch_flagged(chunk, &mut scratch, &mut out, &mut flags);
+            assert_eq!(flags.len(), chunk.len());
+            for (((ray, tmin, tmax), got), flag) in chunk.iter().zip(&out).zip(&flags) {
+                let single = scene.trace_flagged(ray, *tmin, *tmax);
+                assert_eq!(
+                    (hit_bits(got), *flag),
+                    (hit_bits(&single.hit), single.flags),
+                    "{} flagged batches of {size}, interleaving from {min_bytes} bytes, ray {ray:?}",
                     T::NAME
                 );
             }
