@@ -289,6 +289,14 @@ struct PhotonSurface {
     reflectivity: u32,
     efficiency: u32,
     transmittance: u32,
+    finish: u32,
+    unified: u32,
+    roughness: f32,
+    rindex: u32,
+    spike: u32,
+    lobe: u32,
+    backscatter: u32,
+    pad: u32,
 }
 
 struct PhotonInstance {
@@ -329,6 +337,12 @@ const PHOTON_SOURCE_BEAM: u32 = 1u;
 const PHOTON_SOURCE_SPHERE: u32 = 2u;
 const PHOTON_SURFACE_METAL: u32 = 0u;
 const PHOTON_SURFACE_DIELECTRIC: u32 = 1u;
+const PHOTON_FINISH_POLISHED: u32 = 0u;
+const PHOTON_FINISH_POLISHED_FRONT_PAINTED: u32 = 1u;
+const PHOTON_FINISH_POLISHED_BACK_PAINTED: u32 = 2u;
+const PHOTON_FINISH_GROUND: u32 = 3u;
+const PHOTON_FINISH_GROUND_FRONT_PAINTED: u32 = 4u;
+const PHOTON_FINISH_GROUND_BACK_PAINTED: u32 = 5u;
 const PHOTON_DETECTED: u32 = 1u;
 const PHOTON_LOOPS_CUT: u32 = 2u;
 const PHOTON_DEPTH_LIMIT: u32 = 4u;

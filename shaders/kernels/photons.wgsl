@@ -3,7 +3,7 @@
 // tracer in f32 (photons::tracer::Precision::F32), compared photon by photon in
 // crates/trace/tests/gpu_photons.rs. Physics by module as in Rust: photons/sources
 // (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
-// (surfaces.rs), photons/bindings (the flattened tables, gpu_tables.rs, and the history,
+// (surfaces.rs), photons/surface_models (surface_models.rs), photons/bindings (the flattened tables, gpu_tables.rs, and the history,
 // output.rs). The geometry is the scan's scene traversal (trace/scene): the navigator's
 // step from the volume the photon is in (`cross_from`) and the locate (`locate_point`).
 // #import generated/trace_records
@@ -151,6 +151,8 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_BR);
         } else if what == CROSS_SURFACE_REFLECTED {
             history_push(&history, LABEL_SR);
+        } else if what == CROSS_DIFFUSE_REFLECTED {
+            history_push(&history, LABEL_DR);
         } else if what == CROSS_ABSORBED {
             history_push(&history, LABEL_SA);
             break;

@@ -64,6 +64,7 @@ const LABEL_AB: u32 = 4u;
 const LABEL_SC: u32 = 6u;
 const LABEL_SD: u32 = 7u;
 const LABEL_SA: u32 = 8u;
+const LABEL_DR: u32 = 9u;
 const LABEL_SR: u32 = 10u;
 const LABEL_BR: u32 = 11u;
 const LABEL_BT: u32 = 12u;

@@ -73,8 +73,8 @@ record! {
 }
 
 record! {
-    /// An optical surface the kernel models (polished): its type and tables (indices into
-    /// the tables; `u32::MAX`: the default, REFLECTIVITY 1, the others 0).
+    /// An optical surface: its type, finish and model and its tables (indices into the
+    /// tables; `u32::MAX`: the default, REFLECTIVITY 1, the others 0).
     pub struct PhotonSurface {
         /// `PHOTON_SURFACE_*`.
         pub kind: u32,
@@ -84,6 +84,22 @@ record! {
         pub efficiency: u32,
         /// TRANSMITTANCE.
         pub transmittance: u32,
+        /// `PHOTON_FINISH_*` (Geant4's enumerator order).
+        pub finish: u32,
+        /// 1 for the unified model, 0 for glisur.
+        pub unified: u32,
+        /// The model's roughness: unified `sigma_alpha` (radians), glisur `polish`.
+        pub roughness: f32,
+        /// RINDEX of the gap behind a back-painted finish.
+        pub rindex: u32,
+        /// SPECULARSPIKECONSTANT (unified).
+        pub spike: u32,
+        /// SPECULARLOBECONSTANT (unified).
+        pub lobe: u32,
+        /// BACKSCATTERCONSTANT (unified).
+        pub backscatter: u32,
+        /// Padding.
+        pub pad: u32,
     }
 }
 
@@ -168,6 +184,18 @@ pub const PHOTON_SOURCE_SPHERE: u32 = 2;
 pub const PHOTON_SURFACE_METAL: u32 = 0;
 /// `dielectric_dielectric`.
 pub const PHOTON_SURFACE_DIELECTRIC: u32 = 1;
+/// [`PhotonSurface::finish`]: polished.
+pub const PHOTON_FINISH_POLISHED: u32 = 0;
+/// Polished, painted on the surface.
+pub const PHOTON_FINISH_POLISHED_FRONT_PAINTED: u32 = 1;
+/// Polished, painted behind a gap.
+pub const PHOTON_FINISH_POLISHED_BACK_PAINTED: u32 = 2;
+/// Ground.
+pub const PHOTON_FINISH_GROUND: u32 = 3;
+/// Ground, painted on the surface.
+pub const PHOTON_FINISH_GROUND_FRONT_PAINTED: u32 = 4;
+/// Ground, painted behind a gap.
+pub const PHOTON_FINISH_GROUND_BACK_PAINTED: u32 = 5;
 /// [`PhotonRecord::status`] bit: detected (the record is a hit).
 pub const PHOTON_DETECTED: u32 = 1;
 /// Bit: the driver's loop budget cut the photon's loops short (llvmpipe); its record is
@@ -205,6 +233,24 @@ pub fn push_photon_wgsl(out: &mut String) {
         ("PHOTON_SOURCE_SPHERE", PHOTON_SOURCE_SPHERE),
         ("PHOTON_SURFACE_METAL", PHOTON_SURFACE_METAL),
         ("PHOTON_SURFACE_DIELECTRIC", PHOTON_SURFACE_DIELECTRIC),
+        ("PHOTON_FINISH_POLISHED", PHOTON_FINISH_POLISHED),
+        (
+            "PHOTON_FINISH_POLISHED_FRONT_PAINTED",
+            PHOTON_FINISH_POLISHED_FRONT_PAINTED,
+        ),
+        (
+            "PHOTON_FINISH_POLISHED_BACK_PAINTED",
+            PHOTON_FINISH_POLISHED_BACK_PAINTED,
+        ),
+        ("PHOTON_FINISH_GROUND", PHOTON_FINISH_GROUND),
+        (
+            "PHOTON_FINISH_GROUND_FRONT_PAINTED",
+            PHOTON_FINISH_GROUND_FRONT_PAINTED,
+        ),
+        (
+            "PHOTON_FINISH_GROUND_BACK_PAINTED",
+            PHOTON_FINISH_GROUND_BACK_PAINTED,
+        ),
         ("PHOTON_DETECTED", PHOTON_DETECTED),
         ("PHOTON_LOOPS_CUT", PHOTON_LOOPS_CUT),
         ("PHOTON_DEPTH_LIMIT", PHOTON_DEPTH_LIMIT),

@@ -16,7 +16,7 @@ use super::photon_records::{
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use crate::photons::gpu_tables::{unsupported, GpuTables};
+use crate::photons::gpu_tables::{kernel_features, unsupported, GpuTables};
 use crate::photons::output::{History, HitRow};
 use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
@@ -70,7 +70,9 @@ impl GpuPhotons {
         };
         let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS)?;
         let flat = GpuTables::new(scene);
-        let source = kernel_source(KERNEL, &upload.features)?;
+        let mut features = upload.features.clone();
+        features.extend(kernel_features(&scene.tables));
+        let source = kernel_source(KERNEL, &features)?;
         let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
@@ -101,7 +103,7 @@ impl GpuPhotons {
                 scene_group: upload.group.clone(),
                 tables,
                 hierarchical: upload.hierarchical,
-                features: upload.features.clone(),
+                features,
             }
         })
     }

@@ -5,18 +5,20 @@
 //! finds them ([`FlatSurfaces::between`] is the twin of the kernel's lookup and is tested
 //! against it on every pair of instances).
 //!
-//! The kernel models part of the CPU's physics; [`GpuTables::new`] refuses the rest,
-//! naming the material, surface or option and the process: wavelengths drawn from a
-//! spectrum, wavelength shifting, and optical surfaces of any finish but polished.
+//! The kernel models part of the CPU's physics; [`unsupported`] names the rest (the
+//! material or option and the process) and [`kernel_features`] which of the kernel's
+//! optional processes a scene needs.
 
 use hytrace_foundry::UNSET;
 
-use super::properties::{Finish, OpticsTables, Property, SurfaceKind};
+use super::properties::{Finish, OpticsTables, Property, Roughness, SurfaceKind};
 use super::sources::Wavelength;
 use super::surfaces::SurfaceLookup;
 use super::{Origin, PhotonScene, RunOptions};
 use crate::gpu::photon_records::{
-    PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable,
+    PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable, PHOTON_FINISH_GROUND,
+    PHOTON_FINISH_GROUND_BACK_PAINTED, PHOTON_FINISH_GROUND_FRONT_PAINTED, PHOTON_FINISH_POLISHED,
+    PHOTON_FINISH_POLISHED_BACK_PAINTED, PHOTON_FINISH_POLISHED_FRONT_PAINTED,
     PHOTON_SURFACE_DIELECTRIC, PHOTON_SURFACE_METAL,
 };
 
@@ -175,17 +177,27 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
             m.name
         ));
     }
-    let rough = tables
-        .surfaces
-        .iter()
-        .flatten()
-        .find(|s| s.finish != Finish::Polished);
-    rough.map(|s| {
-        format!(
-            "optical surface `{}`: finish {:?} (rough and painted surfaces; the kernel has polished ones)",
-            s.name, s.finish
-        )
-    })
+    None
+}
+
+/// The kernel's composition features for the physics of a scene with `tables` (the
+/// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
+/// a finish other than polished (facets, the unified model's reflection types, paint).
+pub fn kernel_features(tables: &OpticsTables) -> Vec<&'static str> {
+    let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
+    rough.then_some("rough_surfaces").into_iter().collect()
+}
+
+/// A finish as the kernel numbers it (`PHOTON_FINISH_*`).
+fn finish_code(finish: Finish) -> u32 {
+    match finish {
+        Finish::Polished => PHOTON_FINISH_POLISHED,
+        Finish::PolishedFrontPainted => PHOTON_FINISH_POLISHED_FRONT_PAINTED,
+        Finish::PolishedBackPainted => PHOTON_FINISH_POLISHED_BACK_PAINTED,
+        Finish::Ground => PHOTON_FINISH_GROUND,
+        Finish::GroundFrontPainted => PHOTON_FINISH_GROUND_FRONT_PAINTED,
+        Finish::GroundBackPainted => PHOTON_FINISH_GROUND_BACK_PAINTED,
+    }
 }
 
 impl GpuTables {
@@ -208,15 +220,31 @@ impl GpuTables {
             .iter()
             .map(|s| match s {
                 None => PhotonSurface::default(),
-                Some(s) => PhotonSurface {
-                    kind: match s.kind {
-                        SurfaceKind::DielectricMetal => PHOTON_SURFACE_METAL,
-                        SurfaceKind::DielectricDielectric => PHOTON_SURFACE_DIELECTRIC,
-                    },
-                    reflectivity: push_table(&mut tables, &mut rows, s.reflectivity.as_ref()),
-                    efficiency: push_table(&mut tables, &mut rows, s.efficiency.as_ref()),
-                    transmittance: push_table(&mut tables, &mut rows, s.transmittance.as_ref()),
-                },
+                Some(s) => {
+                    let mut table =
+                        |p: &Option<Property>| push_table(&mut tables, &mut rows, p.as_ref());
+                    let (unified, roughness) = match s.roughness {
+                        Roughness::Glisur { polish } => (0, polish),
+                        Roughness::Unified { sigma_alpha } => (1, sigma_alpha),
+                    };
+                    PhotonSurface {
+                        kind: match s.kind {
+                            SurfaceKind::DielectricMetal => PHOTON_SURFACE_METAL,
+                            SurfaceKind::DielectricDielectric => PHOTON_SURFACE_DIELECTRIC,
+                        },
+                        reflectivity: table(&s.reflectivity),
+                        efficiency: table(&s.efficiency),
+                        transmittance: table(&s.transmittance),
+                        finish: finish_code(s.finish),
+                        unified,
+                        roughness: roughness as f32,
+                        rindex: table(&s.rindex),
+                        spike: table(&s.spike),
+                        lobe: table(&s.lobe),
+                        backscatter: table(&s.backscatter),
+                        pad: 0,
+                    }
+                }
             })
             .collect();
         GpuTables {
