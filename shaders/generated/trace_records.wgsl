@@ -269,7 +269,7 @@ struct PhotonParams {
     max_steps: u32,
     hierarchical: u32,
     probe_trips: u32,
-    pad: u32,
+    spectrum: u32,
 }
 
 struct PhotonTable {
@@ -282,6 +282,12 @@ struct PhotonMaterial {
     abslength: u32,
     rayleigh: u32,
     groupvel: u32,
+    reemission: u32,
+    components: u32,
+    spectrum: array<u32, 3>,
+    decay: array<f32, 3>,
+    rise: array<f32, 3>,
+    weight: array<f32, 3>,
 }
 
 struct PhotonSurface {

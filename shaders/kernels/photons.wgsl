@@ -3,9 +3,11 @@
 // tracer in f32 (photons::tracer::Precision::F32), compared photon by photon in
 // crates/trace/tests/gpu_photons.rs. Physics by module as in Rust: photons/sources
 // (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
-// (surfaces.rs), photons/surface_models (surface_models.rs), photons/bindings (the flattened tables, gpu_tables.rs, and the history,
-// output.rs). The geometry is the scan's scene traversal (trace/scene): the navigator's
-// step from the volume the photon is in (`cross_from`) and the locate (`locate_point`).
+// (surfaces.rs), photons/surface_models (surface_models.rs), photons/spectra
+// (properties.rs' Spectrum), photons/reemission (REEMISSIONPROB, scintillation.rs),
+// photons/bindings (the flattened tables, gpu_tables.rs, and the history, output.rs). The
+// geometry is the scan's scene traversal (trace/scene): the navigator's step from the
+// volume the photon is in (`cross_from`) and the locate (`locate_point`).
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
@@ -13,6 +15,12 @@
 // #import photons/bulk
 // #import photons/sources
 // #import photons/surfaces
+// #if spectrum
+// #import photons/spectra
+// #endif
+// #if reemission
+// #import photons/reemission
+// #endif
 
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
 // instance `current`; a crossing of the surface the photon sits on, found again at a
@@ -81,10 +89,14 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     let hi = pparams.first_hi + select(0u, 1u, lo < i);
     var rng = rng_new(pparams.seed, lo, hi);
     let start = torch_start(&rng);
-    let energy = pparams.energy;
+    var energy = pparams.energy;
+    var wavelength = pparams.wavelength_nm;
+    // #if spectrum
+    energy = spectrum_energy(pparams.spectrum, rng_next(&rng));
+    wavelength = wavelength_of_energy(energy);
+    // #endif
     var out: PhotonRecord;
     out.instance = UNSET;
-    out.wavelength = pparams.wavelength_nm;
     var status = 0u;
     // The navigator's STATUS_* bits.
     var nav = 0u;
@@ -125,6 +137,13 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
         pos = pos + dp.dir * step;
         time += step / velocity(m, energy);
         if d_abs == step && d_abs < t_b {
+            // #if reemission
+            if reemit(m, &energy, &time, &dp, &rng) {
+                wavelength = wavelength_of_energy(energy);
+                history_push(&history, LABEL_RE);
+                continue;
+            }
+            // #endif
             history_push(&history, LABEL_AB);
             break;
         }
@@ -165,6 +184,7 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     }
     out.position = array<f32, 3>(pos.x, pos.y, pos.z);
     out.time = time;
+    out.wavelength = wavelength;
     out.direction = array<f32, 3>(dp.dir.x, dp.dir.y, dp.dir.z);
     out.polarization = array<f32, 3>(dp.pol.x, dp.pol.y, dp.pol.z);
     out.history[0] = history.lo;

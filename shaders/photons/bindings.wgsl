@@ -61,6 +61,7 @@ struct History {
 // Label codes (photons::output::Label).
 const LABEL_MI: u32 = 3u;
 const LABEL_AB: u32 = 4u;
+const LABEL_RE: u32 = 5u;
 const LABEL_SC: u32 = 6u;
 const LABEL_SD: u32 = 7u;
 const LABEL_SA: u32 = 8u;

@@ -14,7 +14,7 @@ use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_trace::gpu::{GpuContext, GpuPhotons};
-use hytrace_trace::photons::output::{compare_histories, HitRow};
+use hytrace_trace::photons::output::{compare_histories, history_string, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
@@ -71,10 +71,14 @@ fn same_histories(a: &PhotonRun, b: &PhotonRun) -> f64 {
 /// rounding of the physics: the kernel computes it in f32, the twin in f64 over the same
 /// f32 geometry), and against the f64 CPU by the histories' frequencies.
 fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usize) {
-    let Some(ctx) = GpuContext::for_tests() else {
-        return;
-    };
-    let run = options(source, photons);
+    twin_run(name, path, options(source, photons), min_detected);
+}
+
+/// [`twin`] for any torch run (photons from index 7); the GPU's run, or `None` without an
+/// adapter (tests do not require one).
+fn twin_run(name: &str, path: PathBuf, run: RunOptions, min_detected: usize) -> Option<PhotonRun> {
+    let ctx = GpuContext::for_tests()?;
+    let photons = run.photons;
     let s32 = scene(&path, Precision::F32);
     let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
     let gpu = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap();
@@ -124,6 +128,74 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     for (a, b) in pairs {
         assert!(within(a, b, 2e-2), "{name}: {:?} vs {:?}", a.0, b.0);
         assert_eq!(a.0[11..], b.0[11..], "{name}");
+    }
+    Some(gpu.run)
+}
+
+/// [`options`] with photon energies drawn from `material`'s spectrum `property`, or at
+/// `nm`.
+fn with_wavelength(run: RunOptions, wavelength: Wavelength) -> RunOptions {
+    let Origin::Torch { source, .. } = run.origin else {
+        unreachable!("a torch run")
+    };
+    RunOptions {
+        origin: Origin::Torch { source, wavelength },
+        ..run
+    }
+}
+
+fn spectrum(material: &str, property: &str) -> Wavelength {
+    Wavelength::Spectrum {
+        material: material.into(),
+        property: property.into(),
+    }
+}
+
+/// Photon energies drawn from a material's spectrum (the every-process scene's liquid,
+/// as the Geant4 oracle test draws them): the hits' wavelengths spread over the spectrum.
+#[test]
+fn spectra_match_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/every_process.gdml");
+    let wavelength = spectrum("Liquid", "SCINTILLATIONCOMPONENT1");
+    for (name, source, min_detected) in [
+        ("every_process spectrum point", "point:0,0,0", 50),
+        ("every_process spectrum beam", "beam:0,0,50:0,0,-1:20", 300),
+    ] {
+        let run = with_wavelength(options(source, 2000), wavelength.clone());
+        let Some(gpu) = twin_run(name, path.clone(), run, min_detected) else {
+            return;
+        };
+        let nm: Vec<f64> = gpu.hits.iter().map(|h| h.0[7]).collect();
+        let (lo, hi) = nm
+            .iter()
+            .fold((f64::MAX, 0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(hi - lo > 20.0, "{name}: hit wavelengths {lo} .. {hi} nm");
+    }
+}
+
+/// Re-emission (REEMISSIONPROB 0.5 above 3 eV in the scintillator cube, two components):
+/// photons at 400 nm, and photons drawn from the fast component's spectrum (partly above
+/// 3 eV, where it re-emits), from inside the cube; re-emitted photons are among them.
+#[test]
+fn re_emission_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/scintillator.gdml");
+    for (name, wavelength, least) in [
+        ("scintillator 400 nm", Wavelength::Fixed(400.0), 100),
+        (
+            "scintillator spectrum",
+            spectrum("LS", "SCINTILLATIONCOMPONENT1"),
+            20,
+        ),
+    ] {
+        let run = with_wavelength(options("point:0,0,50", 3000), wavelength);
+        let Some(gpu) = twin_run(name, path.clone(), run, 300) else {
+            return;
+        };
+        let re = (gpu.histories.iter())
+            .filter(|&&h| history_string(h).contains("RE"))
+            .count();
+        eprintln!("{name}: {re} photons re-emitted");
+        assert!(re >= least, "{name}: {re} photons re-emitted");
     }
 }
 
@@ -256,20 +328,12 @@ fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("hits.npy");
-    let cases = [
-        (
-            "tests/data/photons/wavelength_shifter.gdml",
-            "beam:-80,0,50:0.2,0,-1:10",
-            "420",
-            "WLSABSLENGTH",
-        ),
-        (
-            "tests/data/photons/every_process.gdml",
-            "point:0,0,0",
-            "Liquid:SCINTILLATIONCOMPONENT1",
-            "spectrum",
-        ),
-    ];
+    let cases = [(
+        "tests/data/photons/wavelength_shifter.gdml",
+        "beam:-80,0,50:0.2,0,-1:10",
+        "420",
+        "WLSABSLENGTH",
+    )];
     for (file, source, wavelength, needle) in cases {
         let scene = repo(file);
         let args = |backend: &'static str| {

@@ -9,8 +9,8 @@ use hytrace_foundry::record;
 use hytrace_foundry::wgsl::push_struct;
 
 record! {
-    /// What every photon of a GPU run shares: the torch source, the wavelength, the run's
-    /// photons and seed.
+    /// What every photon of a GPU run shares: the torch source, the wavelength or spectrum,
+    /// the run's photons and seed.
     pub struct PhotonParams {
         /// Point: the position; beam, sphere: the centre (mm).
         pub source_at: [f32; 3],
@@ -42,8 +42,9 @@ record! {
         pub hierarchical: u32,
         /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
         pub probe_trips: u32,
-        /// Padding.
-        pub pad: u32,
+        /// The table of a torch run's spectrum, `(energy, integral)` rows
+        /// (`u32::MAX`: every photon at `energy`).
+        pub spectrum: u32,
     }
 }
 
@@ -69,6 +70,18 @@ record! {
         pub rayleigh: u32,
         /// Group velocity (mm/ns).
         pub groupvel: u32,
+        /// REEMISSIONPROB (`u32::MAX`: no re-emission).
+        pub reemission: u32,
+        /// Scintillation components a re-emitted photon follows (0 to 3).
+        pub components: u32,
+        /// Each component's spectrum, `(energy, integral)` rows.
+        pub spectrum: [u32; 3],
+        /// Each component's decay time (ns).
+        pub decay: [f32; 3],
+        /// Each component's rise time (ns; 0: none).
+        pub rise: [f32; 3],
+        /// Each component's yield.
+        pub weight: [f32; 3],
     }
 }
 

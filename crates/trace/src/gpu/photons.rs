@@ -20,7 +20,8 @@ use crate::photons::gpu_tables::{kernel_features, unsupported, GpuTables};
 use crate::photons::output::{History, HitRow};
 use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
-use crate::photons::{Batch, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
+use crate::photons::{Batch, Origin, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
+use hytrace_foundry::UNSET;
 
 const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most (records of 80 bytes: 84 MB).
@@ -37,6 +38,8 @@ pub struct GpuPhotons {
     tables: Vec<wgpu::Buffer>,
     hierarchical: bool,
     features: Vec<&'static str>,
+    /// The table of the run's torch spectrum (`UNSET`: a fixed wavelength).
+    spectrum: u32,
 }
 
 /// What a GPU photon run gives back.
@@ -69,9 +72,17 @@ impl GpuPhotons {
             ));
         };
         let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS)?;
-        let flat = GpuTables::new(scene);
+        let mut flat = GpuTables::new(scene);
+        // A torch spectrum that does not resolve is left to the run, which names it.
+        let spectrum = match &run.origin {
+            Origin::Torch { wavelength, .. } => match scene.emission(wavelength) {
+                Ok(Emission::Spectrum(s)) => flat.push_spectrum(&s),
+                _ => UNSET,
+            },
+            Origin::Gensteps(_) => UNSET,
+        };
         let mut features = upload.features.clone();
-        features.extend(kernel_features(&scene.tables));
+        features.extend(kernel_features(&scene.tables, run));
         let source = kernel_source(KERNEL, &features)?;
         let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the photon kernel", || {
@@ -104,6 +115,7 @@ impl GpuPhotons {
                 tables,
                 hierarchical: upload.hierarchical,
                 features,
+                spectrum,
             }
         })
     }
@@ -167,18 +179,16 @@ impl GpuPhotons {
         emitting: &Emitting,
         times: &mut GpuTimes,
     ) -> crate::Result<Vec<PhotonEnd>> {
-        let Emitting::Torch {
-            source,
-            emission: Emission::Fixed { energy, nm },
-        } = *emitting
-        else {
-            return Err(GpuError::Unsupported(
-                "photons: energies drawn from a spectrum, or gensteps".into(),
-            )
-            .into());
+        let Emitting::Torch { source, emission } = emitting else {
+            return Err(GpuError::Unsupported("photons: gensteps".into()).into());
+        };
+        let (energy, nm) = match *emission {
+            Emission::Fixed { energy, nm } => (energy, nm),
+            Emission::Spectrum(_) => (0.0, 0.0),
         };
         let n = (range.end - range.start) as usize;
-        let params = params(run, source, &range, energy, nm, self.hierarchical);
+        let mut params = params(run, *source, &range, energy, nm, self.hierarchical);
+        params.spectrum = self.spectrum;
         let out_size = (n.max(1) * size_of::<PhotonRecord>()) as u64;
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "photon timestamps");

@@ -11,7 +11,7 @@
 
 use hytrace_foundry::UNSET;
 
-use super::properties::{Finish, OpticsTables, Property, Roughness, SurfaceKind};
+use super::properties::{Finish, OpticsTables, Property, Roughness, Spectrum, SurfaceKind};
 use super::sources::Wavelength;
 use super::surfaces::SurfaceLookup;
 use super::{Origin, PhotonScene, RunOptions};
@@ -145,6 +145,17 @@ fn push_table(
     tables.len() as u32 - 1
 }
 
+/// Appends a spectrum's `(energy, integral)` rows as a table, returning its index.
+fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Spectrum) -> u32 {
+    let first = rows.len() as u32;
+    rows.extend(s.rows().map(|(e, c)| [e as f32, c as f32]));
+    tables.push(PhotonTable {
+        first,
+        count: rows.len() as u32 - first,
+    });
+    tables.len() as u32 - 1
+}
+
 /// Why the GPU kernel cannot propagate `run`'s photons through a scene with `tables`
 /// (the first reason), `None` when it can.
 pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
@@ -152,24 +163,10 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
         Origin::Gensteps(_) => {
             return Some("--gensteps: photons emitted by Cherenkov and scintillation steps".into())
         }
-        Origin::Torch {
-            wavelength: Wavelength::Spectrum { material, property },
-            ..
-        } => {
-            return Some(format!(
-                "--wavelength {material}:{property}: photon energies drawn from a spectrum"
-            ))
-        }
         Origin::Torch { .. } => {}
     }
     if run.records > 0 {
         return Some("--records: step points".into());
-    }
-    if let Some(m) = tables.materials.iter().find(|m| m.reemission.is_some()) {
-        return Some(format!(
-            "material `{}`: property REEMISSIONPROB (re-emission)",
-            m.name
-        ));
     }
     if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
         return Some(format!(
@@ -182,10 +179,27 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
 
 /// The kernel's composition features for the physics of a scene with `tables` (the
 /// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
-/// a finish other than polished (facets, the unified model's reflection types, paint).
-pub fn kernel_features(tables: &OpticsTables) -> Vec<&'static str> {
+/// a finish other than polished (facets, the unified model's reflection types, paint),
+/// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `spectrum`
+/// when `run`'s torch draws its photons' energies from a spectrum.
+pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
     let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
-    rough.then_some("rough_surfaces").into_iter().collect()
+    let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
+    let spectrum = matches!(
+        run.origin,
+        Origin::Torch {
+            wavelength: Wavelength::Spectrum { .. },
+            ..
+        }
+    );
+    [
+        (rough, "rough_surfaces"),
+        (reemission, "reemission"),
+        (spectrum, "spectrum"),
+    ]
+    .into_iter()
+    .filter_map(|(on, name)| on.then_some(name))
+    .collect()
 }
 
 /// A finish as the kernel numbers it (`PHOTON_FINISH_*`).
@@ -201,6 +215,12 @@ fn finish_code(finish: Finish) -> u32 {
 }
 
 impl GpuTables {
+    /// Appends a torch run's spectrum as a table, returning its index
+    /// ([`PhotonParams::spectrum`](crate::gpu::photon_records::PhotonParams::spectrum)).
+    pub fn push_spectrum(&mut self, s: &Spectrum) -> u32 {
+        push_spectrum(&mut self.tables, &mut self.rows, s)
+    }
+
     /// Flattens `scene`'s physics for the kernel.
     pub fn new(scene: &PhotonScene) -> Self {
         let (mut tables, mut rows) = (Vec::new(), Vec::new());
@@ -208,11 +228,28 @@ impl GpuTables {
         let materials = t
             .materials
             .iter()
-            .map(|m| PhotonMaterial {
-                rindex: push_table(&mut tables, &mut rows, m.rindex.as_ref()),
-                abslength: push_table(&mut tables, &mut rows, m.abslength.as_ref()),
-                rayleigh: push_table(&mut tables, &mut rows, m.rayleigh.as_ref()),
-                groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
+            .map(|m| {
+                let mut flat = PhotonMaterial {
+                    rindex: push_table(&mut tables, &mut rows, m.rindex.as_ref()),
+                    abslength: push_table(&mut tables, &mut rows, m.abslength.as_ref()),
+                    rayleigh: push_table(&mut tables, &mut rows, m.rayleigh.as_ref()),
+                    groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
+                    reemission: UNSET,
+                    spectrum: [UNSET; 3],
+                    ..Default::default()
+                };
+                if let Some(r) = &m.reemission {
+                    flat.reemission = push_table(&mut tables, &mut rows, Some(&r.probability));
+                    flat.components = r.scintillator.components() as u32;
+                    for k in 0..r.scintillator.components() {
+                        let (spectrum, decay, rise, weight) = r.scintillator.component(k);
+                        flat.spectrum[k] = push_spectrum(&mut tables, &mut rows, spectrum);
+                        flat.decay[k] = decay as f32;
+                        flat.rise[k] = rise as f32;
+                        flat.weight[k] = weight as f32;
+                    }
+                }
+                flat
             })
             .collect();
         let surfaces = t
@@ -303,10 +340,10 @@ mod tests {
         );
     }
 
-    /// Gensteps, step points and re-emission are refused for the kernel by name; a torch
-    /// run through a scene without them is not.
+    /// Gensteps and step points are refused for the kernel by name; a torch run is not,
+    /// and composes in the processes its scene and wavelength call for, only those.
     #[test]
-    fn gensteps_records_and_re_emission_are_not_on_the_gpu() {
+    fn the_kernel_refuses_what_it_lacks_and_composes_what_the_scene_needs() {
         use crate::photons::gensteps::GenstepFile;
         use crate::photons::sources::Source;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -327,8 +364,28 @@ mod tests {
             keep_histories: false,
             records: 0,
         };
+        let spectrum = RunOptions {
+            origin: Origin::Torch {
+                source: Source::parse("point:0,0,0").unwrap(),
+                wavelength: Wavelength::Spectrum {
+                    material: "Liquid".into(),
+                    property: "SCINTILLATIONCOMPONENT1".into(),
+                },
+            },
+            ..torch.clone()
+        };
         let every = tables("tests/data/photons/every_process.gdml");
-        assert_eq!(unsupported(&every, &torch), None);
+        let rough = tables("tests/data/photons/rough_surfaces.gdml");
+        let scintillator = tables("tests/data/photons/scintillator.gdml");
+        for (tables, run, features) in [
+            (&every, &torch, &[][..]),
+            (&every, &spectrum, &["spectrum"][..]),
+            (&rough, &torch, &["rough_surfaces"][..]),
+            (&scintillator, &torch, &["reemission"][..]),
+        ] {
+            assert_eq!(unsupported(tables, run), None);
+            assert_eq!(kernel_features(tables, run), features);
+        }
         let gensteps = RunOptions {
             origin: Origin::Gensteps(std::sync::Arc::new(GenstepFile {
                 source: "g.npy".into(),
@@ -340,17 +397,8 @@ mod tests {
             records: 4,
             ..torch.clone()
         };
-        let scintillator = tables("tests/data/photons/scintillator.gdml");
-        for (tables, run, needle) in [
-            (&every, &gensteps, "--gensteps"),
-            (&every, &records, "--records"),
-            (
-                &scintillator,
-                &torch,
-                "material `LS`: property REEMISSIONPROB",
-            ),
-        ] {
-            let why = unsupported(tables, run).expect("refused");
+        for (run, needle) in [(&gensteps, "--gensteps"), (&records, "--records")] {
+            let why = unsupported(&every, run).expect("refused");
             assert!(why.contains(needle), "{why}");
         }
     }
