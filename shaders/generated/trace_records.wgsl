@@ -270,6 +270,7 @@ struct PhotonParams {
     hierarchical: u32,
     probe_trips: u32,
     spectrum: u32,
+    records: u32,
 }
 
 struct PhotonTable {

@@ -5,7 +5,8 @@
 // (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
 // (surfaces.rs), photons/surface_models (surface_models.rs), photons/spectra
 // (properties.rs' Spectrum), photons/reemission (REEMISSIONPROB, scintillation.rs),
-// photons/bindings (the flattened tables, gpu_tables.rs, and the history, output.rs). The
+// photons/bindings (the flattened tables, gpu_tables.rs, and the history, output.rs),
+// photons/records (step points, output.rs). The
 // geometry is the scan's scene traversal (trace/scene): the navigator's step from the
 // volume the photon is in (`cross_from`) and the locate (`locate_point`).
 // #import generated/trace_records
@@ -20,6 +21,9 @@
 // #endif
 // #if reemission
 // #import photons/reemission
+// #endif
+// #if records
+// #import photons/records
 // #endif
 
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
@@ -100,7 +104,7 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     var status = 0u;
     // The navigator's STATUS_* bits.
     var nav = 0u;
-    var history = History(0u, 0u, 0u, 0u);
+    var history = History(0u, 0u, 0u, 0u, 0u);
     history_push(&history, LABEL_TO);
     var pos = start.position;
     var dp = DirPol(start.direction, start.polarization);
@@ -111,7 +115,15 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     if ended {
         history_push(&history, LABEL_MI);
     }
+    // #if records
+    // Labels whose step points are written: each is written at the next loop's start or
+    // after the loop, where the photon is once its label's event is done.
+    var recorded = 0u;
+    // #endif
     loop {
+        // #if records
+        record_points(i, &recorded, history, pos, time, dp, wavelength);
+        // #endif
         if ended {
             break;
         }
@@ -182,6 +194,9 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             break;
         }
     }
+    // #if records
+    record_points(i, &recorded, history, pos, time, dp, wavelength);
+    // #endif
     out.position = array<f32, 3>(pos.x, pos.y, pos.z);
     out.time = time;
     out.wavelength = wavelength;

@@ -50,12 +50,14 @@ fn property_value(t: u32, e: f32, fallback: f32) -> f32 {
     return a.y + (b.y - a.y) * (e - a.x) / (b.x - a.x);
 }
 
-// A photon's packed history: labels of 4 bits, first lowest, the first 16 kept.
+// A photon's packed history: labels of 4 bits, first lowest, the first 16 kept, and the
+// last label pushed.
 struct History {
     lo: u32,
     hi: u32,
     len: u32,
     mask: u32,
+    last: u32,
 }
 
 // Label codes (photons::output::Label).
@@ -80,5 +82,6 @@ fn history_push(h: ptr<function, History>, label: u32) {
         (*h).hi |= label << (4u * (n - 8u));
     }
     (*h).len = n + 1u;
+    (*h).last = label;
     (*h).mask |= 1u << (label - 1u);
 }

@@ -129,7 +129,70 @@ fn twin_run(name: &str, path: PathBuf, run: RunOptions, min_detected: usize) -> 
         assert!(within(a, b, 2e-2), "{name}: {:?} vs {:?}", a.0, b.0);
         assert_eq!(a.0[11..], b.0[11..], "{name}");
     }
+    if run.records > 0 {
+        same_step_points(name, g, &cpu32, run.records as usize);
+    }
     Some(gpu.run)
+}
+
+/// The step points of the photons with equal histories: labels (and zero points past the
+/// end) exactly, the columns within f32 rounding of the physics as hit rows are.
+fn same_step_points(name: &str, g: &PhotonRun, cpu: &PhotonRun, k: usize) {
+    assert_eq!(g.records.len(), g.histories.len() * k, "{name}");
+    assert_eq!(cpu.records.len(), g.records.len(), "{name}");
+    let (mut points, mut close) = (0, 0);
+    for (i, (a, b)) in g.histories.iter().zip(&cpu.histories).enumerate() {
+        if a != b {
+            continue;
+        }
+        for p in i * k..(i + 1) * k {
+            let (x, y) = (&g.records[p], &cpu.records[p]);
+            assert_eq!(x[11], y[11], "{name}: photon {i}, point {}", p - i * k);
+            let near = |r: f32| (0..11).all(|c| (x[c] - y[c]).abs() <= r * (1.0 + y[c].abs()));
+            assert!(near(2e-2), "{name}: photon {i}: {x:?} vs {y:?}");
+            points += usize::from(y[11] != 0.0);
+            close += usize::from(y[11] != 0.0 && near(1e-4));
+        }
+    }
+    eprintln!("{name}: {close} of {points} step points within 1e-4 relative");
+    assert!(points > 0 && close as f64 >= 0.95 * points as f64, "{name}");
+}
+
+/// Step points (`--records`) from the GPU: the first K points of every photon, through
+/// boundaries, rough surfaces and re-emission, against the twin's.
+#[test]
+fn step_points_match_the_cpu_twin_point_by_point() {
+    for (name, file, source, k, wavelength) in [
+        (
+            "every_process records",
+            "tests/data/photons/every_process.gdml",
+            "point:0,0,0",
+            8,
+            Wavelength::Fixed(420.0),
+        ),
+        (
+            "rough surfaces records",
+            "tests/data/photons/rough_surfaces.gdml",
+            "beam:-265,0,50:0.5,0,-1:5",
+            5,
+            Wavelength::Fixed(420.0),
+        ),
+        (
+            "scintillator records",
+            "tests/data/photons/scintillator.gdml",
+            "point:0,0,50",
+            20,
+            Wavelength::Fixed(400.0),
+        ),
+    ] {
+        let run = RunOptions {
+            records: k,
+            ..with_wavelength(options(source, 1000), wavelength)
+        };
+        if twin_run(name, repo(file), run, 10).is_none() {
+            return;
+        }
+    }
 }
 
 /// [`options`] with photon energies drawn from `material`'s spectrum `property`, or at

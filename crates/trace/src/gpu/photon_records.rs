@@ -45,6 +45,8 @@ record! {
         /// The table of a torch run's spectrum, `(energy, integral)` rows
         /// (`u32::MAX`: every photon at `energy`).
         pub spectrum: u32,
+        /// Step points written per photon (`--records`; 0: none).
+        pub records: u32,
     }
 }
 

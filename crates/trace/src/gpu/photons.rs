@@ -17,7 +17,7 @@ use super::photon_records::{
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
 use crate::photons::gpu_tables::{kernel_features, unsupported, GpuTables};
-use crate::photons::output::{History, HitRow};
+use crate::photons::output::{History, HitRow, RecordPoint, RECORD_COLUMNS};
 use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
 use crate::photons::{Batch, Origin, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
@@ -27,7 +27,9 @@ const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most (records of 80 bytes: 84 MB).
 const BATCH: u64 = 1 << 20;
 /// Storage buffers of the photon group (group 2).
-const PHOTON_BINDINGS: u32 = 8;
+const PHOTON_BINDINGS: u32 = 9;
+/// Bytes of one step point (`--records`).
+const POINT_BYTES: u64 = (RECORD_COLUMNS * size_of::<f32>()) as u64;
 
 /// A photon scene on the GPU with its kernel.
 pub struct GpuPhotons {
@@ -87,7 +89,7 @@ impl GpuPhotons {
         let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
-            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7]);
+            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7, 8]);
             // Group 0 (the Foundry's own arrays) is not used.
             let pipeline_layout =
                 ctx.pipeline_layout("photons", &[None, Some(&upload.layout), Some(&layout)]);
@@ -158,8 +160,8 @@ impl GpuPhotons {
         progress: &dyn Fn(u64),
     ) -> crate::Result<(RunSummary, GpuTimes)> {
         let mut times = GpuTimes::default();
-        // Batches fill a large GPU, within the binding limit of the records.
-        let record = size_of::<PhotonRecord>() as u64;
+        // Batches fill a large GPU, within the binding limit of the records and step points.
+        let record = (size_of::<PhotonRecord>() as u64).max(u64::from(run.records) * POINT_BYTES);
         let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
         let mut on_gpu =
             |range, emitting: &Emitting| self.batch(ctx, scene, run, range, emitting, &mut times);
@@ -190,12 +192,15 @@ impl GpuPhotons {
         let mut params = params(run, *source, &range, energy, nm, self.hierarchical);
         params.spectrum = self.spectrum;
         let out_size = (n.max(1) * size_of::<PhotonRecord>()) as u64;
+        let k = run.records as usize;
+        let steps_size = (n * k).max(1) as u64 * POINT_BYTES;
         let t0 = Instant::now();
         let timer = PassTimer::new(ctx, "photon timestamps");
         let (out, _keep) = ctx.checked("photon dispatch", || {
             let mut buffers = vec![ctx.input_buffer("photon params", &binding_bytes(&[params]))];
             buffers.extend(self.tables.iter().cloned());
             buffers.push(ctx.output_buffer("photon records", out_size));
+            buffers.push(ctx.output_buffer("photon step points", steps_size));
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("photons"),
                 layout: &self.layout,
@@ -208,22 +213,31 @@ impl GpuPhotons {
                 n as u32,
                 timer.as_ref(),
             );
-            (buffers[7].clone(), (buffers, group))
+            (buffers[7..9].to_vec(), (buffers, group))
         })?;
         let bytes = finish_batch(
             ctx,
             "photon kernel",
             t0,
-            &out,
+            &out[0],
             out_size,
             timer.as_ref(),
             times,
         )?;
         let records: Vec<PhotonRecord> =
             bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<PhotonRecord>()]);
+        let points: Vec<RecordPoint> = if k > 0 {
+            let t = Instant::now();
+            let bytes = ctx.read_buffer(&out[1], steps_size)?;
+            times.readback_s += t.elapsed().as_secs_f64();
+            bytemuck::pod_collect_to_vec(&bytes)
+        } else {
+            Vec::new()
+        };
         Ok(range
             .zip(records)
-            .map(|(index, r)| {
+            .enumerate()
+            .map(|(j, (index, r))| {
                 if r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0 {
                     times.redone_on_cpu += 1;
                     return scene.photon(index, run, emitting);
@@ -231,7 +245,7 @@ impl GpuPhotons {
                 PhotonEnd {
                     own: end_of(&r, index, &scene.copy),
                     further: Vec::new(),
-                    record: Vec::new(),
+                    record: points.get(j * k..(j + 1) * k).unwrap_or_default().to_vec(),
                 }
             })
             .collect())
@@ -258,6 +272,7 @@ fn params(
         max_steps: run.max_steps,
         hierarchical: u32::from(hierarchical),
         probe_trips: 2,
+        records: run.records,
         cos_divergence: 1.0,
         ..Default::default()
     };

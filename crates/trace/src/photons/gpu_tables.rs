@@ -165,9 +165,6 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
         }
         Origin::Torch { .. } => {}
     }
-    if run.records > 0 {
-        return Some("--records: step points".into());
-    }
     if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
         return Some(format!(
             "material `{}`: property WLSABSLENGTH (wavelength shifting, G4OpWLS)",
@@ -181,7 +178,8 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
 /// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
 /// a finish other than polished (facets, the unified model's reflection types, paint),
 /// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `spectrum`
-/// when `run`'s torch draws its photons' energies from a spectrum.
+/// when `run`'s torch draws its photons' energies from a spectrum, `records` when it writes
+/// step points.
 pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
     let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
     let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
@@ -193,6 +191,7 @@ pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static 
         }
     );
     [
+        (run.records > 0, "records"),
         (rough, "rough_surfaces"),
         (reemission, "reemission"),
         (spectrum, "spectrum"),
@@ -340,8 +339,8 @@ mod tests {
         );
     }
 
-    /// Gensteps and step points are refused for the kernel by name; a torch run is not,
-    /// and composes in the processes its scene and wavelength call for, only those.
+    /// Gensteps are refused for the kernel by name; a torch run is not, and composes in
+    /// the processes its scene, wavelength and outputs call for, only those.
     #[test]
     fn the_kernel_refuses_what_it_lacks_and_composes_what_the_scene_needs() {
         use crate::photons::gensteps::GenstepFile;
@@ -397,9 +396,8 @@ mod tests {
             records: 4,
             ..torch.clone()
         };
-        for (run, needle) in [(&gensteps, "--gensteps"), (&records, "--records")] {
-            let why = unsupported(&every, run).expect("refused");
-            assert!(why.contains(needle), "{why}");
-        }
+        assert_eq!(kernel_features(&every, &records), ["records"]);
+        let why = unsupported(&every, &gensteps).expect("refused");
+        assert!(why.contains("--gensteps"), "{why}");
     }
 }
