@@ -324,6 +324,26 @@ struct PhotonBorder {
     pad: u32,
 }
 
+struct PhotonGenstep {
+    kind: u32,
+    material: u32,
+    end_index: array<u32, 2>,
+    start: array<f32, 3>,
+    time: f32,
+    end: array<f32, 3>,
+    charge: f32,
+    beta: array<f32, 2>,
+    mean_beta: f32,
+    max_sin2: f32,
+    axis: array<f32, 3>,
+    pad: u32,
+    yields: array<f32, 2>,
+    counts: array<u32, 3>,
+    spectrum: array<u32, 3>,
+    decay: array<f32, 3>,
+    rise: array<f32, 3>,
+}
+
 struct PhotonRecord {
     position: array<f32, 3>,
     time: f32,
@@ -342,6 +362,9 @@ struct PhotonRecord {
 const PHOTON_SOURCE_POINT: u32 = 0u;
 const PHOTON_SOURCE_BEAM: u32 = 1u;
 const PHOTON_SOURCE_SPHERE: u32 = 2u;
+const PHOTON_SOURCE_GENSTEPS: u32 = 3u;
+const PHOTON_GENSTEP_CHERENKOV: u32 = 1u;
+const PHOTON_GENSTEP_SCINTILLATION: u32 = 2u;
 const PHOTON_SURFACE_METAL: u32 = 0u;
 const PHOTON_SURFACE_DIELECTRIC: u32 = 1u;
 const PHOTON_FINISH_POLISHED: u32 = 0u;

@@ -2,13 +2,14 @@
 // to its end, twin of photons::propagate (PhotonScene::photon and lineage) with the CPU
 // tracer in f32 (photons::tracer::Precision::F32), compared photon by photon in
 // crates/trace/tests/gpu_photons.rs. Physics by module as in Rust: photons/sources
-// (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
-// (surfaces.rs), photons/surface_models (surface_models.rs), photons/spectra
-// (properties.rs' Spectrum), photons/reemission (REEMISSIONPROB, scintillation.rs),
-// photons/bindings (the flattened tables, gpu_tables.rs, and the history, output.rs),
-// photons/records (step points, output.rs). The
-// geometry is the scan's scene traversal (trace/scene): the navigator's step from the
-// volume the photon is in (`cross_from`) and the locate (`locate_point`).
+// (sources.rs), photons/gensteps (gensteps.rs, cherenkov.rs), photons/scintillation and
+// photons/reemission (scintillation.rs, REEMISSIONPROB), photons/spectra (properties.rs'
+// Spectrum), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
+// (surfaces.rs), photons/surface_models (surface_models.rs), photons/bindings (the
+// flattened tables, gpu_tables.rs, and the history, output.rs), photons/records (step
+// points, output.rs). The geometry is the scan's scene traversal (trace/scene): the
+// navigator's step from the volume the photon is in (`cross_from`) and the locate
+// (`locate_point`).
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
@@ -16,9 +17,6 @@
 // #import photons/bulk
 // #import photons/sources
 // #import photons/surfaces
-// #if spectrum
-// #import photons/spectra
-// #endif
 // #if reemission
 // #import photons/reemission
 // #endif
@@ -92,13 +90,13 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     let lo = pparams.first_lo + i;
     let hi = pparams.first_hi + select(0u, 1u, lo < i);
     var rng = rng_new(pparams.seed, lo, hi);
-    let start = torch_start(&rng);
-    var energy = pparams.energy;
+    let start = emitted_photon(lo, hi, &rng);
+    var energy = start.energy;
+    // A fixed wavelength as given; else from the photon's energy.
     var wavelength = pparams.wavelength_nm;
-    // #if spectrum
-    energy = spectrum_energy(pparams.spectrum, rng_next(&rng));
-    wavelength = wavelength_of_energy(energy);
-    // #endif
+    if wavelength == 0.0 {
+        wavelength = wavelength_of_energy(energy);
+    }
     var out: PhotonRecord;
     out.instance = UNSET;
     var status = 0u;
@@ -108,7 +106,7 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     history_push(&history, LABEL_TO);
     var pos = start.position;
     var dp = DirPol(start.direction, start.polarization);
-    var time = 0.0;
+    var time = start.time;
     var steps = 0u;
     var current = locate_point(pos, vec3<f32>(0.0), &nav);
     var ended = current == UNSET;

@@ -8,12 +8,14 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use common::{gpu_stats, hytrace, repo, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_trace::gpu::{GpuContext, GpuPhotons};
+use hytrace_trace::photons::gensteps::GenstepFile;
 use hytrace_trace::photons::output::{compare_histories, history_string, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::tracer::Precision;
@@ -156,6 +158,37 @@ fn same_step_points(name: &str, g: &PhotonRun, cpu: &PhotonRun, k: usize) {
     }
     eprintln!("{name}: {close} of {points} step points within 1e-4 relative");
     assert!(points > 0 && close as f64 >= 0.95 * points as f64, "{name}");
+}
+
+/// Photons from gensteps in the scintillator cube: a scintillation step shared by the two
+/// components (with a charged particle, and a neutral one emitting at the step's end), one
+/// of the second component only, and a Cherenkov step of a slowing particle; the GPU emits
+/// them as the CPU does (the same draws), so the twin agrees photon by photon, and the hit
+/// times reach past the slow component's decay.
+#[test]
+fn gensteps_match_the_cpu_twin_photon_by_photon() {
+    #[rustfmt::skip]
+    let rows: [[f64; 14]; 4] = [
+        // kind, photons, material, t0, start, end, beta0, beta1, charge, component
+        [2.0, 1200.0, 1.0, 10.0, -20.0, 0.0, 0.0, 20.0, 0.0, 0.0, 0.5, 0.5, -1.0, 0.0],
+        [2.0, 300.0, 1.0, 5.0, 0.0, 30.0, 10.0, 0.0, 30.0, 40.0, 0.4, 0.3, 0.0, 2.0],
+        [2.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, 0.5, -1.0, 0.0],
+        [1.0, 1500.0, 1.0, 50.0, 0.0, 0.0, 60.0, 0.0, 0.0, 20.0, 0.99, 0.9, -1.0, 0.0],
+    ];
+    let file = GenstepFile::from_values("twin.npy".into(), &[4, 14], rows.as_flattened()).unwrap();
+    let run = RunOptions {
+        origin: Origin::Gensteps(Arc::new(file)),
+        photons: 2990,
+        ..options("point:0,0,0", 1)
+    };
+    let path = repo("tests/data/photons/scintillator.gdml");
+    let Some(gpu) = twin_run("gensteps", path, run, 300) else {
+        return;
+    };
+    // The second step's photons (from index 1200, the run's from 7) start at its end, 40 mm
+    // above the floor, at least 5 ns plus the flight time.
+    let late = gpu.hits.iter().filter(|h| h.0[3] > 60.0).count();
+    assert!(late > 10, "{late} hits after 60 ns");
 }
 
 /// Step points (`--records`) from the GPU: the first K points of every photon, through

@@ -9,12 +9,12 @@ use hytrace_foundry::record;
 use hytrace_foundry::wgsl::push_struct;
 
 record! {
-    /// What every photon of a GPU run shares: the torch source, the wavelength or spectrum,
-    /// the run's photons and seed.
+    /// What every photon of a GPU run shares: the torch source (or gensteps), the
+    /// wavelength or spectrum, the run's photons and seed.
     pub struct PhotonParams {
         /// Point: the position; beam, sphere: the centre (mm).
         pub source_at: [f32; 3],
-        /// `PHOTON_SOURCE_*`.
+        /// `PHOTON_SOURCE_*` (`PHOTON_SOURCE_GENSTEPS`: photons from the gensteps).
         pub source_kind: u32,
         /// Beam: the unit direction.
         pub source_direction: [f32; 3],
@@ -160,6 +160,49 @@ record! {
 }
 
 record! {
+    /// A genstep as the kernel emits photons from it
+    /// ([`crate::photons::gensteps::Gensteps::gpu_records`]): the step, and what its kind
+    /// needs (Cherenkov: the axis, mean beta, `sin^2` bound and the yields at the ends;
+    /// scintillation: each component's photons, spectrum and time profile).
+    pub struct PhotonGenstep {
+        /// `PHOTON_GENSTEP_*`.
+        pub kind: u32,
+        /// Material index.
+        pub material: u32,
+        /// Index of the first photon after this step's (low, high 32 bits).
+        pub end_index: [u32; 2],
+        /// Start of the step (mm).
+        pub start: [f32; 3],
+        /// Time at the start (ns).
+        pub time: f32,
+        /// End of the step (mm).
+        pub end: [f32; 3],
+        /// Charge of the particle (e).
+        pub charge: f32,
+        /// Beta at the start and the end.
+        pub beta: [f32; 2],
+        /// Cherenkov: the mean beta.
+        pub mean_beta: f32,
+        /// Cherenkov: `sin^2` of the cone's largest angle (the rejection's bound).
+        pub max_sin2: f32,
+        /// Cherenkov: the unit direction of the step.
+        pub axis: [f32; 3],
+        /// Padding.
+        pub pad: u32,
+        /// Cherenkov: the relative yields at the two betas.
+        pub yields: [f32; 2],
+        /// Scintillation: photons of each component, in order.
+        pub counts: [u32; 3],
+        /// Scintillation: each component's spectrum, `(energy, integral)` rows.
+        pub spectrum: [u32; 3],
+        /// Scintillation: each component's decay time (ns).
+        pub decay: [f32; 3],
+        /// Scintillation: each component's rise time (ns; 0: none).
+        pub rise: [f32; 3],
+    }
+}
+
+record! {
     /// How one photon ended: its packed history and, when detected, its hit.
     pub struct PhotonRecord {
         /// Where it ended (mm).
@@ -195,6 +238,12 @@ pub const PHOTON_SOURCE_POINT: u32 = 0;
 pub const PHOTON_SOURCE_BEAM: u32 = 1;
 /// From a sphere along its normal.
 pub const PHOTON_SOURCE_SPHERE: u32 = 2;
+/// Photons from the gensteps ([`PhotonGenstep`]).
+pub const PHOTON_SOURCE_GENSTEPS: u32 = 3;
+/// [`PhotonGenstep::kind`]: a Cherenkov step.
+pub const PHOTON_GENSTEP_CHERENKOV: u32 = 1;
+/// A scintillation step.
+pub const PHOTON_GENSTEP_SCINTILLATION: u32 = 2;
 /// [`PhotonSurface::kind`]: `dielectric_metal`.
 pub const PHOTON_SURFACE_METAL: u32 = 0;
 /// `dielectric_dielectric`.
@@ -229,6 +278,7 @@ pub fn photon_records() -> Vec<RecordEntry> {
         entry::<PhotonSurface>(),
         entry::<PhotonInstance>(),
         entry::<PhotonBorder>(),
+        entry::<PhotonGenstep>(),
         entry::<PhotonRecord>(),
     ]
 }
@@ -241,11 +291,15 @@ pub fn push_photon_wgsl(out: &mut String) {
     push_struct::<PhotonSurface>(out);
     push_struct::<PhotonInstance>(out);
     push_struct::<PhotonBorder>(out);
+    push_struct::<PhotonGenstep>(out);
     push_struct::<PhotonRecord>(out);
     for (name, value) in [
         ("PHOTON_SOURCE_POINT", PHOTON_SOURCE_POINT),
         ("PHOTON_SOURCE_BEAM", PHOTON_SOURCE_BEAM),
         ("PHOTON_SOURCE_SPHERE", PHOTON_SOURCE_SPHERE),
+        ("PHOTON_SOURCE_GENSTEPS", PHOTON_SOURCE_GENSTEPS),
+        ("PHOTON_GENSTEP_CHERENKOV", PHOTON_GENSTEP_CHERENKOV),
+        ("PHOTON_GENSTEP_SCINTILLATION", PHOTON_GENSTEP_SCINTILLATION),
         ("PHOTON_SURFACE_METAL", PHOTON_SURFACE_METAL),
         ("PHOTON_SURFACE_DIELECTRIC", PHOTON_SURFACE_DIELECTRIC),
         ("PHOTON_FINISH_POLISHED", PHOTON_FINISH_POLISHED),

@@ -12,7 +12,7 @@ use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::photon_records::{
     PhotonParams, PhotonRecord, PHOTON_DEPTH_LIMIT, PHOTON_DETECTED, PHOTON_LOOPS_CUT,
-    PHOTON_SOURCE_BEAM, PHOTON_SOURCE_POINT, PHOTON_SOURCE_SPHERE,
+    PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS, PHOTON_SOURCE_POINT, PHOTON_SOURCE_SPHERE,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
@@ -27,7 +27,7 @@ const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most (records of 80 bytes: 84 MB).
 const BATCH: u64 = 1 << 20;
 /// Storage buffers of the photon group (group 2).
-const PHOTON_BINDINGS: u32 = 9;
+const PHOTON_BINDINGS: u32 = 10;
 /// Bytes of one step point (`--records`).
 const POINT_BYTES: u64 = (RECORD_COLUMNS * size_of::<f32>()) as u64;
 
@@ -42,6 +42,8 @@ pub struct GpuPhotons {
     features: Vec<&'static str>,
     /// The table of the run's torch spectrum (`UNSET`: a fixed wavelength).
     spectrum: u32,
+    /// The run's gensteps (binding 9).
+    gensteps: wgpu::Buffer,
 }
 
 /// What a GPU photon run gives back.
@@ -62,7 +64,7 @@ impl GpuPhotons {
         scene: &PhotonScene,
         run: &RunOptions,
     ) -> Result<GpuPhotons, GpuError> {
-        if let Some(why) = unsupported(&scene.tables, run) {
+        if let Some(why) = unsupported(&scene.tables) {
             return Err(GpuError::Unsupported(format!(
                 "photons: {why}; run them with --backend cpu"
             )));
@@ -82,6 +84,13 @@ impl GpuPhotons {
                 _ => UNSET,
             },
             Origin::Gensteps(_) => UNSET,
+        };
+        // Gensteps that do not resolve are likewise left to the run.
+        let gensteps = match scene.emitting(&run.origin) {
+            Ok(Emitting::Gensteps(g)) => g
+                .gpu_records(&mut flat)
+                .map_err(|why| GpuError::Unsupported(format!("photons: gensteps: {why}")))?,
+            _ => Vec::new(),
         };
         let mut features = upload.features.clone();
         features.extend(kernel_features(&scene.tables, run));
@@ -104,6 +113,8 @@ impl GpuPhotons {
                 // happens.
                 ctx.input_buffer("photon borders", &binding_bytes(&flat.lookup.borders)),
             ];
+            // Likewise an empty list of gensteps (a torch run) as one zeroed record.
+            let gensteps = ctx.input_buffer("photon gensteps", &binding_bytes(&gensteps));
             GpuPhotons {
                 pipeline: compute_pipeline(
                     ctx,
@@ -118,6 +129,7 @@ impl GpuPhotons {
                 hierarchical: upload.hierarchical,
                 features,
                 spectrum,
+                gensteps,
             }
         })
     }
@@ -181,16 +193,19 @@ impl GpuPhotons {
         emitting: &Emitting,
         times: &mut GpuTimes,
     ) -> crate::Result<Vec<PhotonEnd>> {
-        let Emitting::Torch { source, emission } = emitting else {
-            return Err(GpuError::Unsupported("photons: gensteps".into()).into());
-        };
-        let (energy, nm) = match *emission {
-            Emission::Fixed { energy, nm } => (energy, nm),
-            Emission::Spectrum(_) => (0.0, 0.0),
-        };
         let n = (range.end - range.start) as usize;
-        let mut params = params(run, *source, &range, energy, nm, self.hierarchical);
-        params.spectrum = self.spectrum;
+        let mut params = params(run, &range, self.hierarchical);
+        match emitting {
+            Emitting::Torch { source, emission } => {
+                torch(&mut params, *source);
+                if let Emission::Fixed { energy, nm } = *emission {
+                    params.energy = energy as f32;
+                    params.wavelength_nm = nm as f32;
+                }
+                params.spectrum = self.spectrum;
+            }
+            Emitting::Gensteps(_) => params.source_kind = PHOTON_SOURCE_GENSTEPS,
+        }
         let out_size = (n.max(1) * size_of::<PhotonRecord>()) as u64;
         let k = run.records as usize;
         let steps_size = (n * k).max(1) as u64 * POINT_BYTES;
@@ -201,6 +216,7 @@ impl GpuPhotons {
             buffers.extend(self.tables.iter().cloned());
             buffers.push(ctx.output_buffer("photon records", out_size));
             buffers.push(ctx.output_buffer("photon step points", steps_size));
+            buffers.push(self.gensteps.clone());
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("photons"),
                 layout: &self.layout,
@@ -252,19 +268,10 @@ impl GpuPhotons {
     }
 }
 
-/// The kernel's parameters for the photons `range` of `run` from `source`.
-fn params(
-    run: &RunOptions,
-    source: Source,
-    range: &Range<u64>,
-    energy: f64,
-    nm: f64,
-    hierarchical: bool,
-) -> PhotonParams {
-    let f = |v: crate::photons::V| v.to_f64().map(|c| c as f32);
-    let mut p = PhotonParams {
-        energy: energy as f32,
-        wavelength_nm: nm as f32,
+/// The kernel's parameters for the photons `range` of `run` (the source's are added by
+/// [`torch`]).
+fn params(run: &RunOptions, range: &Range<u64>, hierarchical: bool) -> PhotonParams {
+    PhotonParams {
         first_lo: range.start as u32,
         first_hi: (range.start >> 32) as u32,
         photon_count: (range.end - range.start) as u32,
@@ -274,8 +281,14 @@ fn params(
         probe_trips: 2,
         records: run.records,
         cos_divergence: 1.0,
+        spectrum: UNSET,
         ..Default::default()
-    };
+    }
+}
+
+/// Sets the torch `source` in the parameters `p`.
+fn torch(p: &mut PhotonParams, source: Source) {
+    let f = |v: crate::photons::V| v.to_f64().map(|c| c as f32);
     match source {
         Source::Point { position } => {
             p.source_kind = PHOTON_SOURCE_POINT;
@@ -304,7 +317,6 @@ fn params(
             p.inward = u32::from(inward);
         }
     }
-    p
 }
 
 /// A photon's history and hit row from its record.

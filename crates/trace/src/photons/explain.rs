@@ -1,7 +1,7 @@
 //! What a photon run calls for (`hytrace photons --explain`): the processes its scene's
 //! materials and surfaces, its source and its outputs need, each with the materials or
 //! surfaces that need it and where it runs (the CPU propagator has every one; the GPU
-//! kernel all but wavelength shifting and gensteps), then what the GPU kernel would be
+//! kernel all but wavelength shifting), then what the GPU kernel would be
 //! composed of, or why it refuses the run.
 
 use std::collections::BTreeSet;
@@ -56,7 +56,7 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
         Origin::Gensteps(file) => line(
             "gensteps (Cherenkov and scintillation photons)",
             format!("{} ({} steps)", file.source, file.steps.len()),
-            CPU_ONLY,
+            BOTH,
         ),
     }
     // The materials some instance is made of.
@@ -124,7 +124,7 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
     if run.records > 0 {
         line("step points", format!("--records {}", run.records), BOTH);
     }
-    lines.push(match unsupported(&scene.tables, run) {
+    lines.push(match unsupported(&scene.tables) {
         None => {
             let features = kernel_features(&scene.tables, run);
             format!(

@@ -156,15 +156,9 @@ fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Sp
     tables.len() as u32 - 1
 }
 
-/// Why the GPU kernel cannot propagate `run`'s photons through a scene with `tables`
-/// (the first reason), `None` when it can.
-pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
-    match &run.origin {
-        Origin::Gensteps(_) => {
-            return Some("--gensteps: photons emitted by Cherenkov and scintillation steps".into())
-        }
-        Origin::Torch { .. } => {}
-    }
+/// Why the GPU kernel cannot propagate photons through a scene with `tables` (the first
+/// reason: the physics it does not have), `None` when it can.
+pub fn unsupported(tables: &OpticsTables) -> Option<String> {
     if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
         return Some(format!(
             "material `{}`: property WLSABSLENGTH (wavelength shifting, G4OpWLS)",
@@ -178,8 +172,8 @@ pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
 /// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
 /// a finish other than polished (facets, the unified model's reflection types, paint),
 /// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `spectrum`
-/// when `run`'s torch draws its photons' energies from a spectrum, `records` when it writes
-/// step points.
+/// when `run`'s torch draws its photons' energies from a spectrum, `gensteps` when its
+/// photons come from gensteps, `records` when it writes step points.
 pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
     let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
     let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
@@ -190,7 +184,9 @@ pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static 
             ..
         }
     );
+    let gensteps = matches!(run.origin, Origin::Gensteps(_));
     [
+        (gensteps, "gensteps"),
         (run.records > 0, "records"),
         (rough, "rough_surfaces"),
         (reemission, "reemission"),
@@ -339,8 +335,8 @@ mod tests {
         );
     }
 
-    /// Gensteps are refused for the kernel by name; a torch run is not, and composes in
-    /// the processes its scene, wavelength and outputs call for, only those.
+    /// Wavelength shifting is refused for the kernel by name; other runs are not, and
+    /// compose in the processes their scene, photons and outputs call for, only those.
     #[test]
     fn the_kernel_refuses_what_it_lacks_and_composes_what_the_scene_needs() {
         use crate::photons::gensteps::GenstepFile;
@@ -382,7 +378,7 @@ mod tests {
             (&rough, &torch, &["rough_surfaces"][..]),
             (&scintillator, &torch, &["reemission"][..]),
         ] {
-            assert_eq!(unsupported(tables, run), None);
+            assert_eq!(unsupported(tables), None);
             assert_eq!(kernel_features(tables, run), features);
         }
         let gensteps = RunOptions {
@@ -397,7 +393,13 @@ mod tests {
             ..torch.clone()
         };
         assert_eq!(kernel_features(&every, &records), ["records"]);
-        let why = unsupported(&every, &gensteps).expect("refused");
-        assert!(why.contains("--gensteps"), "{why}");
+        assert_eq!(unsupported(&every), None);
+        assert_eq!(kernel_features(&every, &gensteps), ["gensteps"]);
+        let shifter = tables("tests/data/photons/wavelength_shifter.gdml");
+        let why = unsupported(&shifter).expect("refused");
+        assert!(
+            why.contains("material `Shifter`: property WLSABSLENGTH"),
+            "{why}"
+        );
     }
 }
