@@ -289,6 +289,10 @@ struct PhotonMaterial {
     decay: array<f32, 3>,
     rise: array<f32, 3>,
     weight: array<f32, 3>,
+    wlsabslength: u32,
+    wls_spectrum: u32,
+    wls_delay: f32,
+    wls_mean: f32,
 }
 
 struct PhotonSurface {
@@ -376,6 +380,7 @@ const PHOTON_FINISH_GROUND_BACK_PAINTED: u32 = 5u;
 const PHOTON_DETECTED: u32 = 1u;
 const PHOTON_LOOPS_CUT: u32 = 2u;
 const PHOTON_DEPTH_LIMIT: u32 = 4u;
+const PHOTON_SEVERAL_EMITTED: u32 = 8u;
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 const STATUS_LOOPS_CUT: u32 = 2u;
 // Relative surface tolerance of the f32 kernels (hytrace_csg::Real).

@@ -5,7 +5,8 @@
 // (sources.rs), photons/gensteps (gensteps.rs, cherenkov.rs), photons/scintillation and
 // photons/reemission (scintillation.rs, REEMISSIONPROB), photons/spectra (properties.rs'
 // Spectrum), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
-// (surfaces.rs), photons/surface_models (surface_models.rs), photons/bindings (the
+// (surfaces.rs), photons/surface_models (surface_models.rs), photons/wls (wavelength
+// shifting, properties.rs' Wls), photons/bindings (the
 // flattened tables, gpu_tables.rs, and the history, output.rs), photons/records (step
 // points, output.rs). The geometry is the scan's scene traversal (trace/scene): the
 // navigator's step from the volume the photon is in (`cross_from`) and the locate
@@ -22,6 +23,9 @@
 // #endif
 // #if records
 // #import photons/records
+// #endif
+// #if wls
+// #import photons/wls
 // #endif
 
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
@@ -133,13 +137,17 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
         let m = pinstances[current].material;
         var d_abs = INF;
         var d_sc = INF;
+        var d_wls = INF;
         if m != UNSET {
             d_abs = draw_distance(pmaterials[m].abslength, energy, &rng);
             d_sc = draw_distance(pmaterials[m].rayleigh, energy, &rng);
+            // #if wls
+            d_wls = draw_distance(pmaterials[m].wlsabslength, energy, &rng);
+            // #endif
         }
         let h = next_boundary(pos, dp.dir, current);
         let t_b = select(INF, h.t, h.found);
-        let step = min(min(t_b, d_abs), d_sc);
+        let step = min(min(min(t_b, d_abs), d_sc), d_wls);
         if step >= INF {
             history_push(&history, LABEL_MI);
             break;
@@ -162,6 +170,22 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_SC);
             continue;
         }
+        // #if wls
+        if d_wls == step && d_wls < t_b {
+            let w = wls_absorb(m, &energy, &time, &dp, &rng);
+            if w == WLS_ONE {
+                wavelength = wavelength_of_energy(energy);
+                history_push(&history, LABEL_RE);
+                continue;
+            }
+            if w == WLS_SEVERAL {
+                status |= PHOTON_SEVERAL_EMITTED;
+                break;
+            }
+            history_push(&history, LABEL_AB);
+            break;
+        }
+        // #endif
         let post = next_volume(pos, dp.dir, current, h, &nav);
         if post == UNSET {
             history_push(&history, LABEL_MI);

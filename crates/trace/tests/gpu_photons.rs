@@ -1,9 +1,9 @@
 //! The GPU photon kernel (`shaders/kernels/photons.wgsl`) against its CPU twin (the
 //! propagator with the f32 tracer) photon by photon, and against the default CPU run (f64
 //! geometry) by the fraction of identical histories and a chi2 on history frequencies,
-//! on the scenes the kernel's physics covers: the repository's every-process and rough
-//! surface scenes, the raindrop and the 8x8 SiPM files of the shared corpus. Physics the kernel does not
-//! model is refused by `--backend gpu` naming it; `auto` falls back to the CPU.
+//! on every process: the repository's every-process, rough-surface, scintillator and
+//! wavelength-shifter scenes (spectra, re-emission, gensteps, wavelength shifting, step
+//! points), the raindrop and the 8x8 SiPM files of the shared corpus.
 
 mod common;
 
@@ -76,9 +76,25 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     twin_run(name, path, options(source, photons), min_detected);
 }
 
+/// The share of photons that may run out of lavapipe's loop budget (propagated again by
+/// the twin): none, but in the wavelength shifter, whose photons take many steps and
+/// draw up to 100 spectrum energies at each shifting absorption.
+const SHIFTER_REDONE: f64 = 0.3;
+
 /// [`twin`] for any torch run (photons from index 7); the GPU's run, or `None` without an
 /// adapter (tests do not require one).
 fn twin_run(name: &str, path: PathBuf, run: RunOptions, min_detected: usize) -> Option<PhotonRun> {
+    twin_within(name, path, run, min_detected, 0.0)
+}
+
+/// [`twin_run`], with at most `redone` of the photons run out of the driver's loop budget.
+fn twin_within(
+    name: &str,
+    path: PathBuf,
+    run: RunOptions,
+    min_detected: usize,
+    redone: f64,
+) -> Option<PhotonRun> {
     let ctx = GpuContext::for_tests()?;
     let photons = run.photons;
     let s32 = scene(&path, Precision::F32);
@@ -98,17 +114,22 @@ fn twin_run(name: &str, path: PathBuf, run: RunOptions, min_detected: usize) -> 
     let chi2 = compare_histories(&g.counts, &cpu64.counts, 30);
     eprintln!(
         "{name}: {photons} photons, {} hits; histories equal to the f32 twin {:.4}, to the f64 CPU {:.4}; \
-         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}",
+         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}, split on the CPU {}",
         g.hits.len(),
         twin_same,
         f64_same,
         chi2.chi2,
         chi2.ndf,
         chi2.p_value,
+        gpu.times.redone_on_cpu,
+        gpu.times.split_on_cpu
+    );
+    // Photons that ran out of lavapipe's loop budget are the twin's by construction.
+    assert!(
+        gpu.times.redone_on_cpu as f64 <= redone * photons as f64,
+        "{name}: {} photons redone on the CPU",
         gpu.times.redone_on_cpu
     );
-    // No photon ran out of lavapipe's loop budget (those are the twin's by construction).
-    assert_eq!(gpu.times.redone_on_cpu, 0, "{name}");
     // f32 rounding of the physics takes a random decision apart for a few photons.
     assert!(twin_same >= 0.99, "{name}: {twin_same}");
     assert!(f64_same >= 0.98, "{name}: {f64_same}");
@@ -189,6 +210,20 @@ fn gensteps_match_the_cpu_twin_photon_by_photon() {
     // above the floor, at least 5 ns plus the flight time.
     let late = gpu.hits.iter().filter(|h| h.0[3] > 60.0).count();
     assert!(late > 10, "{late} hits after 60 ns");
+}
+
+/// Wavelength shifting: one photon per absorption (the first plate), a Poisson number
+/// (mean 2; the absorptions emitting several are the CPU twin's by construction).
+#[test]
+fn wavelength_shifting_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/wavelength_shifter.gdml");
+    for (name, source) in [
+        ("shifter one", "beam:-80,0,50:0.2,0,-1:10"),
+        ("shifter poisson", "beam:80,0,50:0.2,0,-1:10"),
+    ] {
+        let run = options(source, 1500);
+        twin_within(name, path.clone(), run, 100, SHIFTER_REDONE);
+    }
 }
 
 /// Step points (`--records`) from the GPU: the first K points of every photon, through
@@ -417,61 +452,77 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     assert!(same >= 495, "{same} of 500 histories equal");
 }
 
+/// Wavelength shifting from the command line (the two plates of
+/// `wavelength_shifter.gdml`, as the Geant4 oracle test shines them): one photon per
+/// absorption stays on the GPU; an absorption emitting a Poisson number (mean 2) leaves
+/// the photon, with all it emitted, to the CPU twin, as `gpu_split_on_cpu` counts; both
+/// give the CPU run's histories.
 #[test]
-fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
+fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
     if GpuContext::for_tests().is_none() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("hits.npy");
-    let cases = [(
-        "tests/data/photons/wavelength_shifter.gdml",
-        "beam:-80,0,50:0.2,0,-1:10",
-        "420",
-        "WLSABSLENGTH",
-    )];
-    for (file, source, wavelength, needle) in cases {
-        let scene = repo(file);
-        let args = |backend: &'static str| {
-            vec![
-                "photons".to_string(),
-                scene.to_str().unwrap().to_string(),
-                "--source".into(),
-                source.into(),
-                "--wavelength".into(),
-                wavelength.into(),
-                "-n".into(),
-                "50".into(),
-                "-o".into(),
-                out.to_str().unwrap().into(),
-                "--backend".into(),
-                backend.into(),
-                "--stats".into(),
-            ]
+    let scene = repo("tests/data/photons/wavelength_shifter.gdml");
+    for (source, split) in [
+        ("beam:-80,0,50:0.2,0,-1:10", false),
+        ("beam:80,0,50:0.2,0,-1:10", true),
+    ] {
+        let run = |backend: &str| {
+            let out = dir.path().join(format!("{backend}.npy"));
+            let history = dir.path().join(format!("{backend}-history.npy"));
+            let o = hytrace(
+                &[
+                    "photons",
+                    scene.to_str().unwrap(),
+                    "--source",
+                    source,
+                    "-n",
+                    "1000",
+                    "-o",
+                    out.to_str().unwrap(),
+                    &format!("--history={}", history.display()),
+                    "--top",
+                    "0",
+                    "--backend",
+                    backend,
+                    "--stats",
+                ],
+                &[],
+            );
+            assert!(o.status.success(), "{source}: {}", stderr(&o));
+            let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+            let line = stdout.lines().last().unwrap_or_default().to_string();
+            let stats: serde_json::Value = serde_json::from_str(&line).unwrap();
+            let h = std::fs::read(&history).unwrap();
+            let codes: Vec<u64> = h[128..]
+                .chunks_exact(8)
+                .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+                .collect();
+            (stats, codes)
         };
-        let gpu_args = args("gpu");
-        let o = hytrace(
-            &gpu_args.iter().map(String::as_str).collect::<Vec<_>>(),
-            &[],
+        let (gpu, g) = run("gpu");
+        let (_, c) = run("cpu");
+        assert_eq!(gpu["backend"], "gpu", "{source}");
+        assert!(gpu["kernel_features"]
+            .as_array()
+            .unwrap()
+            .contains(&"wls".into()));
+        let on_cpu = gpu["gpu_split_on_cpu"].as_u64().unwrap();
+        assert_eq!(
+            on_cpu > 0,
+            split,
+            "{source}: {on_cpu} photons split on the CPU"
         );
-        let e = stderr(&o);
-        assert!(!o.status.success(), "{file}: accepted on the GPU");
-        assert!(
-            e.contains(needle)
-                && e.contains("not on the GPU")
-                && e.contains(file.rsplit('/').next().unwrap()),
-            "{file}: {e}"
+        let re = g
+            .iter()
+            .filter(|&&h| history_string(h).contains("RE"))
+            .count();
+        let same = g.iter().zip(&c).filter(|(a, b)| a == b).count();
+        eprintln!(
+            "{source}: {re} re-emitted, {on_cpu} split on the CPU, {same} of 1000 histories equal"
         );
-        assert!(!out.exists(), "{file}: an output file after the error");
-        let auto_args = args("auto");
-        let o = hytrace(
-            &auto_args.iter().map(String::as_str).collect::<Vec<_>>(),
-            &[],
-        );
-        assert!(o.status.success(), "{file}: {}", stderr(&o));
-        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        assert_eq!(stats["backend"], "cpu", "{file}");
-        assert!(stderr(&o).contains(needle), "{file}: {}", stderr(&o));
-        std::fs::remove_file(&out).unwrap();
+        assert!(re > 100, "{source}: {re} re-emitted");
+        assert!(same >= 980, "{source}: {same} of 1000 histories equal");
     }
 }

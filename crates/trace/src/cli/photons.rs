@@ -89,17 +89,15 @@ pub struct PhotonsArgs {
     /// Steps after which a photon is stopped (history label TR).
     #[arg(long, default_value_t = 10_000)]
     pub max_steps: u32,
-    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32: torch
-    /// sources at a fixed wavelength or drawn from a spectrum, absorption, Rayleigh
-    /// scattering, re-emission, Fresnel boundaries, polished, rough and painted surfaces,
-    /// step points; wavelength shifting and gensteps are refused, naming them; --explain
-    /// says which) or auto (the GPU when an adapter opens and the kernel models the
-    /// scene, else the CPU).
+    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32, with
+    /// the same physics and outputs; a photon whose wavelength-shifting absorption emits
+    /// several photons is propagated on the CPU with them; --explain lists what the run
+    /// needs) or auto (the GPU when an adapter opens, else the CPU).
     #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
     pub backend: PhotonBackend,
     /// Print the processes the run calls for (source, bulk processes with their materials,
     /// optical surfaces, outputs), where each runs (cpu, gpu), and what the GPU kernel would
-    /// be composed of or why it refuses the run; propagate nothing.
+    /// be composed of; propagate nothing.
     #[arg(long)]
     pub explain: bool,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,

@@ -84,6 +84,15 @@ record! {
         pub rise: [f32; 3],
         /// Each component's yield.
         pub weight: [f32; 3],
+        /// WLSABSLENGTH (`u32::MAX`: no wavelength shifting).
+        pub wlsabslength: u32,
+        /// WLSCOMPONENT, `(energy, integral)` rows (`u32::MAX`: a shifting absorption
+        /// emits nothing).
+        pub wls_spectrum: u32,
+        /// WLSTIMECONSTANT (ns).
+        pub wls_delay: f32,
+        /// WLSMEANNUMBERPHOTONS (negative: one photon per absorption).
+        pub wls_mean: f32,
     }
 }
 
@@ -265,6 +274,9 @@ pub const PHOTON_DETECTED: u32 = 1;
 /// Bit: the driver's loop budget cut the photon's loops short (llvmpipe); its record is
 /// wrong and it is propagated again on the CPU.
 pub const PHOTON_LOOPS_CUT: u32 = 2;
+/// Bit: a wavelength-shifting absorption emitted two photons or more; the photon and
+/// those it emitted are propagated on the CPU (the kernel carries one photon).
+pub const PHOTON_SEVERAL_EMITTED: u32 = 8;
 /// Bit: the placement tree was deeper than the navigator's loop bound (never for a
 /// validated scene); propagated again on the CPU.
 pub const PHOTON_DEPTH_LIMIT: u32 = 4;
@@ -323,6 +335,7 @@ pub fn push_photon_wgsl(out: &mut String) {
         ("PHOTON_DETECTED", PHOTON_DETECTED),
         ("PHOTON_LOOPS_CUT", PHOTON_LOOPS_CUT),
         ("PHOTON_DEPTH_LIMIT", PHOTON_DEPTH_LIMIT),
+        ("PHOTON_SEVERAL_EMITTED", PHOTON_SEVERAL_EMITTED),
     ] {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }

@@ -12,11 +12,12 @@ use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::photon_records::{
     PhotonParams, PhotonRecord, PHOTON_DEPTH_LIMIT, PHOTON_DETECTED, PHOTON_LOOPS_CUT,
-    PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS, PHOTON_SOURCE_POINT, PHOTON_SOURCE_SPHERE,
+    PHOTON_SEVERAL_EMITTED, PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS, PHOTON_SOURCE_POINT,
+    PHOTON_SOURCE_SPHERE,
 };
 use super::timing::{finish_batch, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use crate::photons::gpu_tables::{kernel_features, unsupported, GpuTables};
+use crate::photons::gpu_tables::{kernel_features, GpuTables};
 use crate::photons::output::{History, HitRow, RecordPoint, RECORD_COLUMNS};
 use crate::photons::propagate::{drive_batches, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
@@ -64,11 +65,6 @@ impl GpuPhotons {
         scene: &PhotonScene,
         run: &RunOptions,
     ) -> Result<GpuPhotons, GpuError> {
-        if let Some(why) = unsupported(&scene.tables) {
-            return Err(GpuError::Unsupported(format!(
-                "photons: {why}; run them with --backend cpu"
-            )));
-        }
         let Some(f32_scene) = scene.tracer.f32_scene() else {
             return Err(GpuError::Unsupported(
                 "photons: the scene was prepared with the f64 tracer (the kernel's twin is f32)"
@@ -256,6 +252,10 @@ impl GpuPhotons {
             .map(|(j, (index, r))| {
                 if r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0 {
                     times.redone_on_cpu += 1;
+                    return scene.photon(index, run, emitting);
+                }
+                if r.status & PHOTON_SEVERAL_EMITTED != 0 {
+                    times.split_on_cpu += 1;
                     return scene.photon(index, run, emitting);
                 }
                 PhotonEnd {

@@ -1,22 +1,21 @@
 //! What a photon run calls for (`hytrace photons --explain`): the processes its scene's
 //! materials and surfaces, its source and its outputs need, each with the materials or
-//! surfaces that need it and where it runs (the CPU propagator has every one; the GPU
-//! kernel all but wavelength shifting), then what the GPU kernel would be
-//! composed of, or why it refuses the run.
+//! surfaces that need it and where it runs (the CPU propagator and the GPU kernel have
+//! every one), then what the GPU kernel is composed of.
 
 use std::collections::BTreeSet;
 
 use hytrace_foundry::UNSET;
 
-use super::gpu_tables::{kernel_features, unsupported};
+use super::gpu_tables::kernel_features;
 use super::properties::{MaterialOptics, Roughness, SurfaceKind};
 use super::sources::{Source, Wavelength};
 use super::{Origin, PhotonScene, RunOptions};
 
 /// Where a process runs.
 const BOTH: &str = "cpu, gpu";
-/// Processes the GPU kernel does not have.
-const CPU_ONLY: &str = "cpu only";
+/// Wavelength shifting: an absorption emitting several photons is propagated on the CPU.
+const WLS_ON: &str = "cpu, gpu; an absorption emitting several photons: cpu";
 
 /// The lines of `--explain` for `run` through `scene`: one per process the run calls for
 /// (`process: who needs it [where it runs]`), then the GPU kernel's composition.
@@ -98,7 +97,7 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
         (
             "wavelength shifting (WLSABSLENGTH)",
             &|m| m.wlsabslength.is_some(),
-            CPU_ONLY,
+            WLS_ON,
         ),
     ];
     for (what, has, on) in bulk {
@@ -124,16 +123,10 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
     if run.records > 0 {
         line("step points", format!("--records {}", run.records), BOTH);
     }
-    lines.push(match unsupported(&scene.tables) {
-        None => {
-            let features = kernel_features(&scene.tables, run);
-            format!(
-                "gpu kernel: composed with the physics features [{}] (besides the geometry's)",
-                features.join(", ")
-            )
-        }
-        Some(why) => format!("gpu kernel: refuses the run: not on the GPU yet: {why}"),
-    });
+    lines.push(format!(
+        "gpu kernel: composed with the physics features [{}] (besides the geometry's)",
+        kernel_features(&scene.tables, run).join(", ")
+    ));
     lines
 }
 
@@ -220,13 +213,7 @@ mod tests {
             &shifter,
             "wavelength shifting (WLSABSLENGTH): materials"
         ));
-        assert!(has(&shifter, "[cpu only]"), "{shifter:?}");
-        assert!(
-            has(
-                &shifter,
-                "gpu kernel: refuses the run: not on the GPU yet: material"
-            ),
-            "{shifter:?}"
-        );
+        assert!(has(&shifter, "several photons: cpu]"), "{shifter:?}");
+        assert!(has(&shifter, "features [records, wls]"), "{shifter:?}");
     }
 }

@@ -5,9 +5,8 @@
 //! finds them ([`FlatSurfaces::between`] is the twin of the kernel's lookup and is tested
 //! against it on every pair of instances).
 //!
-//! The kernel models part of the CPU's physics; [`unsupported`] names the rest (the
-//! material or option and the process) and [`kernel_features`] which of the kernel's
-//! optional processes a scene needs.
+//! The kernel has the CPU's physics; [`kernel_features`] says which of its optional
+//! processes a run needs, so that only those are composed in.
 
 use hytrace_foundry::UNSET;
 
@@ -156,27 +155,17 @@ fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Sp
     tables.len() as u32 - 1
 }
 
-/// Why the GPU kernel cannot propagate photons through a scene with `tables` (the first
-/// reason: the physics it does not have), `None` when it can.
-pub fn unsupported(tables: &OpticsTables) -> Option<String> {
-    if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
-        return Some(format!(
-            "material `{}`: property WLSABSLENGTH (wavelength shifting, G4OpWLS)",
-            m.name
-        ));
-    }
-    None
-}
-
 /// The kernel's composition features for the physics of a scene with `tables` (the
 /// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
 /// a finish other than polished (facets, the unified model's reflection types, paint),
-/// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `spectrum`
+/// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `wls` when one
+/// shifts wavelengths (WLSABSLENGTH), `spectrum`
 /// when `run`'s torch draws its photons' energies from a spectrum, `gensteps` when its
 /// photons come from gensteps, `records` when it writes step points.
 pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
     let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
     let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
+    let wls = tables.materials.iter().any(|m| m.wlsabslength.is_some());
     let spectrum = matches!(
         run.origin,
         Origin::Torch {
@@ -190,6 +179,7 @@ pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static 
         (run.records > 0, "records"),
         (rough, "rough_surfaces"),
         (reemission, "reemission"),
+        (wls, "wls"),
         (spectrum, "spectrum"),
     ]
     .into_iter()
@@ -231,8 +221,16 @@ impl GpuTables {
                     groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
                     reemission: UNSET,
                     spectrum: [UNSET; 3],
+                    wlsabslength: push_table(&mut tables, &mut rows, m.wlsabslength.as_ref()),
+                    wls_spectrum: UNSET,
+                    wls_mean: -1.0,
                     ..Default::default()
                 };
+                if let Some(w) = &m.wls {
+                    flat.wls_spectrum = push_spectrum(&mut tables, &mut rows, w.spectrum());
+                    flat.wls_delay = w.time_constant as f32;
+                    flat.wls_mean = w.mean_photons.map_or(-1.0, |m| m as f32);
+                }
                 if let Some(r) = &m.reemission {
                     flat.reemission = push_table(&mut tables, &mut rows, Some(&r.probability));
                     flat.components = r.scintillator.components() as u32;
@@ -335,10 +333,10 @@ mod tests {
         );
     }
 
-    /// Wavelength shifting is refused for the kernel by name; other runs are not, and
-    /// compose in the processes their scene, photons and outputs call for, only those.
+    /// A run composes in the processes its scene, photons and outputs call for, only
+    /// those.
     #[test]
-    fn the_kernel_refuses_what_it_lacks_and_composes_what_the_scene_needs() {
+    fn the_kernel_composes_what_the_run_needs() {
         use crate::photons::gensteps::GenstepFile;
         use crate::photons::sources::Source;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -372,13 +370,14 @@ mod tests {
         let every = tables("tests/data/photons/every_process.gdml");
         let rough = tables("tests/data/photons/rough_surfaces.gdml");
         let scintillator = tables("tests/data/photons/scintillator.gdml");
+        let shifter = tables("tests/data/photons/wavelength_shifter.gdml");
         for (tables, run, features) in [
             (&every, &torch, &[][..]),
             (&every, &spectrum, &["spectrum"][..]),
             (&rough, &torch, &["rough_surfaces"][..]),
             (&scintillator, &torch, &["reemission"][..]),
+            (&shifter, &torch, &["wls"][..]),
         ] {
-            assert_eq!(unsupported(tables), None);
             assert_eq!(kernel_features(tables, run), features);
         }
         let gensteps = RunOptions {
@@ -393,13 +392,6 @@ mod tests {
             ..torch.clone()
         };
         assert_eq!(kernel_features(&every, &records), ["records"]);
-        assert_eq!(unsupported(&every), None);
         assert_eq!(kernel_features(&every, &gensteps), ["gensteps"]);
-        let shifter = tables("tests/data/photons/wavelength_shifter.gdml");
-        let why = unsupported(&shifter).expect("refused");
-        assert!(
-            why.contains("material `Shifter`: property WLSABSLENGTH"),
-            "{why}"
-        );
     }
 }

@@ -263,6 +263,11 @@ impl Wls {
         }
     }
 
+    /// WLSCOMPONENT, the spectrum re-emitted photons are drawn from.
+    pub fn spectrum(&self) -> &Spectrum {
+        &self.spectrum
+    }
+
     /// The energy of one re-emitted photon, no higher than `primary` (MeV): up to 100
     /// draws from the spectrum, as Geant4 tries; `None` when none is low enough.
     pub fn sample_energy(&self, primary: f64, rng: &mut Rng) -> Option<f64> {
