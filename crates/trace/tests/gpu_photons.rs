@@ -384,6 +384,59 @@ fn rough_and_painted_surfaces_match_the_cpu_twin_photon_by_photon() {
     }
 }
 
+/// Runs `hytrace photons SCENE --source SOURCE -n N` on `backend` with `--history` and
+/// `--stats` into `dir`: the command's output and the paths of its hits and histories.
+fn photons_command(
+    dir: &Path,
+    scene: &Path,
+    source: &str,
+    n: u64,
+    backend: &str,
+) -> (std::process::Output, PathBuf, PathBuf) {
+    let out = dir.join(format!("{backend}.npy"));
+    let history = dir.join(format!("{backend}-history.npy"));
+    let o = hytrace(
+        &[
+            "photons",
+            scene.to_str().unwrap(),
+            "--source",
+            source,
+            "-n",
+            &n.to_string(),
+            "-o",
+            out.to_str().unwrap(),
+            &format!("--history={}", history.display()),
+            "--top",
+            "0",
+            "--backend",
+            backend,
+            "--stats",
+        ],
+        &[],
+    );
+    (o, out, history)
+}
+
+/// The packed histories of a `--history` file (uint64).
+fn packed_histories(p: &Path) -> Vec<u64> {
+    let h = std::fs::read(p).unwrap();
+    assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
+    h[128..]
+        .chunks_exact(8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+/// The `--stats` line that ends a command's stdout.
+fn stats_line(o: &std::process::Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let line = stdout.lines().last().unwrap_or_default().to_string();
+    gpu_stats(&std::process::Output {
+        stdout: line.into_bytes(),
+        ..o.clone()
+    })
+}
+
 #[test]
 fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     if GpuContext::for_tests().is_none() {
@@ -391,37 +444,9 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     }
     let dir = tempfile::tempdir().unwrap();
     let scene = repo("tests/data/photons/every_process.gdml");
-    let run = |backend: &str| {
-        let out = dir.path().join(format!("{backend}.npy"));
-        let history = dir.path().join(format!("{backend}-history.npy"));
-        let o = hytrace(
-            &[
-                "photons",
-                scene.to_str().unwrap(),
-                "--source",
-                "point:0,0,0",
-                "-n",
-                "500",
-                "-o",
-                out.to_str().unwrap(),
-                &format!("--history={}", history.display()),
-                "--top",
-                "0",
-                "--backend",
-                backend,
-                "--stats",
-            ],
-            &[],
-        );
-        (o, out, history)
-    };
+    let run = |backend| photons_command(dir.path(), &scene, "point:0,0,0", 500, backend);
     let (gpu, gpu_hits, gpu_history) = run("gpu");
-    let stdout = String::from_utf8_lossy(&gpu.stdout).into_owned();
-    let line = stdout.lines().last().unwrap_or_default().to_string();
-    let stats = gpu_stats(&std::process::Output {
-        stdout: line.into_bytes(),
-        ..gpu
-    });
+    let stats = stats_line(&gpu);
     assert_eq!(stats["photons"], 500);
     let (cpu, cpu_hits, cpu_history) = run("cpu");
     assert!(cpu.status.success(), "{}", stderr(&cpu));
@@ -438,15 +463,10 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
         g.shape,
         c.shape
     );
-    let histories = |p: &PathBuf| {
-        let h = std::fs::read(p).unwrap();
-        assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
-        h[128..]
-            .chunks_exact(8)
-            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
-            .collect::<Vec<_>>()
-    };
-    let (hg, hc) = (histories(&gpu_history), histories(&cpu_history));
+    let (hg, hc) = (
+        packed_histories(&gpu_history),
+        packed_histories(&cpu_history),
+    );
     assert_eq!((hg.len(), hc.len()), (500, 500));
     let same = hg.iter().zip(&hc).filter(|(a, b)| a == b).count();
     assert!(same >= 495, "{same} of 500 histories equal");
@@ -468,47 +488,19 @@ fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
         ("beam:-80,0,50:0.2,0,-1:10", false),
         ("beam:80,0,50:0.2,0,-1:10", true),
     ] {
-        let run = |backend: &str| {
-            let out = dir.path().join(format!("{backend}.npy"));
-            let history = dir.path().join(format!("{backend}-history.npy"));
-            let o = hytrace(
-                &[
-                    "photons",
-                    scene.to_str().unwrap(),
-                    "--source",
-                    source,
-                    "-n",
-                    "1000",
-                    "-o",
-                    out.to_str().unwrap(),
-                    &format!("--history={}", history.display()),
-                    "--top",
-                    "0",
-                    "--backend",
-                    backend,
-                    "--stats",
-                ],
-                &[],
-            );
-            assert!(o.status.success(), "{source}: {}", stderr(&o));
-            let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
-            let line = stdout.lines().last().unwrap_or_default().to_string();
-            let stats: serde_json::Value = serde_json::from_str(&line).unwrap();
-            let h = std::fs::read(&history).unwrap();
-            let codes: Vec<u64> = h[128..]
-                .chunks_exact(8)
-                .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
-                .collect();
-            (stats, codes)
-        };
-        let (gpu, g) = run("gpu");
-        let (_, c) = run("cpu");
-        assert_eq!(gpu["backend"], "gpu", "{source}");
-        assert!(gpu["kernel_features"]
+        let (gpu, _, gpu_history) = photons_command(dir.path(), &scene, source, 1000, "gpu");
+        let stats = stats_line(&gpu);
+        let (cpu, _, cpu_history) = photons_command(dir.path(), &scene, source, 1000, "cpu");
+        assert!(cpu.status.success(), "{source}: {}", stderr(&cpu));
+        let (g, c) = (
+            packed_histories(&gpu_history),
+            packed_histories(&cpu_history),
+        );
+        assert!(stats["kernel_features"]
             .as_array()
             .unwrap()
             .contains(&"wls".into()));
-        let on_cpu = gpu["gpu_split_on_cpu"].as_u64().unwrap();
+        let on_cpu = stats["gpu_split_on_cpu"].as_u64().unwrap();
         assert_eq!(
             on_cpu > 0,
             split,

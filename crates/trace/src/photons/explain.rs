@@ -17,6 +17,9 @@ const BOTH: &str = "cpu, gpu";
 /// Wavelength shifting: an absorption emitting several photons is propagated on the CPU.
 const WLS_ON: &str = "cpu, gpu; an absorption emitting several photons: cpu";
 
+/// Whether a material needs a process.
+type Needs = dyn Fn(&MaterialOptics) -> bool;
+
 /// The lines of `--explain` for `run` through `scene`: one per process the run calls for
 /// (`process: who needs it [where it runs]`), then the GPU kernel's composition.
 pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
@@ -69,14 +72,14 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
         .iter()
         .filter_map(|&m| scene.tables.material(m))
         .collect();
-    let names = |has: &dyn Fn(&MaterialOptics) -> bool| {
+    let names = |has: &Needs| {
         let named: Vec<String> = (materials.iter())
             .filter(|m| has(m))
             .map(|m| format!("`{}`", m.name))
             .collect();
         (!named.is_empty()).then(|| format!("materials {}", named.join(", ")))
     };
-    let bulk: [(&str, &dyn Fn(&MaterialOptics) -> bool, &str); 6] = [
+    let bulk: [(&str, &Needs, &str); 6] = [
         ("Fresnel boundaries (RINDEX)", &|m| m.rindex.is_some(), BOTH),
         (
             "killed at boundaries (no RINDEX)",

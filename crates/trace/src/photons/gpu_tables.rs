@@ -126,17 +126,14 @@ impl FlatSurfaces {
     }
 }
 
-/// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
-fn push_table(
+/// Appends `(energy, value)` rows as a table, returning its index.
+fn push_rows(
     tables: &mut Vec<PhotonTable>,
     rows: &mut Vec<[f32; 2]>,
-    p: Option<&Property>,
+    new: impl Iterator<Item = (f64, f64)>,
 ) -> u32 {
-    let Some(p) = p else {
-        return UNSET;
-    };
     let first = rows.len() as u32;
-    rows.extend(p.rows().map(|(e, v)| [e as f32, v as f32]));
+    rows.extend(new.map(|(e, v)| [e as f32, v as f32]));
     tables.push(PhotonTable {
         first,
         count: rows.len() as u32 - first,
@@ -144,15 +141,18 @@ fn push_table(
     tables.len() as u32 - 1
 }
 
+/// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
+fn push_table(
+    tables: &mut Vec<PhotonTable>,
+    rows: &mut Vec<[f32; 2]>,
+    p: Option<&Property>,
+) -> u32 {
+    p.map_or(UNSET, |p| push_rows(tables, rows, p.rows()))
+}
+
 /// Appends a spectrum's `(energy, integral)` rows as a table, returning its index.
 fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Spectrum) -> u32 {
-    let first = rows.len() as u32;
-    rows.extend(s.rows().map(|(e, c)| [e as f32, c as f32]));
-    tables.push(PhotonTable {
-        first,
-        count: rows.len() as u32 - first,
-    });
-    tables.len() as u32 - 1
+    push_rows(tables, rows, s.rows())
 }
 
 /// The kernel's composition features for the physics of a scene with `tables` (the
