@@ -43,7 +43,7 @@ use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
-use crate::wide_bvh::ray_f32;
+use crate::wide_bvh::{ray_f32, PacketSlabs, PACKET};
 
 mod wide;
 
@@ -54,6 +54,13 @@ use wide::{Search, WideBvh};
 /// incoherent rays, BENCHMARKS.md): 5, 8 and 16 gave the same speed within the noise, and
 /// 8 beat 4 and 16 when finished searches were not replaced until all of them were done.
 pub const INTERLEAVED: usize = 8;
+
+/// How far apart, relative to a mesh's half size, the (recentred) origins of a packet's
+/// rays may lie on each axis ([`MeshPrim::first_crossings`]).
+pub const PACKET_SPREAD: f32 = 1.0 / 32.0;
+
+/// How far apart, in radians, the directions of a packet's rays may point.
+pub const PACKET_ANGLE: f32 = 0.05;
 
 /// A first-crossing query of a mesh ([`MeshPrim::first_crossings`]).
 #[derive(Clone, Copy, Debug)]
@@ -70,6 +77,29 @@ pub struct MeshQuery<'a, T> {
 #[derive(Default)]
 pub struct CrossingScratch {
     searches: Vec<Search>,
+    /// The queries left to the interleaved searches.
+    rest: Vec<usize>,
+}
+
+/// The packet form of `rays` (recentred, of a mesh of half size `scale`) when they run
+/// close enough together for a packet search to pay: origins within [`PACKET_SPREAD`] of
+/// `scale` of each other on every axis, directions within [`PACKET_ANGLE`] radians of the
+/// first one's, and of one sign on each axis ([`PacketSlabs::new`]).
+fn coherent(rays: &[Ray<f32>], scale: f32) -> Option<PacketSlabs> {
+    let first = rays.first()?;
+    let spread = PACKET_SPREAD * scale;
+    let cos = PACKET_ANGLE.cos();
+    let d0 = first.direction;
+    let close = rays.iter().all(|r| {
+        let d = r.direction;
+        (0..3).all(|k| (r.origin.get(k) - first.origin.get(k)).abs() <= spread)
+            && d.dot(d0) >= cos * (d.length_squared() * d0.length_squared()).sqrt()
+    });
+    if close {
+        PacketSlabs::new(rays)
+    } else {
+        None
+    }
 }
 
 /// A crossing of the f32 wide search in precision `T` (exact: `T` is f32 there).
@@ -562,12 +592,17 @@ impl<T: Real> MeshPrim<T> {
     }
 
     /// [`Self::first_crossing`] of every query, in `out` (cleared first), bit for bit. In
-    /// f32 the searches of [`INTERLEAVED`] queries at a time run interleaved on this
-    /// thread, one step of each in turn, each step asking for the memory its next one
-    /// reads: a search of a large mesh mostly waits on memory, and so waits for several at
-    /// once. A finished search's place goes to the next query at once, so the searches
-    /// stay that many until the queries run out. Meshes in f64 are searched one query
-    /// after another.
+    /// f32, consecutive queries of one mesh whose rays run close together (camera rays,
+    /// fine sweeps: origins within [`PACKET_SPREAD`] of the mesh's half size, directions
+    /// within [`PACKET_ANGLE`]) are searched [`PACKET`] at a time as a packet, each node
+    /// fetched and tested once for all of them ([`WideTree::walk_packet`]); the other
+    /// searches run [`INTERLEAVED`] at a time on this thread, one step of each in turn,
+    /// each step asking for the memory its next one reads: a search of a large mesh mostly
+    /// waits on memory, and so waits for several at once. A finished search's place goes
+    /// to the next query at once, so the searches stay that many until the queries run
+    /// out. Meshes in f64 are searched one query after another.
+    ///
+    /// [`WideTree::walk_packet`]: crate::wide_bvh::WideTree::walk_packet
     pub fn first_crossings(
         queries: &[MeshQuery<'_, T>],
         scratch: &mut CrossingScratch,
@@ -575,13 +610,27 @@ impl<T: Real> MeshPrim<T> {
     ) {
         out.clear();
         out.resize(queries.len(), Step::miss(false));
-        let searches = &mut scratch.searches;
+        let CrossingScratch { searches, rest } = scratch;
+        // Packets first; what they leave goes to the interleaved searches.
+        rest.clear();
+        let mut start = 0;
+        while start < queries.len() {
+            let mesh = queries[start].mesh;
+            let stop = queries.len().min(start + PACKET);
+            let end = (start + 1..stop)
+                .find(|&j| !std::ptr::eq(queries[j].mesh, mesh))
+                .unwrap_or(stop);
+            if !mesh.search_packet(&queries[start..end], &mut out[start..end]) {
+                rest.extend(start..end);
+            }
+            start = end;
+        }
         if searches.len() < INTERLEAVED {
             searches.resize_with(INTERLEAVED, Search::new);
         }
         // Per place: the query its search answers, the mesh's wide BVH, the search's shift.
         let mut running: [Option<(usize, &WideBvh, T)>; INTERLEAVED] = [None; INTERLEAVED];
-        let mut next = 0;
+        let mut waiting = rest.iter().copied();
         loop {
             let mut busy = false;
             for (place, search) in running.iter_mut().zip(searches.iter_mut()) {
@@ -593,7 +642,8 @@ impl<T: Real> MeshPrim<T> {
                     }
                 }
                 // An empty place takes the next query needing a search.
-                while place.is_none() && next < queries.len() {
+                while place.is_none() {
+                    let Some(next) = waiting.next() else { break };
                     let q = &queries[next];
                     match (&q.mesh.wide, q.mesh.search_start(&q.ray, q.tmin)) {
                         (Some(wide), Some((moved, shift, after))) => {
@@ -604,7 +654,6 @@ impl<T: Real> MeshPrim<T> {
                         (None, _) => out[next] = q.mesh.first_crossing(&q.ray, q.tmin),
                         (Some(_), None) => {}
                     }
-                    next += 1;
                 }
                 busy |= place.is_some();
             }
@@ -612,6 +661,46 @@ impl<T: Real> MeshPrim<T> {
                 return;
             }
         }
+    }
+
+    /// [`Self::first_crossing`] of `queries` (of this mesh, at most [`PACKET`]) searched as
+    /// one packet, into `out`, when the mesh has a wide BVH and at least two of the rays
+    /// meet its box and run close together ([`coherent`]); false, `out` holding nothing of
+    /// use, when not.
+    fn search_packet(&self, queries: &[MeshQuery<'_, T>], out: &mut [Step<T>]) -> bool {
+        let Some(wide) = &self.wide else {
+            return false;
+        };
+        if queries.len() < 2 {
+            return false;
+        }
+        let unused = Ray {
+            origin: V3::new(0.0, 0.0, 0.0),
+            direction: V3::new(0.0, 0.0, 1.0),
+        };
+        let mut rays = [unused; PACKET];
+        let mut after = [0.0f32; PACKET];
+        // Per ray of the packet: its query and the shift of its parameter.
+        let mut asked = [(0, T::ZERO); PACKET];
+        let mut n = 0;
+        for (i, q) in queries.iter().enumerate() {
+            if let Some((moved, shift, from)) = self.search_start(&q.ray, q.tmin) {
+                rays[n] = ray_f32(&moved);
+                after[n] = from.to_f64() as f32;
+                asked[n] = (i, shift);
+                n += 1;
+            }
+        }
+        let packet = match coherent(&rays[..n], self.scale.to_f64() as f32) {
+            Some(packet) if n >= 2 => packet,
+            _ => return false,
+        };
+        let mut found = [None; PACKET];
+        wide.nearest_packet(&packet, &rays[..n], &after[..n], &mut found[..n]);
+        for (&(i, shift), found) in asked[..n].iter().zip(found) {
+            out[i] = Self::step_at(from_wide(found), shift, &queries[i].ray);
+        }
+        true
     }
 
     /// Whether a point of the solid's frame is inside the mesh (parity of the crossings of

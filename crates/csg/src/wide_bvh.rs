@@ -20,7 +20,8 @@
 //! A walk is either run to its end in one loop ([`WideTree::walk`]) or advanced one node
 //! visit or leaf at a time (`Walker`), so that one thread can interleave the walks of
 //! several rays, each prefetching what it reads next while the others work: the mesh
-//! kernel's `MeshPrim::first_crossings`. Both share the node visit and the stack.
+//! kernel's `MeshPrim::first_crossings`. Both share the node visit and the stack. Coherent
+//! rays walk it as packets of 8 instead ([`WideTree::walk_packet`], module `packet`).
 //!
 //! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
 //! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
@@ -35,6 +36,10 @@ use obvhs::bvh2::Bvh2;
 use wide::f32x8;
 
 use crate::real::{Ray, Real, V3};
+
+mod packet;
+
+pub use packet::{PacketSlabs, PACKET};
 
 /// Children per node.
 pub const WIDTH: usize = 8;
@@ -508,34 +513,75 @@ impl WideSlabs {
     /// where (see the module doc for why no box the exact test accepts is missed).
     #[inline(always)]
     fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
-        let mut entry = f32x8::splat(f32::NEG_INFINITY);
-        let mut exit = f32x8::splat(f32::INFINITY);
-        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
+        let mut span = SlabSpan::new();
         for k in 0..3 {
-            let near = f32x8::from(node.planes[self.near[k]]);
-            let far = f32x8::from(node.planes[(self.near[k] + 3) % 6]);
+            let (near, far) = SlabSpan::planes(node, self.near[k]);
             let o = self.origin[k];
             let (t0, t1) = match self.axis[k] {
                 Axis::Multiply => ((near - o) * self.scale[k], (far - o) * self.scale[k]),
                 Axis::Divide => ((near - o) / self.scale[k], (far - o) / self.scale[k]),
                 Axis::Parallel => {
                     // Inside the slab or not, at every distance.
-                    inside = inside & near.simd_le(o) & o.simd_le(far);
+                    span.inside &= near.simd_le(o) & o.simd_le(far);
                     continue;
                 }
             };
-            entry = entry.fast_max(t0);
-            exit = exit.fast_min(t1);
+            span.entry = span.entry.fast_max(t0);
+            span.exit = span.exit.fast_min(t1);
         }
-        // Widened by four machine epsilons of their size, more than the reciprocal's error;
-        // by multiplying, which keeps the empty lanes' infinities (no inf - inf).
+        span.hits(f32x8::splat(after), f32x8::splat(limit))
+    }
+}
+
+/// A node's slab test in progress, lane by lane: the latest entry and earliest exit over
+/// the axes so far, and whether every axis without a direction component holds the origin
+/// (all ones).
+struct SlabSpan {
+    entry: f32x8,
+    exit: f32x8,
+    inside: f32x8,
+}
+
+impl SlabSpan {
+    /// No axis yet: entered at -inf, left at +inf, inside.
+    #[inline(always)]
+    fn new() -> Self {
+        SlabSpan {
+            entry: f32x8::splat(f32::NEG_INFINITY),
+            exit: f32x8::splat(f32::INFINITY),
+            inside: f32x8::splat(f32::from_bits(u32::MAX)),
+        }
+    }
+
+    /// The planes of every child of `node` on one axis: plane `near_of` (where a ray
+    /// enters that axis' slab) and the opposite one.
+    #[inline(always)]
+    fn planes(node: &WideNode, near_of: usize) -> (f32x8, f32x8) {
+        (
+            f32x8::from(node.planes[near_of]),
+            f32x8::from(node.planes[(near_of + 3) % 6]),
+        )
+    }
+
+    /// The lanes (bit per lane) whose span, widened, overlaps `[after, limit]` while
+    /// inside, and the widened entries clipped to `after`. Widened by four machine
+    /// epsilons of their size, more than the reciprocal's error; by multiplying, which
+    /// keeps the empty lanes' infinities (no inf - inf). The widening is a monotonic
+    /// function of the entry and of the exit (packet tests rely on it).
+    #[inline(always)]
+    fn hits(self, after: f32x8, limit: f32x8) -> (u32, [f32; WIDTH]) {
         let (less, more) = (
             f32x8::splat(1.0 - 4.0 * f32::EPSILON),
             f32x8::splat(1.0 + 4.0 * f32::EPSILON),
         );
         let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
-        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(f32x8::splat(after));
-        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(f32x8::splat(limit));
+        let SlabSpan {
+            entry,
+            exit,
+            inside,
+        } = self;
+        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(after);
+        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(limit);
         let hit = (entry.simd_le(exit) & inside).to_bitmask();
         (hit, entry.to_array())
     }

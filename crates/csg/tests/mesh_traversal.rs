@@ -332,33 +332,14 @@ fn mixed_queries<'a, T: Real>(
         .collect()
 }
 
-fn interleaved_case<T: Real>() {
-    let mut rng = Rng(17);
-    let heights: Vec<f64> = (0..17 * 17).map(|_| rng.range(0.0, 3.0)).collect();
-    let hills = grid(16, |x, y| heights[x as usize * 17 + y as usize]);
-    let shifted = |tris: &[Tri], by: [f64; 3]| -> Vec<Tri> {
-        tris.iter()
-            .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
-            .collect()
-    };
-    let far = [1.0e5, -2.0e5, 3.0e4];
-    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [
-        (shifted(&hills, [-8.0, -8.0, 0.0]), [0.0, 0.0, 1.5]),
-        (
-            shifted(&hills, far),
-            [far[0] + 8.0, far[1] + 8.0, far[2] + 1.5],
-        ),
-        (cube([1.0, 2.0, 3.0], 4.0), [1.0, 2.0, 3.0]),
-    ]
-    .into_iter()
-    .map(|(tris, centre)| (MeshPrim::<T>::new(&tris).unwrap(), centre))
-    .collect();
-    let queries = mixed_queries(&meshes, &mut rng);
+/// Checks that [`MeshPrim::first_crossings`] of `queries`, in windows of each length of
+/// `windows`, answers every query bit for bit as [`MeshPrim::first_crossing`] does;
+/// returns how many crossings it found.
+fn answers_as_one_at_a_time<T: Real>(queries: &[MeshQuery<'_, T>], windows: &[usize]) -> usize {
     let mut scratch = CrossingScratch::default();
     let mut out = Vec::new();
     let mut hits = 0;
-    // Windows of every size up to past the interleaving width, then all at once.
-    for len in (1..=INTERLEAVED + 3).chain([queries.len()]) {
+    for &len in windows {
         for batch in queries.chunks(len) {
             MeshPrim::first_crossings(batch, &mut scratch, &mut out);
             assert_eq!(out.len(), batch.len());
@@ -381,6 +362,34 @@ fn interleaved_case<T: Real>() {
             }
         }
     }
+    hits
+}
+
+fn interleaved_case<T: Real>() {
+    let mut rng = Rng(17);
+    let heights: Vec<f64> = (0..17 * 17).map(|_| rng.range(0.0, 3.0)).collect();
+    let hills = grid(16, |x, y| heights[x as usize * 17 + y as usize]);
+    let shifted = |tris: &[Tri], by: [f64; 3]| -> Vec<Tri> {
+        tris.iter()
+            .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
+            .collect()
+    };
+    let far = [1.0e5, -2.0e5, 3.0e4];
+    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [
+        (shifted(&hills, [-8.0, -8.0, 0.0]), [0.0, 0.0, 1.5]),
+        (
+            shifted(&hills, far),
+            [far[0] + 8.0, far[1] + 8.0, far[2] + 1.5],
+        ),
+        (cube([1.0, 2.0, 3.0], 4.0), [1.0, 2.0, 3.0]),
+    ]
+    .into_iter()
+    .map(|(tris, centre)| (MeshPrim::<T>::new(&tris).unwrap(), centre))
+    .collect();
+    let queries = mixed_queries(&meshes, &mut rng);
+    // Windows of every size up to past the interleaving width, then all at once.
+    let windows: Vec<usize> = (1..=INTERLEAVED + 3).chain([queries.len()]).collect();
+    let hits = answers_as_one_at_a_time(&queries, &windows);
     assert!(
         hits > 2000,
         "only {hits} crossings among the {} {} queries",
@@ -396,4 +405,65 @@ fn interleaved_case<T: Real>() {
 fn interleaved_searches_answer_as_one_at_a_time() {
     interleaved_case::<f32>();
     interleaved_case::<f64>();
+}
+
+/// Queries in runs of one mesh whose rays run close together, as a camera's rows and a
+/// sweep give them: the searches take them as packets (8 at a time), and still answer as
+/// [`MeshPrim::first_crossing`] does, bit for bit, in f32 and f64.
+fn packet_case<T: Real>() {
+    let mut rng = Rng(23);
+    let heights: Vec<f64> = (0..33 * 33).map(|_| rng.range(0.0, 3.0)).collect();
+    let hills = grid(32, |x, y| heights[x as usize * 33 + y as usize]);
+    let far = [3.0e4, -2.0e4, 1.0e4];
+    let meshes: Vec<(MeshPrim<T>, [f64; 3])> = [[0.0; 3], far]
+        .into_iter()
+        .map(|by| {
+            let tris: Vec<Tri> = hills
+                .iter()
+                .map(|t| t.map(|v| [0, 1, 2].map(|c| v[c] + by[c])))
+                .collect();
+            (MeshPrim::<T>::new(&tris).unwrap(), by)
+        })
+        .collect();
+    let mut queries = Vec::new();
+    for (mesh, by) in &meshes {
+        // A camera's rows, from far above one corner; some rows from the surface's height
+        // on (`tmin`).
+        let eye = [by[0] - 40.0, by[1] - 40.0, by[2] + 60.0];
+        for row in 0..64 {
+            for col in 0..64 {
+                let d = [
+                    0.6 + f64::from(col) / 512.0,
+                    0.6 + f64::from(row) / 96.0,
+                    -1.0,
+                ];
+                let tmin = if row % 4 == 3 { 70.0 } else { 0.0 };
+                queries.push(MeshQuery {
+                    mesh,
+                    ray: Ray::from_f64(eye, unit(d)),
+                    tmin: T::from_f64(tmin),
+                });
+            }
+        }
+        // A sweep straight down onto vertices and edges (two zero components), and one
+        // starting past the field (every ray a miss).
+        for z in [10.0, -10.0] {
+            for k in 0..32 * 64 {
+                let (x, y) = (f64::from(k % 64) / 64.0 + 8.0, f64::from(k / 64));
+                queries.push(MeshQuery {
+                    mesh,
+                    ray: Ray::from_f64([by[0] + x, by[1] + y, by[2] + z], [0.0, 0.0, -1.0]),
+                    tmin: T::ZERO,
+                });
+            }
+        }
+    }
+    let hits = answers_as_one_at_a_time(&queries, &[5, 8, 13, 256]);
+    assert!(hits > 20_000, "only {hits} {} crossings", T::NAME);
+}
+
+#[test]
+fn packet_searches_answer_as_one_at_a_time() {
+    packet_case::<f32>();
+    packet_case::<f64>();
 }

@@ -250,7 +250,8 @@ fn truncated_and_mutated_files_never_panic() {
 /// (what `hytrace scan` hands it) answer every ray bit for bit as tracing it alone does,
 /// and agree with the f64 scan (its own kernel, one box at a time) within f32's
 /// tolerance: incoherent rays from above, some with a `tmax` short of the surface or a
-/// `tmin` past it.
+/// `tmin` past it, then coherent ones (searched as packets): a sweep straight down and a
+/// camera's rows.
 #[test]
 fn scans_of_a_large_mesh_equal_single_traces() {
     // A 128 x 128 heightfield: 32 768 triangles.
@@ -281,7 +282,7 @@ fn scans_of_a_large_mesh_equal_single_traces() {
     }
     let mut rng = XorShift64Star(0x2545_f491_4f6c_dd1d);
     let mut uniform = || rng.uniform();
-    let rows: Vec<[f64; 8]> = (0..20_000)
+    let mut rows: Vec<[f64; 8]> = (0..20_000)
         .map(|k| {
             let o = [uniform() * 140.0 - 6.0, uniform() * 140.0 - 6.0, 10.0];
             let d = [uniform() - 0.5, uniform() - 0.5, -uniform()];
@@ -294,6 +295,31 @@ fn scans_of_a_large_mesh_equal_single_traces() {
             [o[0], o[1], o[2], tmin, d[0] / l, d[1] / l, d[2] / l, tmax]
         })
         .collect();
+    let incoherent = rows.len();
+    // A sweep straight down, rows of rays 1/16 apart; a camera's rows, pixels 1/1024 rad
+    // apart, from above one corner.
+    for k in 0..16 * 1024 {
+        let (x, y) = (
+            10.0 + (k % 1024) as f64 / 16.0,
+            20.0 + (k / 1024) as f64 * 4.0,
+        );
+        rows.push([x, y, 10.0, 0.0, 0.0, 0.0, -1.0, f64::INFINITY]);
+    }
+    for k in 0..64 * 256 {
+        let (u, v) = ((k % 256) as f64 / 1024.0, (k / 256) as f64 / 128.0);
+        let d = [0.5 + u, 0.5 + v, -0.7];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        rows.push([
+            -20.0,
+            -20.0,
+            40.0,
+            0.0,
+            d[0] / l,
+            d[1] / l,
+            d[2] / l,
+            f64::INFINITY,
+        ]);
+    }
     let rays = rays_from_rows(&rows, "test rays").unwrap();
     let (exact, _) = scan(&f, &rays, Precision::F64).unwrap();
     let scene = hytrace_trace::cpu::CpuScene::<f32>::new(&f).unwrap();
@@ -313,7 +339,7 @@ fn scans_of_a_large_mesh_equal_single_traces() {
         scene.trace_batch(&queries, &mut scratch, &mut out);
         batched.extend_from_slice(&out);
     }
-    let (mut hits, mut far) = (0, 0);
+    let (mut hits, mut coherent_hits, mut far) = (0, 0, 0);
     for (i, r) in rays.iter().enumerate() {
         let (ray, tmin, tmax) = query(r);
         let alone = scene.trace(&ray, tmin, tmax);
@@ -323,8 +349,17 @@ fn scans_of_a_large_mesh_equal_single_traces() {
         if want.is_finite() != t.is_finite() || (t.is_finite() && (t - want).abs() > 1e-3) {
             far += 1;
         }
-        hits += usize::from(t.is_finite());
+        if i < incoherent {
+            hits += usize::from(t.is_finite());
+        } else {
+            coherent_hits += usize::from(t.is_finite());
+        }
     }
     assert!(hits > 8000 && hits < 19_000, "{hits} of 20000 rays hit");
+    assert!(
+        coherent_hits > 20_000,
+        "{coherent_hits} of {} coherent rays hit",
+        rays.len() - incoherent
+    );
     assert!(far <= 2, "{far} rays disagree with the f64 scan");
 }

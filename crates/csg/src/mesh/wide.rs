@@ -16,7 +16,8 @@ use wide::f32x4;
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
 use crate::wide_bvh::{
-    point_f32, prefetch_lines, BinaryNode, Walker, WideBvhError, WideSlabs, WideTree,
+    point_f32, prefetch_lines, BinaryNode, PacketSlabs, Walker, WideBvhError, WideSlabs, WideTree,
+    PACKET,
 };
 
 /// Triangles per block.
@@ -115,6 +116,55 @@ impl WideBvh {
                 best.t
             });
         self.found(&best)
+    }
+
+    /// [`Self::nearest`] of each ray of a packet (`rays`, at most [`PACKET`], each with its
+    /// `after` and no limit; `packet` is their [`PacketSlabs`]), walked together
+    /// ([`WideTree::walk_packet`]): the same answers, bit for bit, in `out`.
+    pub(crate) fn nearest_packet(
+        &self,
+        packet: &PacketSlabs,
+        rays: &[Ray<f32>],
+        after: &[f32],
+        out: &mut [Option<(f32, usize, V3<f32>)>],
+    ) {
+        let n = rays.len();
+        let triangles: [WideRay; PACKET] =
+            std::array::from_fn(|i| WideRay::new(&rays[i.min(n - 1)]));
+        let mut best: [Best; PACKET] = std::array::from_fn(|_| Best::none(f32::INFINITY));
+        let lanes = std::array::from_fn(|i| after[i.min(n - 1)]);
+        let mut limits = std::array::from_fn(|i| {
+            if i < n {
+                f32::INFINITY
+            } else {
+                f32::NEG_INFINITY
+            }
+        });
+        self.tree.walk_packet(
+            packet,
+            &lanes,
+            &mut limits,
+            |r, first, count| {
+                for b in first..first + count {
+                    triangles[r].test(
+                        &self.blocks[b as usize],
+                        b,
+                        &rays[r],
+                        after[r],
+                        &mut best[r],
+                    );
+                }
+                best[r].t
+            },
+            |first, count| {
+                for block in &self.blocks[first as usize..(first + count) as usize] {
+                    prefetch_lines(block);
+                }
+            },
+        );
+        for (slot, best) in out.iter_mut().zip(&best[..n]) {
+            *slot = self.found(best);
+        }
     }
 
     /// Advances `search` by one node visit or one leaf (see [`Walker::step`] for `AHEAD`);
@@ -359,6 +409,21 @@ mod tests {
             .collect()
     }
 
+    /// 3000 random triangles of sizes 0.01 to 2 in a 20-wide cube about the origin.
+    fn random_soup(rng: &mut Rng) -> MeshPrim<f32> {
+        let soup: Vec<_> = (0..3000)
+            .map(|_| {
+                let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
+                let size = rng.range(0.01, 2.0);
+                [0; 3].map(|_| {
+                    let e = rng.direction();
+                    [0, 1, 2].map(|k| c[k] + size * e[k])
+                })
+            })
+            .collect();
+        MeshPrim::<f32>::new(&soup).unwrap()
+    }
+
     /// Runs both searches on a ray and its recentred form; returns whether it hit.
     fn both_agree(mesh: &MeshPrim<f32>, origin: [f64; 3], direction: [f64; 3]) -> bool {
         let wide = mesh.wide.as_ref().expect("f32 meshes have a wide BVH");
@@ -385,16 +450,7 @@ mod tests {
     #[test]
     fn wide_search_equals_the_binary_one_bit_for_bit_on_random_rays() {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-        let mut soup = Vec::new();
-        for _ in 0..3000 {
-            let c = [0; 3].map(|_| rng.range(-10.0, 10.0));
-            let size = rng.range(0.01, 2.0);
-            soup.push([0; 3].map(|_| {
-                let e = rng.direction();
-                [0, 1, 2].map(|k| c[k] + size * e[k])
-            }));
-        }
-        let mesh = MeshPrim::<f32>::new(&soup).unwrap();
+        let mesh = random_soup(&mut rng);
         let mut hits = 0;
         for _ in 0..20_000 {
             let o = [0; 3].map(|_| rng.range(-15.0, 15.0));
@@ -436,5 +492,117 @@ mod tests {
                 both_agree(&mesh, o, rng.direction());
             }
         }
+    }
+
+    /// Checks [`WideBvh::nearest_packet`] of `rays` (origin, direction) against
+    /// [`WideBvh::nearest`] ray by ray, bit for bit, each ray recentred as the mesh's
+    /// searches recentre it; returns how many hit, or `None` when the rays have no packet
+    /// form. With `coherent`, also checks that the mesh's searches would take them as a
+    /// packet.
+    fn packet_agrees(
+        mesh: &MeshPrim<f32>,
+        rays: &[([f64; 3], [f64; 3])],
+        coherent: bool,
+    ) -> Option<usize> {
+        let wide = mesh.wide.as_ref().expect("f32 meshes have a wide BVH");
+        let (moved, after): (Vec<Ray<f32>>, Vec<f32>) = rays
+            .iter()
+            .map(|(o, d)| {
+                let (moved, shift) = mesh.recentred(&Ray::from_f64(*o, *d));
+                (moved, -shift)
+            })
+            .unzip();
+        if coherent {
+            assert!(
+                super::super::coherent(&moved, mesh.scale).is_some(),
+                "rays {rays:?} not taken as a packet"
+            );
+        }
+        let packet = PacketSlabs::new(&moved)?;
+        let mut got = vec![None; rays.len()];
+        wide.nearest_packet(&packet, &moved, &after, &mut got);
+        for ((ray, after), got) in moved.iter().zip(&after).zip(&got) {
+            let want = wide.nearest(ray, *after, f32::INFINITY);
+            assert_eq!(
+                got.map(|(t, i, n)| (t.to_bits(), i, n)),
+                want.map(|(t, i, n)| (t.to_bits(), i, n)),
+                "ray {ray:?} after {after} in the packet {rays:?}"
+            );
+        }
+        Some(got.iter().filter(|g| g.is_some()).count())
+    }
+
+    #[test]
+    fn packet_search_equals_single_searches_on_camera_rays_and_sweeps() {
+        for offset in [0.0, 1.0e5] {
+            let mesh = MeshPrim::<f32>::new(&shifted_grid(24, offset)).unwrap();
+            let mut hits = 0;
+            // A camera's rows of 8 pixels (of 256 across), from above the grid's corner.
+            let eye = [offset - 6.0, offset - 6.0, offset + 20.0];
+            for row in 0..240 {
+                for col in (0..256).step_by(8) {
+                    let packet: Vec<_> = (col..col + 8)
+                        .map(|x| {
+                            let (u, v) = (f64::from(x) / 256.0, f64::from(row) / 240.0);
+                            (eye, [0.3 + 0.9 * u, 0.3 + 0.9 * v, -0.8])
+                        })
+                        .collect();
+                    hits += packet_agrees(&mesh, &packet, true).unwrap();
+                }
+            }
+            // Sweeps: rows of parallel rays 1/32 apart (every vertex and edge among their
+            // targets), straight down (two zero components) and tilted (one).
+            for d in [[0.0, 0.0, -1.0], [0.0, 0.6, -0.8], [0.6, 0.0, -0.8]] {
+                for j in 0..49 {
+                    for i0 in (0..24 * 32).step_by(8) {
+                        let packet: Vec<_> = (i0..i0 + 8)
+                            .map(|i| {
+                                let (x, y) = (i as f64 / 32.0 + offset, j as f64 * 0.5 + offset);
+                                ([x - 10.0 * d[0], y - 10.0 * d[1], offset + 10.0], d)
+                            })
+                            .collect();
+                        hits += packet_agrees(&mesh, &packet, true).unwrap();
+                    }
+                }
+            }
+            assert!(hits > 100_000, "only {hits} rays hit the grid at {offset}");
+        }
+    }
+
+    #[test]
+    fn packet_search_equals_single_searches_on_divergent_packets() {
+        let mut rng = Rng(0x5851_f42d_4c95_7f2d);
+        let mesh = random_soup(&mut rng);
+        let (mut hits, mut packets) = (0, 0);
+        for k in 0..4000 {
+            // Rays of one octant from anywhere (the packet test accepts them, loosely),
+            // packets of 1 to 8; some rays start far away and are recentred.
+            let sign = [0; 3].map(|_| {
+                if rng.range(-1.0, 1.0) < 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                }
+            });
+            let packet: Vec<_> = (0..1 + k % 8)
+                .map(|_| {
+                    let far = if rng.range(0.0, 1.0) < 0.2 {
+                        100.0
+                    } else {
+                        1.0
+                    };
+                    let o = [0; 3].map(|_| far * rng.range(-15.0, 15.0));
+                    let d = rng.direction();
+                    (o, [0, 1, 2].map(|c| sign[c] * d[c].abs()))
+                })
+                .collect();
+            hits += packet_agrees(&mesh, &packet, false).expect("one octant");
+            packets += 1;
+        }
+        assert_eq!(packets, 4000);
+        assert!(hits > 2000, "only {hits} rays hit the soup");
+        // Rays of different octants have no packet form.
+        let mixed = [([0.0; 3], [1.0, 0.0, 0.0]), ([0.0; 3], [-1.0, 0.0, 0.0])];
+        assert!(packet_agrees(&mesh, &mixed, false).is_none());
     }
 }

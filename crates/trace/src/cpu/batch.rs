@@ -1,6 +1,8 @@
 //! Tracing rays in batches, so that the mesh searches of several rays run interleaved on
 //! one thread ([`MeshPrim::first_crossings`]): incoherent rays through a large mesh spend
-//! most of their time waiting on memory, and the interleaved searches wait together.
+//! most of their time waiting on memory, and the interleaved searches wait together;
+//! coherent rays (consecutive queries of one mesh running close together) are searched
+//! as packets, sharing each node's fetch and test.
 //!
 //! A trace asks for its prims' first crossings through [`Crossings`]. [`Direct`] computes
 //! each at once (the per-ray [`CpuScene::trace`]). A batch trace runs each ray's ordinary

@@ -127,6 +127,20 @@ fn random_rays(seed: u32, centre: [f64; 3], count: usize) -> Vec<Ray<f64>> {
         .collect()
 }
 
+/// `rows` rows of 64 camera rays (directions 1/4096 apart in a row) from 300 below and 100
+/// above `centre`, looking at it: neighbouring rays close enough for the mesh searches to
+/// take them as packets (8 in a row).
+fn camera_rays(centre: [f64; 3], rows: usize) -> Vec<Ray<f64>> {
+    let eye = [centre[0], centre[1] - 300.0, centre[2] + 100.0];
+    (0..rows * 64)
+        .map(|n| {
+            let (u, v) = ((n % 64) as f64 / 4096.0, (n / 64) as f64 / rows as f64);
+            let d = [u - 1.0 / 128.0, 1.0, -1.0 / 3.0 + 0.3 * (v - 0.5)];
+            Ray::from_f64(eye, d)
+        })
+        .collect()
+}
+
 /// The flat scene's answer by the linear loop over all instances.
 fn linear_flat<T: Real>(s: &CpuScene<T>, ray: &Ray<f64>, tmin: T, tmax: T) -> Option<Hit<T>> {
     let ray = &WorldRay::new(ray);
@@ -501,6 +515,8 @@ fn lone_mesh_batches_answer_as_single_traces() {
         let scene = CpuScene::<f32>::new(&f).unwrap();
         assert_eq!(scene.lone_mesh().is_some(), lone, "case {seed}");
         let mut rays = windowed(random_rays(seed as u32 + 10, centre, 3000));
+        // Camera rays, searched as packets.
+        rays.extend(windowed(camera_rays(centre, 40)));
         // From the surface: each hit's point, `tmin` its distance.
         let from_surface: Vec<_> = rays
             .iter()
