@@ -46,6 +46,15 @@ struct DirPol {
     pol: vec3<f32>,
 }
 
+// A photon as it starts: where, which way, its polarization, time (ns) and energy (MeV).
+struct Emitted {
+    position: vec3<f32>,
+    direction: vec3<f32>,
+    polarization: vec3<f32>,
+    time: f32,
+    energy: f32,
+}
+
 // A direction uniform over the sphere and a random polarization perpendicular to it.
 fn isotropic(rng: ptr<function, VolumeRng>) -> DirPol {
     let c = 1.0 - 2.0 * rng_next(rng);

@@ -4,6 +4,7 @@
 // as it leaves the point, then the label code; the first K of each photon are written to
 // `psteps` (12 floats a point, K points a photon, zeros past its end).
 // #import photons/bindings
+// #import photons/bulk
 
 @group(2) @binding(8) var<storage, read_write> psteps: array<f32>;
 

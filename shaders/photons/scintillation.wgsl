@@ -2,6 +2,7 @@
 // shared by re-emission and scintillation gensteps.
 // #import photons/bindings
 // #import photons/spectra
+// #import volume/rng
 
 // Draws of the rejection loop of a profile with a rise time (the CPU's loop is unbounded;
 // its acceptance is at least 1 - exp(-1) for rise times below the decay time).

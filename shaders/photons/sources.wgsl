@@ -47,15 +47,6 @@ fn torch_start(rng: ptr<function, VolumeRng>) -> Start {
     return Start(position, direction, polarization);
 }
 
-// A photon as it starts: where, which way, its polarization, time (ns) and energy (MeV).
-struct Emitted {
-    position: vec3<f32>,
-    direction: vec3<f32>,
-    polarization: vec3<f32>,
-    time: f32,
-    energy: f32,
-}
-
 // Photon (lo, hi) of the run as it starts, drawn from its stream `rng`.
 fn emitted_photon(lo: u32, hi: u32, rng: ptr<function, VolumeRng>) -> Emitted {
     // #if gensteps
