@@ -182,9 +182,31 @@ def transmittance():
                 record({"label": f"transmittance {est} {repr_} compare", "error": str(e)})
 
 
+PHOTON_PHASES = ["gpu_upload_s", "gpu_kernel_s", "gpu_readback_s", "gpu_host_s", "tally_s", "write_s"]
+
+
+def photon_split(label, stats):
+    """Where a GPU photon run's time went: each phase of --stats, what is left of
+    propagate_s, the kernel's own rate (timestamps where the device has them) and the GPU
+    memory the batch held."""
+    if not stats or stats.get("backend") != "gpu":
+        return
+    row = {"label": f"{label} split", "propagate_s": stats["propagate_s"]}
+    for k in PHOTON_PHASES:
+        row[k] = stats.get(k)
+    row["rest_s"] = stats["propagate_s"] - sum(stats.get(k) or 0.0 for k in PHOTON_PHASES)
+    kernel = stats.get("gpu_kernel_timestamps_s") or stats.get("gpu_kernel_s")
+    row["kernel_photons_per_s"] = stats["photons"] / kernel if kernel else None
+    row["end_to_end_photons_per_s"] = stats["photons_per_s"]
+    if "gpu_batch" in stats:
+        row["gpu_batch_bytes"] = stats["gpu_batch"] * stats["gpu_bytes_per_photon"]
+    record(row)
+
+
 def photons():
-    """Photons/s of the GPU kernel beside the CPU propagator on the same photons, and the
-    fraction of photons whose histories agree (the kernel is f32, the CPU f64)."""
+    """Photons/s of the GPU kernel beside the CPU propagator on the same photons, the
+    fraction of photons whose histories agree (the kernel is f32, the CPU f64), and where
+    each GPU run's time went."""
     n = str(int(1_000_000 * SCALE))
     for name, f, src in [
         ("sipm", f"{GDML}/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml", "point:0.1,0.1,4"),
@@ -197,15 +219,18 @@ def photons():
         for be in ["cpu", "gpu"]:
             h = f"{TMP}/ph.{name}.{be}.history.npy"
             args = ["photons", f, "--source", src, "-n", n, "-o", f"{TMP}/ph.{be}.npy", f"--history={h}", "--top", "0", "--backend", be, "--stats"]
-            if run(f"photons {name} {be}", args, timeout=300) is not None:
+            stats = run(f"photons {name} {be}", args, timeout=300)
+            if stats is not None:
                 histories[be] = h
+                photon_split(f"photons {name} {be}", stats)
         if len(histories) == 2:
             a, b = np.load(histories["cpu"]), np.load(histories["gpu"])
             record({"label": f"photons {name} gpu vs cpu", "photons": int(len(a)), "same_history": int(np.sum(a == b))})
         if SCALE >= 1:
             # Ten times as many on the GPU alone: the rate once the device is full.
             big = str(int(10_000_000 * SCALE))
-            run(f"photons {name} gpu 1e7", ["photons", f, "--source", src, "-n", big, "-o", f"{TMP}/ph.big.npy", "--backend", "gpu", "--stats"], timeout=120)
+            stats = run(f"photons {name} gpu 1e7", ["photons", f, "--source", src, "-n", big, "-o", f"{TMP}/ph.big.npy", "--backend", "gpu", "--stats"], timeout=120)
+            photon_split(f"photons {name} gpu 1e7", stats)
 
 
 CORAL_SCENE = """[volumes.coral]

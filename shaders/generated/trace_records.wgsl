@@ -360,7 +360,8 @@ struct PhotonRecord {
     labels: u32,
     steps: u32,
     status: u32,
-    pad: array<u32, 2>,
+    photon: u32,
+    pad: u32,
 }
 
 const PHOTON_SOURCE_POINT: u32 = 0u;

@@ -236,5 +236,10 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
         status |= PHOTON_LOOPS_CUT;
     }
     out.status = status;
-    precords[i] = out;
+    phistories[i] = vec2<u32>(history.lo, history.hi);
+    // Only the photons the host needs more of: detected, or to be propagated again.
+    if status != 0u {
+        out.photon = i;
+        precords[atomicAdd(&pcount, 1u)] = out;
+    }
 }

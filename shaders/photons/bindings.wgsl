@@ -12,7 +12,11 @@
 @group(2) @binding(4) var<storage, read> psurfaces: array<PhotonSurface>;
 @group(2) @binding(5) var<storage, read> pinstances: array<PhotonInstance>;
 @group(2) @binding(6) var<storage, read> pborders: array<PhotonBorder>;
+// The records of the photons detected or cut short, appended (`pcount` of them).
 @group(2) @binding(7) var<storage, read_write> precords: array<PhotonRecord>;
+// Every photon's packed history (low, high 32 bits), by its index in the batch.
+@group(2) @binding(8) var<storage, read_write> phistories: array<vec2<u32>>;
+@group(2) @binding(9) var<storage, read_write> pcount: atomic<u32>;
 
 // Speed of light in vacuum, mm/ns (photons::properties::C_LIGHT_MM_PER_NS).
 const C_LIGHT_MM_PER_NS: f32 = 299.792458;

@@ -7,7 +7,7 @@
 // #import photons/bulk
 // #import photons/scintillation
 
-@group(2) @binding(9) var<storage, read> pgensteps: array<PhotonGenstep>;
+@group(2) @binding(11) var<storage, read> pgensteps: array<PhotonGenstep>;
 
 // Draws of a rejection loop (the CPU's are unbounded).
 const GENSTEP_MAX_DRAWS: u32 = 4096u;

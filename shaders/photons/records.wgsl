@@ -6,7 +6,7 @@
 // #import photons/bindings
 // #import photons/bulk
 
-@group(2) @binding(8) var<storage, read_write> psteps: array<f32>;
+@group(2) @binding(10) var<storage, read_write> psteps: array<f32>;
 
 // Label `n` of history `h`: the last one pushed, or one of the first 16 kept in it.
 fn history_label(h: History, n: u32) -> u32 {

@@ -384,36 +384,38 @@ fn rough_and_painted_surfaces_match_the_cpu_twin_photon_by_photon() {
     }
 }
 
-/// Runs `hytrace photons SCENE --source SOURCE -n N` on `backend` with `--history` and
-/// `--stats` into `dir`: the command's output and the paths of its hits and histories.
+/// Runs `hytrace photons SCENE --source SOURCE -n N` on `backend` with `--history`,
+/// `--stats` and `extra` into `dir`: the command's output and the paths of its hits and
+/// histories.
 fn photons_command(
     dir: &Path,
     scene: &Path,
     source: &str,
     n: u64,
     backend: &str,
+    extra: &[&str],
 ) -> (std::process::Output, PathBuf, PathBuf) {
     let out = dir.join(format!("{backend}.npy"));
     let history = dir.join(format!("{backend}-history.npy"));
-    let o = hytrace(
-        &[
-            "photons",
-            scene.to_str().unwrap(),
-            "--source",
-            source,
-            "-n",
-            &n.to_string(),
-            "-o",
-            out.to_str().unwrap(),
-            &format!("--history={}", history.display()),
-            "--top",
-            "0",
-            "--backend",
-            backend,
-            "--stats",
-        ],
-        &[],
-    );
+    let (n, history_arg) = (n.to_string(), format!("--history={}", history.display()));
+    let mut args = vec![
+        "photons",
+        scene.to_str().unwrap(),
+        "--source",
+        source,
+        "-n",
+        &n,
+        "-o",
+        out.to_str().unwrap(),
+        &history_arg,
+        "--top",
+        "0",
+        "--backend",
+        backend,
+        "--stats",
+    ];
+    args.extend(extra);
+    let o = hytrace(&args, &[]);
     (o, out, history)
 }
 
@@ -437,6 +439,51 @@ fn stats_line(o: &std::process::Output) -> serde_json::Value {
     })
 }
 
+/// Batches overlap on the GPU (the next one runs while the host handles the last) and the
+/// kernel appends its hits in the order photons finish: whatever the batch, a run gives
+/// the one-batch run's histories and hit rows exactly, hits in photon order.
+#[test]
+fn gpu_batches_give_the_one_batch_run_with_hits_in_photon_order() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let path = repo("tests/data/photons/every_process.gdml");
+    let run = options("point:0,0,0", 1000);
+    let s32 = scene(&path, Precision::F32);
+    let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
+    let whole = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap().run;
+    let photon_order = |hits: &[HitRow]| hits.windows(2).all(|w| w[0].0[13] < w[1].0[13]);
+    assert!(whole.hits.len() >= 10, "{} hits", whole.hits.len());
+    assert!(photon_order(&whole.hits));
+    for batch in [1, 97, 256] {
+        let mut all = hytrace_trace::photons::Batch::default();
+        let mut sizes = Vec::new();
+        let (summary, _, host) = kernel
+            .propagate_into(
+                &ctx,
+                &s32,
+                &run,
+                Some(batch),
+                &mut |b| {
+                    sizes.push(b.histories.len());
+                    all.gather(b)
+                },
+                &|_| (),
+            )
+            .unwrap();
+        assert_eq!(host.batch, batch);
+        assert_eq!(
+            sizes.len() as u64,
+            1000_u64.div_ceil(batch),
+            "batch {batch}"
+        );
+        assert_eq!(all.histories, whole.histories, "batch {batch}");
+        assert_eq!(all.hits, whole.hits, "batch {batch}");
+        assert_eq!(summary.counts, whole.counts, "batch {batch}");
+        assert_eq!(summary.hits as usize, whole.hits.len());
+    }
+}
+
 #[test]
 fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     if GpuContext::for_tests().is_none() {
@@ -444,10 +491,29 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     }
     let dir = tempfile::tempdir().unwrap();
     let scene = repo("tests/data/photons/every_process.gdml");
-    let run = |backend| photons_command(dir.path(), &scene, "point:0,0,0", 500, backend);
+    let run = |backend| {
+        let batch = ["--batch", "128"];
+        photons_command(dir.path(), &scene, "point:0,0,0", 500, backend, &batch)
+    };
     let (gpu, gpu_hits, gpu_history) = run("gpu");
     let stats = stats_line(&gpu);
     assert_eq!(stats["photons"], 500);
+    // Four batches of 128 photons in flight, 88 bytes each on the GPU; the phases of the
+    // run are timed apart, so they add up to at most the whole.
+    assert_eq!(stats["gpu_batch"], 128);
+    assert_eq!(stats["gpu_bytes_per_photon"], 88);
+    let phases: f64 = [
+        "gpu_upload_s",
+        "gpu_kernel_s",
+        "gpu_readback_s",
+        "gpu_host_s",
+        "tally_s",
+        "write_s",
+    ]
+    .iter()
+    .map(|k| stats[*k].as_f64().unwrap_or_else(|| panic!("{k}: {stats}")))
+    .sum();
+    assert!(phases <= stats["propagate_s"].as_f64().unwrap(), "{stats}");
     let (cpu, cpu_hits, cpu_history) = run("cpu");
     assert!(cpu.status.success(), "{}", stderr(&cpu));
     // The same layouts: float64 (H, 16) hits, uint64 (500,) histories, nearly all equal.
@@ -488,9 +554,9 @@ fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
         ("beam:-80,0,50:0.2,0,-1:10", false),
         ("beam:80,0,50:0.2,0,-1:10", true),
     ] {
-        let (gpu, _, gpu_history) = photons_command(dir.path(), &scene, source, 1000, "gpu");
+        let (gpu, _, gpu_history) = photons_command(dir.path(), &scene, source, 1000, "gpu", &[]);
         let stats = stats_line(&gpu);
-        let (cpu, _, cpu_history) = photons_command(dir.path(), &scene, source, 1000, "cpu");
+        let (cpu, _, cpu_history) = photons_command(dir.path(), &scene, source, 1000, "cpu", &[]);
         assert!(cpu.status.success(), "{source}: {}", stderr(&cpu));
         let (g, c) = (
             packed_histories(&gpu_history),

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
-use hytrace_trace::gpu::{add_gpu_stats, warn_redone};
+use hytrace_trace::gpu::{add_gpu_stats, warn_redone, BYTES_PER_PHOTON};
 use hytrace_trace::outputs::{check_destinations, OutputSet};
 use hytrace_trace::photons::backend::{propagate_on, BackendRun, PhotonBackend};
 use hytrace_trace::photons::explain::explain;
@@ -101,8 +101,8 @@ pub struct PhotonsArgs {
     #[arg(long)]
     pub explain: bool,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
-    /// propagate_s, photons_per_s, threads, backend; on the GPU also the adapter and its
-    /// times).
+    /// propagate_s and of it tally_s and write_s, photons_per_s, threads, backend; on the
+    /// GPU also the adapter, its times, the host's work on the results and the batch).
     #[arg(long)]
     pub stats: bool,
 }
@@ -214,11 +214,16 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "load_s": load_s,
             "build_s": build_s,
             "propagate_s": run.propagate_s,
+            "tally_s": run.tally_s,
+            "write_s": run.write_s,
             "photons_per_s": if run.propagate_s > 0.0 { photons as f64 / run.propagate_s } else { 0.0 },
             "threads": rayon::current_num_threads(),
         });
         if let Some(g) = &gpu {
             add_gpu_stats(&mut line, &g.adapter, &g.features, &g.times);
+            line["gpu_host_s"] = g.host.host_s.into();
+            line["gpu_batch"] = g.host.batch.into();
+            line["gpu_bytes_per_photon"] = BYTES_PER_PHOTON.into();
         }
         println!("{line}");
     } else {

@@ -20,7 +20,7 @@ mod tracer;
 mod transmittance;
 
 pub use context::{gpu_or_cpu, GpuContext, GpuError};
-pub use photons::{GpuPhotonRun, GpuPhotons};
+pub use photons::{GpuPhotonRun, GpuPhotons, PhotonHostWork, BYTES_PER_PHOTON};
 pub use render::{compose_render_kernel, GpuImage, GpuRenderer};
 pub use scene::GpuScene;
 pub use streamed::GpuStreamedVolume;

@@ -212,7 +212,9 @@ record! {
 }
 
 record! {
-    /// How one photon ended: its packed history and, when detected, its hit.
+    /// How one photon ended, for the photons the host needs more of than their history
+    /// (detected, or to be propagated again on the CPU): appended by the kernel in the
+    /// order they finish, each naming its photon.
     pub struct PhotonRecord {
         /// Where it ended (mm).
         pub position: [f32; 3],
@@ -236,8 +238,10 @@ record! {
         pub steps: u32,
         /// `PHOTON_STATUS_*` bits.
         pub status: u32,
+        /// The photon: its index in the batch.
+        pub photon: u32,
         /// Padding.
-        pub pad: [u32; 2],
+        pub pad: u32,
     }
 }
 

@@ -11,7 +11,7 @@ use super::run::{prepare, propagate_batches_in};
 use super::tracer::Precision;
 use super::{Batch, PhotonError, PhotonScene, RunOptions, RunSummary};
 use crate::error::Context;
-use crate::gpu::{gpu_or_cpu, GpuContext, GpuPhotons, GpuTimes};
+use crate::gpu::{gpu_or_cpu, GpuContext, GpuPhotons, GpuTimes, PhotonHostWork};
 use crate::scene::VolumeSurfaces;
 
 /// Where photons are propagated.
@@ -40,6 +40,8 @@ pub struct GpuPhotonInfo {
     pub features: Vec<&'static str>,
     /// Upload, kernel and readback seconds, and the photons the CPU propagated again.
     pub times: GpuTimes,
+    /// The host's work on the batches' results, and the photons a batch.
+    pub host: PhotonHostWork,
 }
 
 /// A photon run on a backend.
@@ -107,7 +109,7 @@ pub fn propagate_on(
             started.set(true);
             sink(b)
         };
-        let (summary, times) = kernel
+        let (summary, times, host) = kernel
             .propagate_into(&ctx, &scene, run, batch, &mut noted, progress)
             .with_context(|| format!("{}: propagating photons on the GPU", path.display()))?;
         Ok(BackendRun {
@@ -117,6 +119,7 @@ pub fn propagate_on(
                 adapter: ctx.describe(),
                 features: kernel.features().to_vec(),
                 times,
+                host,
             }),
         })
     };

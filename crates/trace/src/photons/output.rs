@@ -139,7 +139,8 @@ pub const HIT_COLUMNS: [&str; 16] = [
 /// One detected photon: where and when, its direction, wavelength and polarization, the
 /// instance whose surface detected it, that instance's copy number, the photon's index,
 /// its history mask and step count.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(transparent)]
 pub struct HitRow(pub [f64; 16]);
 
 /// Columns of a step point of `--records` (float32).
@@ -214,9 +215,8 @@ impl RunFiles {
 
     /// Appends a batch.
     pub fn append(&mut self, batch: &Batch) -> Result<(), PhotonError> {
-        let hits: Vec<f64> = batch.hits.iter().flat_map(|h| h.0).collect();
         self.hits
-            .append(bytemuck::cast_slice(&hits))
+            .append(bytemuck::cast_slice(&batch.hits))
             .map_err(output_error)?;
         if let Some(h) = &mut self.histories {
             h.append(bytemuck::cast_slice(&batch.histories))

@@ -12,6 +12,8 @@
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
 //! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there.
 
+use std::collections::HashMap;
+use std::ops::Range;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -452,6 +454,47 @@ pub(crate) struct PhotonEnd {
     pub(crate) record: Vec<RecordPoint>,
 }
 
+/// A batch's photons as they ended, in photon order: what [`drive_batches`] tallies and
+/// hands on.
+#[derive(Default)]
+pub(crate) struct BatchEnds {
+    /// Each photon's own lineage's packed history.
+    pub(crate) histories: Vec<u64>,
+    /// The packed histories of the further lineages (counted, not kept).
+    pub(crate) further: Vec<u64>,
+    /// The hit rows, in photon order (a photon's own lineage's first).
+    pub(crate) hits: Vec<HitRow>,
+    /// Each photon's step points, [`RunOptions::records`] a photon.
+    pub(crate) records: Vec<RecordPoint>,
+}
+
+impl BatchEnds {
+    /// The ends of photons propagated one by one, in photon order.
+    pub(crate) fn of(ends: Vec<PhotonEnd>) -> BatchEnds {
+        let mut out = BatchEnds {
+            histories: Vec::with_capacity(ends.len()),
+            ..BatchEnds::default()
+        };
+        for end in ends {
+            let own = out.add_lineages(end);
+            out.histories.push(own);
+        }
+        out
+    }
+
+    /// Adds the hits, step points and further histories of the next photon's `end`;
+    /// returns its own history, for the caller to place.
+    pub(crate) fn add_lineages(&mut self, end: PhotonEnd) -> u64 {
+        self.records.extend(end.record);
+        self.hits.extend(end.own.1);
+        for (h, hit) in end.further {
+            self.further.push(h.code);
+            self.hits.extend(hit);
+        }
+        end.own.0.code
+    }
+}
+
 /// `record` filled to `k` points with zero points (label 0).
 fn padded(mut record: Vec<RecordPoint>, k: u32) -> Vec<RecordPoint> {
     record.resize(k as usize, [0.0; RECORD_COLUMNS]);
@@ -580,6 +623,10 @@ pub struct RunSummary {
     pub counts: Vec<(String, u64)>,
     /// Seconds spent propagating (the sink's time included).
     pub propagate_s: f64,
+    /// Of those, seconds counting histories and gathering each batch's results.
+    pub tally_s: f64,
+    /// Of those, seconds in the sink (writing the outputs).
+    pub write_s: f64,
 }
 
 /// Propagates photons `run.first .. run.first + run.photons` through `scene`, in parallel
@@ -611,20 +658,22 @@ pub fn propagate_batches(
     sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
     progress: &dyn Fn(u64),
 ) -> Result<RunSummary, PhotonError> {
-    let mut on_cpu = |photons: std::ops::Range<u64>, emitting: &Emitting| {
-        Ok::<_, PhotonError>(
+    let mut on_cpu = |photons: Range<u64>, _: Option<Range<u64>>, emitting: &Emitting| {
+        Ok::<_, PhotonError>(BatchEnds::of(
             photons
                 .into_par_iter()
                 .map(|i| scene.photon(i, run, emitting))
                 .collect(),
-        )
+        ))
     };
     drive_batches(scene, run, batch, &mut on_cpu, sink, progress)
 }
 
-/// A batch of photons propagated: the ends of photons `range`, in order.
+/// A batch of photons propagated: the ends of photons `range`, given the range of the
+/// batch asked for next (`None` after the last), which the GPU starts on before the
+/// host works through this one's results.
 pub(crate) type BatchFn<'a, E> =
-    dyn FnMut(std::ops::Range<u64>, &Emitting) -> Result<Vec<PhotonEnd>, E> + 'a;
+    dyn FnMut(Range<u64>, Option<Range<u64>>, &Emitting) -> Result<BatchEnds, E> + 'a;
 
 /// Checks a run, then propagates its photons in batches of `size` with `batch` (the CPU's
 /// or the GPU's), handing each batch's hits, histories and step points to `sink` as it
@@ -681,30 +730,62 @@ pub(crate) fn drive_batches<E: From<PhotonError>>(
         Emitting::Gensteps(_) => {}
     }
     let start = Instant::now();
-    let mut hits = 0;
-    let mut codes: std::collections::HashMap<u64, u64> = Default::default();
+    let (mut hits, mut tally_s, mut write_s) = (0, 0.0, 0.0);
+    let mut codes = HashMap::new();
+    let range = |first: u64| first..first.saturating_add(size).min(end);
     let mut first = run.first;
     while first < end {
-        let last = first.saturating_add(size).min(end);
-        let mut out = Batch::default();
-        for end in batch(first..last, &emitting)? {
-            if run.keep_histories {
-                out.histories.push(end.own.0.code);
-            }
-            out.records.extend(end.record);
-            for (h, hit) in std::iter::once(end.own).chain(end.further) {
-                *codes.entry(h.code).or_default() += 1;
-                out.hits.extend(hit);
-            }
-        }
+        let this = range(first);
+        let next = (this.end < end).then(|| range(this.end));
+        let ends = batch(this.clone(), next, &emitting)?;
+        let t = Instant::now();
+        tally(&mut codes, &ends.histories);
+        tally(&mut codes, &ends.further);
+        let out = Batch {
+            hits: ends.hits,
+            histories: if run.keep_histories {
+                ends.histories
+            } else {
+                Vec::new()
+            },
+            records: ends.records,
+        };
         hits += out.hits.len() as u64;
+        let t_sink = Instant::now();
+        tally_s += (t_sink - t).as_secs_f64();
         sink(out).map_err(E::from)?;
-        first = last;
+        write_s += t_sink.elapsed().as_secs_f64();
+        first = this.end;
         progress(first - run.first);
     }
     Ok(RunSummary {
         hits,
         counts: sorted_counts(codes),
         propagate_s: start.elapsed().as_secs_f64(),
+        tally_s,
+        write_s,
     })
+}
+
+/// Adds the packed histories `codes` to the `counts` of each (in parallel: a GPU batch
+/// holds a million).
+fn tally(counts: &mut HashMap<u64, u64>, codes: &[u64]) {
+    let counted = codes
+        .par_chunks(1 << 14)
+        .map(|chunk| {
+            let mut counts = HashMap::<u64, u64>::new();
+            for &c in chunk {
+                *counts.entry(c).or_default() += 1;
+            }
+            counts
+        })
+        .reduce(HashMap::new, |mut a, b| {
+            for (c, n) in b {
+                *a.entry(c).or_default() += n;
+            }
+            a
+        });
+    for (c, n) in counted {
+        *counts.entry(c).or_default() += n;
+    }
 }
