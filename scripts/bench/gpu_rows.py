@@ -240,6 +240,8 @@ def photons():
         ("sipm", f"{GDML}/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml", "point:0.1,0.1,4"),
         ("raindrop", f"{GDML}/eic-opticks/opticks_raindrop.gdml", "point:0,0,70"),
         ("every_process", "tests/data/photons/every_process.gdml", "point:0,0,0"),
+        # Rough surfaces (the kernel's rough_surfaces feature): unified ground glass.
+        ("rough_surfaces", "tests/data/photons/rough_surfaces.gdml", "beam:-265,0,50:0.5,0,-1:5"),
     ]:
         histories = {}
         for be in ["cpu", "gpu"]:

@@ -270,7 +270,8 @@ struct PhotonParams {
     max_steps: u32,
     hierarchical: u32,
     probe_trips: u32,
-    pad: u32,
+    spectrum: u32,
+    records: u32,
 }
 
 struct PhotonTable {
@@ -283,6 +284,16 @@ struct PhotonMaterial {
     abslength: u32,
     rayleigh: u32,
     groupvel: u32,
+    reemission: u32,
+    components: u32,
+    spectrum: array<u32, 3>,
+    decay: array<f32, 3>,
+    rise: array<f32, 3>,
+    weight: array<f32, 3>,
+    wlsabslength: u32,
+    wls_spectrum: u32,
+    wls_delay: f32,
+    wls_mean: f32,
 }
 
 struct PhotonSurface {
@@ -290,6 +301,14 @@ struct PhotonSurface {
     reflectivity: u32,
     efficiency: u32,
     transmittance: u32,
+    finish: u32,
+    unified: u32,
+    roughness: f32,
+    rindex: u32,
+    spike: u32,
+    lobe: u32,
+    backscatter: u32,
+    pad: u32,
 }
 
 struct PhotonInstance {
@@ -308,6 +327,26 @@ struct PhotonBorder {
     post: u32,
     surface: u32,
     pad: u32,
+}
+
+struct PhotonGenstep {
+    kind: u32,
+    material: u32,
+    end_index: array<u32, 2>,
+    start: array<f32, 3>,
+    time: f32,
+    end: array<f32, 3>,
+    charge: f32,
+    beta: array<f32, 2>,
+    mean_beta: f32,
+    max_sin2: f32,
+    axis: array<f32, 3>,
+    pad: u32,
+    yields: array<f32, 2>,
+    counts: array<u32, 3>,
+    spectrum: array<u32, 3>,
+    decay: array<f32, 3>,
+    rise: array<f32, 3>,
 }
 
 struct PhotonRecord {
@@ -329,11 +368,21 @@ struct PhotonRecord {
 const PHOTON_SOURCE_POINT: u32 = 0u;
 const PHOTON_SOURCE_BEAM: u32 = 1u;
 const PHOTON_SOURCE_SPHERE: u32 = 2u;
+const PHOTON_SOURCE_GENSTEPS: u32 = 3u;
+const PHOTON_GENSTEP_CHERENKOV: u32 = 1u;
+const PHOTON_GENSTEP_SCINTILLATION: u32 = 2u;
 const PHOTON_SURFACE_METAL: u32 = 0u;
 const PHOTON_SURFACE_DIELECTRIC: u32 = 1u;
+const PHOTON_FINISH_POLISHED: u32 = 0u;
+const PHOTON_FINISH_POLISHED_FRONT_PAINTED: u32 = 1u;
+const PHOTON_FINISH_POLISHED_BACK_PAINTED: u32 = 2u;
+const PHOTON_FINISH_GROUND: u32 = 3u;
+const PHOTON_FINISH_GROUND_FRONT_PAINTED: u32 = 4u;
+const PHOTON_FINISH_GROUND_BACK_PAINTED: u32 = 5u;
 const PHOTON_DETECTED: u32 = 1u;
 const PHOTON_LOOPS_CUT: u32 = 2u;
 const PHOTON_DEPTH_LIMIT: u32 = 4u;
+const PHOTON_SEVERAL_EMITTED: u32 = 8u;
 const STATUS_DEPTH_LIMIT: u32 = 1u;
 const STATUS_LOOPS_CUT: u32 = 2u;
 const STATUS_START_NEAR: u32 = 4u;

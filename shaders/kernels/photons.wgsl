@@ -2,10 +2,15 @@
 // to its end, twin of photons::propagate (PhotonScene::photon and lineage) with the CPU
 // tracer in f32 (photons::tracer::Precision::F32), compared photon by photon in
 // crates/trace/tests/gpu_photons.rs. Physics by module as in Rust: photons/sources
-// (sources.rs), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
-// (surfaces.rs), photons/bindings (the flattened tables, gpu_tables.rs, and the history,
-// output.rs). The geometry is the scan's scene traversal (trace/scene): the navigator's
-// step from the volume the photon is in (`cross_from`) and the locate (`locate_point`).
+// (sources.rs), photons/gensteps (gensteps.rs, cherenkov.rs), photons/scintillation and
+// photons/reemission (scintillation.rs, REEMISSIONPROB), photons/spectra (properties.rs'
+// Spectrum), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
+// (surfaces.rs), photons/surface_models (surface_models.rs), photons/wls (wavelength
+// shifting, properties.rs' Wls), photons/bindings (the
+// flattened tables, gpu_tables.rs, and the history, output.rs), photons/records (step
+// points, output.rs). The geometry is the scan's scene traversal (trace/scene): the
+// navigator's step from the volume the photon is in (`cross_from`) and the locate
+// (`locate_point`).
 // #import generated/trace_records
 // #import trace/scene
 // #import loop_budget
@@ -13,6 +18,15 @@
 // #import photons/bulk
 // #import photons/sources
 // #import photons/surfaces
+// #if reemission
+// #import photons/reemission
+// #endif
+// #if records
+// #import photons/records
+// #endif
+// #if wls
+// #import photons/wls
+// #endif
 
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
 // instance `current`; a crossing of the surface the photon sits on, found again at a
@@ -80,26 +94,38 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     let lo = pparams.first_lo + i;
     let hi = pparams.first_hi + select(0u, 1u, lo < i);
     var rng = rng_new(pparams.seed, lo, hi);
-    let start = torch_start(&rng);
-    let energy = pparams.energy;
+    let start = emitted_photon(lo, hi, &rng);
+    var energy = start.energy;
+    // A fixed wavelength as given; else from the photon's energy.
+    var wavelength = pparams.wavelength_nm;
+    if wavelength == 0.0 {
+        wavelength = wavelength_of_energy(energy);
+    }
     var out: PhotonRecord;
     out.instance = UNSET;
-    out.wavelength = pparams.wavelength_nm;
     var status = 0u;
     // The navigator's STATUS_* bits.
     var nav = 0u;
-    var history = History(0u, 0u, 0u, 0u);
+    var history = History(0u, 0u, 0u, 0u, 0u);
     history_push(&history, LABEL_TO);
     var pos = start.position;
     var dp = DirPol(start.direction, start.polarization);
-    var time = 0.0;
+    var time = start.time;
     var steps = 0u;
     var current = locate_point(pos, vec3<f32>(0.0), &nav);
     var ended = current == UNSET;
     if ended {
         history_push(&history, LABEL_MI);
     }
+    // #if records
+    // Labels whose step points are written: each is written at the next loop's start or
+    // after the loop, where the photon is once its label's event is done.
+    var recorded = 0u;
+    // #endif
     loop {
+        // #if records
+        record_points(i, &recorded, history, pos, time, dp, wavelength);
+        // #endif
         if ended {
             break;
         }
@@ -111,13 +137,17 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
         let m = pinstances[current].material;
         var d_abs = INF;
         var d_sc = INF;
+        var d_wls = INF;
         if m != UNSET {
             d_abs = draw_distance(pmaterials[m].abslength, energy, &rng);
             d_sc = draw_distance(pmaterials[m].rayleigh, energy, &rng);
+            // #if wls
+            d_wls = draw_distance(pmaterials[m].wlsabslength, energy, &rng);
+            // #endif
         }
         let h = next_boundary(pos, dp.dir, current);
         let t_b = select(INF, h.t, h.found);
-        let step = min(min(t_b, d_abs), d_sc);
+        let step = min(min(min(t_b, d_abs), d_sc), d_wls);
         if step >= INF {
             history_push(&history, LABEL_MI);
             break;
@@ -125,6 +155,13 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
         pos = pos + dp.dir * step;
         time += step / velocity(m, energy);
         if d_abs == step && d_abs < t_b {
+            // #if reemission
+            if reemit(m, &energy, &time, &dp, &rng) {
+                wavelength = wavelength_of_energy(energy);
+                history_push(&history, LABEL_RE);
+                continue;
+            }
+            // #endif
             history_push(&history, LABEL_AB);
             break;
         }
@@ -133,6 +170,22 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_SC);
             continue;
         }
+        // #if wls
+        if d_wls == step && d_wls < t_b {
+            let w = wls_absorb(m, &energy, &time, &dp, &rng);
+            if w == WLS_ONE {
+                wavelength = wavelength_of_energy(energy);
+                history_push(&history, LABEL_RE);
+                continue;
+            }
+            if w == WLS_SEVERAL {
+                status |= PHOTON_SEVERAL_EMITTED;
+                break;
+            }
+            history_push(&history, LABEL_AB);
+            break;
+        }
+        // #endif
         let post = next_volume(pos, dp.dir, current, h, &nav);
         if post == UNSET {
             history_push(&history, LABEL_MI);
@@ -151,6 +204,8 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_BR);
         } else if what == CROSS_SURFACE_REFLECTED {
             history_push(&history, LABEL_SR);
+        } else if what == CROSS_DIFFUSE_REFLECTED {
+            history_push(&history, LABEL_DR);
         } else if what == CROSS_ABSORBED {
             history_push(&history, LABEL_SA);
             break;
@@ -161,8 +216,12 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             break;
         }
     }
+    // #if records
+    record_points(i, &recorded, history, pos, time, dp, wavelength);
+    // #endif
     out.position = array<f32, 3>(pos.x, pos.y, pos.z);
     out.time = time;
+    out.wavelength = wavelength;
     out.direction = array<f32, 3>(dp.dir.x, dp.dir.y, dp.dir.z);
     out.polarization = array<f32, 3>(dp.pol.x, dp.pol.y, dp.pol.z);
     out.history[0] = history.lo;

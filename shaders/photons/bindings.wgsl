@@ -54,20 +54,24 @@ fn property_value(t: u32, e: f32, fallback: f32) -> f32 {
     return a.y + (b.y - a.y) * (e - a.x) / (b.x - a.x);
 }
 
-// A photon's packed history: labels of 4 bits, first lowest, the first 16 kept.
+// A photon's packed history: labels of 4 bits, first lowest, the first 16 kept, and the
+// last label pushed.
 struct History {
     lo: u32,
     hi: u32,
     len: u32,
     mask: u32,
+    last: u32,
 }
 
 // Label codes (photons::output::Label).
 const LABEL_MI: u32 = 3u;
 const LABEL_AB: u32 = 4u;
+const LABEL_RE: u32 = 5u;
 const LABEL_SC: u32 = 6u;
 const LABEL_SD: u32 = 7u;
 const LABEL_SA: u32 = 8u;
+const LABEL_DR: u32 = 9u;
 const LABEL_SR: u32 = 10u;
 const LABEL_BR: u32 = 11u;
 const LABEL_BT: u32 = 12u;
@@ -82,5 +86,6 @@ fn history_push(h: ptr<function, History>, label: u32) {
         (*h).hi |= label << (4u * (n - 8u));
     }
     (*h).len = n + 1u;
+    (*h).last = label;
     (*h).mask |= 1u << (label - 1u);
 }

@@ -1,5 +1,6 @@
 // Bulk processes and the vector helpers of the photon kernel: twins of
-// photons::bulk (sample_distance, rotate_uz, rayleigh_scatter) and V3::normalized.
+// photons::bulk (sample_distance, rotate_uz, isotropic, rayleigh_scatter) and
+// V3::normalized.
 // #import real
 // #import volume/rng
 
@@ -43,6 +44,25 @@ const RAYLEIGH_MAX_DRAWS: u32 = 1000u;
 struct DirPol {
     dir: vec3<f32>,
     pol: vec3<f32>,
+}
+
+// A photon as it starts: where, which way, its polarization, time (ns) and energy (MeV).
+struct Emitted {
+    position: vec3<f32>,
+    direction: vec3<f32>,
+    polarization: vec3<f32>,
+    time: f32,
+    energy: f32,
+}
+
+// A direction uniform over the sphere and a random polarization perpendicular to it.
+fn isotropic(rng: ptr<function, VolumeRng>) -> DirPol {
+    let c = 1.0 - 2.0 * rng_next(rng);
+    let s = sqrt((1.0 - c) * (1.0 + c));
+    let phi = TAU * rng_next(rng);
+    let dir = vec3<f32>(s * cos(phi), s * sin(phi), c);
+    let a = TAU * rng_next(rng);
+    return DirPol(dir, normalized(rotate_uz(vec3<f32>(cos(a), sin(a), 0.0), dir)));
 }
 
 // Rayleigh scattering of a linearly polarized photon, drawn as Geant4 draws it.

@@ -1,6 +1,11 @@
-// Torch sources: twin of photons::sources::Source::sample.
+// Where photons start: torch sources (twin of photons::sources::Source::sample, with the
+// energy fixed or drawn from a spectrum) or gensteps, as PhotonScene::photon starts them.
 // #import photons/bindings
 // #import photons/bulk
+// #import photons/spectra
+// #if gensteps
+// #import photons/gensteps
+// #endif
 
 struct Start {
     position: vec3<f32>,
@@ -40,4 +45,19 @@ fn torch_start(rng: ptr<function, VolumeRng>) -> Start {
     let a = TAU * rng_next(rng);
     let polarization = normalized(rotate_uz(vec3<f32>(cos(a), sin(a), 0.0), direction));
     return Start(position, direction, polarization);
+}
+
+// Photon (lo, hi) of the run as it starts, drawn from its stream `rng`.
+fn emitted_photon(lo: u32, hi: u32, rng: ptr<function, VolumeRng>) -> Emitted {
+    // #if gensteps
+    if pparams.source_kind == PHOTON_SOURCE_GENSTEPS {
+        return genstep_photon(lo, hi, rng);
+    }
+    // #endif
+    let s = torch_start(rng);
+    var e = Emitted(s.position, s.direction, s.polarization, 0.0, pparams.energy);
+    // #if spectrum
+    e.energy = spectrum_energy(pparams.spectrum, rng_next(rng));
+    // #endif
+    return e;
 }

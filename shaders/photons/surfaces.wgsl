@@ -1,9 +1,9 @@
 // Which optical surface applies to a crossing (twin of
 // photons::gpu_tables::FlatSurfaces::between) and what a photon does at a boundary: twin
-// of photons::surfaces::cross for the surfaces the kernel models (polished
-// dielectric_dielectric and dielectric_metal, and no surface at all).
+// of photons::surfaces::cross (dielectric_dielectric and dielectric_metal surfaces of the
+// glisur and unified models, every plain finish, and no surface at all).
 // #import photons/bindings
-// #import photons/boundary
+// #import photons/surface_models
 
 // The surface of a crossing from instance `pre` into `post` (UNSET for none).
 fn surface_between(pre: u32, post: u32) -> u32 {
@@ -41,14 +41,13 @@ fn surface_between(pre: u32, post: u32) -> u32 {
 const CROSS_TRANSMITTED: u32 = 0u;
 const CROSS_REFLECTED: u32 = 1u;
 const CROSS_SURFACE_REFLECTED: u32 = 2u;
+const CROSS_DIFFUSE_REFLECTED: u32 = 3u;
 const CROSS_ABSORBED: u32 = 4u;
 const CROSS_DETECTED: u32 = 5u;
 
-// Geant4's tolerance on the cosine of a reflected direction with the surface normal.
-const CAR_TOLERANCE: f32 = 1e-9;
-// Most decisions of a polished dielectric crossing (a photon refracted back across the
-// surface by rounding is decided again).
-const DIELECTRIC_MAX_DECISIONS: u32 = 16u;
+// A reflected direction within this of the mirror image of the incoming one counts as
+// specular (the CPU's 1e-7, widened to f32's rounding of a reflection).
+const SPECULAR_TOLERANCE: f32 = 1e-5;
 
 // Absorption at a surface, detected with probability `efficiency`.
 fn absorb(efficiency: f32, rng: ptr<function, VolumeRng>) -> u32 {
@@ -70,80 +69,86 @@ fn cross_boundary(m1: u32, m2: u32, surface: u32, dp: ptr<function, DirPol>, ene
     if n1 < 0.0 {
         return CROSS_ABSORBED;
     }
+    // No surface: polished dielectric_dielectric (glisur, polish 1) with REFLECTIVITY 1.
+    var at = SurfaceAt(PHOTON_FINISH_POLISHED, false, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0);
     var kind = PHOTON_SURFACE_DIELECTRIC;
-    var reflectivity = 1.0;
-    var transmittance = 0.0;
     var efficiency = 0.0;
+    // The gap's RINDEX behind a back-painted finish.
+    var gap = n1;
     if surface != UNSET {
         let s = psurfaces[surface];
         kind = s.kind;
-        reflectivity = property_value(s.reflectivity, energy, 1.0);
-        transmittance = property_value(s.transmittance, energy, 0.0);
+        at.finish = s.finish;
+        at.unified = s.unified != 0u;
+        at.roughness = s.roughness;
+        at.reflectivity = property_value(s.reflectivity, energy, 1.0);
+        at.transmittance = property_value(s.transmittance, energy, 0.0);
         efficiency = property_value(s.efficiency, energy, 0.0);
+        // #if rough_surfaces
+        at.spike = property_value(s.spike, energy, 0.0);
+        at.lobe = property_value(s.lobe, energy, 0.0);
+        at.backscatter = property_value(s.backscatter, energy, 0.0);
+        if back_painted(at.finish) {
+            // Without RINDEX the photon dies in the gap (Geant4's NoRINDEX).
+            if s.rindex == UNSET {
+                return CROSS_ABSORBED;
+            }
+            gap = property_value(s.rindex, energy, 1.0);
+        }
+        // #endif
     }
+    let incoming = (*dp).dir;
+    var end = SURFACE_LEFT;
     if kind == PHOTON_SURFACE_METAL {
         let u = rng_next(rng);
-        if u > reflectivity {
-            if u > reflectivity + transmittance {
+        if u > at.reflectivity {
+            if u > at.reflectivity + at.transmittance {
                 return absorb(efficiency, rng);
             }
             return CROSS_TRANSMITTED;
         }
-        // Polished: specular about the surface normal.
-        let pol = (*dp).pol;
-        (*dp).dir = mirror((*dp).dir, normal);
-        (*dp).pol = -pol + normal * (2.0 * v3_dot(pol, normal));
-        if v3_dot((*dp).dir, normal) < 0.0 {
-            return CROSS_TRANSMITTED;
+        metal_reflection(at, dp, normal, rng);
+    } else {
+        let plain = at.finish == PHOTON_FINISH_POLISHED || at.finish == PHOTON_FINISH_GROUND;
+        var n2 = gap;
+        if plain {
+            if m1 == m2 {
+                return CROSS_TRANSMITTED;
+            }
+            n2 = rindex_of(m2, energy);
+            if n2 < 0.0 {
+                return CROSS_ABSORBED;
+            }
         }
-        return CROSS_SURFACE_REFLECTED;
-    }
-    if m1 == m2 {
-        return CROSS_TRANSMITTED;
-    }
-    let n2_of = rindex_of(m2, energy);
-    if n2_of < 0.0 {
-        return CROSS_ABSORBED;
-    }
-    let u = rng_next(rng);
-    if u > reflectivity + transmittance {
-        return absorb(efficiency, rng);
-    }
-    if u > reflectivity {
-        return CROSS_TRANSMITTED;
-    }
-    // Polished dielectric_dielectric: Fresnel on the surface itself, decided again while
-    // the photon is sent back across it.
-    var a = n1;
-    var b = n2_of;
-    var facing = normal;
-    var through = false;
-    for (var k = 0u; k < DIELECTRIC_MAX_DECISIONS; k += 1u) {
-        if through {
-            through = false;
-            facing = -facing;
-            let t = a;
-            a = b;
-            b = t;
-        }
-        let f = fresnel_decide((*dp).dir, (*dp).pol, facing, a, b, transmittance, rng_next(rng));
-        let refracted = f.what == FRESNEL_REFRACTED;
-        var next: DirPol;
-        if refracted {
-            through = true;
-            next = fresnel_refracted(f, (*dp).dir, (*dp).pol, facing);
+        if back_painted(at.finish) {
+            end = dielectric(at, dp, normal, n1, n2, rng);
         } else {
-            next = fresnel_reflected(f, (*dp).dir, (*dp).pol, facing);
+            let u = rng_next(rng);
+            if u > at.reflectivity + at.transmittance {
+                return absorb(efficiency, rng);
+            }
+            if u > at.reflectivity {
+                return CROSS_TRANSMITTED;
+            }
+            if plain {
+                end = dielectric(at, dp, normal, n1, n2, rng);
+            } else {
+                // Front paint: specular (polished) or Lambertian (ground).
+                *dp = do_reflection(at, at.finish == PHOTON_FINISH_GROUND_FRONT_PAINTED, (*dp).dir, (*dp).pol, normal, rng);
+            }
         }
-        (*dp).dir = normalized(next.dir);
-        (*dp).pol = normalized(next.pol);
-        let c = v3_dot((*dp).dir, facing);
-        if (refracted && c <= 0.0) || (!refracted && c >= -CAR_TOLERANCE) {
-            break;
-        }
+    }
+    if end == SURFACE_ABSORBED {
+        return absorb(efficiency, rng);
     }
     if v3_dot((*dp).dir, normal) < 0.0 {
         return CROSS_TRANSMITTED;
+    }
+    if v3_length((*dp).dir - mirror(incoming, normal)) > SPECULAR_TOLERANCE {
+        return CROSS_DIFFUSE_REFLECTED;
+    }
+    if kind == PHOTON_SURFACE_METAL {
+        return CROSS_SURFACE_REFLECTED;
     }
     return CROSS_REFLECTED;
 }

@@ -6,7 +6,8 @@
 //! Files: the raindrop and 8x8 SiPM files of ../shared/gdml/eic-opticks and our scene with
 //! every process of the propagator (tests/data/photons/every_process.gdml).
 //! The two programs draw different random numbers, so the comparison is statistical; the
-//! seeds are fixed, so the test is deterministic.
+//! seeds are fixed, so the test is deterministic. Where a GPU adapter opens, the GPU
+//! photon kernel's run of the same photons is held to the same criteria.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -15,9 +16,13 @@ use std::process::Command;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_tests::gdml::gdml_dir;
 use hytrace_tests::{geant4_data_dir, oracle_python};
+use hytrace_trace::gpu::{GpuContext, GpuPhotons};
 use hytrace_trace::photons::output::compare_histories;
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, propagate, Origin, PhotonScene, RunOptions};
+use hytrace_trace::photons::tracer::Precision;
+use hytrace_trace::photons::{
+    load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
+};
 use serde::Deserialize;
 
 /// Photons per run of each program.
@@ -101,28 +106,39 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
         None => gdml_dir().join(file),
     };
     let g4 = geant4(python, &gdml, source, wavelength);
-    // One history per photon, and one more for each further photon a wavelength shifter
-    // emitted.
     assert!(g4.photons >= PHOTONS, "{} histories", g4.photons);
     let (f, surfaces) = load_photon_scene(&gdml, &GdmlOptions::default()).unwrap();
-    let scene = PhotonScene::new(&f, surfaces).unwrap();
-    let run = propagate(
-        &scene,
-        &RunOptions {
-            origin: Origin::Torch {
-                source: Source::parse(source).unwrap(),
-                wavelength: Wavelength::parse(wavelength).unwrap(),
-            },
-            photons: PHOTONS,
-            first: 0,
-            seed: 1,
-            max_steps: 100_000,
-            keep_histories: false,
-            records: 0,
+    let options = RunOptions {
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::parse(wavelength).unwrap(),
         },
-    )
-    .unwrap();
-    let theirs: Vec<(String, u64)> = g4.histories.into_iter().collect();
+        photons: PHOTONS,
+        first: 0,
+        seed: 1,
+        max_steps: 100_000,
+        keep_histories: false,
+        records: 0,
+    };
+    let scene = PhotonScene::new(&f, surfaces.clone()).unwrap();
+    let cpu = propagate(&scene, &options).unwrap();
+    let what = format!("{file} {source} {wavelength}");
+    let mut problems = judge(&format!("{what} ({})", g4.geant4), &cpu, &g4);
+    // The GPU kernel against Geant4 too, where an adapter opens.
+    if let Some(ctx) = GpuContext::for_tests() {
+        let s32 = PhotonScene::with_precision(&f, surfaces, Precision::F32).unwrap();
+        let kernel = GpuPhotons::new(&ctx, &s32, &options).unwrap();
+        let gpu = kernel.propagate(&ctx, &s32, &options, &|_| ()).unwrap();
+        let found = judge(&format!("{what} (GPU kernel)"), &gpu.run, &g4);
+        problems.extend(found.into_iter().map(|p| format!("GPU kernel: {p}")));
+    }
+    (!problems.is_empty()).then(|| format!("{what}: {}", problems.join("; ")))
+}
+
+/// A run against Geant4's: the history frequencies, the detected count, the mean hit time,
+/// and where the hits land and at which wavelengths; what disagrees, in words.
+fn judge(what: &str, run: &PhotonRun, g4: &Geant4Run) -> Vec<String> {
+    let theirs: Vec<(String, u64)> = g4.histories.clone().into_iter().collect();
     let c = compare_histories(&run.counts, &theirs, MIN_COUNT);
     let (a, b) = (run.hits.len() as f64, g4.detected as f64);
     let sigma = (a + b).sqrt();
@@ -135,12 +151,11 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
     let ours_nm = wavelength_bins(run.hits.iter().map(|h| h.0[7]));
     let nm = compare_histories(
         &ours_nm,
-        &wavelength_bins(g4.hit_wavelengths.into_iter()),
+        &wavelength_bins(g4.hit_wavelengths.iter().copied()),
         MIN_COUNT,
     );
     eprintln!(
-        "{file} {source} {wavelength} ({}): chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}; hit wavelengths chi2/ndf {:.2}/{}, p {:.3}",
-        g4.geant4,
+        "{what}: chi2/ndf {:.2}/{} = {:.3}, p {:.3}; detected {} vs Geant4 {} ({:.2} sigma); mean hit time {ta:.5} vs {tb:.5} ns ({time_sigmas:.2} standard errors); hit directions chi2/ndf {:.2}/{}, p {:.3}; hit wavelengths chi2/ndf {:.2}/{}, p {:.3}",
         c.chi2,
         c.ndf,
         c.chi2 / c.ndf.max(1) as f64,
@@ -177,12 +192,9 @@ fn compare_at(python: &Path, file: &str, source: &str, wavelength: &str) -> Opti
     if time_sigmas > 4.0 {
         problems.push(format!("mean hit time {ta} vs {tb} ns"));
     }
-    (!problems.is_empty()).then(|| format!("{file} {source} {wavelength}: {}", problems.join("; ")))
+    problems
 }
 
-/// Runs both programs on every case (file, source, wavelength) and fails listing every
-/// case that disagrees; nothing runs without the oracle's Python (the helper says why, or
-/// fails where oracles are required).
 fn all_agree(cases: &[(&str, &str, &str)]) {
     let Some(python) = oracle_python(&["geant4_pybind", "numpy"]) else {
         return;

@@ -1,20 +1,22 @@
 //! The GPU photon kernel (`shaders/kernels/photons.wgsl`) against its CPU twin (the
 //! propagator with the f32 tracer) photon by photon, and against the default CPU run (f64
 //! geometry) by the fraction of identical histories and a chi2 on history frequencies,
-//! on the three scenes the kernel's physics covers: the repository's every-process scene,
-//! the raindrop and the 8x8 SiPM files of the shared corpus. Physics the kernel does not
-//! model is refused by `--backend gpu` naming it; `auto` falls back to the CPU.
+//! on every process: the repository's every-process, rough-surface, scintillator and
+//! wavelength-shifter scenes (spectra, re-emission, gensteps, wavelength shifting, step
+//! points), the raindrop and the 8x8 SiPM files of the shared corpus.
 
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use common::{gpu_stats, hytrace, repo, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_trace::gpu::{GpuContext, GpuPhotons};
-use hytrace_trace::photons::output::{compare_histories, HitRow};
+use hytrace_trace::photons::gensteps::GenstepFile;
+use hytrace_trace::photons::output::{compare_histories, history_string, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
@@ -71,10 +73,30 @@ fn same_histories(a: &PhotonRun, b: &PhotonRun) -> f64 {
 /// rounding of the physics: the kernel computes it in f32, the twin in f64 over the same
 /// f32 geometry), and against the f64 CPU by the histories' frequencies.
 fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usize) {
-    let Some(ctx) = GpuContext::for_tests() else {
-        return;
-    };
-    let run = options(source, photons);
+    twin_run(name, path, options(source, photons), min_detected);
+}
+
+/// The share of photons that may run out of lavapipe's loop budget (propagated again by
+/// the twin): none, but in the wavelength shifter, whose photons take many steps and
+/// draw up to 100 spectrum energies at each shifting absorption.
+const SHIFTER_REDONE: f64 = 0.3;
+
+/// [`twin`] for any torch run (photons from index 7); the GPU's run, or `None` without an
+/// adapter (tests do not require one).
+fn twin_run(name: &str, path: PathBuf, run: RunOptions, min_detected: usize) -> Option<PhotonRun> {
+    twin_within(name, path, run, min_detected, 0.0)
+}
+
+/// [`twin_run`], with at most `redone` of the photons run out of the driver's loop budget.
+fn twin_within(
+    name: &str,
+    path: PathBuf,
+    run: RunOptions,
+    min_detected: usize,
+    redone: f64,
+) -> Option<PhotonRun> {
+    let ctx = GpuContext::for_tests()?;
+    let photons = run.photons;
     let s32 = scene(&path, Precision::F32);
     let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
     let gpu = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap();
@@ -92,17 +114,22 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     let chi2 = compare_histories(&g.counts, &cpu64.counts, 30);
     eprintln!(
         "{name}: {photons} photons, {} hits; histories equal to the f32 twin {:.4}, to the f64 CPU {:.4}; \
-         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}",
+         chi2/ndf vs f64 {:.2}/{} (p {:.3}); redone on the CPU {}, split on the CPU {}",
         g.hits.len(),
         twin_same,
         f64_same,
         chi2.chi2,
         chi2.ndf,
         chi2.p_value,
+        gpu.times.redone_on_cpu,
+        gpu.times.split_on_cpu
+    );
+    // Photons that ran out of lavapipe's loop budget are the twin's by construction.
+    assert!(
+        gpu.times.redone_on_cpu as f64 <= redone * photons as f64,
+        "{name}: {} photons redone on the CPU",
         gpu.times.redone_on_cpu
     );
-    // No photon ran out of lavapipe's loop budget (those are the twin's by construction).
-    assert_eq!(gpu.times.redone_on_cpu, 0, "{name}");
     // f32 rounding of the physics takes a random decision apart for a few photons.
     assert!(twin_same >= 0.99, "{name}: {twin_same}");
     assert!(f64_same >= 0.98, "{name}: {f64_same}");
@@ -124,6 +151,182 @@ fn twin(name: &str, path: PathBuf, source: &str, photons: u64, min_detected: usi
     for (a, b) in pairs {
         assert!(within(a, b, 2e-2), "{name}: {:?} vs {:?}", a.0, b.0);
         assert_eq!(a.0[11..], b.0[11..], "{name}");
+    }
+    if run.records > 0 {
+        same_step_points(name, g, &cpu32, run.records as usize);
+    }
+    Some(gpu.run)
+}
+
+/// The step points of the photons with equal histories: labels (and zero points past the
+/// end) exactly, the columns within f32 rounding of the physics as hit rows are.
+fn same_step_points(name: &str, g: &PhotonRun, cpu: &PhotonRun, k: usize) {
+    assert_eq!(g.records.len(), g.histories.len() * k, "{name}");
+    assert_eq!(cpu.records.len(), g.records.len(), "{name}");
+    let (mut points, mut close) = (0, 0);
+    for (i, (a, b)) in g.histories.iter().zip(&cpu.histories).enumerate() {
+        if a != b {
+            continue;
+        }
+        for p in i * k..(i + 1) * k {
+            let (x, y) = (&g.records[p], &cpu.records[p]);
+            assert_eq!(x[11], y[11], "{name}: photon {i}, point {}", p - i * k);
+            let near = |r: f32| (0..11).all(|c| (x[c] - y[c]).abs() <= r * (1.0 + y[c].abs()));
+            assert!(near(2e-2), "{name}: photon {i}: {x:?} vs {y:?}");
+            points += usize::from(y[11] != 0.0);
+            close += usize::from(y[11] != 0.0 && near(1e-4));
+        }
+    }
+    eprintln!("{name}: {close} of {points} step points within 1e-4 relative");
+    assert!(points > 0 && close as f64 >= 0.95 * points as f64, "{name}");
+}
+
+/// Photons from gensteps in the scintillator cube: a scintillation step shared by the two
+/// components (with a charged particle, and a neutral one emitting at the step's end), one
+/// of the second component only, and a Cherenkov step of a slowing particle; the GPU emits
+/// them as the CPU does (the same draws), so the twin agrees photon by photon, and the hit
+/// times reach past the slow component's decay.
+#[test]
+fn gensteps_match_the_cpu_twin_photon_by_photon() {
+    #[rustfmt::skip]
+    let rows: [[f64; 14]; 4] = [
+        // kind, photons, material, t0, start, end, beta0, beta1, charge, component
+        [2.0, 1200.0, 1.0, 10.0, -20.0, 0.0, 0.0, 20.0, 0.0, 0.0, 0.5, 0.5, -1.0, 0.0],
+        [2.0, 300.0, 1.0, 5.0, 0.0, 30.0, 10.0, 0.0, 30.0, 40.0, 0.4, 0.3, 0.0, 2.0],
+        [2.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, 0.5, -1.0, 0.0],
+        [1.0, 1500.0, 1.0, 50.0, 0.0, 0.0, 60.0, 0.0, 0.0, 20.0, 0.99, 0.9, -1.0, 0.0],
+    ];
+    let file = GenstepFile::from_values("twin.npy".into(), &[4, 14], rows.as_flattened()).unwrap();
+    let run = RunOptions {
+        origin: Origin::Gensteps(Arc::new(file)),
+        photons: 2990,
+        ..options("point:0,0,0", 1)
+    };
+    let path = repo("tests/data/photons/scintillator.gdml");
+    let Some(gpu) = twin_run("gensteps", path, run, 300) else {
+        return;
+    };
+    // The second step's photons (from index 1200, the run's from 7) start at its end, 40 mm
+    // above the floor, at least 5 ns plus the flight time.
+    let late = gpu.hits.iter().filter(|h| h.0[3] > 60.0).count();
+    assert!(late > 10, "{late} hits after 60 ns");
+}
+
+/// Wavelength shifting: one photon per absorption (the first plate), a Poisson number
+/// (mean 2; the absorptions emitting several are the CPU twin's by construction).
+#[test]
+fn wavelength_shifting_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/wavelength_shifter.gdml");
+    for (name, source) in [
+        ("shifter one", "beam:-80,0,50:0.2,0,-1:10"),
+        ("shifter poisson", "beam:80,0,50:0.2,0,-1:10"),
+    ] {
+        let run = options(source, 1500);
+        twin_within(name, path.clone(), run, 100, SHIFTER_REDONE);
+    }
+}
+
+/// Step points (`--records`) from the GPU: the first K points of every photon, through
+/// boundaries, rough surfaces and re-emission, against the twin's.
+#[test]
+fn step_points_match_the_cpu_twin_point_by_point() {
+    for (name, file, source, k, wavelength) in [
+        (
+            "every_process records",
+            "tests/data/photons/every_process.gdml",
+            "point:0,0,0",
+            8,
+            Wavelength::Fixed(420.0),
+        ),
+        (
+            "rough surfaces records",
+            "tests/data/photons/rough_surfaces.gdml",
+            "beam:-265,0,50:0.5,0,-1:5",
+            5,
+            Wavelength::Fixed(420.0),
+        ),
+        (
+            "scintillator records",
+            "tests/data/photons/scintillator.gdml",
+            "point:0,0,50",
+            20,
+            Wavelength::Fixed(400.0),
+        ),
+    ] {
+        let run = RunOptions {
+            records: k,
+            ..with_wavelength(options(source, 1000), wavelength)
+        };
+        if twin_run(name, repo(file), run, 10).is_none() {
+            return;
+        }
+    }
+}
+
+/// [`options`] with photon energies drawn from `material`'s spectrum `property`, or at
+/// `nm`.
+fn with_wavelength(run: RunOptions, wavelength: Wavelength) -> RunOptions {
+    let Origin::Torch { source, .. } = run.origin else {
+        unreachable!("a torch run")
+    };
+    RunOptions {
+        origin: Origin::Torch { source, wavelength },
+        ..run
+    }
+}
+
+fn spectrum(material: &str, property: &str) -> Wavelength {
+    Wavelength::Spectrum {
+        material: material.into(),
+        property: property.into(),
+    }
+}
+
+/// Photon energies drawn from a material's spectrum (the every-process scene's liquid,
+/// as the Geant4 oracle test draws them): the hits' wavelengths spread over the spectrum.
+#[test]
+fn spectra_match_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/every_process.gdml");
+    let wavelength = spectrum("Liquid", "SCINTILLATIONCOMPONENT1");
+    for (name, source, min_detected) in [
+        ("every_process spectrum point", "point:0,0,0", 50),
+        ("every_process spectrum beam", "beam:0,0,50:0,0,-1:20", 300),
+    ] {
+        let run = with_wavelength(options(source, 2000), wavelength.clone());
+        let Some(gpu) = twin_run(name, path.clone(), run, min_detected) else {
+            return;
+        };
+        let nm: Vec<f64> = gpu.hits.iter().map(|h| h.0[7]).collect();
+        let (lo, hi) = nm
+            .iter()
+            .fold((f64::MAX, 0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(hi - lo > 20.0, "{name}: hit wavelengths {lo} .. {hi} nm");
+    }
+}
+
+/// Re-emission (REEMISSIONPROB 0.5 above 3 eV in the scintillator cube, two components):
+/// photons at 400 nm, and photons drawn from the fast component's spectrum (partly above
+/// 3 eV, where it re-emits), from inside the cube; re-emitted photons are among them.
+#[test]
+fn re_emission_matches_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/scintillator.gdml");
+    for (name, wavelength, least) in [
+        ("scintillator 400 nm", Wavelength::Fixed(400.0), 100),
+        (
+            "scintillator spectrum",
+            spectrum("LS", "SCINTILLATIONCOMPONENT1"),
+            20,
+        ),
+    ] {
+        let run = with_wavelength(options("point:0,0,50", 3000), wavelength);
+        let Some(gpu) = twin_run(name, path.clone(), run, 300) else {
+            return;
+        };
+        let re = (gpu.histories.iter())
+            .filter(|&&h| history_string(h).contains("RE"))
+            .count();
+        eprintln!("{name}: {re} photons re-emitted");
+        assert!(re >= least, "{name}: {re} photons re-emitted");
     }
 }
 
@@ -151,6 +354,89 @@ fn raindrop_matches_the_cpu_twin_photon_by_photon() {
 fn sipm_matches_the_cpu_twin_photon_by_photon() {
     let path = repo("../shared/gdml/eic-opticks/8x8SiPM_w_CSI_optial_grease.gdml");
     twin("sipm point", path, "point:0.1,0.1,4", 1500, 200);
+}
+
+/// Rough and painted surfaces (glisur and unified, every plain finish, on
+/// dielectric_dielectric and dielectric_metal): one beam per slab of
+/// `rough_surfaces.gdml`, as the Geant4 oracle test shines them; the shell around the slabs
+/// detects every photon that leaves.
+#[test]
+fn rough_and_painted_surfaces_match_the_cpu_twin_photon_by_photon() {
+    let path = repo("tests/data/photons/rough_surfaces.gdml");
+    for (name, source) in [
+        ("unified ground glass", "beam:-265,0,50:0.5,0,-1:5"),
+        (
+            "unified ground glass at 60 degrees",
+            "beam:-266,0,20:1.732,0,-1:5",
+        ),
+        ("unified ground metal", "beam:-185,0,50:0.5,0,-1:5"),
+        ("glisur ground glass", "beam:-105,0,50:0.5,0,-1:5"),
+        (
+            "glisur ground glass at 60 degrees",
+            "beam:-167,0,50:1.732,0,-1:5",
+        ),
+        ("ground front-painted glass", "beam:-25,0,50:0.5,0,-1:5"),
+        ("polished back-painted glass", "beam:55,0,50:0.5,0,-1:5"),
+        ("ground back-painted glass", "beam:135,0,50:0.5,0,-1:5"),
+        ("glisur ground metal", "beam:215,0,50:0.5,0,-1:5"),
+    ] {
+        twin(name, path.clone(), source, 1000, 500);
+    }
+}
+
+/// Runs `hytrace photons SCENE --source SOURCE -n N` on `backend` with `--history`,
+/// `--stats` and `extra` into `dir`: the command's output and the paths of its hits and
+/// histories.
+fn photons_command(
+    dir: &Path,
+    scene: &Path,
+    source: &str,
+    n: u64,
+    backend: &str,
+    extra: &[&str],
+) -> (std::process::Output, PathBuf, PathBuf) {
+    let out = dir.join(format!("{backend}.npy"));
+    let history = dir.join(format!("{backend}-history.npy"));
+    let (n, history_arg) = (n.to_string(), format!("--history={}", history.display()));
+    let mut args = vec![
+        "photons",
+        scene.to_str().unwrap(),
+        "--source",
+        source,
+        "-n",
+        &n,
+        "-o",
+        out.to_str().unwrap(),
+        &history_arg,
+        "--top",
+        "0",
+        "--backend",
+        backend,
+        "--stats",
+    ];
+    args.extend(extra);
+    let o = hytrace(&args, &[]);
+    (o, out, history)
+}
+
+/// The packed histories of a `--history` file (uint64).
+fn packed_histories(p: &Path) -> Vec<u64> {
+    let h = std::fs::read(p).unwrap();
+    assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
+    h[128..]
+        .chunks_exact(8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+/// The `--stats` line that ends a command's stdout.
+fn stats_line(o: &std::process::Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let line = stdout.lines().last().unwrap_or_default().to_string();
+    gpu_stats(&std::process::Output {
+        stdout: line.into_bytes(),
+        ..o.clone()
+    })
 }
 
 /// Batches overlap on the GPU (the next one runs while the host handles the last) and the
@@ -205,39 +491,12 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
     }
     let dir = tempfile::tempdir().unwrap();
     let scene = repo("tests/data/photons/every_process.gdml");
-    let run = |backend: &str| {
-        let out = dir.path().join(format!("{backend}.npy"));
-        let history = dir.path().join(format!("{backend}-history.npy"));
-        let o = hytrace(
-            &[
-                "photons",
-                scene.to_str().unwrap(),
-                "--source",
-                "point:0,0,0",
-                "-n",
-                "500",
-                "-o",
-                out.to_str().unwrap(),
-                &format!("--history={}", history.display()),
-                "--top",
-                "0",
-                "--batch",
-                "128",
-                "--backend",
-                backend,
-                "--stats",
-            ],
-            &[],
-        );
-        (o, out, history)
+    let run = |backend| {
+        let batch = ["--batch", "128"];
+        photons_command(dir.path(), &scene, "point:0,0,0", 500, backend, &batch)
     };
     let (gpu, gpu_hits, gpu_history) = run("gpu");
-    let stdout = String::from_utf8_lossy(&gpu.stdout).into_owned();
-    let line = stdout.lines().last().unwrap_or_default().to_string();
-    let stats = gpu_stats(&std::process::Output {
-        stdout: line.into_bytes(),
-        ..gpu
-    });
+    let stats = stats_line(&gpu);
     assert_eq!(stats["photons"], 500);
     // Four batches of 128 photons in flight, 88 bytes each on the GPU; the phases of the
     // run are timed apart, so they add up to at most the whole.
@@ -270,89 +529,58 @@ fn the_command_runs_photons_on_the_gpu_and_writes_what_the_cpu_writes() {
         g.shape,
         c.shape
     );
-    let histories = |p: &PathBuf| {
-        let h = std::fs::read(p).unwrap();
-        assert!(String::from_utf8_lossy(&h[..128]).contains("<u8"));
-        h[128..]
-            .chunks_exact(8)
-            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
-            .collect::<Vec<_>>()
-    };
-    let (hg, hc) = (histories(&gpu_history), histories(&cpu_history));
+    let (hg, hc) = (
+        packed_histories(&gpu_history),
+        packed_histories(&cpu_history),
+    );
     assert_eq!((hg.len(), hc.len()), (500, 500));
     let same = hg.iter().zip(&hc).filter(|(a, b)| a == b).count();
     assert!(same >= 495, "{same} of 500 histories equal");
 }
 
+/// Wavelength shifting from the command line (the two plates of
+/// `wavelength_shifter.gdml`, as the Geant4 oracle test shines them): one photon per
+/// absorption stays on the GPU; an absorption emitting a Poisson number (mean 2) leaves
+/// the photon, with all it emitted, to the CPU twin, as `gpu_split_on_cpu` counts; both
+/// give the CPU run's histories.
 #[test]
-fn unsupported_physics_is_refused_on_the_gpu_by_name_and_auto_falls_back() {
+fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
     if GpuContext::for_tests().is_none() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("hits.npy");
-    let cases = [
-        (
-            "tests/data/photons/rough_surfaces.gdml",
-            "beam:-265,0,50:0.5,0,-1:5",
-            "420",
-            "finish",
-        ),
-        (
-            "tests/data/photons/wavelength_shifter.gdml",
-            "beam:-80,0,50:0.2,0,-1:10",
-            "420",
-            "WLSABSLENGTH",
-        ),
-        (
-            "tests/data/photons/every_process.gdml",
-            "point:0,0,0",
-            "Liquid:SCINTILLATIONCOMPONENT1",
-            "spectrum",
-        ),
-    ];
-    for (file, source, wavelength, needle) in cases {
-        let scene = repo(file);
-        let args = |backend: &'static str| {
-            vec![
-                "photons".to_string(),
-                scene.to_str().unwrap().to_string(),
-                "--source".into(),
-                source.into(),
-                "--wavelength".into(),
-                wavelength.into(),
-                "-n".into(),
-                "50".into(),
-                "-o".into(),
-                out.to_str().unwrap().into(),
-                "--backend".into(),
-                backend.into(),
-                "--stats".into(),
-            ]
-        };
-        let gpu_args = args("gpu");
-        let o = hytrace(
-            &gpu_args.iter().map(String::as_str).collect::<Vec<_>>(),
-            &[],
+    let scene = repo("tests/data/photons/wavelength_shifter.gdml");
+    for (source, split) in [
+        ("beam:-80,0,50:0.2,0,-1:10", false),
+        ("beam:80,0,50:0.2,0,-1:10", true),
+    ] {
+        let (gpu, _, gpu_history) = photons_command(dir.path(), &scene, source, 1000, "gpu", &[]);
+        let stats = stats_line(&gpu);
+        let (cpu, _, cpu_history) = photons_command(dir.path(), &scene, source, 1000, "cpu", &[]);
+        assert!(cpu.status.success(), "{source}: {}", stderr(&cpu));
+        let (g, c) = (
+            packed_histories(&gpu_history),
+            packed_histories(&cpu_history),
         );
-        let e = stderr(&o);
-        assert!(!o.status.success(), "{file}: accepted on the GPU");
-        assert!(
-            e.contains(needle)
-                && e.contains("not on the GPU")
-                && e.contains(file.rsplit('/').next().unwrap()),
-            "{file}: {e}"
+        assert!(stats["kernel_features"]
+            .as_array()
+            .unwrap()
+            .contains(&"wls".into()));
+        let on_cpu = stats["gpu_split_on_cpu"].as_u64().unwrap();
+        assert_eq!(
+            on_cpu > 0,
+            split,
+            "{source}: {on_cpu} photons split on the CPU"
         );
-        assert!(!out.exists(), "{file}: an output file after the error");
-        let auto_args = args("auto");
-        let o = hytrace(
-            &auto_args.iter().map(String::as_str).collect::<Vec<_>>(),
-            &[],
+        let re = g
+            .iter()
+            .filter(|&&h| history_string(h).contains("RE"))
+            .count();
+        let same = g.iter().zip(&c).filter(|(a, b)| a == b).count();
+        eprintln!(
+            "{source}: {re} re-emitted, {on_cpu} split on the CPU, {same} of 1000 histories equal"
         );
-        assert!(o.status.success(), "{file}: {}", stderr(&o));
-        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        assert_eq!(stats["backend"], "cpu", "{file}");
-        assert!(stderr(&o).contains(needle), "{file}: {}", stderr(&o));
-        std::fs::remove_file(&out).unwrap();
+        assert!(re > 100, "{source}: {re} re-emitted");
+        assert!(same >= 980, "{source}: {same} of 1000 histories equal");
     }
 }

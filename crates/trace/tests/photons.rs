@@ -268,6 +268,42 @@ fn the_command_writes_hits_histories_and_stats() {
     assert_eq!((h.len() - 128) / 8, 2000);
 }
 
+/// `--explain` lists the processes and where they run, propagates nothing and writes
+/// nothing; it needs neither `-n` nor `-o`.
+#[test]
+fn explain_lists_the_processes_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let hits = dir.path().join("hits.npy");
+    let scene = scene_path();
+    for with_out in [false, true] {
+        let mut args = vec![
+            "photons",
+            scene.to_str().unwrap(),
+            "--source",
+            "point:0,0,0",
+        ];
+        if with_out {
+            args.extend(["-n", "10", "-o", hits.to_str().unwrap()]);
+        }
+        args.push("--explain");
+        let out = hytrace(&args);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for needle in [
+            "torch source: point at (0, 0, 0) mm [cpu, gpu]",
+            "Rayleigh scattering (RAYLEIGH): materials",
+            "gpu kernel: composed with the physics features []",
+        ] {
+            assert!(stdout.contains(needle), "{needle}: {stdout}");
+        }
+        assert!(!hits.exists());
+    }
+}
+
 #[test]
 fn bad_input_fails_naming_the_problem_without_output() {
     let dir = tempfile::tempdir().unwrap();

@@ -4,16 +4,17 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::bail;
+use anyhow::{bail, Context};
 use clap::Args;
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::gpu::{add_gpu_stats, warn_redone, BYTES_PER_PHOTON};
 use hytrace_trace::outputs::{check_destinations, OutputSet};
 use hytrace_trace::photons::backend::{propagate_on, BackendRun, PhotonBackend};
+use hytrace_trace::photons::explain::explain;
 use hytrace_trace::photons::gensteps::GenstepFile;
 use hytrace_trace::photons::output::{history_table, RunFiles};
 use hytrace_trace::photons::sources::{Source, Wavelength};
-use hytrace_trace::photons::{load_photon_scene, Origin, RunOptions};
+use hytrace_trace::photons::{load_photon_scene, Origin, PhotonScene, RunOptions};
 use serde_json::json;
 
 use super::choice::choice;
@@ -48,13 +49,13 @@ pub struct PhotonsArgs {
     #[arg(long, default_value = "420", conflicts_with = "gensteps")]
     pub wavelength: String,
     /// Number of photons (with --gensteps: by default all from --first on).
-    #[arg(short = 'n', long, required_unless_present = "gensteps")]
+    #[arg(short = 'n', long, required_unless_present_any = ["gensteps", "explain"])]
     pub photons: Option<u64>,
     /// Detected photons, float64 (H, 16): x y z (mm) t (ns) dx dy dz wavelength (nm)
     /// px py pz (polarization) instance (whose surface detected it) copy (its copy number)
     /// photon (index) mask (history flags, Opticks' bits) steps; written atomically.
-    #[arg(short = 'o', long)]
-    pub out: PathBuf,
+    #[arg(short = 'o', long, required_unless_present = "explain")]
+    pub out: Option<PathBuf>,
     /// Index of the first photon: photons FIRST .. FIRST + N are propagated, each with its
     /// own stream, so a run split into ranges gives exactly the whole run's photons.
     #[arg(long, default_value_t = 0)]
@@ -88,12 +89,17 @@ pub struct PhotonsArgs {
     /// Steps after which a photon is stopped (history label TR).
     #[arg(long, default_value_t = 10_000)]
     pub max_steps: u32,
-    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32: torch
-    /// sources at a fixed wavelength, absorption, Rayleigh scattering, Fresnel boundaries,
-    /// polished surfaces; other physics is refused, naming it) or auto (the GPU when an
-    /// adapter opens and the kernel models the scene, else the CPU).
+    /// Where photons are propagated: cpu (f64 geometry), gpu (the WGSL kernel, f32, with
+    /// the same physics and outputs; a photon whose wavelength-shifting absorption emits
+    /// several photons is propagated on the CPU with them; --explain lists what the run
+    /// needs) or auto (the GPU when an adapter opens, else the CPU).
     #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
     pub backend: PhotonBackend,
+    /// Print the processes the run calls for (source, bulk processes with their materials,
+    /// optical surfaces, outputs), where each runs (cpu, gpu), and what the GPU kernel would
+    /// be composed of; propagate nothing.
+    #[arg(long)]
+    pub explain: bool,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
     /// propagate_s and of it tally_s and write_s, photons_per_s, threads, backend; on the
     /// GPU also the adapter, its times, the host's work on the results and the batch).
@@ -111,10 +117,31 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         },
         (None, None) => bail!("give --source or --gensteps"),
     };
+    if args.explain {
+        let (f, surfaces) = load_photon_scene(&args.scene, options)?;
+        let scene = PhotonScene::new(&f, surfaces)
+            .with_context(|| format!("{}: preparing for photons", args.scene.display()))?;
+        let run = RunOptions {
+            origin,
+            photons: args.photons.unwrap_or(1),
+            first: args.first,
+            seed: args.seed,
+            max_steps: args.max_steps,
+            keep_histories: false,
+            records: args.records.unwrap_or(0),
+        };
+        for line in explain(&scene, &run) {
+            println!("{line}");
+        }
+        return Ok(());
+    }
+    let Some(out) = &args.out else {
+        bail!("give -o HITS.npy");
+    };
     // The outputs are checked before the work, streamed to temporary files during it and
     // moved into place together after it.
     let history_path = args.history.as_ref().and_then(|h| h.as_deref());
-    let mut destinations = vec![("--out", args.out.as_path())];
+    let mut destinations = vec![("--out", out.as_path())];
     destinations.extend(history_path.map(|p| ("--history", p)));
     destinations.extend(args.records_out.as_deref().map(|p| ("--records-out", p)));
     check_destinations(&destinations)?;
@@ -140,7 +167,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         (None, Origin::Torch { .. }) => bail!("-n is needed with --source"),
     };
     let mut written = OutputSet::new();
-    let hits_tmp = written.reserve(&args.out)?;
+    let hits_tmp = written.reserve(out)?;
     let history_tmp = history_path.map(|p| written.reserve(p)).transpose()?;
     let records_tmp = match (&args.records_out, args.records) {
         (Some(p), Some(k)) => Some((written.reserve(p)?, k)),
@@ -204,7 +231,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             "{} photons, {} detected, written to {}",
             photons,
             run.hits,
-            args.out.display()
+            out.display()
         );
     }
     Ok(())

@@ -9,12 +9,12 @@ use hytrace_foundry::record;
 use hytrace_foundry::wgsl::push_struct;
 
 record! {
-    /// What every photon of a GPU run shares: the torch source, the wavelength, the run's
-    /// photons and seed.
+    /// What every photon of a GPU run shares: the torch source (or gensteps), the
+    /// wavelength or spectrum, the run's photons and seed.
     pub struct PhotonParams {
         /// Point: the position; beam, sphere: the centre (mm).
         pub source_at: [f32; 3],
-        /// `PHOTON_SOURCE_*`.
+        /// `PHOTON_SOURCE_*` (`PHOTON_SOURCE_GENSTEPS`: photons from the gensteps).
         pub source_kind: u32,
         /// Beam: the unit direction.
         pub source_direction: [f32; 3],
@@ -42,8 +42,11 @@ record! {
         pub hierarchical: u32,
         /// 2: the trip count of the loop-budget probe (`shaders/loop_budget.wgsl`).
         pub probe_trips: u32,
-        /// Padding.
-        pub pad: u32,
+        /// The table of a torch run's spectrum, `(energy, integral)` rows
+        /// (`u32::MAX`: every photon at `energy`).
+        pub spectrum: u32,
+        /// Step points written per photon (`--records`; 0: none).
+        pub records: u32,
     }
 }
 
@@ -69,12 +72,33 @@ record! {
         pub rayleigh: u32,
         /// Group velocity (mm/ns).
         pub groupvel: u32,
+        /// REEMISSIONPROB (`u32::MAX`: no re-emission).
+        pub reemission: u32,
+        /// Scintillation components a re-emitted photon follows (0 to 3).
+        pub components: u32,
+        /// Each component's spectrum, `(energy, integral)` rows.
+        pub spectrum: [u32; 3],
+        /// Each component's decay time (ns).
+        pub decay: [f32; 3],
+        /// Each component's rise time (ns; 0: none).
+        pub rise: [f32; 3],
+        /// Each component's yield.
+        pub weight: [f32; 3],
+        /// WLSABSLENGTH (`u32::MAX`: no wavelength shifting).
+        pub wlsabslength: u32,
+        /// WLSCOMPONENT, `(energy, integral)` rows (`u32::MAX`: a shifting absorption
+        /// emits nothing).
+        pub wls_spectrum: u32,
+        /// WLSTIMECONSTANT (ns).
+        pub wls_delay: f32,
+        /// WLSMEANNUMBERPHOTONS (negative: one photon per absorption).
+        pub wls_mean: f32,
     }
 }
 
 record! {
-    /// An optical surface the kernel models (polished): its type and tables (indices into
-    /// the tables; `u32::MAX`: the default, REFLECTIVITY 1, the others 0).
+    /// An optical surface: its type, finish and model and its tables (indices into the
+    /// tables; `u32::MAX`: the default, REFLECTIVITY 1, the others 0).
     pub struct PhotonSurface {
         /// `PHOTON_SURFACE_*`.
         pub kind: u32,
@@ -84,6 +108,22 @@ record! {
         pub efficiency: u32,
         /// TRANSMITTANCE.
         pub transmittance: u32,
+        /// `PHOTON_FINISH_*` (Geant4's enumerator order).
+        pub finish: u32,
+        /// 1 for the unified model, 0 for glisur.
+        pub unified: u32,
+        /// The model's roughness: unified `sigma_alpha` (radians), glisur `polish`.
+        pub roughness: f32,
+        /// RINDEX of the gap behind a back-painted finish.
+        pub rindex: u32,
+        /// SPECULARSPIKECONSTANT (unified).
+        pub spike: u32,
+        /// SPECULARLOBECONSTANT (unified).
+        pub lobe: u32,
+        /// BACKSCATTERCONSTANT (unified).
+        pub backscatter: u32,
+        /// Padding.
+        pub pad: u32,
     }
 }
 
@@ -129,6 +169,49 @@ record! {
 }
 
 record! {
+    /// A genstep as the kernel emits photons from it
+    /// ([`crate::photons::gensteps::Gensteps::gpu_records`]): the step, and what its kind
+    /// needs (Cherenkov: the axis, mean beta, `sin^2` bound and the yields at the ends;
+    /// scintillation: each component's photons, spectrum and time profile).
+    pub struct PhotonGenstep {
+        /// `PHOTON_GENSTEP_*`.
+        pub kind: u32,
+        /// Material index.
+        pub material: u32,
+        /// Index of the first photon after this step's (low, high 32 bits).
+        pub end_index: [u32; 2],
+        /// Start of the step (mm).
+        pub start: [f32; 3],
+        /// Time at the start (ns).
+        pub time: f32,
+        /// End of the step (mm).
+        pub end: [f32; 3],
+        /// Charge of the particle (e).
+        pub charge: f32,
+        /// Beta at the start and the end.
+        pub beta: [f32; 2],
+        /// Cherenkov: the mean beta.
+        pub mean_beta: f32,
+        /// Cherenkov: `sin^2` of the cone's largest angle (the rejection's bound).
+        pub max_sin2: f32,
+        /// Cherenkov: the unit direction of the step.
+        pub axis: [f32; 3],
+        /// Padding.
+        pub pad: u32,
+        /// Cherenkov: the relative yields at the two betas.
+        pub yields: [f32; 2],
+        /// Scintillation: photons of each component, in order.
+        pub counts: [u32; 3],
+        /// Scintillation: each component's spectrum, `(energy, integral)` rows.
+        pub spectrum: [u32; 3],
+        /// Scintillation: each component's decay time (ns).
+        pub decay: [f32; 3],
+        /// Scintillation: each component's rise time (ns; 0: none).
+        pub rise: [f32; 3],
+    }
+}
+
+record! {
     /// How one photon ended, for the photons the host needs more of than their history
     /// (detected, or to be propagated again on the CPU): appended by the kernel in the
     /// order they finish, each naming its photon.
@@ -168,15 +251,36 @@ pub const PHOTON_SOURCE_POINT: u32 = 0;
 pub const PHOTON_SOURCE_BEAM: u32 = 1;
 /// From a sphere along its normal.
 pub const PHOTON_SOURCE_SPHERE: u32 = 2;
+/// Photons from the gensteps ([`PhotonGenstep`]).
+pub const PHOTON_SOURCE_GENSTEPS: u32 = 3;
+/// [`PhotonGenstep::kind`]: a Cherenkov step.
+pub const PHOTON_GENSTEP_CHERENKOV: u32 = 1;
+/// A scintillation step.
+pub const PHOTON_GENSTEP_SCINTILLATION: u32 = 2;
 /// [`PhotonSurface::kind`]: `dielectric_metal`.
 pub const PHOTON_SURFACE_METAL: u32 = 0;
 /// `dielectric_dielectric`.
 pub const PHOTON_SURFACE_DIELECTRIC: u32 = 1;
+/// [`PhotonSurface::finish`]: polished.
+pub const PHOTON_FINISH_POLISHED: u32 = 0;
+/// Polished, painted on the surface.
+pub const PHOTON_FINISH_POLISHED_FRONT_PAINTED: u32 = 1;
+/// Polished, painted behind a gap.
+pub const PHOTON_FINISH_POLISHED_BACK_PAINTED: u32 = 2;
+/// Ground.
+pub const PHOTON_FINISH_GROUND: u32 = 3;
+/// Ground, painted on the surface.
+pub const PHOTON_FINISH_GROUND_FRONT_PAINTED: u32 = 4;
+/// Ground, painted behind a gap.
+pub const PHOTON_FINISH_GROUND_BACK_PAINTED: u32 = 5;
 /// [`PhotonRecord::status`] bit: detected (the record is a hit).
 pub const PHOTON_DETECTED: u32 = 1;
 /// Bit: the driver's loop budget cut the photon's loops short (llvmpipe); its record is
 /// wrong and it is propagated again on the CPU.
 pub const PHOTON_LOOPS_CUT: u32 = 2;
+/// Bit: a wavelength-shifting absorption emitted two photons or more; the photon and
+/// those it emitted are propagated on the CPU (the kernel carries one photon).
+pub const PHOTON_SEVERAL_EMITTED: u32 = 8;
 /// Bit: the placement tree was deeper than the navigator's loop bound (never for a
 /// validated scene); propagated again on the CPU.
 pub const PHOTON_DEPTH_LIMIT: u32 = 4;
@@ -190,6 +294,7 @@ pub fn photon_records() -> Vec<RecordEntry> {
         entry::<PhotonSurface>(),
         entry::<PhotonInstance>(),
         entry::<PhotonBorder>(),
+        entry::<PhotonGenstep>(),
         entry::<PhotonRecord>(),
     ]
 }
@@ -202,16 +307,39 @@ pub fn push_photon_wgsl(out: &mut String) {
     push_struct::<PhotonSurface>(out);
     push_struct::<PhotonInstance>(out);
     push_struct::<PhotonBorder>(out);
+    push_struct::<PhotonGenstep>(out);
     push_struct::<PhotonRecord>(out);
     for (name, value) in [
         ("PHOTON_SOURCE_POINT", PHOTON_SOURCE_POINT),
         ("PHOTON_SOURCE_BEAM", PHOTON_SOURCE_BEAM),
         ("PHOTON_SOURCE_SPHERE", PHOTON_SOURCE_SPHERE),
+        ("PHOTON_SOURCE_GENSTEPS", PHOTON_SOURCE_GENSTEPS),
+        ("PHOTON_GENSTEP_CHERENKOV", PHOTON_GENSTEP_CHERENKOV),
+        ("PHOTON_GENSTEP_SCINTILLATION", PHOTON_GENSTEP_SCINTILLATION),
         ("PHOTON_SURFACE_METAL", PHOTON_SURFACE_METAL),
         ("PHOTON_SURFACE_DIELECTRIC", PHOTON_SURFACE_DIELECTRIC),
+        ("PHOTON_FINISH_POLISHED", PHOTON_FINISH_POLISHED),
+        (
+            "PHOTON_FINISH_POLISHED_FRONT_PAINTED",
+            PHOTON_FINISH_POLISHED_FRONT_PAINTED,
+        ),
+        (
+            "PHOTON_FINISH_POLISHED_BACK_PAINTED",
+            PHOTON_FINISH_POLISHED_BACK_PAINTED,
+        ),
+        ("PHOTON_FINISH_GROUND", PHOTON_FINISH_GROUND),
+        (
+            "PHOTON_FINISH_GROUND_FRONT_PAINTED",
+            PHOTON_FINISH_GROUND_FRONT_PAINTED,
+        ),
+        (
+            "PHOTON_FINISH_GROUND_BACK_PAINTED",
+            PHOTON_FINISH_GROUND_BACK_PAINTED,
+        ),
         ("PHOTON_DETECTED", PHOTON_DETECTED),
         ("PHOTON_LOOPS_CUT", PHOTON_LOOPS_CUT),
         ("PHOTON_DEPTH_LIMIT", PHOTON_DEPTH_LIMIT),
+        ("PHOTON_SEVERAL_EMITTED", PHOTON_SEVERAL_EMITTED),
     ] {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }

@@ -14,23 +14,27 @@ use super::compose::declared_constants;
 use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::photon_records::{
     PhotonParams, PhotonRecord, PHOTON_DEPTH_LIMIT, PHOTON_DETECTED, PHOTON_LOOPS_CUT,
-    PHOTON_SOURCE_BEAM, PHOTON_SOURCE_POINT, PHOTON_SOURCE_SPHERE,
+    PHOTON_SEVERAL_EMITTED, PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS, PHOTON_SOURCE_POINT,
+    PHOTON_SOURCE_SPHERE,
 };
 use super::timing::{finish_pass, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
-use crate::photons::gpu_tables::{unsupported, GpuTables};
-use crate::photons::output::HitRow;
+use crate::photons::gpu_tables::{kernel_features, GpuTables};
+use crate::photons::output::{HitRow, RecordPoint, RECORD_COLUMNS};
 use crate::photons::propagate::{drive_batches, BatchEnds, Emission, Emitting, PhotonEnd};
 use crate::photons::sources::Source;
-use crate::photons::{Batch, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
+use crate::photons::{Batch, Origin, PhotonError, PhotonRun, PhotonScene, RunOptions, RunSummary};
+use hytrace_foundry::UNSET;
 
 const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most.
 const BATCH: u64 = 1 << 20;
 /// Storage buffers of the photon group (group 2).
-const PHOTON_BINDINGS: u32 = 10;
+const PHOTON_BINDINGS: u32 = 12;
+/// Bytes of one step point (`--records`).
+const POINT_BYTES: u64 = (RECORD_COLUMNS * size_of::<f32>()) as u64;
 /// GPU memory a photon in flight takes (bytes): its packed history and room for its
-/// record (every photon of a batch may be detected).
+/// record (every photon of a batch may be detected); `--records K` adds `K` step points.
 pub const BYTES_PER_PHOTON: u64 = (size_of::<PhotonRecord>() + size_of::<[u32; 2]>()) as u64;
 
 /// A photon scene on the GPU with its kernel.
@@ -42,6 +46,10 @@ pub struct GpuPhotons {
     tables: Vec<wgpu::Buffer>,
     hierarchical: bool,
     features: Vec<&'static str>,
+    /// The table of the run's torch spectrum (`UNSET`: a fixed wavelength).
+    spectrum: u32,
+    /// The run's gensteps (binding 11).
+    gensteps: wgpu::Buffer,
 }
 
 /// What a GPU photon run gives back.
@@ -69,11 +77,15 @@ struct Outputs {
     records: wgpu::Buffer,
     histories: wgpu::Buffer,
     count: wgpu::Buffer,
+    /// The step points of `--records`, `K` a photon (one point without).
+    steps: wgpu::Buffer,
 }
 
 /// A batch submitted to the GPU and not yet read back, with what it binds.
 struct InFlight {
     range: Range<u64>,
+    /// Step points a photon.
+    records: u32,
     timer: Option<PassTimer>,
     _bound: (wgpu::Buffer, wgpu::BindGroup),
 }
@@ -83,6 +95,8 @@ struct InFlight {
 struct Readback {
     histories: Vec<u64>,
     records: Vec<PhotonRecord>,
+    /// Every photon's step points, when asked for.
+    points: Vec<RecordPoint>,
 }
 
 impl GpuPhotons {
@@ -94,11 +108,6 @@ impl GpuPhotons {
         scene: &PhotonScene,
         run: &RunOptions,
     ) -> Result<GpuPhotons, GpuError> {
-        if let Some(why) = unsupported(&scene.tables, run) {
-            return Err(GpuError::Unsupported(format!(
-                "photons: {why}; run them with --backend cpu"
-            )));
-        }
         let Some(f32_scene) = scene.tracer.f32_scene() else {
             return Err(GpuError::Unsupported(
                 "photons: the scene was prepared with the f64 tracer (the kernel's twin is f32)"
@@ -106,12 +115,29 @@ impl GpuPhotons {
             ));
         };
         let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS)?;
-        let flat = GpuTables::new(scene);
-        let source = kernel_source(KERNEL, &upload.features)?;
+        let mut flat = GpuTables::new(scene);
+        // A torch spectrum that does not resolve is left to the run, which names it.
+        let spectrum = match &run.origin {
+            Origin::Torch { wavelength, .. } => match scene.emission(wavelength) {
+                Ok(Emission::Spectrum(s)) => flat.push_spectrum(&s),
+                _ => UNSET,
+            },
+            Origin::Gensteps(_) => UNSET,
+        };
+        // Gensteps that do not resolve are likewise left to the run.
+        let gensteps = match scene.emitting(&run.origin) {
+            Ok(Emitting::Gensteps(g)) => g
+                .gpu_records(&mut flat)
+                .map_err(|why| GpuError::Unsupported(format!("photons: gensteps: {why}")))?,
+            _ => Vec::new(),
+        };
+        let mut features = upload.features.clone();
+        features.extend(kernel_features(&scene.tables, run));
+        let source = kernel_source(KERNEL, &features)?;
         let constants = declared_constants(&source, &upload.constants);
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
-            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7, 8, 9]);
+            let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7, 8, 9, 10]);
             // Group 0 (the Foundry's own arrays) is not used.
             let pipeline_layout =
                 ctx.pipeline_layout("photons", &[None, Some(&upload.layout), Some(&layout)]);
@@ -126,6 +152,8 @@ impl GpuPhotons {
                 // happens.
                 ctx.input_buffer("photon borders", &binding_bytes(&flat.lookup.borders)),
             ];
+            // Likewise an empty list of gensteps (a torch run) as one zeroed record.
+            let gensteps = ctx.input_buffer("photon gensteps", &binding_bytes(&gensteps));
             GpuPhotons {
                 pipeline: compute_pipeline(
                     ctx,
@@ -138,7 +166,9 @@ impl GpuPhotons {
                 scene_group: upload.group.clone(),
                 tables,
                 hierarchical: upload.hierarchical,
-                features: upload.features.clone(),
+                features,
+                spectrum,
+                gensteps,
             }
         })
     }
@@ -148,10 +178,11 @@ impl GpuPhotons {
         &self.features
     }
 
-    /// Photons a batch for runs asking for at most `batch` a dispatch: by default as many
-    /// as fill the GPU, up to 2^20, within the device's binding limit for the records.
-    pub fn batch_size(ctx: &GpuContext, batch: Option<u64>) -> u64 {
-        let record = size_of::<PhotonRecord>() as u64;
+    /// Photons a batch for runs asking for at most `batch` a dispatch and `records` step
+    /// points a photon: by default as many as fill the GPU, up to 2^20, within the
+    /// device's binding limit for the records and the step points.
+    pub fn batch_size(ctx: &GpuContext, batch: Option<u64>, records: u32) -> u64 {
+        let record = (size_of::<PhotonRecord>() as u64).max(u64::from(records) * POINT_BYTES);
         let most = (ctx.limits.max_storage_buffer_binding_size / record).clamp(1, BATCH);
         batch.map_or(most, |b| b.min(most))
     }
@@ -190,12 +221,12 @@ impl GpuPhotons {
     ) -> crate::Result<(RunSummary, GpuTimes, PhotonHostWork)> {
         let mut times = GpuTimes::default();
         let mut host = PhotonHostWork {
-            batch: Self::batch_size(ctx, batch),
+            batch: Self::batch_size(ctx, batch, run.records),
             ..Default::default()
         };
         // Room for the run's largest batch (wgpu clears a buffer before its first use); a
         // batch of 0 is refused by the batches' loop, before any buffer is bound.
-        let outputs = self.outputs(ctx, host.batch.min(run.photons).max(1))?;
+        let outputs = self.outputs(ctx, host.batch.min(run.photons).max(1), run.records)?;
         let mut flight: Option<InFlight> = None;
         let mut on_gpu = |range: Range<u64>, next: Option<Range<u64>>, emitting: &Emitting| {
             if flight.as_ref().map(|f| &f.range) != Some(&range) {
@@ -216,9 +247,13 @@ impl GpuPhotons {
         Ok((summary, times, host))
     }
 
-    /// The output buffers of batches of `batch` photons.
-    fn outputs(&self, ctx: &GpuContext, batch: u64) -> Result<Outputs, GpuError> {
+    /// The output buffers of batches of `batch` photons with `k` step points each.
+    fn outputs(&self, ctx: &GpuContext, batch: u64, k: u32) -> Result<Outputs, GpuError> {
         ctx.checked("photon output buffers", || Outputs {
+            steps: ctx.output_buffer(
+                "photon step points",
+                (batch * u64::from(k)).max(1) * POINT_BYTES,
+            ),
             records: ctx.output_buffer("photon records", batch * size_of::<PhotonRecord>() as u64),
             histories: ctx.output_buffer("photon histories", batch * size_of::<[u32; 2]>() as u64),
             count: ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -242,24 +277,33 @@ impl GpuPhotons {
         range: Range<u64>,
         times: &mut GpuTimes,
     ) -> crate::Result<InFlight> {
-        let Emitting::Torch {
-            source,
-            emission: Emission::Fixed { energy, nm },
-        } = *emitting
-        else {
-            return Err(GpuError::Unsupported(
-                "photons: energies drawn from a spectrum, or gensteps".into(),
-            )
-            .into());
-        };
         let t0 = Instant::now();
-        let params = params(run, source, &range, energy, nm, self.hierarchical);
+        let mut params = params(run, &range, self.hierarchical);
+        match emitting {
+            Emitting::Torch { source, emission } => {
+                torch(&mut params, *source);
+                if let Emission::Fixed { energy, nm } = *emission {
+                    params.energy = energy as f32;
+                    params.wavelength_nm = nm as f32;
+                }
+                params.spectrum = self.spectrum;
+            }
+            Emitting::Gensteps(_) => params.source_kind = PHOTON_SOURCE_GENSTEPS,
+        }
         let timer = PassTimer::new(ctx, "photon timestamps");
         let bound = ctx.checked("photon dispatch", || {
             let mut buffers = vec![ctx.input_buffer("photon params", &binding_bytes(&[params]))];
             buffers.extend(self.tables.iter().cloned());
-            buffers
-                .extend([&outputs.records, &outputs.histories, &outputs.count].map(Clone::clone));
+            buffers.extend(
+                [
+                    &outputs.records,
+                    &outputs.histories,
+                    &outputs.count,
+                    &outputs.steps,
+                    &self.gensteps,
+                ]
+                .map(Clone::clone),
+            );
             let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("photons"),
                 layout: &self.layout,
@@ -279,6 +323,7 @@ impl GpuPhotons {
         times.upload_s += t0.elapsed().as_secs_f64();
         Ok(InFlight {
             range,
+            records: run.records,
             timer,
             _bound: bound,
         })
@@ -310,8 +355,14 @@ impl GpuPhotons {
             0 => Vec::new(),
             bytes => bytemuck::pod_collect_to_vec(&ctx.read_buffer(&outputs.records, bytes)?),
         };
+        let k = u64::from(done.records);
+        let points = match n * k * POINT_BYTES {
+            0 => Vec::new(),
+            bytes => bytemuck::pod_collect_to_vec(&ctx.read_buffer(&outputs.steps, bytes)?),
+        };
         times.readback_s += t.elapsed().as_secs_f64();
         Ok(Readback {
+            points,
             histories: words
                 .into_iter()
                 .map(|[lo, hi]| u64::from(lo) | (u64::from(hi) << 32))
@@ -322,8 +373,9 @@ impl GpuPhotons {
 }
 
 /// The ends of a batch's photons (the first `first`) from what its kernel gave back: the
-/// records put in photon order, those detected turned into hit rows, those cut short
-/// propagated again by the CPU twin (in parallel).
+/// records put in photon order, those detected turned into hit rows, those cut short or
+/// whose wavelength-shifting absorption emitted several photons propagated again by the
+/// CPU twin (in parallel), their step points in place of the kernel's.
 fn ends(
     scene: &PhotonScene,
     run: &RunOptions,
@@ -335,10 +387,12 @@ fn ends(
     let Readback {
         mut histories,
         mut records,
+        points,
     } = back;
     records.sort_unstable_by_key(|r| r.photon);
-    let cut = |r: &PhotonRecord| r.status & (PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT) != 0;
-    // Threads only where some photon is to be propagated again (lavapipe alone).
+    let again_on_cpu = PHOTON_LOOPS_CUT | PHOTON_DEPTH_LIMIT | PHOTON_SEVERAL_EMITTED;
+    let cut = |r: &PhotonRecord| r.status & again_on_cpu != 0;
+    // Threads only where some photon is to be propagated again.
     let again: Vec<Option<PhotonEnd>> = if records.iter().any(cut) {
         records
             .par_iter()
@@ -348,12 +402,25 @@ fn ends(
         Vec::new()
     };
     let mut again = again.into_iter();
-    let mut out = BatchEnds::default();
+    let k = run.records as usize;
+    let mut out = BatchEnds {
+        records: points,
+        ..BatchEnds::default()
+    };
     for r in &records {
         match again.next().flatten() {
-            Some(end) => {
-                times.redone_on_cpu += 1;
-                histories[r.photon as usize] = out.add_lineages(end);
+            Some(mut end) => {
+                if r.status & PHOTON_SEVERAL_EMITTED != 0 {
+                    times.split_on_cpu += 1;
+                } else {
+                    times.redone_on_cpu += 1;
+                }
+                let p = r.photon as usize;
+                let points = std::mem::take(&mut end.record);
+                if k > 0 {
+                    out.records[p * k..(p + 1) * k].copy_from_slice(&points);
+                }
+                histories[p] = out.add_lineages(end);
             }
             None if r.status & PHOTON_DETECTED != 0 => {
                 out.hits
@@ -366,19 +433,10 @@ fn ends(
     out
 }
 
-/// The kernel's parameters for the photons `range` of `run` from `source`.
-fn params(
-    run: &RunOptions,
-    source: Source,
-    range: &Range<u64>,
-    energy: f64,
-    nm: f64,
-    hierarchical: bool,
-) -> PhotonParams {
-    let f = |v: crate::photons::V| v.to_f64().map(|c| c as f32);
-    let mut p = PhotonParams {
-        energy: energy as f32,
-        wavelength_nm: nm as f32,
+/// The kernel's parameters for the photons `range` of `run` (the source's are added by
+/// [`torch`]).
+fn params(run: &RunOptions, range: &Range<u64>, hierarchical: bool) -> PhotonParams {
+    PhotonParams {
         first_lo: range.start as u32,
         first_hi: (range.start >> 32) as u32,
         photon_count: (range.end - range.start) as u32,
@@ -386,9 +444,16 @@ fn params(
         max_steps: run.max_steps,
         hierarchical: u32::from(hierarchical),
         probe_trips: 2,
+        records: run.records,
         cos_divergence: 1.0,
+        spectrum: UNSET,
         ..Default::default()
-    };
+    }
+}
+
+/// Sets the torch `source` in the parameters `p`.
+fn torch(p: &mut PhotonParams, source: Source) {
+    let f = |v: crate::photons::V| v.to_f64().map(|c| c as f32);
     match source {
         Source::Point { position } => {
             p.source_kind = PHOTON_SOURCE_POINT;
@@ -417,7 +482,6 @@ fn params(
             p.inward = u32::from(inward);
         }
     }
-    p
 }
 
 /// The hit row of a detected photon's record.

@@ -21,6 +21,9 @@ pub struct GpuTimes {
     /// Items (rays, pixels) the CPU computed again because the driver's loop budget cut
     /// their loops short (llvmpipe only: `shaders/loop_budget.wgsl`).
     pub redone_on_cpu: u64,
+    /// Photons whose wavelength-shifting absorption emitted several photons, propagated
+    /// with them by the CPU twin (the photon kernel carries one photon).
+    pub split_on_cpu: u64,
 }
 
 /// Timestamp queries written at the beginning and end of one compute pass.
@@ -122,6 +125,7 @@ pub fn add_gpu_stats(
     line["gpu_readback_s"] = times.readback_s.into();
     line["gpu_kernel_timestamps_s"] = times.kernel_gpu_s.into();
     line["gpu_redone_on_cpu"] = times.redone_on_cpu.into();
+    line["gpu_split_on_cpu"] = times.split_on_cpu.into();
 }
 
 /// Waits until the GPU has finished the work submitted so far (`what` names it in errors).

@@ -28,8 +28,8 @@ pub enum PhotonBackend {
 
 crate::choice::named!(PhotonBackend {
     (PhotonBackend::Cpu, "cpu", [], "The CPU propagator (rayon over photons, f64 geometry)"),
-    (PhotonBackend::Gpu, "gpu", [], "The WGSL photon kernel through wgpu (f32): torch sources, fixed wavelengths, absorption, Rayleigh scattering, Fresnel boundaries, polished surfaces"),
-    (PhotonBackend::Auto, "auto", [], "The GPU when an adapter opens and the kernel models the scene's physics, else the CPU"),
+    (PhotonBackend::Gpu, "gpu", [], "The WGSL photon kernel through wgpu (f32): the CPU's physics, sources, gensteps and outputs"),
+    (PhotonBackend::Auto, "auto", [], "The GPU when an adapter opens, else the CPU"),
 });
 
 /// What the GPU side of a photon run reports.

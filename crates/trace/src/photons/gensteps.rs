@@ -26,13 +26,18 @@ use std::path::Path;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
 use hytrace_foundry::optics::Material;
+use hytrace_foundry::UNSET;
 use hytrace_volume::Rng;
 
 use super::bulk::isotropic;
 use super::cherenkov::Cherenkov;
+use super::gpu_tables::GpuTables;
 use super::properties::C_LIGHT_MM_PER_NS;
 use super::scintillation::Scintillator;
 use super::{PhotonError, V};
+use crate::gpu::photon_records::{
+    PhotonGenstep, PHOTON_GENSTEP_CHERENKOV, PHOTON_GENSTEP_SCINTILLATION,
+};
 
 /// Columns of a genstep row.
 pub const GENSTEP_COLUMNS: usize = 14;
@@ -360,6 +365,70 @@ impl Gensteps {
         self.ends.last().copied().unwrap_or(0)
     }
 
+    /// The gensteps as the GPU kernel emits photons from them (`shaders/photons/gensteps.wgsl`,
+    /// the twin of [`Gensteps::emit`]), their scintillation spectra appended to `tables`.
+    /// A step of 2^32 photons or more is refused, naming its row.
+    pub fn gpu_records(&self, tables: &mut GpuTables) -> Result<Vec<PhotonGenstep>, String> {
+        let mut spectra: Vec<Option<[u32; 3]>> = vec![None; self.scintillators.len()];
+        let mut before = 0;
+        let mut records = Vec::with_capacity(self.steps.len());
+        for (row, ((step, emitter), &end)) in self.steps.iter().zip(&self.ends).enumerate() {
+            if end - before > u64::from(u32::MAX) {
+                return Err(format!(
+                    "row {row}: {} photons from one step (the GPU kernel counts them in 32 bits)",
+                    end - before
+                ));
+            }
+            before = end;
+            let f = |v: V| v.to_f64().map(|c| c as f32);
+            let mut r = PhotonGenstep {
+                material: step.material,
+                end_index: [end as u32, (end >> 32) as u32],
+                start: f(step.start),
+                time: step.time as f32,
+                end: f(step.end),
+                charge: step.charge as f32,
+                beta: step.beta.map(|b| b as f32),
+                ..Default::default()
+            };
+            match *emitter {
+                Emitter::Cherenkov {
+                    material,
+                    axis,
+                    beta,
+                    yields,
+                } => {
+                    let c = self.cherenkov[material].as_ref().expect("prepared");
+                    let max_cos = 1.0 / (beta * c.max_index());
+                    r.kind = PHOTON_GENSTEP_CHERENKOV;
+                    r.mean_beta = beta as f32;
+                    r.max_sin2 = ((1.0 - max_cos) * (1.0 + max_cos)) as f32;
+                    r.axis = f(axis);
+                    r.yields = yields.map(|y| y as f32);
+                }
+                Emitter::Scintillation { material, counts } => {
+                    let s = self.scintillators[material].as_ref().expect("prepared");
+                    r.kind = PHOTON_GENSTEP_SCINTILLATION;
+                    r.counts = counts.map(|c| c as u32);
+                    r.spectrum = *spectra[material].get_or_insert_with(|| {
+                        let mut t = [UNSET; 3];
+                        for (k, t) in t.iter_mut().enumerate().take(s.components()) {
+                            *t = tables.push_spectrum(s.component(k).0);
+                        }
+                        t
+                    });
+                    for k in 0..s.components() {
+                        let (_, decay, rise, _) = s.component(k);
+                        r.decay[k] = decay as f32;
+                        r.rise[k] = rise as f32;
+                    }
+                }
+            }
+            records.push(r);
+        }
+        Ok(records)
+    }
+
     /// Photon `index` (below [`Gensteps::photons`]), drawn from `rng`.
     pub fn emit(&self, index: u64, rng: &mut Rng) -> Emitted {
         let g = self.ends.partition_point(|&e| e <= index);
@@ -499,6 +568,56 @@ mod tests {
         let u = (e.position - g.start).length() / step.length();
         let (_, t) = g.along(u);
         (u, e.time - t)
+    }
+
+    /// The kernel's records: ends counted through the steps in 64 bits, each component's
+    /// photons, the spectra appended once per material; a step of 2^32 photons refused by
+    /// its row.
+    #[test]
+    fn gpu_records_number_the_photons_and_refuse_steps_past_32_bits() {
+        let scint = |n: f64| {
+            row(
+                2.0,
+                n,
+                1.0,
+                0.0,
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                [0.5, 0.5],
+                -1.0,
+                0.0,
+            )
+        };
+        let cherenkov = row(
+            1.0,
+            10.0,
+            1.0,
+            0.0,
+            [0.0; 3],
+            [0.0, 0.0, 5.0],
+            [0.9, 0.9],
+            -1.0,
+            0.0,
+        );
+        let f = file(&[scint(4e9), scint(100.0), cherenkov.clone()]).unwrap();
+        let g = Gensteps::new(&f, &materials()).unwrap();
+        let mut tables = GpuTables::default();
+        let r = g.gpu_records(&mut tables).unwrap();
+        let end = |r: &PhotonGenstep| u64::from(r.end_index[0]) | (u64::from(r.end_index[1]) << 32);
+        assert_eq!(
+            r.iter().map(end).collect::<Vec<_>>(),
+            [4_000_000_000, 4_000_000_100, 4_000_000_110]
+        );
+        assert_eq!(r[1].counts, [75, 25, 0]);
+        assert_eq!((r[0].spectrum, tables.tables.len()), (r[1].spectrum, 2));
+        assert_eq!(r[2].kind, PHOTON_GENSTEP_CHERENKOV);
+        assert!(r[2].max_sin2 > 0.0 && r[2].axis == [0.0, 0.0, 1.0]);
+        let f = file(&[cherenkov, scint(5e9)]).unwrap();
+        let why = Gensteps::new(&f, &materials())
+            .unwrap()
+            .gpu_records(&mut tables)
+            .unwrap_err();
+        assert!(why.starts_with("row 1: 5000000000 photons"), "{why}");
     }
 
     #[test]

@@ -5,18 +5,19 @@
 //! finds them ([`FlatSurfaces::between`] is the twin of the kernel's lookup and is tested
 //! against it on every pair of instances).
 //!
-//! The kernel models part of the CPU's physics; [`GpuTables::new`] refuses the rest,
-//! naming the material, surface or option and the process: wavelengths drawn from a
-//! spectrum, wavelength shifting, and optical surfaces of any finish but polished.
+//! The kernel has the CPU's physics; [`kernel_features`] says which of its optional
+//! processes a run needs, so that only those are composed in.
 
 use hytrace_foundry::UNSET;
 
-use super::properties::{Finish, OpticsTables, Property, SurfaceKind};
+use super::properties::{Finish, OpticsTables, Property, Roughness, Spectrum, SurfaceKind};
 use super::sources::Wavelength;
 use super::surfaces::SurfaceLookup;
 use super::{Origin, PhotonScene, RunOptions};
 use crate::gpu::photon_records::{
-    PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable,
+    PhotonBorder, PhotonInstance, PhotonMaterial, PhotonSurface, PhotonTable, PHOTON_FINISH_GROUND,
+    PHOTON_FINISH_GROUND_BACK_PAINTED, PHOTON_FINISH_GROUND_FRONT_PAINTED, PHOTON_FINISH_POLISHED,
+    PHOTON_FINISH_POLISHED_BACK_PAINTED, PHOTON_FINISH_POLISHED_FRONT_PAINTED,
     PHOTON_SURFACE_DIELECTRIC, PHOTON_SURFACE_METAL,
 };
 
@@ -125,17 +126,14 @@ impl FlatSurfaces {
     }
 }
 
-/// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
-fn push_table(
+/// Appends `(energy, value)` rows as a table, returning its index.
+fn push_rows(
     tables: &mut Vec<PhotonTable>,
     rows: &mut Vec<[f32; 2]>,
-    p: Option<&Property>,
+    new: impl Iterator<Item = (f64, f64)>,
 ) -> u32 {
-    let Some(p) = p else {
-        return UNSET;
-    };
     let first = rows.len() as u32;
-    rows.extend(p.rows().map(|(e, v)| [e as f32, v as f32]));
+    rows.extend(new.map(|(e, v)| [e as f32, v as f32]));
     tables.push(PhotonTable {
         first,
         count: rows.len() as u32 - first,
@@ -143,52 +141,71 @@ fn push_table(
     tables.len() as u32 - 1
 }
 
-/// Why the GPU kernel cannot propagate `run`'s photons through a scene with `tables`
-/// (the first reason), `None` when it can.
-pub fn unsupported(tables: &OpticsTables, run: &RunOptions) -> Option<String> {
-    match &run.origin {
-        Origin::Gensteps(_) => {
-            return Some("--gensteps: photons emitted by Cherenkov and scintillation steps".into())
-        }
+/// Appends a property's rows as a table, returning its index ([`UNSET`] for none).
+fn push_table(
+    tables: &mut Vec<PhotonTable>,
+    rows: &mut Vec<[f32; 2]>,
+    p: Option<&Property>,
+) -> u32 {
+    p.map_or(UNSET, |p| push_rows(tables, rows, p.rows()))
+}
+
+/// Appends a spectrum's `(energy, integral)` rows as a table, returning its index.
+fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Spectrum) -> u32 {
+    push_rows(tables, rows, s.rows())
+}
+
+/// The kernel's composition features for the physics of a scene with `tables` (the
+/// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
+/// a finish other than polished (facets, the unified model's reflection types, paint),
+/// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `wls` when one
+/// shifts wavelengths (WLSABSLENGTH), `spectrum`
+/// when `run`'s torch draws its photons' energies from a spectrum, `gensteps` when its
+/// photons come from gensteps, `records` when it writes step points.
+pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
+    let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
+    let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
+    let wls = tables.materials.iter().any(|m| m.wlsabslength.is_some());
+    let spectrum = matches!(
+        run.origin,
         Origin::Torch {
-            wavelength: Wavelength::Spectrum { material, property },
+            wavelength: Wavelength::Spectrum { .. },
             ..
-        } => {
-            return Some(format!(
-                "--wavelength {material}:{property}: photon energies drawn from a spectrum"
-            ))
         }
-        Origin::Torch { .. } => {}
+    );
+    let gensteps = matches!(run.origin, Origin::Gensteps(_));
+    [
+        (gensteps, "gensteps"),
+        (run.records > 0, "records"),
+        (rough, "rough_surfaces"),
+        (reemission, "reemission"),
+        (wls, "wls"),
+        (spectrum, "spectrum"),
+    ]
+    .into_iter()
+    .filter_map(|(on, name)| on.then_some(name))
+    .collect()
+}
+
+/// A finish as the kernel numbers it (`PHOTON_FINISH_*`).
+fn finish_code(finish: Finish) -> u32 {
+    match finish {
+        Finish::Polished => PHOTON_FINISH_POLISHED,
+        Finish::PolishedFrontPainted => PHOTON_FINISH_POLISHED_FRONT_PAINTED,
+        Finish::PolishedBackPainted => PHOTON_FINISH_POLISHED_BACK_PAINTED,
+        Finish::Ground => PHOTON_FINISH_GROUND,
+        Finish::GroundFrontPainted => PHOTON_FINISH_GROUND_FRONT_PAINTED,
+        Finish::GroundBackPainted => PHOTON_FINISH_GROUND_BACK_PAINTED,
     }
-    if run.records > 0 {
-        return Some("--records: step points".into());
-    }
-    if let Some(m) = tables.materials.iter().find(|m| m.reemission.is_some()) {
-        return Some(format!(
-            "material `{}`: property REEMISSIONPROB (re-emission)",
-            m.name
-        ));
-    }
-    if let Some(m) = tables.materials.iter().find(|m| m.wlsabslength.is_some()) {
-        return Some(format!(
-            "material `{}`: property WLSABSLENGTH (wavelength shifting, G4OpWLS)",
-            m.name
-        ));
-    }
-    let rough = tables
-        .surfaces
-        .iter()
-        .flatten()
-        .find(|s| s.finish != Finish::Polished);
-    rough.map(|s| {
-        format!(
-            "optical surface `{}`: finish {:?} (rough and painted surfaces; the kernel has polished ones)",
-            s.name, s.finish
-        )
-    })
 }
 
 impl GpuTables {
+    /// Appends a torch run's spectrum as a table, returning its index
+    /// ([`PhotonParams::spectrum`](crate::gpu::photon_records::PhotonParams::spectrum)).
+    pub fn push_spectrum(&mut self, s: &Spectrum) -> u32 {
+        push_spectrum(&mut self.tables, &mut self.rows, s)
+    }
+
     /// Flattens `scene`'s physics for the kernel.
     pub fn new(scene: &PhotonScene) -> Self {
         let (mut tables, mut rows) = (Vec::new(), Vec::new());
@@ -196,11 +213,36 @@ impl GpuTables {
         let materials = t
             .materials
             .iter()
-            .map(|m| PhotonMaterial {
-                rindex: push_table(&mut tables, &mut rows, m.rindex.as_ref()),
-                abslength: push_table(&mut tables, &mut rows, m.abslength.as_ref()),
-                rayleigh: push_table(&mut tables, &mut rows, m.rayleigh.as_ref()),
-                groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
+            .map(|m| {
+                let mut flat = PhotonMaterial {
+                    rindex: push_table(&mut tables, &mut rows, m.rindex.as_ref()),
+                    abslength: push_table(&mut tables, &mut rows, m.abslength.as_ref()),
+                    rayleigh: push_table(&mut tables, &mut rows, m.rayleigh.as_ref()),
+                    groupvel: push_table(&mut tables, &mut rows, m.groupvel.as_ref()),
+                    reemission: UNSET,
+                    spectrum: [UNSET; 3],
+                    wlsabslength: push_table(&mut tables, &mut rows, m.wlsabslength.as_ref()),
+                    wls_spectrum: UNSET,
+                    wls_mean: -1.0,
+                    ..Default::default()
+                };
+                if let Some(w) = &m.wls {
+                    flat.wls_spectrum = push_spectrum(&mut tables, &mut rows, w.spectrum());
+                    flat.wls_delay = w.time_constant as f32;
+                    flat.wls_mean = w.mean_photons.map_or(-1.0, |m| m as f32);
+                }
+                if let Some(r) = &m.reemission {
+                    flat.reemission = push_table(&mut tables, &mut rows, Some(&r.probability));
+                    flat.components = r.scintillator.components() as u32;
+                    for k in 0..r.scintillator.components() {
+                        let (spectrum, decay, rise, weight) = r.scintillator.component(k);
+                        flat.spectrum[k] = push_spectrum(&mut tables, &mut rows, spectrum);
+                        flat.decay[k] = decay as f32;
+                        flat.rise[k] = rise as f32;
+                        flat.weight[k] = weight as f32;
+                    }
+                }
+                flat
             })
             .collect();
         let surfaces = t
@@ -208,15 +250,31 @@ impl GpuTables {
             .iter()
             .map(|s| match s {
                 None => PhotonSurface::default(),
-                Some(s) => PhotonSurface {
-                    kind: match s.kind {
-                        SurfaceKind::DielectricMetal => PHOTON_SURFACE_METAL,
-                        SurfaceKind::DielectricDielectric => PHOTON_SURFACE_DIELECTRIC,
-                    },
-                    reflectivity: push_table(&mut tables, &mut rows, s.reflectivity.as_ref()),
-                    efficiency: push_table(&mut tables, &mut rows, s.efficiency.as_ref()),
-                    transmittance: push_table(&mut tables, &mut rows, s.transmittance.as_ref()),
-                },
+                Some(s) => {
+                    let mut table =
+                        |p: &Option<Property>| push_table(&mut tables, &mut rows, p.as_ref());
+                    let (unified, roughness) = match s.roughness {
+                        Roughness::Glisur { polish } => (0, polish),
+                        Roughness::Unified { sigma_alpha } => (1, sigma_alpha),
+                    };
+                    PhotonSurface {
+                        kind: match s.kind {
+                            SurfaceKind::DielectricMetal => PHOTON_SURFACE_METAL,
+                            SurfaceKind::DielectricDielectric => PHOTON_SURFACE_DIELECTRIC,
+                        },
+                        reflectivity: table(&s.reflectivity),
+                        efficiency: table(&s.efficiency),
+                        transmittance: table(&s.transmittance),
+                        finish: finish_code(s.finish),
+                        unified,
+                        roughness: roughness as f32,
+                        rindex: table(&s.rindex),
+                        spike: table(&s.spike),
+                        lobe: table(&s.lobe),
+                        backscatter: table(&s.backscatter),
+                        pad: 0,
+                    }
+                }
             })
             .collect();
         GpuTables {
@@ -275,10 +333,10 @@ mod tests {
         );
     }
 
-    /// Gensteps, step points and re-emission are refused for the kernel by name; a torch
-    /// run through a scene without them is not.
+    /// A run composes in the processes its scene, photons and outputs call for, only
+    /// those.
     #[test]
-    fn gensteps_records_and_re_emission_are_not_on_the_gpu() {
+    fn the_kernel_composes_what_the_run_needs() {
         use crate::photons::gensteps::GenstepFile;
         use crate::photons::sources::Source;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -299,8 +357,29 @@ mod tests {
             keep_histories: false,
             records: 0,
         };
+        let spectrum = RunOptions {
+            origin: Origin::Torch {
+                source: Source::parse("point:0,0,0").unwrap(),
+                wavelength: Wavelength::Spectrum {
+                    material: "Liquid".into(),
+                    property: "SCINTILLATIONCOMPONENT1".into(),
+                },
+            },
+            ..torch.clone()
+        };
         let every = tables("tests/data/photons/every_process.gdml");
-        assert_eq!(unsupported(&every, &torch), None);
+        let rough = tables("tests/data/photons/rough_surfaces.gdml");
+        let scintillator = tables("tests/data/photons/scintillator.gdml");
+        let shifter = tables("tests/data/photons/wavelength_shifter.gdml");
+        for (tables, run, features) in [
+            (&every, &torch, &[][..]),
+            (&every, &spectrum, &["spectrum"][..]),
+            (&rough, &torch, &["rough_surfaces"][..]),
+            (&scintillator, &torch, &["reemission"][..]),
+            (&shifter, &torch, &["wls"][..]),
+        ] {
+            assert_eq!(kernel_features(tables, run), features);
+        }
         let gensteps = RunOptions {
             origin: Origin::Gensteps(std::sync::Arc::new(GenstepFile {
                 source: "g.npy".into(),
@@ -312,18 +391,7 @@ mod tests {
             records: 4,
             ..torch.clone()
         };
-        let scintillator = tables("tests/data/photons/scintillator.gdml");
-        for (tables, run, needle) in [
-            (&every, &gensteps, "--gensteps"),
-            (&every, &records, "--records"),
-            (
-                &scintillator,
-                &torch,
-                "material `LS`: property REEMISSIONPROB",
-            ),
-        ] {
-            let why = unsupported(tables, run).expect("refused");
-            assert!(why.contains(needle), "{why}");
-        }
+        assert_eq!(kernel_features(&every, &records), ["records"]);
+        assert_eq!(kernel_features(&every, &gensteps), ["gensteps"]);
     }
 }

@@ -4,7 +4,8 @@
 //! ([`properties`]), Fresnel reflection and refraction ([`boundary`]), bulk absorption and
 //! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]) and their rough and painted
 //! models ([`surface_models`]), the propagation loop
-//! through the scene's navigator ([`propagate()`]) and the outputs ([`output`]).
+//! through the scene's navigator ([`propagate()`]), the outputs ([`output`]) and what a run
+//! calls for ([`explain`]).
 //!
 //! Photon `i` draws every random number from the counter-based stream `(seed, i)`
 //! ([`hytrace_volume::Rng`]), so a run's results do not depend on threads or batches.
@@ -15,6 +16,7 @@ pub mod backend;
 pub mod boundary;
 pub mod bulk;
 pub mod cherenkov;
+pub mod explain;
 pub mod gensteps;
 pub mod gpu_tables;
 pub mod output;

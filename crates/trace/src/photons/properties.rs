@@ -220,6 +220,15 @@ impl Spectrum {
         }
     }
 
+    /// Its rows: `(energy (MeV), integral of the intensity up to it)`, the integral not
+    /// decreasing (what the GPU kernel inverts).
+    pub fn rows(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.energies
+            .iter()
+            .copied()
+            .zip(self.cumulative.iter().copied())
+    }
+
     /// One photon energy (MeV) drawn from the spectrum.
     pub fn sample(&self, rng: &mut Rng) -> f64 {
         self.energy_at(rng.next_f64() * self.cumulative[self.cumulative.len() - 1])
@@ -252,6 +261,11 @@ impl Wls {
             time_constant,
             mean_photons,
         }
+    }
+
+    /// WLSCOMPONENT, the spectrum re-emitted photons are drawn from.
+    pub fn spectrum(&self) -> &Spectrum {
+        &self.spectrum
     }
 
     /// The energy of one re-emitted photon, no higher than `primary` (MeV): up to 100

@@ -96,6 +96,12 @@ impl Scintillator {
         }
     }
 
+    /// Component `k`'s spectrum, decay time, rise time (0: none) and yield.
+    pub fn component(&self, k: usize) -> (&Spectrum, f64, f64, f64) {
+        let c = &self.components[k];
+        (&c.spectrum, c.decay, c.rise, c.weight)
+    }
+
     /// A component drawn in proportion to the yields (for single re-emitted photons).
     pub fn pick(&self, rng: &mut Rng) -> usize {
         let sum: f64 = self.components.iter().map(|c| c.weight).sum();
