@@ -12,6 +12,7 @@
 // `cross_from`), so neither kernel carries the other's code.
 // #import csg/spans
 // #import csg/frame
+// #import real
 // #import trace/bvh
 // #if csg
 // #import csg/tree
