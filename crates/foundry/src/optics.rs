@@ -99,6 +99,14 @@ pub struct Medium {
     /// Texel format of the bricked grid the bricks were built from (`f32`, `f16`,
     /// `unorm16`, `unorm8`, `bc4`).
     pub format: String,
+    /// Single-scattering albedo, scattering over extinction, in [0, 1]: the chance that a
+    /// photon's collision with the medium scatters rather than absorbs it (0, a pure
+    /// absorber, in files written before photons met media).
+    #[serde(default)]
+    pub albedo: f64,
+    /// Henyey-Greenstein asymmetry of its scattering, in (-1, 1): above 0 forward.
+    #[serde(default)]
+    pub g: f64,
 }
 
 impl Optics {
@@ -131,6 +139,18 @@ impl Optics {
                         "medium {i}: density scale {} is not finite and >= 0",
                         m.density_scale
                     ),
+                });
+            }
+            if !(0.0..=1.0).contains(&m.albedo) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("medium {i}: albedo {} is not in [0, 1]", m.albedo),
+                });
+            }
+            if !(m.g.is_finite() && m.g.abs() < 1.0) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("medium {i}: phase asymmetry g {} is not in (-1, 1)", m.g),
                 });
             }
         }
