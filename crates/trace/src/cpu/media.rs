@@ -1,5 +1,7 @@
 //! Transmittance along rays through a scene's media up to the first surface: surfaces are
-//! opaque, media attenuate (`trace_transmittance`).
+//! opaque, media attenuate (`trace_transmittance`); and the first real collision with the
+//! media along a ray (`collision`, delta tracking: the free paths of the renderer's paths
+//! and of photons).
 //!
 //! Each medium's grid is opened again from its source and bricked in the texel format its
 //! Foundry bricks were made from, so the lookups are those of the bricked grid a GPU

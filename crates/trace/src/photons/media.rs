@@ -4,9 +4,9 @@
 //! Inside a medium the extinction is `density_scale * grid value` per mm, gray (the same at
 //! every wavelength). Each step the distance to the first real collision with the media
 //! along the photon's path is drawn by delta tracking under the media's stored local
-//! majorants (the volume crate's tracker, through [`SceneMedia::collision`]), over the
-//! step the material's bulk processes and the next boundary leave: the nearest of them
-//! happens. At a collision the photon is absorbed with probability `1 - albedo` (label
+//! majorants (the volume crate's tracker, through
+//! [`crate::cpu::media::SceneMedia::collision`]), over the step the material's bulk
+//! processes and the next boundary leave: the nearest of them happens. At a collision the photon is absorbed with probability `1 - albedo` (label
 //! AB), else scattered (label SC) into a direction drawn from the Henyey-Greenstein phase
 //! function of the medium's `g`, its polarization the old one projected onto the plane
 //! perpendicular to the new direction (as Geant4's Mie scattering, G4OpMieHG, carries it),

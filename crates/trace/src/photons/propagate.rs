@@ -357,8 +357,7 @@ impl PhotonScene {
                 mark!(Label::Mi);
                 return (history, None);
             }
-            if MEDIA {
-                let media = self.media.as_ref().expect("MEDIA: the scene has media");
+            if let (true, Some(media)) = (MEDIA, &self.media) {
                 if let Some(c) = media.collision(&self.tracer, pos, dir, step, rng) {
                     pos = pos + dir * c.t;
                     time += c.t / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
