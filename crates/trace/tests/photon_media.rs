@@ -9,15 +9,16 @@
 //! at z = 150 that detects everything reaching it) with procedural volumes placed at the
 //! origin, written as scene files into a temporary directory.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use common::{hytrace, stderr, torch_run};
 
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_trace::photons::output::{chi2_survival, history_string};
-use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{
-    load_photon_scene, propagate, propagate_batches, Batch, Origin, PhotonRun, PhotonScene,
-    RunOptions,
+    load_photon_scene, propagate, propagate_batches, Batch, PhotonRun, PhotonScene, RunOptions,
 };
 
 fn data(name: &str) -> PathBuf {
@@ -56,16 +57,8 @@ fn scene(path: &Path) -> PhotonScene {
 
 fn options(source: &str, photons: u64, records: u32) -> RunOptions {
     RunOptions {
-        origin: Origin::Torch {
-            source: Source::parse(source).unwrap(),
-            wavelength: Wavelength::Fixed(420.0),
-        },
-        photons,
-        first: 0,
-        seed: 9,
-        max_steps: 10_000,
-        keep_histories: true,
         records,
+        ..torch_run(source, photons, 9)
     }
 }
 
@@ -253,30 +246,22 @@ fn media_runs_do_not_depend_on_threads_or_batches() {
         .any(|&h| history_string(h).contains("SC")));
 }
 
-fn hytrace(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytrace"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 /// `--explain` lists the medium with where it runs.
 #[test]
 fn explain_lists_the_media() {
     let scene = data("media_slab.toml");
-    let out = hytrace(&[
-        "photons",
-        scene.to_str().unwrap(),
-        "--source",
-        "point:0,0,0",
-        "--explain",
-    ]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = hytrace(
+        &[
+            "photons",
+            scene.to_str().unwrap(),
+            "--source",
+            "point:0,0,0",
+            "--explain",
+        ],
+        &[],
     );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", stderr(&out));
     assert!(
         text.contains("medium: delta-tracked absorption (AB) and Henyey-Greenstein scattering (SC): `box:200,200,20,1,1` x 0.05 /mm, albedo 0.8, g 0.6 [cpu;"),
         "{text}"
@@ -318,17 +303,20 @@ fn bad_media_fail_naming_the_file_and_entry_without_output() {
     for (volume, why) in cases {
         let scene = scene_file(&dir, volume, 0.0);
         let hits = dir.join("hits.npy");
-        let out = hytrace(&[
-            "photons",
-            scene.to_str().unwrap(),
-            "--source",
-            "point:0,0,-100",
-            "-n",
-            "10",
-            "-o",
-            hits.to_str().unwrap(),
-        ]);
-        let err = String::from_utf8_lossy(&out.stderr);
+        let out = hytrace(
+            &[
+                "photons",
+                scene.to_str().unwrap(),
+                "--source",
+                "point:0,0,-100",
+                "-n",
+                "10",
+                "-o",
+                hits.to_str().unwrap(),
+            ],
+            &[],
+        );
+        let err = stderr(&out);
         assert!(!out.status.success(), "{volume}: succeeded");
         assert!(
             err.contains("scene.toml") && err.contains(why),

@@ -25,7 +25,7 @@ use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
     CacheStats, GridMap, IndexRay, IndexTransmittance, Rng, TexelFormat, TransmittanceParams,
-    DEFAULT_STORE_BUDGET,
+    VolumeError, DEFAULT_STORE_BUDGET,
 };
 
 use rayon::prelude::*;
@@ -293,14 +293,23 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         let mut transmittance = 1.0;
         let mut lookups = 0;
         for s in self.segments_of(origin, direction, spans)? {
-            let params = self.params(s.medium, s.placement);
-            let grid = self.grid(s.medium);
-            let e = IndexTransmittance::new(grid, grid.ranges(), &params)?
-                .estimate(&s.ray, ray_index)?;
+            let e = self.tracked(&s, |t| t.estimate(&s.ray, ray_index))?;
             transmittance *= e.transmittance;
             lookups += e.lookups;
         }
         Ok((transmittance, lookups))
+    }
+
+    /// `estimate` given the tracker of segment `s`'s medium, with its parameters.
+    fn tracked<R>(
+        &self,
+        s: &MediumSegment,
+        estimate: impl FnOnce(IndexTransmittance<MediumGrid>) -> Result<R, VolumeError>,
+    ) -> crate::Result<R> {
+        let params = self.params(s.medium, s.placement);
+        let grid = self.grid(s.medium);
+        let tracker = IndexTransmittance::new(grid, grid.ranges(), &params)?;
+        Ok(estimate(tracker)?)
     }
 
     /// The first real collision with any medium over `[t0, t1]` of the ray `origin + t
@@ -318,10 +327,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     ) -> crate::Result<Option<MediumCollision>> {
         let mut best: Option<MediumCollision> = None;
         for s in self.segments(origin, direction, t0, t1)? {
-            let grid = self.grid(s.medium);
-            let params = self.params(s.medium, s.placement);
-            let tracker = IndexTransmittance::new(grid, grid.ranges(), &params)?;
-            if let Some(c) = tracker.collision(&s.ray, rng)? {
+            if let Some(c) = self.tracked(&s, |t| t.collision(&s.ray, rng))? {
                 if best.is_none_or(|b| c.t < b.t) {
                     best = Some(MediumCollision {
                         medium: s.medium,

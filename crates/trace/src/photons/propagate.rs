@@ -287,15 +287,8 @@ impl PhotonScene {
         );
         let mut further = Vec::new();
         while let Some(photon) = pending.pop() {
-            further.push(lineage(
-                self,
-                photon,
-                index,
-                run,
-                &mut rng,
-                &mut pending,
-                None,
-            ));
+            let end = lineage(self, photon, index, run, &mut rng, &mut pending, None);
+            further.push(end);
         }
         PhotonEnd {
             own,
@@ -307,7 +300,7 @@ impl PhotonScene {
     /// Propagates one photon to its end; photons emitted by wavelength-shifting
     /// absorptions beyond the one that carries on are pushed onto `pending`. With `record`,
     /// each step point is appended to it until it holds `run.records`. `MEDIA`: the scene
-    /// has media (compiled out of the loop of a scene without).
+    /// has media (a scene without runs the loop with their test compiled out).
     fn lineage<const MEDIA: bool>(
         &self,
         photon: Lineage,
