@@ -6,7 +6,7 @@
 // photons/reemission (scintillation.rs, REEMISSIONPROB), photons/spectra (properties.rs'
 // Spectrum), photons/bulk (bulk.rs), photons/boundary (boundary.rs), photons/surfaces
 // (surfaces.rs), photons/surface_models (surface_models.rs), photons/wls (wavelength
-// shifting, properties.rs' Wls), photons/bindings (the
+// shifting, properties.rs' Wls), photons/media (media.rs), photons/bindings (the
 // flattened tables, gpu_tables.rs, and the history, output.rs), photons/records (step
 // points, output.rs). The geometry is the scan's scene traversal (trace/scene): the
 // navigator's step from the volume the photon is in (`cross_from`) and the locate
@@ -26,6 +26,9 @@
 // #endif
 // #if wls
 // #import photons/wls
+// #endif
+// #if media
+// #import photons/media
 // #endif
 
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
@@ -152,6 +155,19 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
             history_push(&history, LABEL_MI);
             break;
         }
+        // #if media
+        let c = media_collision(pos, dp.dir, step, &rng);
+        if c.collided {
+            pos = pos + dp.dir * c.t;
+            time += c.t / velocity(m, energy);
+            if !medium_collide(c.placement, &dp, &rng) {
+                history_push(&history, LABEL_AB);
+                break;
+            }
+            history_push(&history, LABEL_SC);
+            continue;
+        }
+        // #endif
         pos = pos + dp.dir * step;
         time += step / velocity(m, energy);
         if d_abs == step && d_abs < t_b {

@@ -5,6 +5,7 @@
 // transmittance kernel.
 // #import generated/trace_records
 // #import csg/spans
+// #import transform
 // #import volume/rng
 // #import render/bindings
 // #if absorption
@@ -37,7 +38,7 @@ fn no_medium() -> MediumStep {
 // (translated as its grid's upload).
 fn medium_space(k: u32, p: vec3<f32>, w: f32) -> vec3<f32> {
     let m = media[k].rows;
-    return vec3<f32>(dot(m[0].xyz, p) + w * m[0].w, dot(m[1].xyz, p) + w * m[1].w, dot(m[2].xyz, p) + w * m[2].w);
+    return rows_apply(m[0], m[1], m[2], p, w);
 }
 
 fn medium_emission(k: u32) -> vec3<f32> {

@@ -3,7 +3,8 @@
 //! exponential of the optical depth integral), the first scattering angles of a thin
 //! scattering slab against the Henyey-Greenstein formula, every photon accounted for;
 //! results independent of threads and batches; `--explain`; bad media refused by name
-//! with no output written.
+//! with no output written. The Beer-Lambert checks run on the GPU kernel too where an
+//! adapter opens.
 //!
 //! The scenes are `tests/data/photons/media_tank.gdml` (a vacuum world with a sensor plate
 //! at z = 150 that detects everything reaching it) with procedural volumes placed at the
@@ -16,7 +17,9 @@ use std::path::{Path, PathBuf};
 use common::{hytrace, stderr, torch_run};
 
 use hytrace_foundry::gdml::GdmlOptions;
+use hytrace_trace::gpu::{GpuContext, GpuPhotons};
 use hytrace_trace::photons::output::{chi2_survival, history_string};
+use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
     load_photon_scene, propagate, propagate_batches, Batch, PhotonRun, PhotonScene, RunOptions,
 };
@@ -53,6 +56,20 @@ fn scene_file(dir: &Path, volume: &str, z: f64) -> PathBuf {
 fn scene(path: &Path) -> PhotonScene {
     let (f, surfaces) = load_photon_scene(path, &GdmlOptions::default()).unwrap();
     PhotonScene::new(&f, surfaces).unwrap()
+}
+
+/// `run` through the scene at `path` on the CPU, then on the GPU kernel (its scene prepared
+/// with the kernel's f32 tracer) where an adapter opens: each backend's name and run.
+fn on_each_backend(path: &Path, run: &RunOptions) -> Vec<(&'static str, PhotonRun)> {
+    let mut runs = vec![("cpu", propagate(&scene(path), run).unwrap())];
+    if let Some(ctx) = GpuContext::for_tests() {
+        let (f, surfaces) = load_photon_scene(path, &GdmlOptions::default()).unwrap();
+        let s32 = PhotonScene::with_precision(&f, surfaces, Precision::F32).unwrap();
+        let kernel = GpuPhotons::new(&ctx, &s32, run).unwrap();
+        let gpu = kernel.propagate(&ctx, &s32, run, &|_| ()).unwrap();
+        runs.push(("gpu", gpu.run));
+    }
+    runs
 }
 
 fn options(source: &str, photons: u64, records: u32) -> RunOptions {
@@ -98,17 +115,23 @@ fn a_pure_absorber_transmits_exp_minus_its_optical_depth() {
         "source = \"box:200,200,20,1,1\"\ndensity_scale = {}\nalbedo = 0",
         tau / 19.0
     );
-    let scene = scene(&scene_file(&dir, &volume, 0.0));
+    let path = scene_file(&dir, &volume, 0.0);
     let n = 20_000;
-    let run = propagate(&scene, &options("beam:0,0,-150:0,0,1:0", n, 0)).unwrap();
-    let labels = last_labels(&run);
-    let detected = labels.iter().filter(|l| *l == "SD").count();
-    let absorbed = labels.iter().filter(|l| *l == "AB").count();
-    assert_eq!(detected + absorbed, n as usize, "{:?}", run.counts);
-    assert_eq!(run.hits.len(), detected);
-    assert_binomial("transmitted", detected, n, (-tau).exp());
-    // Absorbed inside the slab only, where the density is.
-    assert!(run.hits.iter().all(|h| (h.0[2] - 149.0).abs() < 1e-6));
+    for (backend, run) in on_each_backend(&path, &options("beam:0,0,-150:0,0,1:0", n, 0)) {
+        let labels = last_labels(&run);
+        let detected = labels.iter().filter(|l| *l == "SD").count();
+        let absorbed = labels.iter().filter(|l| *l == "AB").count();
+        assert_eq!(
+            detected + absorbed,
+            n as usize,
+            "{backend}: {:?}",
+            run.counts
+        );
+        assert_eq!(run.hits.len(), detected, "{backend}");
+        assert_binomial(backend, detected, n, (-tau).exp());
+        // Detected on the sensor plate (its face at z = 149).
+        assert!(run.hits.iter().all(|h| (h.0[2] - 149.0).abs() < 1e-4));
+    }
 }
 
 /// A graded medium: a fog box 40 mm deep whose density rises linearly from 0 at its faces
@@ -121,16 +144,15 @@ fn a_graded_medium_transmits_the_exponential_of_its_optical_depth_integral() {
     let dir = scratch("graded");
     let scale = 1.0 / 17.5;
     let volume = format!("source = \"box:200,200,40,1,20\"\ndensity_scale = {scale}");
-    let scene = scene(&scene_file(&dir, &volume, 0.0));
+    let path = scene_file(&dir, &volume, 0.0);
     let n = 20_000;
-    let run = propagate(&scene, &options("beam:0,0,-10:0,0,1:0", n, 0)).unwrap();
-    let labels = last_labels(&run);
-    let detected = labels.iter().filter(|l| *l == "SD").count();
-    assert_eq!(
-        detected + labels.iter().filter(|l| *l == "AB").count(),
-        n as usize
-    );
-    assert_binomial("transmitted", detected, n, (-1.0f64).exp());
+    for (backend, run) in on_each_backend(&path, &options("beam:0,0,-10:0,0,1:0", n, 0)) {
+        let labels = last_labels(&run);
+        let detected = labels.iter().filter(|l| *l == "SD").count();
+        let absorbed = labels.iter().filter(|l| *l == "AB").count();
+        assert_eq!(detected + absorbed, n as usize, "{backend}");
+        assert_binomial(backend, detected, n, (-1.0f64).exp());
+    }
 }
 
 /// An optically thin scattering slab (optical depth 0.1 across, albedo 0.8, g 0.6): the
@@ -246,7 +268,8 @@ fn media_runs_do_not_depend_on_threads_or_batches() {
         .any(|&h| history_string(h).contains("SC")));
 }
 
-/// `--explain` lists the medium with where it runs.
+/// `--explain` lists the medium with where it runs (both backends) and the kernel composed
+/// with `media`.
 #[test]
 fn explain_lists_the_media() {
     let scene = data("media_slab.toml");
@@ -263,9 +286,10 @@ fn explain_lists_the_media() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
-        text.contains("medium: delta-tracked absorption (AB) and Henyey-Greenstein scattering (SC): `box:200,200,20,1,1` x 0.05 /mm, albedo 0.8, g 0.6 [cpu;"),
+        text.contains("medium: delta-tracked absorption (AB) and Henyey-Greenstein scattering (SC): `box:200,200,20,1,1` x 0.05 /mm, albedo 0.8, g 0.6 [cpu, gpu;"),
         "{text}"
     );
+    assert!(text.contains("physics features [media]"), "{text}");
 }
 
 /// Bad media: each refused naming the scene file and the volume entry, with no output.

@@ -3,7 +3,9 @@
 //! ([`crate::photons::gpu_tables`]), one invocation per photon. Its CPU twin is the
 //! propagator with the f32 tracer ([`crate::photons::tracer::Precision::F32`]);
 //! `tests/gpu_photons.rs` compares them photon by photon. Photons whose loops ran out of
-//! the driver's loop budget (llvmpipe only) are propagated again by that twin.
+//! the driver's loop budget (llvmpipe only) are propagated again by that twin. A scene's
+//! media are bound as the renderer binds them: their grids in the volume group (group 0,
+//! [`super::render::media_group`]) and their placements as [`RenderMedium`] records.
 
 use std::ops::Range;
 use std::time::Instant;
@@ -17,8 +19,11 @@ use super::photon_records::{
     PHOTON_SEVERAL_EMITTED, PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS, PHOTON_SOURCE_POINT,
     PHOTON_SOURCE_SPHERE,
 };
+use super::records::RenderMedium;
+use super::render::{media_group, placed_rows, tracking_params};
 use super::timing::{finish_pass, GpuTimes, PassTimer};
 use super::tracer::{binding_bytes, kernel_source, SceneUpload};
+use super::transmittance::{KernelGrid, VolumeUpload};
 use crate::photons::gpu_tables::{kernel_features, GpuTables};
 use crate::photons::output::{HitRow, RecordPoint, RECORD_COLUMNS};
 use crate::photons::propagate::{drive_batches, BatchEnds, Emission, Emitting, PhotonEnd};
@@ -29,8 +34,8 @@ use hytrace_foundry::UNSET;
 const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most.
 const BATCH: u64 = 1 << 20;
-/// Storage buffers of the photon group (group 2).
-const PHOTON_BINDINGS: u32 = 12;
+/// Storage buffers of the photon group (group 2); the last holds the placed media.
+const PHOTON_BINDINGS: u32 = 13;
 /// Bytes of one step point (`--records`).
 const POINT_BYTES: u64 = (RECORD_COLUMNS * size_of::<f32>()) as u64;
 /// GPU memory a photon in flight takes (bytes): its packed history and room for its
@@ -50,6 +55,72 @@ pub struct GpuPhotons {
     spectrum: u32,
     /// The run's gensteps (binding 11).
     gensteps: wgpu::Buffer,
+    /// The placed media (binding 12; one zeroed record without).
+    placed: wgpu::Buffer,
+    /// The media's grids (group 0), when the scene has placed media.
+    media_group: Option<wgpu::BindGroup>,
+}
+
+/// A scene's media as the photon kernel reads them: the grids' shared arrays with the
+/// trackers' parameters, and every placement (in the CPU's instance order).
+struct MediaUpload {
+    volume: VolumeUpload,
+    params: wgpu::Buffer,
+    placed: Vec<RenderMedium>,
+}
+
+impl MediaUpload {
+    /// The media of `scene` uploaded (`None` without media); media read as stored
+    /// in a brick store are a [`GpuError::Unsupported`].
+    fn new(ctx: &GpuContext, scene: &PhotonScene) -> Result<Option<MediaUpload>, GpuError> {
+        let (Some(media), Some(f32_scene)) = (&scene.media, scene.tracer.f32_scene()) else {
+            return Ok(None);
+        };
+        // `PhotonMedia::new` kept only placed media.
+        let on = media.open().on(f32_scene);
+        let count = on.medium_count() as u32;
+        let bricked = (0..count)
+            .map(|m| {
+                on.grid(m).bricked().ok_or_else(|| {
+                    GpuError::Unsupported(format!(
+                        "photons: medium {m} is a brick store read as stored; the photon kernel \
+                         takes media bricked in memory (--backend cpu propagates it, or give \
+                         the store a texel format)"
+                    ))
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let grids: Vec<KernelGrid> = bricked.iter().map(|g| KernelGrid::Bricked(g)).collect();
+        let volume = VolumeUpload::new(ctx, &grids)?;
+        let params: Vec<_> = (volume.grids.iter().enumerate())
+            .map(|(m, g)| tracking_params(g, Some(on.params(m as u32, 0).density_scale)))
+            .collect();
+        let scattering = media.scattering();
+        let placed = on
+            .placements()
+            .map(|((_, medium), to_index)| {
+                let s = scattering[medium as usize];
+                RenderMedium {
+                    rows: placed_rows(to_index, volume.grids[medium as usize].shift),
+                    emission: [0.0; 3],
+                    volume: medium,
+                    albedo: s.albedo as f32,
+                    g: s.g as f32,
+                    // The photon's own stream tracks every placement, as on the CPU.
+                    seed: 0,
+                    pad: 0,
+                }
+            })
+            .collect();
+        let params = ctx.checked("photon media", || {
+            ctx.input_buffer("photon medium params", &binding_bytes(&params))
+        })?;
+        Ok(Some(MediaUpload {
+            volume,
+            params,
+            placed,
+        }))
+    }
 }
 
 /// What a GPU photon run gives back.
@@ -114,14 +185,9 @@ impl GpuPhotons {
                     .into(),
             ));
         };
-        if scene.media.is_some() {
-            return Err(GpuError::Unsupported(
-                "photons: media (the scene's volumes) are not modelled by the photon kernel; \
-                 --backend cpu propagates them"
-                    .into(),
-            ));
-        }
-        let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS)?;
+        let media = MediaUpload::new(ctx, scene)?;
+        let media_bindings = media.as_ref().map_or(0, |m| m.volume.binding_count());
+        let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS + media_bindings)?;
         let mut flat = GpuTables::new(scene);
         // A torch spectrum that does not resolve is left to the run, which names it.
         let spectrum = match &run.origin {
@@ -139,15 +205,30 @@ impl GpuPhotons {
             _ => Vec::new(),
         };
         let mut features = upload.features.clone();
-        features.extend(kernel_features(&scene.tables, run));
+        features.extend(kernel_features(&scene.tables, media.is_some(), run));
+        let mut constants = upload.constants.clone();
+        if let Some(m) = &media {
+            let (chunked, volume_constants) = m.volume.kernel_options();
+            features.extend(chunked);
+            constants.extend(volume_constants);
+        }
         let source = kernel_source(KERNEL, &features)?;
-        let constants = declared_constants(&source, &upload.constants);
+        let constants = declared_constants(&source, &constants);
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let layout = ctx.storage_layout("photons", PHOTON_BINDINGS, &[7, 8, 9, 10]);
-            // Group 0 (the Foundry's own arrays) is not used.
-            let pipeline_layout =
-                ctx.pipeline_layout("photons", &[None, Some(&upload.layout), Some(&layout)]);
+            // Group 0 holds the media's grids (the Foundry's own arrays are not used).
+            let media_group = media
+                .as_ref()
+                .map(|m| media_group(ctx, &m.volume, &m.params, None));
+            let pipeline_layout = ctx.pipeline_layout(
+                "photons",
+                &[
+                    media_group.as_ref().map(|(layout, _)| layout),
+                    Some(&upload.layout),
+                    Some(&layout),
+                ],
+            );
             let tables = vec![
                 ctx.input_buffer("photon tables", &binding_bytes(&flat.tables)),
                 ctx.input_buffer("photon rows", &binding_bytes(&flat.rows)),
@@ -159,8 +240,10 @@ impl GpuPhotons {
                 // happens.
                 ctx.input_buffer("photon borders", &binding_bytes(&flat.lookup.borders)),
             ];
-            // Likewise an empty list of gensteps (a torch run) as one zeroed record.
+            // Likewise an empty list of gensteps (a torch run) and of placed media.
             let gensteps = ctx.input_buffer("photon gensteps", &binding_bytes(&gensteps));
+            let placed = media.as_ref().map_or(&[][..], |m| &m.placed[..]);
+            let placed = ctx.input_buffer("photon media", &binding_bytes(placed));
             GpuPhotons {
                 pipeline: compute_pipeline(
                     ctx,
@@ -176,6 +259,8 @@ impl GpuPhotons {
                 features,
                 spectrum,
                 gensteps,
+                placed,
+                media_group: media_group.map(|(_, group)| group),
             }
         })
     }
@@ -308,6 +393,7 @@ impl GpuPhotons {
                     &outputs.count,
                     &outputs.steps,
                     &self.gensteps,
+                    &self.placed,
                 ]
                 .map(Clone::clone),
             );
@@ -321,7 +407,12 @@ impl GpuPhotons {
             ctx.submit_pass(
                 "photons",
                 &[&self.pipeline],
-                &[(1, &self.scene_group), (2, &group)],
+                &self
+                    .media_group
+                    .iter()
+                    .map(|g| (0, g))
+                    .chain([(1, &self.scene_group), (2, &group)])
+                    .collect::<Vec<_>>(),
                 (range.end - range.start) as u32,
                 timer.as_ref(),
             );

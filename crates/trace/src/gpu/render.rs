@@ -28,6 +28,7 @@ use crate::render::camera::Projection;
 use crate::render::cutaway::CutMode;
 use crate::render::spec::{Light, Material, View, VolumeMode};
 use crate::render::{Image, Renderer};
+use hytrace_foundry::Transform64;
 use hytrace_volume::{global_range, BrickStore, BrickedGrid, RangeMips};
 
 const KERNEL: &str = "kernels/render";
@@ -217,14 +218,71 @@ fn streamed_medium<'r>(renderer: &'r Renderer) -> Option<(&'r BrickStore, &'r Ra
 /// (trilinear lookups, the finest local majorants; the march walks one global segment
 /// whatever `global` says).
 fn medium_params(renderer: &Renderer, medium: usize, grid: &UploadedGrid) -> VolumeParams {
+    let scale = renderer
+        .media
+        .as_ref()
+        .map(|media| media.scene.params(medium as u32, 0).density_scale);
+    tracking_params(grid, scale)
+}
+
+/// The kernel's parameters of a medium uploaded as `grid` for the CPU's trackers
+/// (trilinear lookups, the finest local majorants; the march walks one global segment
+/// whatever `global` says), with its density scale when given: the renderer's and the
+/// photon kernel's.
+pub(super) fn tracking_params(grid: &UploadedGrid, density_scale: Option<f64>) -> VolumeParams {
     let mut params = grid.base;
-    if let Some(media) = &renderer.media {
-        params.density_scale = media.scene.params(medium as u32, 0).density_scale as f32;
+    if let Some(scale) = density_scale {
+        params.density_scale = scale as f32;
     }
     params.lookup_filter = VOLUME_FILTER_TRILINEAR;
     params.global = 0;
     params.finest = 0;
     params
+}
+
+/// The rows of the world-to-index transform `to_index` of a placed medium whose grid's
+/// upload translated its index space by `shift` (a [`RenderMedium`]'s `rows`).
+pub(super) fn placed_rows(to_index: &Transform64, shift: [f64; 3]) -> [[f32; 4]; 3] {
+    std::array::from_fn(|r| {
+        let row = to_index.rows[r];
+        [
+            row[0] as f32,
+            row[1] as f32,
+            row[2] as f32,
+            (row[3] - shift[r]) as f32,
+        ]
+    })
+}
+
+/// The media's group 0 of grids uploaded whole: its layout and bind group, the grids'
+/// parameters at binding 0 and their texels in `texture` when given.
+pub(super) fn media_group(
+    ctx: &GpuContext,
+    volume: &VolumeUpload,
+    params: &wgpu::Buffer,
+    texture: Option<&wgpu::TextureView>,
+) -> (wgpu::BindGroupLayout, wgpu::BindGroup) {
+    let mut layout_entries = volume.layout_entries(ctx);
+    let mut entries = volume.entries(params);
+    if let Some(view) = texture {
+        layout_entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
+        entries.push(wgpu::BindGroupEntry {
+            binding: ATLAS_TEXTURE_BINDING,
+            resource: wgpu::BindingResource::TextureView(view),
+        });
+    }
+    let layout = ctx
+        .device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("medium"),
+            entries: &layout_entries,
+        });
+    let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("medium"),
+        layout: &layout,
+        entries: &entries,
+    });
+    (layout, group)
 }
 
 /// The effect features and `RENDER_EFFECT_*` bits of a render.
@@ -373,15 +431,7 @@ fn inputs(renderer: &Renderer, hierarchical: bool, shifts: &[[f64; 3]]) -> Rende
             let shift = shifts[medium as usize];
             let optics = &m.optics[medium as usize];
             media.push(RenderMedium {
-                rows: std::array::from_fn(|r| {
-                    let row = to_index.rows[r];
-                    [
-                        row[0] as f32,
-                        row[1] as f32,
-                        row[2] as f32,
-                        (row[3] - shift[r]) as f32,
-                    ]
-                }),
+                rows: placed_rows(to_index, shift),
                 emission: optics.emission.map(|c| c as f32),
                 volume: medium,
                 albedo: optics.albedo as f32,
@@ -484,26 +534,7 @@ impl GpuRenderer {
             let module = ctx.wgsl_module(KERNEL, &source);
             let render_layout = ctx.storage_layout("render", render_bindings, &[3]);
             let medium_group = medium.as_ref().map(|(volume, params, texture, shifts)| {
-                let mut layout_entries = volume.layout_entries(ctx);
-                let mut entries = volume.entries(params);
-                if let Some(view) = texture {
-                    layout_entries.push(texture_layout_entry(ATLAS_TEXTURE_BINDING));
-                    entries.push(wgpu::BindGroupEntry {
-                        binding: ATLAS_TEXTURE_BINDING,
-                        resource: wgpu::BindingResource::TextureView(view),
-                    });
-                }
-                let layout =
-                    ctx.device
-                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                            label: Some("medium"),
-                            entries: &layout_entries,
-                        });
-                let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("medium"),
-                    layout: &layout,
-                    entries: &entries,
-                });
+                let (layout, group) = media_group(ctx, volume, params, texture.as_ref());
                 (layout, MediumGroup::InCore(group, shifts.clone()))
             });
             let medium_group = medium_group.or_else(|| {

@@ -1,8 +1,8 @@
 //! What a photon run calls for (`hytrace photons --explain`): the processes its scene's
 //! materials and surfaces, its source and its outputs need, each with the materials or
 //! surfaces that need it and where it runs (the CPU propagator and the GPU kernel have
-//! every one but media, which the CPU alone propagates), then what the GPU kernel is
-//! composed of.
+//! every one; the CPU alone propagates media read as stored in a brick store), then what
+//! the GPU kernel is composed of.
 
 use std::collections::BTreeSet;
 
@@ -18,9 +18,8 @@ const BOTH: &str = "cpu, gpu";
 /// Wavelength shifting: an absorption emitting several photons is propagated on the CPU.
 const WLS_ON: &str = "cpu, gpu; an absorption emitting several photons: cpu";
 
-/// Media: the GPU kernel does not model them yet.
-const MEDIA_ON: &str =
-    "cpu; the gpu kernel refuses media: --backend auto runs the scene on the cpu";
+/// Media: media read as stored in a brick store are the CPU's alone.
+const MEDIA_ON: &str = "cpu, gpu; a brick store read as stored: cpu";
 
 /// Whether a material needs a process.
 type Needs = dyn Fn(&MaterialOptics) -> bool;
@@ -140,7 +139,7 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
     }
     lines.push(format!(
         "gpu kernel: composed with the physics features [{}] (besides the geometry's)",
-        kernel_features(&scene.tables, run).join(", ")
+        kernel_features(&scene.tables, scene.media.is_some(), run).join(", ")
     ));
     lines
 }

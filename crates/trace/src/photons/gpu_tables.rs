@@ -159,10 +159,11 @@ fn push_spectrum(tables: &mut Vec<PhotonTable>, rows: &mut Vec<[f32; 2]>, s: &Sp
 /// `// #if` blocks of `shaders/photons/`): `rough_surfaces` when an optical surface has
 /// a finish other than polished (facets, the unified model's reflection types, paint),
 /// `reemission` when a material re-emits what it absorbs (REEMISSIONPROB), `wls` when one
-/// shifts wavelengths (WLSABSLENGTH), `spectrum`
+/// shifts wavelengths (WLSABSLENGTH), `media` when the scene places `media` (its volumes,
+/// [`super::media`]), `spectrum`
 /// when `run`'s torch draws its photons' energies from a spectrum, `gensteps` when its
 /// photons come from gensteps, `records` when it writes step points.
-pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static str> {
+pub fn kernel_features(tables: &OpticsTables, media: bool, run: &RunOptions) -> Vec<&'static str> {
     let rough = (tables.surfaces.iter().flatten()).any(|s| s.finish != Finish::Polished);
     let reemission = tables.materials.iter().any(|m| m.reemission.is_some());
     let wls = tables.materials.iter().any(|m| m.wlsabslength.is_some());
@@ -180,6 +181,7 @@ pub fn kernel_features(tables: &OpticsTables, run: &RunOptions) -> Vec<&'static 
         (rough, "rough_surfaces"),
         (reemission, "reemission"),
         (wls, "wls"),
+        (media, "media"),
         (spectrum, "spectrum"),
     ]
     .into_iter()
@@ -378,7 +380,7 @@ mod tests {
             (&scintillator, &torch, &["reemission"][..]),
             (&shifter, &torch, &["wls"][..]),
         ] {
-            assert_eq!(kernel_features(tables, run), features);
+            assert_eq!(kernel_features(tables, false, run), features);
         }
         let gensteps = RunOptions {
             origin: Origin::Gensteps(std::sync::Arc::new(GenstepFile {
@@ -391,7 +393,7 @@ mod tests {
             records: 4,
             ..torch.clone()
         };
-        assert_eq!(kernel_features(&every, &records), ["records"]);
-        assert_eq!(kernel_features(&every, &gensteps), ["gensteps"]);
+        assert_eq!(kernel_features(&every, false, &records), ["records"]);
+        assert_eq!(kernel_features(&every, false, &gensteps), ["gensteps"]);
     }
 }

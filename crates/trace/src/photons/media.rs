@@ -55,7 +55,8 @@ pub struct PhotonMedia {
 }
 
 impl PhotonMedia {
-    /// Opens the media of `f` on the scene `tracer` navigates (`None` without media).
+    /// Opens the media of `f` on the scene `tracer` navigates (`None` without placed
+    /// media).
     /// Errors name the medium and its source: a grid that cannot be opened, a density
     /// below zero (delta tracking needs `>= 0`), or a medium so dense that tracking across
     /// it would take more than 10^7 density lookups.
@@ -63,10 +64,14 @@ impl PhotonMedia {
         if f.optics.media.is_empty() {
             return Ok(None);
         }
-        let open = match tracer {
+        let (open, placed) = match tracer {
             PhotonTracer::F64(s) => opened(s, f)?,
             PhotonTracer::F32(s) => opened(s, f)?,
         };
+        // Media no instance places are never met.
+        if !placed {
+            return Ok(None);
+        }
         let scattering = f
             .optics
             .media
@@ -112,6 +117,17 @@ impl PhotonMedia {
         })
     }
 
+    /// The media opened, to answer queries on the scene they were opened for (the GPU
+    /// kernel's upload reads their grids and placements).
+    pub(crate) fn open(&self) -> &OpenMedia {
+        &self.open
+    }
+
+    /// Each medium's scattering, in the Foundry's order.
+    pub fn scattering(&self) -> &[Scattering] {
+        &self.scattering
+    }
+
     /// Each medium's source, extinction scale and scattering, for `--explain`.
     pub fn describe(&self) -> impl Iterator<Item = String> + '_ {
         self.described
@@ -122,8 +138,8 @@ impl PhotonMedia {
 }
 
 /// The media of `f` opened on `scene` and checked for delta tracking (see
-/// [`PhotonMedia::new`]).
-fn opened<T: Real>(scene: &CpuScene<T>, f: &Foundry) -> Result<OpenMedia, PhotonError> {
+/// [`PhotonMedia::new`]), and whether any is placed.
+fn opened<T: Real>(scene: &CpuScene<T>, f: &Foundry) -> Result<(OpenMedia, bool), PhotonError> {
     let params = TransmittanceParams::new(Estimator::Delta);
     let open = OpenMedia::open(scene, f, &params, DEFAULT_STORE_BUDGET)
         .map_err(|e| PhotonError::Scene(crate::error::report(&e)))?;
@@ -152,7 +168,8 @@ fn opened<T: Real>(scene: &CpuScene<T>, f: &Foundry) -> Result<OpenMedia, Photon
             }
         }
     }
-    Ok(open)
+    let placed = !placements.is_empty();
+    Ok((open, placed))
 }
 
 /// A collision with a medium of `scattering`: `None` when it absorbs the photon, else its
