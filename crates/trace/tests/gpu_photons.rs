@@ -3,7 +3,8 @@
 //! geometry) by the fraction of identical histories and a chi2 on history frequencies,
 //! on every process: the repository's every-process, rough-surface, scintillator and
 //! wavelength-shifter scenes (spectra, re-emission, gensteps, wavelength shifting, step
-//! points), the raindrop and the 8x8 SiPM files of the shared corpus.
+//! points), media (a fog slab and a dense fog), the raindrop and the 8x8 SiPM files of the
+//! shared corpus.
 
 mod common;
 

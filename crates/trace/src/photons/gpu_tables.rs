@@ -395,5 +395,6 @@ mod tests {
         };
         assert_eq!(kernel_features(&every, false, &records), ["records"]);
         assert_eq!(kernel_features(&every, false, &gensteps), ["gensteps"]);
+        assert_eq!(kernel_features(&shifter, true, &torch), ["wls", "media"]);
     }
 }
