@@ -23,6 +23,7 @@ use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
     load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
 };
+use hytrace_volume::{convert_grid, ConvertOptions, DenseGrid};
 
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
@@ -677,5 +678,89 @@ fn the_command_runs_media_on_the_gpu_and_auto_picks_it() {
         same as f64 >= 0.98 * a.len() as f64,
         "{same} of {}",
         a.len()
+    );
+}
+
+/// A scene whose medium is a brick store read as stored (16^3 voxels of density 1, an
+/// extinction of 0.05 per mm) in the tank of `media_tank.gdml`, written into `dir`.
+fn stored_medium(dir: &Path) -> PathBuf {
+    let mut grid = DenseGrid::new([0; 3], [16; 3], 0.0).unwrap();
+    for z in 0..16 {
+        for y in 0..16 {
+            for x in 0..16 {
+                grid.set([x, y, z], 1.0);
+            }
+        }
+    }
+    let options = ConvertOptions {
+        background: 0.0,
+        threshold: 0.0,
+        range: None,
+        memory: 1 << 26,
+    };
+    convert_grid(
+        &grid,
+        "density",
+        &options,
+        &dir.join("fog.bricks"),
+        &|_, _| (),
+    )
+    .unwrap();
+    let path = dir.join("stored.toml");
+    let tank = repo("tests/data/photons/media_tank.gdml");
+    std::fs::write(
+        &path,
+        format!(
+            "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"fog.bricks\"\n\
+             density_scale = 0.05\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
+             translate = [-8, -8, -8]\n",
+            tank.display()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+/// The kernel reads media bricked in memory only: `GpuPhotons::new` refuses a brick store
+/// read as stored naming the medium, `--backend gpu` fails without output, and `--backend
+/// auto` says why on stderr and gives the CPU run's histories and hits exactly.
+#[test]
+fn stored_media_are_refused_by_the_kernel_and_auto_runs_them_on_the_cpu() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = stored_medium(dir.path());
+    let source = "beam:0,0,-150:0,0,1:0";
+    let Err(e) = GpuPhotons::new(&ctx, &scene(&path, Precision::F32), &options(source, 100)) else {
+        panic!("the kernel accepted a medium read as stored");
+    };
+    assert!(e.to_string().contains("medium 0 is a brick store"), "{e}");
+    let (gpu, hits, _) = photons_command(dir.path(), &path, source, 500, "gpu", &[]);
+    assert!(!gpu.status.success());
+    assert!(
+        stderr(&gpu).contains("stored.toml") && stderr(&gpu).contains("brick store"),
+        "{}",
+        stderr(&gpu)
+    );
+    assert!(!hits.exists());
+    let (auto, auto_hits, auto_history) =
+        photons_command(dir.path(), &path, source, 500, "auto", &[]);
+    assert!(auto.status.success(), "{}", stderr(&auto));
+    assert!(stderr(&auto).contains("on the CPU"), "{}", stderr(&auto));
+    let (cpu, cpu_hits, cpu_history) = photons_command(dir.path(), &path, source, 500, "cpu", &[]);
+    assert!(cpu.status.success(), "{}", stderr(&cpu));
+    let absorbed_or_scattered = packed_histories(&cpu_history)
+        .iter()
+        .filter(|&&h| history_string(h) != "TO SD")
+        .count();
+    assert!(absorbed_or_scattered > 50, "{absorbed_or_scattered}");
+    assert_eq!(
+        packed_histories(&auto_history),
+        packed_histories(&cpu_history)
+    );
+    assert_eq!(
+        std::fs::read(auto_hits).unwrap(),
+        std::fs::read(cpu_hits).unwrap()
     );
 }
