@@ -20,7 +20,6 @@
 mod batched;
 #[path = "common/heightfield.rs"]
 mod heightfield;
-#[cfg(feature = "embree")]
 #[path = "common/pairs.rs"]
 mod pairs;
 
@@ -38,7 +37,8 @@ use hytrace_tests::oracle_python;
 use hytrace_trace::cpu::{CpuScene, Hit, BATCH};
 use hytrace_trace::scene::load_scene;
 #[cfg(feature = "embree")]
-use pairs::{paired_speed_ratio, PAIRS};
+use pairs::paired_speed_ratio;
+use pairs::{paired_simd_ratio, simd_line, PAIRS};
 use rayon::prelude::*;
 
 /// Timed runs per measurement (the best is reported).
@@ -118,6 +118,7 @@ fn main() {
         faces.len(),
         count
     );
+    println!("{}", simd_line());
 
     let t0 = Instant::now();
     let foundry = load_scene(Some(&obj), &GdmlOptions::default()).unwrap();
@@ -209,6 +210,23 @@ fn main() {
         batch_rates.push(mrays(rays.len(), batch_s));
         prim_rates.push(mrays(rays.len(), prim_s));
         ours_t.push(hits);
+        // The selected SIMD path against the portable one, side by side: closest hits in
+        // batches (as `hytrace scan`) and any hits ray by ray.
+        let closest = paired_simd_ratio(|| {
+            trace_batches(&scene, &rays64, distance);
+        });
+        let any = paired_simd_ratio(|| {
+            rays64.par_iter().for_each(|r| {
+                scene.occluded(r, 0.0, f32::INFINITY);
+            })
+        });
+        if let (Some([median, low, high]), Some([any_median, any_low, any_high])) = (closest, any) {
+            println!(
+                "{}: {} over portable, {PAIRS} alternating pairs: CpuScene::trace_batch median {median:.2}x, range {low:.2}-{high:.2}x; CpuScene::occluded median {any_median:.2}x, range {any_low:.2}-{any_high:.2}x",
+                set.name,
+                hytrace_csg::simd::selected()
+            );
+        }
     }
     rows.push(format!(
         "| hytrace CpuScene::<f32>::trace ({} threads) | {build_s:.2} | {:.2} | {:.2} |",

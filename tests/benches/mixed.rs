@@ -15,7 +15,6 @@
 mod batched;
 #[path = "common/mixed_scene.rs"]
 mod mixed_scene;
-#[cfg(feature = "embree")]
 #[path = "common/pairs.rs"]
 mod pairs;
 
@@ -30,7 +29,8 @@ use hytrace_trace::scene::scene_from_toml;
 use hytrace_volume::{Estimator, TransmittanceParams};
 use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
 #[cfg(feature = "embree")]
-use pairs::{paired_speed_ratio, PAIRS};
+use pairs::paired_speed_ratio;
+use pairs::{paired_simd_ratio, simd_line, PAIRS};
 use rayon::prelude::*;
 
 #[cfg(feature = "embree")]
@@ -71,6 +71,7 @@ fn main() {
         f.brick.len(),
         rayon::current_num_threads()
     );
+    println!("{}", simd_line());
     println!("| rays | query | backend | build s | Mrays/s | hits |");
     println!("|---|---|---|---|---|---|");
     #[cfg(feature = "embree")]
@@ -120,6 +121,21 @@ fn main() {
                 .count()
         });
         row("any hit", "hytrace cpu", build_s, secs, occluded);
+        // The selected SIMD path against the portable one, side by side.
+        let closest = paired_simd_ratio(|| {
+            trace_batches(&cpu, &rays64, |h| h.map(|h| h.t));
+        });
+        let any = paired_simd_ratio(|| {
+            rays64.par_iter().for_each(|r| {
+                cpu.occluded(r, 0.0, f32::INFINITY);
+            })
+        });
+        if let (Some([median, low, high]), Some([any_median, any_low, any_high])) = (closest, any) {
+            println!(
+                "|  | {} over portable, {PAIRS} alternating pairs: closest hit in batches median {median:.2}x, range {low:.2}-{high:.2}x; any hit median {any_median:.2}x, range {any_low:.2}-{any_high:.2}x | | | | |",
+                hytrace_csg::simd::selected()
+            );
+        }
         #[cfg(feature = "embree")]
         {
             let (secs, embree_hits) = best(|| {

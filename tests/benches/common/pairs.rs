@@ -3,6 +3,8 @@
 
 use std::time::Instant;
 
+use hytrace_csg::simd::{self, SimdPath};
+
 /// Alternating pairs per comparison.
 pub const PAIRS: usize = 7;
 
@@ -21,4 +23,34 @@ pub fn paired_speed_ratio(mut ours: impl FnMut(), mut theirs: impl FnMut()) -> [
         .collect();
     ratios.sort_by(f64::total_cmp);
     [ratios[PAIRS / 2], ratios[0], ratios[PAIRS - 1]]
+}
+
+/// How many times faster `work` runs on the selected SIMD path ([`simd::selected`]) than
+/// on the portable one, over [`PAIRS`] alternating pairs ([`paired_speed_ratio`]); `None`
+/// when the selected path is the portable one. The selected path is restored afterwards.
+pub fn paired_simd_ratio(work: impl Fn()) -> Option<[f64; 3]> {
+    let chosen = simd::selected();
+    if chosen == SimdPath::Portable {
+        return None;
+    }
+    let on = |path: SimdPath| {
+        simd::select(path).expect("a supported path");
+        work();
+    };
+    let ratio = paired_speed_ratio(|| on(chosen), || on(SimdPath::Portable));
+    simd::select(chosen).expect("a supported path");
+    Some(ratio)
+}
+
+/// The line naming the SIMD path the kernels run on, and the others this CPU has.
+pub fn simd_line() -> String {
+    let names: Vec<String> = SimdPath::available()
+        .iter()
+        .map(|p| p.to_string())
+        .collect();
+    format!(
+        "SIMD path: {} (this CPU: {}; HYTRACE_SIMD=portable|avx2|avx512 forces one)",
+        simd::selected(),
+        names.join(", ")
+    )
 }
