@@ -626,6 +626,7 @@ mod tests {
 
     use super::*;
     use crate::prim_tree::ray_bounds_entry;
+    use crate::simd::{run_on, Kernel, SimdPath};
     use crate::test_common::{Random, Rng};
 
     /// Random boxes, a wide tree over them (leaves of up to 4 boxes) and the box numbers in
@@ -681,17 +682,36 @@ mod tests {
         /// Checks that walking the tree (the limit never lowered) reaches every box the
         /// exact dividing test finds the ray meeting within `[after, limit]`; returns how many.
         fn window(&self, origin: [f64; 3], direction: [f64; 3], after: f32, limit: f32) -> usize {
-            let (boxes, tree, order) = (&self.boxes, &self.tree, &self.order);
             let ray = &Ray::<f32>::from_f64(origin, direction);
-            let mut reached = vec![false; boxes.len()];
-            tree.walk(&WideSlabs::new(ray), after, limit, |first, count| {
-                for &i in &order[first as usize..(first + count) as usize] {
-                    reached[i as usize] = true;
+            /// The boxes a walk reaches, as a [`Kernel`].
+            struct Reach<'a>(&'a Forest, &'a WideSlabs, f32, f32);
+            impl Kernel for Reach<'_> {
+                type Output = Vec<bool>;
+                fn run<S: Isa>(self) -> Vec<bool> {
+                    let Reach(forest, slabs, after, limit) = self;
+                    let mut reached = vec![false; forest.boxes.len()];
+                    forest
+                        .tree
+                        .walk_with::<S>(slabs, after, limit, |first, count| {
+                            for &i in &forest.order[first as usize..(first + count) as usize] {
+                                reached[i as usize] = true;
+                            }
+                            limit
+                        });
+                    reached
                 }
-                limit
-            });
+            }
+            let slabs = WideSlabs::new(ray);
+            let reached = run_on(SimdPath::Portable, Reach(self, &slabs, after, limit));
+            // Every path reaches the same boxes (its node test gives the same bits).
+            for path in SimdPath::available() {
+                assert!(
+                    run_on(path, Reach(self, &slabs, after, limit)) == reached,
+                    "{path} reaches other boxes than the portable path for {ray:?}"
+                );
+            }
             let mut met = 0;
-            for (i, b) in boxes.iter().enumerate() {
+            for (i, b) in self.boxes.iter().enumerate() {
                 if ray_bounds_entry(ray, b, after, limit).is_some() {
                     met += 1;
                     assert!(
