@@ -37,8 +37,8 @@ use hytrace_tests::oracle_python;
 use hytrace_trace::cpu::{CpuScene, Hit, BATCH};
 use hytrace_trace::scene::load_scene;
 #[cfg(feature = "embree")]
-use pairs::paired_speed_ratio;
-use pairs::{paired_simd_ratio, simd_line, PAIRS};
+use pairs::{paired_speed_ratio, PAIRS};
+use pairs::{simd_line, simd_over_portable};
 use rayon::prelude::*;
 
 /// Timed runs per measurement (the best is reported).
@@ -210,22 +210,8 @@ fn main() {
         batch_rates.push(mrays(rays.len(), batch_s));
         prim_rates.push(mrays(rays.len(), prim_s));
         ours_t.push(hits);
-        // The selected SIMD path against the portable one, side by side: closest hits in
-        // batches (as `hytrace scan`) and any hits ray by ray.
-        let closest = paired_simd_ratio(|| {
-            trace_batches(&scene, &rays64, distance);
-        });
-        let any = paired_simd_ratio(|| {
-            rays64.par_iter().for_each(|r| {
-                scene.occluded(r, 0.0, f32::INFINITY);
-            })
-        });
-        if let (Some([median, low, high]), Some([any_median, any_low, any_high])) = (closest, any) {
-            println!(
-                "{}: {} over portable, {PAIRS} alternating pairs: CpuScene::trace_batch median {median:.2}x, range {low:.2}-{high:.2}x; CpuScene::occluded median {any_median:.2}x, range {any_low:.2}-{any_high:.2}x",
-                set.name,
-                hytrace_csg::simd::selected()
-            );
+        if let Some(line) = simd_over_portable(&scene, &rays64) {
+            println!("{}: {line}", set.name);
         }
     }
     rows.push(format!(

@@ -29,8 +29,8 @@ use hytrace_trace::scene::scene_from_toml;
 use hytrace_volume::{Estimator, TransmittanceParams};
 use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
 #[cfg(feature = "embree")]
-use pairs::paired_speed_ratio;
-use pairs::{paired_simd_ratio, simd_line, PAIRS};
+use pairs::{paired_speed_ratio, PAIRS};
+use pairs::{simd_line, simd_over_portable};
 use rayon::prelude::*;
 
 #[cfg(feature = "embree")]
@@ -121,20 +121,8 @@ fn main() {
                 .count()
         });
         row("any hit", "hytrace cpu", build_s, secs, occluded);
-        // The selected SIMD path against the portable one, side by side.
-        let closest = paired_simd_ratio(|| {
-            trace_batches(&cpu, &rays64, |h| h.map(|h| h.t));
-        });
-        let any = paired_simd_ratio(|| {
-            rays64.par_iter().for_each(|r| {
-                cpu.occluded(r, 0.0, f32::INFINITY);
-            })
-        });
-        if let (Some([median, low, high]), Some([any_median, any_low, any_high])) = (closest, any) {
-            println!(
-                "|  | {} over portable, {PAIRS} alternating pairs: closest hit in batches median {median:.2}x, range {low:.2}-{high:.2}x; any hit median {any_median:.2}x, range {any_low:.2}-{any_high:.2}x | | | | |",
-                hytrace_csg::simd::selected()
-            );
+        if let Some(line) = simd_over_portable(&cpu, &rays64) {
+            println!("|  | {line} | | | | |");
         }
         #[cfg(feature = "embree")]
         {

@@ -1,10 +1,10 @@
 //! The instruction sets the f32 mesh kernel runs with, chosen once per process at run time.
 //!
 //! The kernel's node box test (8 children at once), packet slab test and triangle block test
-//! are written once, generically over an instruction-set marker ([`Isa`]): [`Portable`]
+//! are written once, generically over an instruction-set marker (`Isa`): `Portable`
 //! uses `wide`'s vectors, whose form is fixed when this crate is compiled (two SSE halves
 //! for 8 lanes in the default x86-64 build, NEON on AArch64, arrays elsewhere); on x86-64,
-//! `Avx2` holds 8 lanes in one 256-bit register. A search ([`Kernel`]) is compiled once per
+//! `Avx2` holds 8 lanes in one 256-bit register. A search (a `Kernel`) is compiled once per
 //! path: for the portable one as it stands, and for each x86-64 path inside a function built
 //! for that instruction set (`#[target_feature]`), into which the whole search is inlined,
 //! so that the walk, the triangle tests and the scalar work around them all use it. The
@@ -18,7 +18,7 @@
 //! The path is the best one the CPU supports ([`SimdPath::detect`]), or the one the
 //! environment variable `HYTRACE_SIMD` (`portable`, `avx2`, `avx512`) names; [`selected`]
 //! reads it once. [`select`] changes it for the rest of the process (benchmarks compare
-//! paths that way); [`run_on`] runs one search on a given path.
+//! paths that way); `run_on` runs one search on a given path.
 
 use std::fmt;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};

@@ -22,7 +22,7 @@
 //! visit or leaf at a time (`Walker`), so that one thread can interleave the walks of
 //! several rays, each prefetching what it reads next while the others work: the mesh
 //! kernel's `MeshPrim::first_crossings`. Both share the node visit and the stack. Coherent
-//! rays walk it as packets of 8 instead ([`WideTree::walk_packet`], module `packet`).
+//! rays walk it as packets of 8 instead (`WideTree::walk_packet`, module `packet`).
 //!
 //! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
 //! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
