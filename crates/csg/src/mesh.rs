@@ -22,8 +22,10 @@
 //!
 //! The f32 kernel's nearest-crossing search on the CPU does not walk this binary tree: it
 //! walks its wide form (module `wide`: 8 children per node and 4 triangles per SIMD test),
-//! built from it and giving the same answers bit for bit. The binary tree stays what the
-//! GPU kernels, the f64 kernel and the parity count of [`MeshPrim::contains`] traverse.
+//! built from it and giving the same answers bit for bit, with the instruction set chosen at
+//! run time ([`crate::simd`]: AVX2 where the CPU has it, SSE2 otherwise; the same bits).
+//! The binary tree stays what the GPU kernels, the f64 kernel and the parity count of
+//! [`MeshPrim::contains`] traverse.
 //!
 //! obvhs' own compressed 8-wide BVH (`build_cwbvh_from_tris`) was measured first and not
 //! adopted: with our triangle test it was only 3-13% (coherent) and 12-29% (incoherent)
