@@ -588,26 +588,24 @@ fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
     }
 }
 
-/// A scene with a denser, more forward-scattering fog than `media_slab.toml`'s in the same
-/// tank: optical depth 8 across the slab, so photons scatter many times (and some are
-/// absorbed) before they leave it.
-fn dense_fog(dir: &Path) -> PathBuf {
+/// A scene of the tank of `media_tank.gdml` with the fog `volume` (its TOML lines) at the
+/// origin, written as `name` into `dir`.
+fn fog_scene(dir: &Path, name: &str, volume: &str) -> PathBuf {
     let tank = repo("tests/data/photons/media_tank.gdml");
-    let path = dir.join("dense_fog.toml");
-    std::fs::write(
-        &path,
-        format!(
-            "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"box:200,200,20,1,1\"\n\
-             density_scale = 0.4\nalbedo = 0.95\ng = 0.85\n\n[[place]]\nsolid = \"fog\"\n",
-            tank.display()
-        ),
-    )
-    .unwrap();
+    let path = dir.join(name);
+    let text = format!(
+        "[gdml.tank]\nfile = {:?}\n\n[volumes.fog]\n{volume}\n\n[[place]]\nsolid = \"fog\"\n",
+        tank.display().to_string()
+    );
+    std::fs::write(&path, text).unwrap();
     path
 }
 
 /// Media: the beam through `media_slab.toml`'s scattering fog (one scattering or none for
-/// most photons) and through a dense fog (many scatterings a photon) on the GPU, against
+/// most photons), through a dense, forward-scattering slab (optical depth 8: many
+/// scatterings a photon) and through a fog ball (radius 30 mm in 0.5 mm voxels, optical
+/// depth 6 to its surface: brick clusters and range-mips blocks only partly filled, so the
+/// walk crosses empty and partial blocks) on the GPU, against
 /// the f32 twin photon by photon: the kernel tracks the media with the volume module's
 /// delta tracking on the photon's own stream, so at least 99.9% of the histories are
 /// equal (the rest: an f32 free flight or density against the twin's f64 lands a
@@ -622,7 +620,26 @@ fn media_match_the_cpu_twin_photon_by_photon() {
             10_000,
             5_000,
         ),
-        ("dense fog", dense_fog(dir.path()), 3_000, 300),
+        (
+            "dense fog",
+            fog_scene(
+                dir.path(),
+                "dense.toml",
+                "source = \"box:200,200,20,1,1\"\ndensity_scale = 0.4\nalbedo = 0.95\ng = 0.85",
+            ),
+            3_000,
+            300,
+        ),
+        (
+            "fog ball",
+            fog_scene(
+                dir.path(),
+                "ball.toml",
+                "source = \"sphere:30,0.5,1\"\ndensity_scale = 0.2\nalbedo = 0.9\ng = 0.5",
+            ),
+            3_000,
+            20,
+        ),
     ] {
         let run = options("beam:0,0,-150:0,0,1:0", photons);
         let Some((g, twin_same)) = twin_within(name, path, run, min_detected, 0.0) else {
