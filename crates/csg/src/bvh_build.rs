@@ -13,7 +13,6 @@
 
 use std::time::Duration;
 
-use glam::Vec3A;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::{build_bvh2, build_bvh2_from_tris};
 use obvhs::bvh2::node::Bvh2Node;
@@ -68,7 +67,7 @@ pub fn shallow_bvh2(boxes: &[Aabb], params: BvhBuildParams) -> Bvh2 {
 /// triangles where `params` asks for them; the median split bounds whole triangles).
 pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) -> Bvh2 {
     let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
-    if largest_fan(triangles) > MAX_FAN {
+    if fan_beyond(triangles, MAX_FAN) {
         return median_split_bvh2(&boxes, params.max_prims_per_leaf.max(1) as usize);
     }
     shallow(&boxes, params, || {
@@ -80,28 +79,50 @@ pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) ->
 /// (a fan of 10^5 triangles took 15 s): such meshes go straight to the median split.
 const MAX_FAN: usize = 1024;
 
-/// The most triangles that share one vertex (by exact position; positions are compared
-/// by a 64-bit hash, whose rare collisions can only overstate the count).
-fn largest_fan(triangles: &[Triangle]) -> usize {
-    let key = |v: Vec3A| {
-        let [x, y, z] = v.to_array().map(|c| u64::from(c.to_bits()));
-        (x | y << 32) ^ z.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+/// Whether more than `limit` triangles share one vertex (by exact position).
+fn fan_beyond(triangles: &[Triangle], limit: usize) -> bool {
+    let corners = || {
+        triangles
+            .iter()
+            .flat_map(|t| [t.v0, t.v1, t.v2].map(|v| v.to_array().map(f32::to_bits)))
     };
-    let mut corners: Vec<u64> = triangles
-        .iter()
-        .flat_map(|t| [key(t.v0), key(t.v1), key(t.v2)])
-        .collect();
-    corners.sort_unstable();
-    corners
-        .chunk_by(|a, b| a == b)
-        .map(<[_]>::len)
-        .max()
-        .unwrap_or(0)
+    occurs_more_than(corners, triangles.len() * 3, limit)
+}
+
+/// Whether some value of `values()` (`count` of them) occurs more than `limit` times. A
+/// first pass counts the values by a hash into buckets: a bucket's count is at least that
+/// of any value in it, so when no bucket passes `limit` no value does, the usual answer,
+/// found in linear time. Otherwise the values are sorted and counted exactly. Buckets
+/// expect `limit / 16` values each: few enough that distinct values rarely crowd one past
+/// the limit, and for a large limit few enough buckets to stay in cache.
+fn occurs_more_than<const N: usize, I>(values: impl Fn() -> I, count: usize, limit: usize) -> bool
+where
+    I: Iterator<Item = [u32; N]>,
+{
+    let buckets = count.saturating_mul(16) / limit.max(1);
+    let bits = buckets.max(2).next_power_of_two().trailing_zeros();
+    let mut buckets = vec![0u16; 1 << bits];
+    let mut crowded = false;
+    for v in values() {
+        // A multiplicative hash; its top bits pick the bucket.
+        let h = v.iter().fold(0u64, |h, &w| {
+            (h ^ u64::from(w)).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        });
+        let b = &mut buckets[(h >> (64 - bits)) as usize];
+        *b = b.saturating_add(1);
+        crowded |= usize::from(*b) > limit;
+    }
+    if !crowded {
+        return false;
+    }
+    let mut sorted: Vec<[u32; N]> = values().collect();
+    sorted.sort_unstable();
+    sorted.chunk_by(|a, b| a == b).any(|run| run.len() > limit)
 }
 
 fn shallow(boxes: &[Aabb], params: BvhBuildParams, ploc: impl FnOnce() -> Bvh2) -> Bvh2 {
     let leaf = params.max_prims_per_leaf.max(1) as usize;
-    if most_coincident(boxes) > MAX_COINCIDENT {
+    if coincident_beyond(boxes, MAX_COINCIDENT) {
         return median_split_bvh2(boxes, leaf);
     }
     let bvh = ploc();
@@ -111,18 +132,15 @@ fn shallow(boxes: &[Aabb], params: BvhBuildParams, ploc: impl FnOnce() -> Bvh2) 
     bvh
 }
 
-/// The largest number of boxes with exactly the same corners.
-fn most_coincident(boxes: &[Aabb]) -> usize {
-    let key = |b: &Aabb| {
-        let (lo, hi) = (b.min.to_array(), b.max.to_array());
-        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]].map(f32::to_bits)
+/// Whether more than `limit` boxes have exactly the same corners.
+fn coincident_beyond(boxes: &[Aabb], limit: usize) -> bool {
+    let corners = || {
+        boxes.iter().map(|b| {
+            let (lo, hi) = (b.min.to_array(), b.max.to_array());
+            [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]].map(f32::to_bits)
+        })
     };
-    let mut keys: Vec<[u32; 6]> = boxes.iter().map(key).collect();
-    keys.sort_unstable();
-    keys.chunk_by(|a, b| a == b)
-        .map(<[_]>::len)
-        .max()
-        .unwrap_or(0)
+    occurs_more_than(corners, boxes.len(), limit)
 }
 
 /// A BVH whose every inner node splits its boxes in two halves by their centres along the
@@ -239,6 +257,38 @@ mod tests {
         assert!(bvh2_depth(&bvh.nodes) <= MAX_BVH_DEPTH);
         let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
         check_tree(&bvh, &boxes);
+    }
+
+    /// Values drawn from `0..range` (a small range repeats some), by a fixed LCG.
+    fn draws(n: usize, range: u32, seed: u64) -> Vec<[u32; 2]> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                [((x >> 33) as u32) % range, 7]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn repeat_counts_agree_with_a_plain_count() {
+        // Limits below, at and above the true largest count, for values that repeat a
+        // little (the filter's answer) and a lot (the exact count's).
+        for (n, range) in [(20_000, 1 << 30), (20_000, 5000), (3000, 40), (1, 1)] {
+            let values = draws(n, range, n as u64 + u64::from(range));
+            let mut count = std::collections::HashMap::new();
+            for v in &values {
+                *count.entry(*v).or_insert(0usize) += 1;
+            }
+            let most = count.values().copied().max().unwrap();
+            for limit in [1, most.saturating_sub(1).max(1), most, most + 1, 1024] {
+                assert_eq!(
+                    occurs_more_than(|| values.iter().copied(), values.len(), limit),
+                    most > limit,
+                    "{n} values in 0..{range}, most {most}, limit {limit}"
+                );
+            }
+        }
     }
 
     #[test]
