@@ -10,13 +10,22 @@
 //! whatever the boxes, in `O(n log n)` time. Inputs known to chain (many coincident boxes,
 //! a vertex shared by very many triangles) skip PLOC; other inputs fall back to the median
 //! split only when the PLOC tree comes out too deep.
+//!
+//! What a mesh build costs (the 1M-triangle heightfield of `cargo bench -p hytrace-tests
+//! --bench mesh`, one thread, 2026-11-28): obvhs' PLOC passes and reinsertion are most
+//! of it; its last step, the SAH leaf collapse, copied and reordered the whole tree, which
+//! the mesh then copied and reordered again for its own layout, so the collapse is only
+//! decided here ([`LeafPlan`], the same decisions) and the mesh applies it while it lays
+//! the tree out. The checks for chaining inputs count by hash bucket before they sort.
 
 use std::time::Duration;
 
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::{build_bvh2, build_bvh2_from_tris};
 use obvhs::bvh2::node::Bvh2Node;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
+use obvhs::ploc::PlocBuilder;
 use obvhs::triangle::Triangle;
 use obvhs::{Boundable, BvhBuildParams};
 
@@ -64,15 +73,215 @@ pub fn shallow_bvh2(boxes: &[Aabb], params: BvhBuildParams) -> Bvh2 {
 }
 
 /// [`shallow_bvh2`] over triangles (obvhs' triangle build, with its splits of large
-/// triangles where `params` asks for them; the median split bounds whole triangles).
-pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) -> Bvh2 {
+/// triangles where `params` asks for them; the median split bounds whole triangles), with
+/// the leaves it is to have ([`LeafPlan`]). Where obvhs' SAH leaf collapse would be its
+/// build's last step (no reinsertion after it, no splits), the tree comes uncollapsed and
+/// the plan holds the collapse's decisions, for the caller to apply while it lays the tree
+/// out: obvhs applies it by copying and reordering the whole tree, which took as long as the
+/// PLOC build itself on a 1M-triangle mesh.
+pub fn shallow_bvh2_from_tris(triangles: &[Triangle], params: BvhBuildParams) -> (Bvh2, LeafPlan) {
     let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
-    if fan_beyond(triangles, MAX_FAN) {
-        return median_split_bvh2(&boxes, params.max_prims_per_leaf.max(1) as usize);
+    let leaf = params.max_prims_per_leaf.max(1) as usize;
+    let median = |boxes: &[Aabb]| {
+        let bvh = median_split_bvh2(boxes, leaf);
+        let plan = LeafPlan::new(&bvh, None);
+        (bvh, plan)
+    };
+    if fan_beyond(triangles, MAX_FAN) || coincident_beyond(&boxes, MAX_COINCIDENT) {
+        return median(&boxes);
     }
-    shallow(&boxes, params, || {
-        build_bvh2_from_tris(triangles, params, &mut Duration::default())
-    })
+    let collapses_last = !params.pre_split
+        && params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier
+            <= 0.0;
+    let (bvh, plan) = if collapses_last {
+        // `build_bvh2_from_tris` up to its leaf collapse.
+        let mut bvh = PlocBuilder::with_capacity(triangles.len()).build(
+            params.ploc_search_distance,
+            triangles,
+            (0..triangles.len() as u32).collect(),
+            params.sort_precision,
+            params.search_depth_threshold,
+        );
+        ReinsertionOptimizer::default().run(&mut bvh, params.reinsertion_batch_ratio, None);
+        let collapse = (
+            params.max_prims_per_leaf.clamp(1, 255),
+            params.collapse_traversal_cost,
+        );
+        let plan = LeafPlan::new(&bvh, Some(collapse));
+        (bvh, plan)
+    } else {
+        let bvh = build_bvh2_from_tris(triangles, params, &mut Duration::default());
+        let plan = LeafPlan::new(&bvh, None);
+        (bvh, plan)
+    };
+    if plan.depth > MAX_BVH_DEPTH {
+        return median(&boxes);
+    }
+    (bvh, plan)
+}
+
+/// The leaves a binary BVH is to have: its own, or those of obvhs' SAH leaf collapse
+/// (`obvhs::bvh2::leaf_collapser::collapse`), decided as it decides them, on the same
+/// numbers, so the tree is the one obvhs would return. Nodes are listed by position: the
+/// BVH's nodes in depth-first order, first children first (a node's first child is at the
+/// next position), so that the walks over it read arrays in order; nodes the root does not
+/// reach are left out.
+#[derive(Clone, Debug)]
+pub struct LeafPlan {
+    /// The BVH node at each position.
+    pub node: Vec<u32>,
+    /// The position of each inner node's second child (0 for a leaf of the BVH).
+    pub second: Vec<u32>,
+    /// Primitives (entries of the BVH's `primitive_indices`) below each position.
+    pub prims: Vec<u32>,
+    /// Whether each position is a leaf of the planned tree (a leaf, or an inner node whose
+    /// subtree becomes one leaf); positions below such a one are not part of the tree.
+    pub leaf: Vec<bool>,
+    /// Where each position's primitives start in [`Self::sequence`].
+    pub start: Vec<u32>,
+    /// The primitives of the BVH's leaves, leaves in depth-first order, first children
+    /// first: the order obvhs' collapse gives a merged leaf.
+    pub sequence: Vec<u32>,
+    /// Levels below the root of the planned tree.
+    pub depth: usize,
+}
+
+/// What the collapse asks of a finished subtree.
+struct Subtree {
+    prims: u32,
+    leaf: bool,
+    height: u32,
+    half_area: f32,
+    first_index: u32,
+}
+
+/// A step of [`LeafPlan::new`]'s walk.
+enum Step {
+    /// Visit a node; `second_of`: the position of the parent whose second child it is.
+    Enter { node: u32, second_of: Option<u32> },
+    /// Both children of the inner node at `pos` are done.
+    Leave {
+        pos: u32,
+        half_area: f32,
+        first_index: u32,
+    },
+}
+
+impl LeafPlan {
+    /// The plan for `bvh`: its own leaves, or with `collapse = Some((max_prims,
+    /// traversal_cost))` obvhs' collapse with those parameters.
+    pub fn new(bvh: &Bvh2, collapse: Option<(u32, f32)>) -> Self {
+        let nodes = &bvh.nodes;
+        let n = nodes.len();
+        // obvhs' collapse leaves small trees as they are.
+        let collapse = collapse.filter(|&(max_prims, _)| {
+            max_prims > 1
+                && n > 2 * max_prims as usize + 1
+                && (bvh.primitive_indices.is_empty()
+                    || bvh.primitive_indices.len() > max_prims as usize)
+                && nodes[0].prim_count == 0
+        });
+        let mut plan = LeafPlan {
+            node: Vec::with_capacity(n),
+            second: Vec::with_capacity(n),
+            prims: Vec::with_capacity(n),
+            leaf: Vec::with_capacity(n),
+            start: Vec::with_capacity(n),
+            sequence: Vec::with_capacity(bvh.primitive_indices.len()),
+            depth: 0,
+        };
+        let mut steps = Vec::new();
+        if n > 0 {
+            steps.push(Step::Enter {
+                node: 0,
+                second_of: None,
+            });
+        }
+        // Finished subtrees whose parents are not: a first child's below its sibling's.
+        let mut done: Vec<Subtree> = Vec::new();
+        while let Some(step) = steps.pop() {
+            match step {
+                Step::Enter { node, second_of } => {
+                    let pos = plan.node.len() as u32;
+                    if let Some(parent) = second_of {
+                        plan.second[parent as usize] = pos;
+                    }
+                    let bvh_node = &nodes[node as usize];
+                    let first = bvh_node.first_index;
+                    plan.node.push(node);
+                    plan.second.push(0);
+                    plan.start.push(plan.sequence.len() as u32);
+                    plan.prims.push(bvh_node.prim_count);
+                    plan.leaf.push(bvh_node.prim_count != 0);
+                    if bvh_node.prim_count != 0 {
+                        let range = first as usize..(first + bvh_node.prim_count) as usize;
+                        plan.sequence
+                            .extend_from_slice(&bvh.primitive_indices[range]);
+                        done.push(Subtree {
+                            prims: bvh_node.prim_count,
+                            leaf: true,
+                            height: 0,
+                            half_area: bvh_node.aabb().half_area(),
+                            first_index: first,
+                        });
+                    } else {
+                        steps.push(Step::Leave {
+                            pos,
+                            half_area: bvh_node.aabb().half_area(),
+                            first_index: first,
+                        });
+                        steps.push(Step::Enter {
+                            node: first + 1,
+                            second_of: Some(pos),
+                        });
+                        steps.push(Step::Enter {
+                            node: first,
+                            second_of: None,
+                        });
+                    }
+                }
+                Step::Leave {
+                    pos,
+                    half_area,
+                    first_index,
+                } => {
+                    let (Some(r), Some(l)) = (done.pop(), done.pop()) else {
+                        unreachable!("an inner node is left after both its children");
+                    };
+                    let total = l.prims + r.prims;
+                    let mut leaf = false;
+                    if let Some((max_prims, traversal_cost)) = collapse {
+                        // obvhs merges two children that are leaves (after its own merges
+                        // below) when one leaf of both costs no more by the SAH, or when
+                        // both hold the same primitive (its spatial splits).
+                        if l.leaf && r.leaf && total <= max_prims {
+                            let merged = half_area * (total as f32 - traversal_cost);
+                            let apart = l.half_area * l.prims as f32 + r.half_area * r.prims as f32;
+                            let same_prim = l.first_index == r.first_index && total == 2;
+                            leaf = merged <= apart || same_prim;
+                        }
+                    }
+                    plan.prims[pos as usize] = total;
+                    plan.leaf[pos as usize] = leaf;
+                    done.push(Subtree {
+                        prims: total,
+                        leaf,
+                        height: if leaf { 0 } else { 1 + l.height.max(r.height) },
+                        half_area,
+                        first_index,
+                    });
+                }
+            }
+        }
+        plan.depth = done.first().map_or(0, |root| root.height as usize);
+        plan
+    }
+
+    /// The primitives below position `pos`, in the order of [`Self::sequence`].
+    pub fn prims_of(&self, pos: usize) -> &[u32] {
+        let start = self.start[pos] as usize;
+        &self.sequence[start..start + self.prims[pos] as usize]
+    }
 }
 
 /// Triangles sharing one vertex beyond this many make a fan PLOC builds in quadratic time
@@ -288,6 +497,87 @@ mod tests {
                     "{n} values in 0..{range}, most {most}, limit {limit}"
                 );
             }
+        }
+    }
+
+    /// The leaves of a collapsed obvhs tree, each as its primitives, in depth-first order
+    /// (first children first), and the tree's depth.
+    fn obvhs_leaves(bvh: &Bvh2) -> (Vec<Vec<u32>>, usize) {
+        let mut leaves = Vec::new();
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let n = &bvh.nodes[i];
+            let first = n.first_index as usize;
+            if n.prim_count == 0 {
+                stack.extend([first + 1, first]);
+            } else {
+                leaves.push(bvh.primitive_indices[first..first + n.prim_count as usize].to_vec());
+            }
+        }
+        (leaves, bvh2_depth(&bvh.nodes))
+    }
+
+    #[test]
+    fn the_leaf_plan_is_obvhs_collapse() {
+        // Random triangles of mixed sizes (leaves of 1 to 8 merge or not by the SAH), and
+        // the plan's leaves against those of obvhs' own collapse of the same tree.
+        let mut x = 17u64;
+        let mut next = || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (x >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for (count, params) in [
+            (5000, BvhBuildParams::fast_build()),
+            (3000, BvhBuildParams::very_fast_build()),
+            (7, BvhBuildParams::fast_build()),
+            (40, BvhBuildParams::fast_build()),
+        ] {
+            let triangles: Vec<Triangle> = (0..count)
+                .map(|_| {
+                    let c = Vec3A::new(next(), next(), next()) * 100.0;
+                    let size = 0.05 + 5.0 * next() * next();
+                    let mut corner = || c + Vec3A::new(next(), next(), next()) * size;
+                    Triangle {
+                        v0: corner(),
+                        v1: corner(),
+                        v2: corner(),
+                    }
+                })
+                .collect();
+            let mut bvh = PlocBuilder::with_capacity(count).build(
+                params.ploc_search_distance,
+                &triangles,
+                (0..count as u32).collect(),
+                params.sort_precision,
+                params.search_depth_threshold,
+            );
+            ReinsertionOptimizer::default().run(&mut bvh, params.reinsertion_batch_ratio, None);
+            let max_prims = params.max_prims_per_leaf;
+            let plan = LeafPlan::new(&bvh, Some((max_prims, params.collapse_traversal_cost)));
+            let mut collapsed = bvh.clone();
+            obvhs::bvh2::leaf_collapser::collapse(
+                &mut collapsed,
+                max_prims,
+                params.collapse_traversal_cost,
+            );
+            // The plan's leaves, walked as its positions give them.
+            let mut leaves = Vec::new();
+            let mut stack = vec![0usize];
+            while let Some(pos) = stack.pop() {
+                if plan.leaf[pos] {
+                    leaves.push(plan.prims_of(pos).to_vec());
+                } else {
+                    stack.extend([plan.second[pos] as usize, pos + 1]);
+                }
+            }
+            let (expected, depth) = obvhs_leaves(&collapsed);
+            assert_eq!(leaves, expected, "{count} triangles");
+            assert_eq!(plan.depth, depth, "{count} triangles");
+            assert!(leaves.iter().any(|l| l.len() > 1) || count < 20);
+            // Without a collapse, the plan's leaves are the tree's own.
+            let own = LeafPlan::new(&collapsed, None);
+            assert_eq!(own.depth, depth);
+            assert_eq!(own.prims[0] as usize, count);
         }
     }
 
