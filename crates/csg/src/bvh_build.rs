@@ -462,8 +462,9 @@ mod tests {
                 v2: rim(i + 1),
             })
             .collect();
-        let bvh = shallow_bvh2_from_tris(&triangles, BvhBuildParams::fast_build());
+        let (bvh, plan) = shallow_bvh2_from_tris(&triangles, BvhBuildParams::fast_build());
         assert!(bvh2_depth(&bvh.nodes) <= MAX_BVH_DEPTH);
+        assert!(plan.depth <= MAX_BVH_DEPTH);
         let boxes: Vec<Aabb> = triangles.iter().map(Boundable::aabb).collect();
         check_tree(&bvh, &boxes);
     }
