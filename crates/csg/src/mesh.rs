@@ -22,8 +22,10 @@
 //!
 //! The f32 kernel's nearest-crossing search on the CPU does not walk this binary tree: it
 //! walks its wide form (module `wide`: 8 children per node and 4 triangles per SIMD test),
-//! built from it and giving the same answers bit for bit. The binary tree stays what the
-//! GPU kernels, the f64 kernel and the parity count of [`MeshPrim::contains`] traverse.
+//! built from it and giving the same answers bit for bit, with the instruction set chosen at
+//! run time ([`crate::simd`]: AVX2 where the CPU has it, SSE2 otherwise; the same bits).
+//! The binary tree stays what the GPU kernels, the f64 kernel and the parity count of
+//! [`MeshPrim::contains`] traverse.
 //!
 //! obvhs' own compressed 8-wide BVH (`build_cwbvh_from_tris`) was measured first and not
 //! adopted: with our triangle test it was only 3-13% (coherent) and 12-29% (incoherent)
@@ -44,6 +46,7 @@ use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
+use crate::simd::{self, run_on, Isa, Kernel, SimdPath};
 use crate::wide_bvh::{ray_f32, PacketSlabs, PACKET};
 
 mod wide;
@@ -453,9 +456,12 @@ impl<T: Real> MeshPrim<T> {
     /// first meets them, the order earlier versions searched them in).
     fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
         match &self.wide {
-            Some(wide) => {
-                from_wide(wide.nearest(&ray_f32(ray), after.to_f64() as f32, f32::INFINITY))
-            }
+            Some(wide) => from_wide(wide.nearest(
+                simd::selected(),
+                &ray_f32(ray),
+                after.to_f64() as f32,
+                f32::INFINITY,
+            )),
             None => self.nearest_binary(ray, after).map(|(t, i)| {
                 let [v0, v1, v2] = self.triangles[i];
                 (t, (v1 - v0).cross(v2 - v0))
@@ -590,15 +596,50 @@ impl<T: Real> MeshPrim<T> {
     /// f32, consecutive queries of one mesh whose rays run close together (camera rays,
     /// fine sweeps: origins within [`PACKET_SPREAD`] of the mesh's half size, directions
     /// within [`PACKET_ANGLE`]) are searched [`PACKET`] at a time as a packet, each node
-    /// fetched and tested once for all of them ([`WideTree::walk_packet`]); the other
+    /// fetched and tested once for all of them (`WideTree::walk_packet`); the other
     /// searches run [`INTERLEAVED`] at a time on this thread, one step of each in turn,
     /// each step asking for the memory its next one reads: a search of a large mesh mostly
     /// waits on memory, and so waits for several at once. A finished search's place goes
     /// to the next query at once, so the searches stay that many until the queries run
-    /// out. Meshes in f64 are searched one query after another.
-    ///
-    /// [`WideTree::walk_packet`]: crate::wide_bvh::WideTree::walk_packet
+    /// out. Meshes in f64 are searched one query after another. The searches run on the
+    /// SIMD path [`simd::selected`] names.
     pub fn first_crossings(
+        queries: &[MeshQuery<'_, T>],
+        scratch: &mut CrossingScratch,
+        out: &mut Vec<Step<T>>,
+    ) {
+        Self::first_crossings_on(simd::selected(), queries, scratch, out);
+    }
+
+    /// [`Self::first_crossings`] on SIMD path `path`, whatever [`simd::selected`] says (the
+    /// same answers on every path; tests and benchmarks compare them). A path this CPU
+    /// does not run ([`SimdPath::supported`]) runs the portable one.
+    pub fn first_crossings_on(
+        path: SimdPath,
+        queries: &[MeshQuery<'_, T>],
+        scratch: &mut CrossingScratch,
+        out: &mut Vec<Step<T>>,
+    ) {
+        /// The searches as a [`Kernel`].
+        struct Crossings<'q, 'm, 's, T>(
+            &'q [MeshQuery<'m, T>],
+            &'s mut CrossingScratch,
+            &'s mut Vec<Step<T>>,
+        );
+        impl<T: Real> Kernel for Crossings<'_, '_, '_, T> {
+            type Output = ();
+            #[inline(always)]
+            fn run<S: Isa>(self) {
+                let Crossings(queries, scratch, out) = self;
+                MeshPrim::first_crossings_with::<S>(queries, scratch, out);
+            }
+        }
+        run_on(path, Crossings(queries, scratch, out));
+    }
+
+    /// [`Self::first_crossings`] with the vectors of `S`.
+    #[inline(always)]
+    fn first_crossings_with<S: Isa>(
         queries: &[MeshQuery<'_, T>],
         scratch: &mut CrossingScratch,
         out: &mut Vec<Step<T>>,
@@ -615,7 +656,7 @@ impl<T: Real> MeshPrim<T> {
             let end = (start + 1..stop)
                 .find(|&j| !std::ptr::eq(queries[j].mesh, mesh))
                 .unwrap_or(stop);
-            if !mesh.search_packet(&queries[start..end], &mut out[start..end]) {
+            if !mesh.search_packet::<S>(&queries[start..end], &mut out[start..end]) {
                 rest.extend(start..end);
             }
             start = end;
@@ -630,7 +671,7 @@ impl<T: Real> MeshPrim<T> {
             let mut busy = false;
             for (place, search) in running.iter_mut().zip(searches.iter_mut()) {
                 if let Some((i, wide, shift)) = *place {
-                    if !wide.advance::<true>(search) {
+                    if !wide.advance::<S, true>(search) {
                         let found = from_wide(wide.answer(search));
                         out[i] = Self::step_at(found, shift, &queries[i].ray);
                         *place = None;
@@ -662,7 +703,8 @@ impl<T: Real> MeshPrim<T> {
     /// one packet, into `out`, when the mesh has a wide BVH and at least two of the rays
     /// meet its box and run close together ([`coherent`]); false, `out` holding nothing of
     /// use, when not.
-    fn search_packet(&self, queries: &[MeshQuery<'_, T>], out: &mut [Step<T>]) -> bool {
+    #[inline(always)]
+    fn search_packet<S: Isa>(&self, queries: &[MeshQuery<'_, T>], out: &mut [Step<T>]) -> bool {
         let Some(wide) = &self.wide else {
             return false;
         };
@@ -691,7 +733,7 @@ impl<T: Real> MeshPrim<T> {
             _ => return false,
         };
         let mut found = [None; PACKET];
-        wide.nearest_packet(&packet, &rays[..n], &after[..n], &mut found[..n]);
+        wide.nearest_packet::<S>(&packet, &rays[..n], &after[..n], &mut found[..n]);
         for (&(i, shift), found) in asked[..n].iter().zip(found) {
             out[i] = Self::step_at(from_wide(found), shift, &queries[i].ray);
         }
