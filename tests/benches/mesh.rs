@@ -330,6 +330,15 @@ fn embree_backend_row(
     let t0 = Instant::now();
     let embree = hytrace_trace::embree::EmbreeScene::new(foundry, scene).unwrap();
     let build_s = t0.elapsed().as_secs_f64();
+    // Builds alternate too: Embree's (2 TBB threads here) against the CPU scene's, each
+    // from the same Foundry.
+    let [median, low, high] = paired_speed_ratio(
+        || drop(CpuScene::<f32>::new(foundry).unwrap()),
+        || drop(hytrace_trace::embree::EmbreeScene::new(foundry, scene).unwrap()),
+    );
+    println!(
+        "build: CpuScene::<f32>::new over Embree 3's (hytrace backend), {PAIRS} alternating pairs: median {median:.2}x, range {low:.2}-{high:.2}x"
+    );
     let mut rates = Vec::new();
     for (set, ours) in sets.iter().zip(ours) {
         let rays = set.rays();

@@ -37,10 +37,11 @@ use std::ops::Range;
 
 use glam::Vec3A;
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
+use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle as BvhTriangle;
 use obvhs::BvhBuildParams;
 
-use crate::bvh_build::shallow_bvh2_from_tris;
+use crate::bvh_build::{shallow_bvh2_from_tris, LeafPlan};
 use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
@@ -146,30 +147,54 @@ pub(crate) struct MeshNode<T> {
 /// triangles stay far below it).
 pub(crate) const MAX_BVH_DEPTH: usize = crate::wide_bvh::MAX_DEPTH;
 
-/// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
-/// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
-/// visited, repeats the root to keep them there).
-fn depth_first_layout<T: Real>(nodes: &[MeshNode<T>]) -> Vec<MeshNode<T>> {
-    let Some(root) = nodes.first() else {
-        return Vec::new();
+/// The nodes and triangles of a mesh BVH as the traversals read them, from obvhs' tree and
+/// the leaves `plan` gives it. Nodes: sibling pairs in depth-first order (a subtree's nodes
+/// close together) and at even indices (slot 1, never visited, repeats the root), boxes
+/// padded by `pad` outward. Triangles: in leaf order, leaves met in a depth-first walk that
+/// visits second children first (the traversal breaks ties between equal distances by this
+/// numbering, see `nearest`, which keeps the answers of the unordered traversal earlier
+/// versions had), a merged leaf's triangles in its subtree's order
+/// ([`LeafPlan::prims_of`]).
+fn lay_out<T: Real>(
+    bvh: &Bvh2,
+    plan: &LeafPlan,
+    triangles: &[[[f64; 3]; 3]],
+    pad: f64,
+) -> (Vec<MeshNode<T>>, Vec<[V3<T>; 3]>) {
+    let padded = |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
+    let node = |i: usize, first: u32, count: u32| {
+        let aabb = &bvh.nodes[i].aabb;
+        MeshNode {
+            bounds: [padded(aabb.min, -1.0), padded(aabb.max, 1.0)],
+            first,
+            count,
+        }
     };
-    let mut out = vec![root.clone(), root.clone()];
-    // (index in `nodes`, index in `out`) of nodes whose children are still to be placed.
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((old, new)) = stack.pop() {
-        let n = &nodes[old];
-        if n.count != 0 {
+    let total = plan.prims.first().copied().unwrap_or(0) as usize;
+    let mut ordered = vec![triangles[0].map(V3::from_f64); total];
+    let mut nodes = vec![node(0, 0, 0), node(0, 0, 0)];
+    // (position in `plan`, slot in `nodes`, the number of its subtree's first triangle)
+    let mut stack = vec![(0usize, 0usize, 0u32)];
+    while let Some((pos, slot, start)) = stack.pop() {
+        let i = plan.node[pos] as usize;
+        if plan.leaf[pos] {
+            nodes[slot] = node(i, start, plan.prims[pos]);
+            let slots = &mut ordered[start as usize..][..plan.prims[pos] as usize];
+            for (slot, &p) in slots.iter_mut().zip(plan.prims_of(pos)) {
+                *slot = triangles[p as usize].map(V3::from_f64);
+            }
             continue;
         }
-        let base = out.len();
-        let (a, b) = (n.first as usize, n.first as usize + 1);
-        out.push(nodes[a].clone());
-        out.push(nodes[b].clone());
-        out[new].first = base as u32;
-        stack.push((b, base + 1));
-        stack.push((a, base));
+        let (a, b) = (pos + 1, plan.second[pos] as usize);
+        let base = nodes.len();
+        nodes[slot] = node(i, base as u32, 0);
+        nodes.extend([node(0, 0, 0), node(0, 0, 0)]);
+        // The second child's triangles are numbered first.
+        stack.push((b, base + 1, start));
+        stack.push((a, base, start + plan.prims[b]));
     }
-    out
+    nodes[1] = nodes[0].clone();
+    (nodes, ordered)
 }
 
 /// The per-ray part of the watertight test: axes permuted so `z` is the direction's
@@ -261,40 +286,9 @@ impl<T: Real> MeshPrim<T> {
                 BvhTriangle { v0, v1, v2 }
             })
             .collect();
-        let bvh = shallow_bvh2_from_tris(&bvh_input, build);
+        let (bvh, plan) = shallow_bvh2_from_tris(&bvh_input, build);
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
-        let padded =
-            |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
-        let mut nodes: Vec<MeshNode<T>> = bvh
-            .nodes
-            .iter()
-            .map(|n| MeshNode {
-                bounds: [padded(n.aabb.min, -1.0), padded(n.aabb.max, 1.0)],
-                first: n.first_index,
-                count: n.prim_count,
-            })
-            .collect();
-        // Triangles in leaf order, leaves met in a depth-first walk that visits second
-        // children first: the traversal breaks ties between equal distances by this
-        // numbering (see `nearest`), which keeps the answers of the unordered traversal
-        // earlier versions had.
-        let mut ordered: Vec<[V3<T>; 3]> = Vec::with_capacity(triangles.len());
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            let Some(n) = bvh.nodes.get(i) else { continue };
-            let first = n.first_index as usize;
-            if n.prim_count == 0 {
-                stack.extend([first, first + 1]);
-                continue;
-            }
-            nodes[i].first = ordered.len() as u32;
-            ordered.extend(
-                bvh.primitive_indices[first..first + n.prim_count as usize]
-                    .iter()
-                    .map(|&p| triangles[p as usize].map(V3::from_f64)),
-            );
-        }
-        let nodes = depth_first_layout(&nodes);
+        let (nodes, ordered) = lay_out(&bvh, &plan, triangles, pad);
         let wide = (T::NAME == "f32")
             .then(|| {
                 let (nodes, triangles) = wide::to_f32(&nodes, &ordered);
