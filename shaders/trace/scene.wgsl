@@ -60,9 +60,11 @@ fn prim_first_crossing(p: SurfacePrim, o: vec3<f32>, d: vec3<f32>, tmin: f32) ->
     return step_miss(false);
 }
 
-// Whether a prim of the trace skipped a short span as a touch before its search's limit
-// (the CPU's Crossings::note_dropped): the scan reports STATUS_DROPPED_SPAN.
-var<private> trace_dropped: bool = false;
+// The least world parameter at which a prim of the trace skipped a short span as a touch,
+// or a mesh decided a triangle within rounding, before its search's limit (the CPU's
+// Crossings::note_dropped); INF when none did. The scan reports STATUS_DROPPED_SPAN when it
+// is not beyond the answer.
+var<private> trace_dropped_at: f32 = INF;
 
 fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
     // #if csg
@@ -80,7 +82,8 @@ fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
 
 // The first crossing in (tmin, limit) of a ray in solid `solid`'s frame; of crossings at
 // the same t, the lowest prim's (twin of SolidAccel::cross). `instance` is left unset.
-fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) -> Hit {
+// `shift` is the world parameter of the local ray's origin (for trace_dropped_at).
+fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32, shift: f32) -> Hit {
     let list = solid_list(solid);
     var best_index = UNSET;
     var best_t = INF;
@@ -104,9 +107,10 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) ->
         }
         dropped_span = INF;
         let step = prim_first_crossing(p, o, d, tmin);
-        // A span skipped as a touch before the limit: within rounding (the f64 fallback).
+        // A span skipped as a touch, or a mesh triangle decided within rounding, before the
+        // limit (the f64 fallback).
         if dropped_span < INF && dropped_span < within {
-            trace_dropped = true;
+            trace_dropped_at = min(trace_dropped_at, shift + dropped_span);
         }
         let tie_won = step.t == within && found && i < best_index;
         if step.t > tmin && (step.t < within || tie_won) {
@@ -180,7 +184,7 @@ fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin:
     let shift = local.shift;
     let past = limit - shift;
     let limit_local = past + 4.0 * EPSILON * abs(past);
-    var c = solid_cross(p.solid, local.o, local.d, tmin - shift, limit_local);
+    var c = solid_cross(p.solid, local.o, local.d, tmin - shift, limit_local, shift);
     if !c.found {
         return best;
     }
