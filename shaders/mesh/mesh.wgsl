@@ -267,7 +267,10 @@ fn mesh_doubt(ax: f32, ay: f32, az: f32, bx: f32, by: f32, bz: f32, cx: f32, cy:
 // latest_crossing in crates/csg/src/mesh/wide.rs, operation by operation).
 fn mesh_latest_crossing(t: f32, za: f32, zb: f32, zc: f32, det: f32, bound: f32) -> f32 {
     let spread = abs(za - t) + abs(zb - t) + abs(zc - t);
-    return t + bound * spread / abs(det);
+    let late = t + bound * spread / abs(det);
+    var far = select(zb, za, za > zb);
+    far = select(far, zc, zc > far);
+    return select(far, late, late < far);
 }
 
 // A triangle test's answer: `ok` and `t` where the ray crosses it, whether its hit or miss

@@ -102,7 +102,9 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32, sh
             continue;
         }
         let p = surface_prim(list.first + i);
-        if !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
+        // A mesh tests its own box (mesh_first_crossing), as the CPU's does when it is a
+        // lone prim: the exact test here would skip near misses its f32 test doubts.
+        if p.kind != PRIM_MESH && !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
             continue;
         }
         dropped_span = INF;
@@ -177,7 +179,9 @@ fn placement_rebase(p: Placement, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>) -
 fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
     let p = placement(index);
     let limit = hit_limit(best, tmax);
-    if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
+    // The CPU's culling test (Placement::local_ray), a superset of the exact one: a mesh's
+    // near misses within its rounding are searched alike, so their doubt flags alike.
+    if !slab_entry_conservative(slab_ray(o, d), placement_lo(p), placement_hi(p), tmin, limit).ok {
         return best;
     }
     let local = placement_rebase(p, o, o_lo, d);

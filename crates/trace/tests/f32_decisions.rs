@@ -567,8 +567,9 @@ fn mesh_tolerance(r: &RayRow, t: f64) -> f64 {
 /// `count` rays `ray(rng, i)` (a start in the cube's frame and a direction, which is made
 /// its own f32 unit vector) traced through the mesh cube placed at the origin and 1e5 mm
 /// out, against the exact slab answer of the cube, within [`mesh_tolerance`]. In f32, the
-/// plain trace (no fallback) must be wrong on some of them: the scan's f64 fallback is what
-/// makes them right.
+/// plain trace (no fallback) must be wrong on some of them (at the origin: 1e5 mm out the
+/// tolerance is that distance's, and f32 in the cube's frame is well within it): the
+/// scan's f64 fallback is what makes them right.
 fn mesh_cube_cases(
     name: &str,
     p: Precision,
@@ -605,7 +606,10 @@ fn mesh_cube_cases(
                 })
                 .count();
             eprintln!("{label}: the plain f32 trace is wrong on {plain_wrong} rays");
-            assert!(plain_wrong > 0, "{label}: no ray is hard for f32");
+            assert!(
+                distance > 0.0 || plain_wrong > 0,
+                "{label}: no ray is hard for f32"
+            );
         }
         let got = scanned(&f, &rows, p, true);
         check(&label, &rows, &got, &want, mesh_tolerance);

@@ -497,16 +497,25 @@ fn edge_doubt(
     (near & (may_hit_from_front | may_hit_from_behind), bound)
 }
 
-/// The latest distance at which the ray may cross the plane of a doubtful triangle: `t`,
-/// the test's `sum(e_j z_j) / det` (`z` the vertices' heights times the shear's `z`, `det`
-/// the sum of the edge functions `e_j`), plus its change when each `e_j` moves by `bound`
-/// ([`edge_doubt`]): `bound sum |z_j - t| / |det|`. Nearly edge-on triangles have garbage
-/// plane distances; this keeps a doubtful one from counting as met before the answer when
-/// it may not be. The WGSL twin is `mesh_latest_crossing`, operation by operation.
+/// The latest distance at which the ray may cross a doubtful triangle: `t`, the test's
+/// `sum(e_j z_j) / det` (`z` the vertices' distances along the ray, their heights times the
+/// shear's `z`; `det` the sum of the edge functions `e_j`), plus its change when each
+/// `e_j` moves by `bound` ([`edge_doubt`]), `bound sum |z_j - t| / |det|`, but no later
+/// than its farthest vertex (a crossing lies within the triangle). Nearly edge-on
+/// triangles have garbage plane distances; this keeps a doubtful one from counting as met
+/// before the answer when it may not be. The WGSL twin is `mesh_latest_crossing`,
+/// operation by operation (comparisons, not `min`/`max`, which differ on NaN).
 #[inline(always)]
 fn latest_crossing(t: f32, z: [f32; 3], det: f32, bound: f32) -> f32 {
     let spread = (z[0] - t).abs() + (z[1] - t).abs() + (z[2] - t).abs();
-    t + bound * spread / det.abs()
+    let late = t + bound * spread / det.abs();
+    let far = if z[0] > z[1] { z[0] } else { z[1] };
+    let far = if z[2] > far { z[2] } else { far };
+    if late < far {
+        late
+    } else {
+        far
+    }
 }
 
 /// A mesh's binary BVH and triangles in f32 (exact when `T` is f32).
