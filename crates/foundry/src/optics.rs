@@ -99,6 +99,14 @@ pub struct Medium {
     /// Texel format of the bricked grid the bricks were built from (`f32`, `f16`,
     /// `unorm16`, `unorm8`, `bc4`).
     pub format: String,
+    /// Single-scattering albedo, scattering over extinction, in [0, 1]: the chance that a
+    /// photon's collision with the medium scatters rather than absorbs it (0, a pure
+    /// absorber, in files written before photons met media).
+    #[serde(default)]
+    pub albedo: f64,
+    /// Henyey-Greenstein asymmetry of its scattering, in (-1, 1): above 0 forward.
+    #[serde(default)]
+    pub g: f64,
 }
 
 impl Optics {
@@ -133,7 +141,60 @@ impl Optics {
                     ),
                 });
             }
+            if !(0.0..=1.0).contains(&m.albedo) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("medium {i}: albedo {} is not in [0, 1]", m.albedo),
+                });
+            }
+            if !(m.g.is_finite() && m.g.abs() < 1.0) {
+                return Err(FoundryError::File {
+                    path: "optics.json".into(),
+                    problem: format!("medium {i}: phase asymmetry g {} is not in (-1, 1)", m.g),
+                });
+            }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_medium(albedo: f64, g: f64) -> Optics {
+        Optics {
+            media: vec![Medium {
+                source: "box:4,4,4".into(),
+                density_scale: 0.1,
+                format: "f32".into(),
+                albedo,
+                g,
+                ..Medium::default()
+            }],
+            ..Optics::default()
+        }
+    }
+
+    /// A medium's albedo outside [0, 1] or `g` outside (-1, 1) is refused naming the file
+    /// and the medium; a record written before media had them reads them as 0.
+    #[test]
+    fn media_scattering_is_checked_and_defaults_to_a_pure_absorber() {
+        assert!(with_medium(0.5, -0.9).validate().is_ok());
+        for (albedo, g, why) in [
+            (1.5, 0.0, "albedo 1.5"),
+            (-0.1, 0.0, "albedo -0.1"),
+            (0.5, 1.0, "g 1"),
+            (0.5, f64::NAN, "g NaN"),
+        ] {
+            let e = with_medium(albedo, g).validate().unwrap_err().to_string();
+            assert!(
+                e.contains("optics.json") && e.contains("medium 0") && e.contains(why),
+                "{e}"
+            );
+        }
+        let old = r#"{"prim": 3, "source": "fog.nvdb", "grid": null, "density_scale": 0.2, "format": "f16"}"#;
+        let m: Medium = serde_json::from_str(old).unwrap();
+        assert_eq!((m.albedo, m.g), (0.0, 0.0));
     }
 }

@@ -170,6 +170,8 @@ fn sample_records(f: &mut Foundry, tag: &str, size: f32) -> Base {
         grid: None,
         density_scale: 0.5,
         format: "f32".into(),
+        albedo: 0.25,
+        g: 0.5,
     });
     Base {
         solids: [tree, world, mesh, fog],

@@ -584,3 +584,44 @@ fn wavelength_shifting_runs_on_the_gpu_and_gives_the_cpu_histories() {
         assert!(same >= 980, "{source}: {same} of 1000 histories equal");
     }
 }
+
+/// The kernel does not model media: `GpuPhotons::new` refuses a scene with them by name,
+/// `--backend gpu` fails without output, and `--backend auto` says why on stderr and gives
+/// the CPU run's histories and hits exactly.
+#[test]
+fn media_are_refused_by_the_kernel_and_auto_runs_them_on_the_cpu() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let path = repo("tests/data/photons/media_slab.toml");
+    let run = options("beam:0,0,-150:0,0,1:0", 500);
+    let Err(e) = GpuPhotons::new(&ctx, &scene(&path, Precision::F32), &run) else {
+        panic!("the kernel accepted a scene with media");
+    };
+    assert!(e.to_string().contains("media"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let (gpu, hits, _) =
+        photons_command(dir.path(), &path, "beam:0,0,-150:0,0,1:0", 500, "gpu", &[]);
+    assert!(!gpu.status.success());
+    assert!(
+        stderr(&gpu).contains("media_slab.toml") && stderr(&gpu).contains("media"),
+        "{}",
+        stderr(&gpu)
+    );
+    assert!(!hits.exists());
+    let (auto, auto_hits, auto_history) =
+        photons_command(dir.path(), &path, "beam:0,0,-150:0,0,1:0", 500, "auto", &[]);
+    assert!(auto.status.success(), "{}", stderr(&auto));
+    assert!(stderr(&auto).contains("on the CPU"), "{}", stderr(&auto));
+    let (cpu, cpu_hits, cpu_history) =
+        photons_command(dir.path(), &path, "beam:0,0,-150:0,0,1:0", 500, "cpu", &[]);
+    assert!(cpu.status.success(), "{}", stderr(&cpu));
+    assert_eq!(
+        packed_histories(&auto_history),
+        packed_histories(&cpu_history)
+    );
+    assert_eq!(
+        std::fs::read(auto_hits).unwrap(),
+        std::fs::read(cpu_hits).unwrap()
+    );
+}

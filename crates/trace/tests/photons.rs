@@ -6,6 +6,8 @@
 //! (tiny batches) equal to the in-memory run, and `--records` step points lying where the
 //! CPU tracer puts the scene's surfaces and ending at the hits.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -16,9 +18,8 @@ use hytrace_foundry::npy::read_array;
 use hytrace_trace::cpu::CpuScene;
 use hytrace_trace::photons::output::RECORD_COLUMNS;
 use hytrace_trace::photons::properties::energy_of_wavelength;
-use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{
-    load_photon_scene, propagate, propagate_reporting, Origin, PhotonRun, PhotonScene, RunOptions,
+    load_photon_scene, propagate, propagate_reporting, PhotonRun, PhotonScene, RunOptions,
 };
 
 fn scene_path() -> PathBuf {
@@ -31,18 +32,7 @@ fn scene() -> PhotonScene {
 }
 
 fn options(source: &str, photons: u64) -> RunOptions {
-    RunOptions {
-        origin: Origin::Torch {
-            source: Source::parse(source).unwrap(),
-            wavelength: Wavelength::Fixed(420.0),
-        },
-        photons,
-        first: 0,
-        seed: 3,
-        max_steps: 10_000,
-        keep_histories: true,
-        records: 0,
-    }
+    common::torch_run(source, photons, 3)
 }
 
 fn run_on_threads(scene: &PhotonScene, run: &RunOptions, threads: usize) -> PhotonRun {

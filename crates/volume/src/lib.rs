@@ -57,5 +57,5 @@ pub use source::{
 };
 pub use transmittance::{
     transmittance, transmittance_batch, Collision, Estimate, Estimator, IndexTransmittance,
-    Majorant, TransmittanceParams,
+    Majorant, TransmittanceParams, MAX_TRACKED_LOOKUPS,
 };

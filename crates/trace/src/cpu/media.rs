@@ -1,5 +1,7 @@
 //! Transmittance along rays through a scene's media up to the first surface: surfaces are
-//! opaque, media attenuate (`trace_transmittance`).
+//! opaque, media attenuate (`trace_transmittance`); and the first real collision with the
+//! media along a ray (`collision`, delta tracking: the free paths of the renderer's paths
+//! and of photons).
 //!
 //! Each medium's grid is opened again from its source and bricked in the texel format its
 //! Foundry bricks were made from, so the lookups are those of the bricked grid a GPU
@@ -22,8 +24,8 @@ use crate::error::Context;
 use hytrace_csg::{Ray, Real};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 use hytrace_volume::{
-    CacheStats, GridMap, IndexRay, IndexTransmittance, TexelFormat, TransmittanceParams,
-    DEFAULT_STORE_BUDGET,
+    CacheStats, GridMap, IndexRay, IndexTransmittance, Rng, TexelFormat, TransmittanceParams,
+    VolumeError, DEFAULT_STORE_BUDGET,
 };
 
 use rayon::prelude::*;
@@ -66,41 +68,61 @@ pub struct MediumSegment {
     pub ray: IndexRay,
 }
 
-/// A scene's surfaces and its media opened for transmittance queries.
-pub struct SceneMedia<'a, T> {
-    scene: &'a CpuScene<T>,
+/// A scene's media opened: their grids and where each placement's index space lies. It
+/// answers queries on the [`CpuScene`] it was opened for, through [`OpenMedia::on`] (so
+/// that a holder of both, such as the photon propagator's scene, need not borrow one from
+/// the other).
+pub struct OpenMedia {
     grids: Vec<OpenMedium>,
     /// Index space of the medium of each volume prim, from world space, per instance:
     /// `(instance, medium) -> world-to-index`.
     to_index: BTreeMap<(u32, u32), Transform64>,
 }
 
-/// Seed of the random streams of the `k`-th placed medium on a ray (a Weyl step keeps the
-/// streams of different placements apart).
-fn placement_seed(seed: u32, k: u32) -> u32 {
-    seed.wrapping_add(k.wrapping_mul(0x9E37_79B9))
+/// The media of a [`SceneMedia`]: its own, or borrowed from an [`OpenMedia`] kept apart.
+enum Held<'a> {
+    Own(OpenMedia),
+    Borrowed(&'a OpenMedia),
 }
 
-impl<'a, T: Real> SceneMedia<'a, T> {
-    /// Opens every medium of `f` (the Foundry `scene` was prepared from); `params` apply to
-    /// all, their density scale multiplying each medium's own. Media read as stored in a
-    /// brick store hold at most [`DEFAULT_STORE_BUDGET`] bytes each.
-    pub fn new(
-        scene: &'a CpuScene<T>,
-        f: &Foundry,
-        params: &TransmittanceParams,
-    ) -> crate::Result<Self> {
-        Self::with_memory(scene, f, params, DEFAULT_STORE_BUDGET)
-    }
+impl std::ops::Deref for Held<'_> {
+    type Target = OpenMedia;
 
-    /// [`SceneMedia::new`] with each medium read as stored in a brick store holding at most
-    /// `memory` bytes resident (its tables and a cache of bricks read on demand).
-    pub fn with_memory(
-        scene: &'a CpuScene<T>,
+    fn deref(&self) -> &OpenMedia {
+        match self {
+            Held::Own(m) => m,
+            Held::Borrowed(m) => m,
+        }
+    }
+}
+
+/// A scene's surfaces and its media opened for transmittance queries.
+pub struct SceneMedia<'a, T> {
+    scene: &'a CpuScene<T>,
+    open: Held<'a>,
+}
+
+/// The first real collision of a ray with a scene's media ([`SceneMedia::collision`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MediumCollision {
+    /// The medium (index into the Foundry's `optics.media`).
+    pub medium: u32,
+    /// Where along the ray.
+    pub t: f64,
+    /// The extinction there: the density with the medium's density scale and the
+    /// caller's folded in.
+    pub density: f64,
+}
+
+impl OpenMedia {
+    /// The media of `scene` opened once, for queries on it through [`OpenMedia::on`]; see
+    /// [`SceneMedia::with_memory`].
+    pub fn open<T: Real>(
+        scene: &CpuScene<T>,
         f: &Foundry,
         params: &TransmittanceParams,
         memory: u64,
-    ) -> crate::Result<Self> {
+    ) -> crate::Result<OpenMedia> {
         let mut grids = Vec::with_capacity(f.optics.media.len());
         for (i, m) in f.optics.media.iter().enumerate() {
             let format = match m.format.as_str() {
@@ -118,7 +140,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                 placement: Transform64::IDENTITY,
             };
             let grid = open_medium(&spec, memory)
-                .with_context(|| format!("medium {i}"))?
+                .with_context(|| format!("medium {i} ({})", m.source))?
                 .with_map(GridMap::IDENTITY);
             let mut params = *params;
             params.density_scale *= m.density_scale;
@@ -154,10 +176,48 @@ impl<'a, T: Real> SceneMedia<'a, T> {
                 to_index.insert((instance, medium as u32), inverse);
             }
         }
+        Ok(OpenMedia { grids, to_index })
+    }
+
+    /// The media answering queries on `scene`, which must be the scene they were opened
+    /// for.
+    pub fn on<'a, T: Real>(&'a self, scene: &'a CpuScene<T>) -> SceneMedia<'a, T> {
+        SceneMedia {
+            scene,
+            open: Held::Borrowed(self),
+        }
+    }
+}
+
+/// Seed of the random streams of the `k`-th placed medium on a ray (a Weyl step keeps the
+/// streams of different placements apart).
+fn placement_seed(seed: u32, k: u32) -> u32 {
+    seed.wrapping_add(k.wrapping_mul(0x9E37_79B9))
+}
+
+impl<'a, T: Real> SceneMedia<'a, T> {
+    /// Opens every medium of `f` (the Foundry `scene` was prepared from); `params` apply to
+    /// all, their density scale multiplying each medium's own. Media read as stored in a
+    /// brick store hold at most [`DEFAULT_STORE_BUDGET`] bytes each.
+    pub fn new(
+        scene: &'a CpuScene<T>,
+        f: &Foundry,
+        params: &TransmittanceParams,
+    ) -> crate::Result<Self> {
+        Self::with_memory(scene, f, params, DEFAULT_STORE_BUDGET)
+    }
+
+    /// [`SceneMedia::new`] with each medium read as stored in a brick store holding at most
+    /// `memory` bytes resident (its tables and a cache of bricks read on demand).
+    pub fn with_memory(
+        scene: &'a CpuScene<T>,
+        f: &Foundry,
+        params: &TransmittanceParams,
+        memory: u64,
+    ) -> crate::Result<Self> {
         Ok(SceneMedia {
             scene,
-            grids,
-            to_index,
+            open: Held::Own(OpenMedia::open(scene, f, params, memory)?),
         })
     }
 
@@ -233,14 +293,51 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         let mut transmittance = 1.0;
         let mut lookups = 0;
         for s in self.segments_of(origin, direction, spans)? {
-            let params = self.params(s.medium, s.placement);
-            let grid = self.grid(s.medium);
-            let e = IndexTransmittance::new(grid, grid.ranges(), &params)?
-                .estimate(&s.ray, ray_index)?;
+            let e = self.tracked(&s, |t| t.estimate(&s.ray, ray_index))?;
             transmittance *= e.transmittance;
             lookups += e.lookups;
         }
         Ok((transmittance, lookups))
+    }
+
+    /// `estimate` given the tracker of segment `s`'s medium, with its parameters.
+    fn tracked<R>(
+        &self,
+        s: &MediumSegment,
+        estimate: impl FnOnce(IndexTransmittance<MediumGrid>) -> Result<R, VolumeError>,
+    ) -> crate::Result<R> {
+        let params = self.params(s.medium, s.placement);
+        let grid = self.grid(s.medium);
+        let tracker = IndexTransmittance::new(grid, grid.ranges(), &params)?;
+        Ok(estimate(tracker)?)
+    }
+
+    /// The first real collision with any medium over `[t0, t1]` of the ray `origin + t
+    /// direction` (unit direction, world space), by delta tracking each placed medium
+    /// under its local majorants ([`IndexTransmittance::collision`]) with draws from `rng`:
+    /// the earliest of the media's independent collisions is the collision of the media
+    /// together. `None` when the ray passes `[t0, t1]` without one.
+    pub fn collision(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        t0: f64,
+        t1: f64,
+        rng: &mut Rng,
+    ) -> crate::Result<Option<MediumCollision>> {
+        let mut best: Option<MediumCollision> = None;
+        for s in self.segments(origin, direction, t0, t1)? {
+            if let Some(c) = self.tracked(&s, |t| t.collision(&s.ray, rng))? {
+                if best.is_none_or(|b| c.t < b.t) {
+                    best = Some(MediumCollision {
+                        medium: s.medium,
+                        t: c.t,
+                        density: c.density,
+                    });
+                }
+            }
+        }
+        Ok(best)
     }
 
     /// [`Self::trace_transmittance`] of every ray in parallel, ray `i` with the random
@@ -322,24 +419,24 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     /// The placed media: `(instance, medium)` with the transform from world space to the
     /// medium's index space, in instance order.
     pub fn placements(&self) -> impl Iterator<Item = ((u32, u32), &Transform64)> {
-        self.to_index.iter().map(|(k, t)| (*k, t))
+        self.open.to_index.iter().map(|(k, t)| (*k, t))
     }
 
     /// Number of media (the Foundry's `optics.media`).
     pub fn medium_count(&self) -> usize {
-        self.grids.len()
+        self.open.grids.len()
     }
 
     /// The grid of `medium`, bricked in its Foundry texel format or read as stored, with an
     /// identity map: its world space is its index space.
     pub fn grid(&self, medium: u32) -> &MediumGrid {
-        &self.grids[medium as usize].grid
+        &self.open.grids[medium as usize].grid
     }
 
     /// What the caches of the media read as stored did, summed over them (`None` when no
     /// medium is read as stored).
     pub fn store_stats(&self) -> Option<CacheStats> {
-        let stores = self.grids.iter().filter_map(|m| match &m.grid {
+        let stores = self.open.grids.iter().filter_map(|m| match &m.grid {
             MediumGrid::Store(s, _) => Some(s.stats()),
             MediumGrid::Bricked(_) => None,
         });
@@ -353,7 +450,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     /// An error when a medium read as stored could not read a brick it needed since it was
     /// opened (those lookups read the background): results computed meanwhile are wrong.
     pub fn check_reads(&self) -> crate::Result<()> {
-        for (i, m) in self.grids.iter().enumerate() {
+        for (i, m) in self.open.grids.iter().enumerate() {
             m.grid
                 .check_reads()
                 .with_context(|| format!("medium {i}"))?;
@@ -364,7 +461,7 @@ impl<'a, T: Real> SceneMedia<'a, T> {
     /// The parameters of `medium` on the `placement`-th segment of a ray: the caller's, with
     /// the medium's density scale folded in and the placement's seed.
     pub fn params(&self, medium: u32, placement: u32) -> TransmittanceParams {
-        let mut params = self.grids[medium as usize].params;
+        let mut params = self.open.grids[medium as usize].params;
         params.seed = placement_seed(params.seed, placement);
         params
     }
@@ -395,9 +492,13 @@ impl<'a, T: Real> SceneMedia<'a, T> {
             .enumerate()
             .map(|(k, ((instance, medium), (t0, t1)))| {
                 // A visit from another backend may name a placement this scene lacks.
-                let w = self.to_index.get(&(instance, medium)).with_context(|| {
-                    format!("instance {instance} does not hold medium {medium}")
-                })?;
+                let w = self
+                    .open
+                    .to_index
+                    .get(&(instance, medium))
+                    .with_context(|| {
+                        format!("instance {instance} does not hold medium {medium}")
+                    })?;
                 let ray = IndexRay::new(w.apply_point(origin), w.apply_vector(direction), t0, t1)?;
                 Ok(MediumSegment {
                     medium,

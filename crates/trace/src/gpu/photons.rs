@@ -114,6 +114,13 @@ impl GpuPhotons {
                     .into(),
             ));
         };
+        if scene.media.is_some() {
+            return Err(GpuError::Unsupported(
+                "photons: media (the scene's volumes) are not modelled by the photon kernel; \
+                 --backend cpu propagates them"
+                    .into(),
+            ));
+        }
         let upload = SceneUpload::new(ctx, f32_scene, "photons", PHOTON_BINDINGS)?;
         let mut flat = GpuTables::new(scene);
         // A torch spectrum that does not resolve is left to the run, which names it.

@@ -1,7 +1,8 @@
 //! What a photon run calls for (`hytrace photons --explain`): the processes its scene's
 //! materials and surfaces, its source and its outputs need, each with the materials or
 //! surfaces that need it and where it runs (the CPU propagator and the GPU kernel have
-//! every one), then what the GPU kernel is composed of.
+//! every one but media, which the CPU alone propagates), then what the GPU kernel is
+//! composed of.
 
 use std::collections::BTreeSet;
 
@@ -16,6 +17,10 @@ use super::{Origin, PhotonScene, RunOptions};
 const BOTH: &str = "cpu, gpu";
 /// Wavelength shifting: an absorption emitting several photons is propagated on the CPU.
 const WLS_ON: &str = "cpu, gpu; an absorption emitting several photons: cpu";
+
+/// Media: the GPU kernel does not model them yet.
+const MEDIA_ON: &str =
+    "cpu; the gpu kernel refuses media: --backend auto runs the scene on the cpu";
 
 /// Whether a material needs a process.
 type Needs = dyn Fn(&MaterialOptics) -> bool;
@@ -107,6 +112,13 @@ pub fn explain(scene: &PhotonScene, run: &RunOptions) -> Vec<String> {
         if let Some(who) = names(has) {
             line(what, who, on);
         }
+    }
+    for medium in scene.media.iter().flat_map(|m| m.describe()) {
+        line(
+            "medium: delta-tracked absorption (AB) and Henyey-Greenstein scattering (SC)",
+            medium,
+            MEDIA_ON,
+        );
     }
     for s in scene.tables.surfaces.iter().flatten() {
         let kind = match s.kind {

@@ -2,7 +2,8 @@
 //! photons`): torch sources ([`sources`]), gensteps ([`gensteps`]) emitting Cherenkov
 //! ([`cherenkov`]) and scintillation ([`scintillation`]) light, material and surface property tables
 //! ([`properties`]), Fresnel reflection and refraction ([`boundary`]), bulk absorption and
-//! Rayleigh scattering ([`bulk`]), optical surfaces ([`surfaces`]) and their rough and painted
+//! Rayleigh scattering ([`bulk`]), a scene's sparse volumes as absorbing and scattering
+//! media ([`media`]), optical surfaces ([`surfaces`]) and their rough and painted
 //! models ([`surface_models`]), the propagation loop
 //! through the scene's navigator ([`propagate()`]), the outputs ([`output`]) and what a run
 //! calls for ([`explain`]).
@@ -19,6 +20,7 @@ pub mod cherenkov;
 pub mod explain;
 pub mod gensteps;
 pub mod gpu_tables;
+pub mod media;
 pub mod output;
 pub mod propagate;
 pub mod properties;

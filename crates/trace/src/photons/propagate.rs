@@ -10,7 +10,9 @@
 //! the far side is the daughter entered, or where the photon goes on leaving the volume
 //! (a touching sibling, else the mother); the two materials and the optical surface of the
 //! crossing decide what the photon does ([`cross`]). In a wavelength shifter a third
-//! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there.
+//! distance (WLSABSLENGTH) competes; the photons an absorption emits go on from there. In
+//! a scene with media ([`super::media`]) the first collision with them within the step
+//! competes last; the loop is compiled with that test only for such scenes.
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -24,6 +26,7 @@ use rayon::prelude::*;
 
 use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
 use super::gensteps::{GenstepFile, Gensteps};
+use super::media::{collide, PhotonMedia};
 use super::output::{
     photon_columns, record_point, sorted_counts, History, HitRow, Label, RecordPoint, HIT_COLUMNS,
     RECORD_COLUMNS,
@@ -53,6 +56,8 @@ pub struct PhotonScene {
     pub(crate) copy: Vec<i32>,
     pub(crate) surfaces: SurfaceLookup,
     pub(crate) hierarchical: bool,
+    /// The scene's media, `None` without any.
+    pub(crate) media: Option<PhotonMedia>,
 }
 
 impl PhotonScene {
@@ -107,7 +112,9 @@ impl PhotonScene {
                 .any(|b| b.inner_surface == s || b.outer_surface == s),
         };
         let tables = OpticsTables::new(&f.optics, used)?;
+        let media = PhotonMedia::new(f, &tracer)?;
         Ok(PhotonScene {
+            media,
             tracer,
             tables,
             materials: f.optics.materials.clone(),
@@ -265,7 +272,12 @@ impl PhotonScene {
         // The photon's own lineage first; the vectors allocate only when a wavelength
         // shifter emits more than one photon.
         let mut pending = Vec::new();
-        let own = self.lineage(
+        let lineage = match self.media {
+            Some(_) => Self::lineage::<true>,
+            None => Self::lineage::<false>,
+        };
+        let own = lineage(
+            self,
             photon,
             index,
             run,
@@ -275,7 +287,8 @@ impl PhotonScene {
         );
         let mut further = Vec::new();
         while let Some(photon) = pending.pop() {
-            further.push(self.lineage(photon, index, run, &mut rng, &mut pending, None));
+            let end = lineage(self, photon, index, run, &mut rng, &mut pending, None);
+            further.push(end);
         }
         PhotonEnd {
             own,
@@ -286,8 +299,9 @@ impl PhotonScene {
 
     /// Propagates one photon to its end; photons emitted by wavelength-shifting
     /// absorptions beyond the one that carries on are pushed onto `pending`. With `record`,
-    /// each step point is appended to it until it holds `run.records`.
-    fn lineage(
+    /// each step point is appended to it until it holds `run.records`. `MEDIA`: the scene
+    /// has media (a scene without runs the loop with their test compiled out).
+    fn lineage<const MEDIA: bool>(
         &self,
         photon: Lineage,
         index: u64,
@@ -335,6 +349,19 @@ impl PhotonScene {
             if !step.is_finite() {
                 mark!(Label::Mi);
                 return (history, None);
+            }
+            if let (true, Some(media)) = (MEDIA, &self.media) {
+                if let Some(c) = media.collision(&self.tracer, pos, dir, step, rng) {
+                    pos = pos + dir * c.t;
+                    time += c.t / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));
+                    let Some((d, p)) = collide(c.scattering, dir, pol, rng) else {
+                        mark!(Label::Ab);
+                        return (history, None);
+                    };
+                    (dir, pol) = (d, p);
+                    mark!(Label::Sc);
+                    continue;
+                }
             }
             pos = pos + dir * step;
             time += step / mat.map_or(C_LIGHT_MM_PER_NS, |m| m.velocity(energy));

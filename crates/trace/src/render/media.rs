@@ -3,9 +3,7 @@
 
 use crate::error::Context;
 use glam::DVec3;
-use hytrace_volume::{
-    global_range, sample_trilinear, IndexRay, IndexTransmittance, Rng, SegmentWalk, LEVEL_GLOBAL,
-};
+use hytrace_volume::{global_range, sample_trilinear, IndexRay, Rng, SegmentWalk, LEVEL_GLOBAL};
 
 use super::spec::MediumOptics;
 use crate::cpu::media::SceneMedia;
@@ -107,8 +105,7 @@ impl Media<'_> {
     }
 
     /// The first real collision with any medium over `[t0, t1]` of the ray, by delta
-    /// tracking each placed medium under its local majorants (the earliest of independent
-    /// collisions is the collision of the media together).
+    /// tracking ([`SceneMedia::collision`]).
     pub fn collision(
         &self,
         origin: DVec3,
@@ -117,22 +114,19 @@ impl Media<'_> {
         t1: f64,
         rng: &mut Rng,
     ) -> crate::Result<Option<MediumEvent>> {
-        let mut best: Option<MediumEvent> = None;
-        for s in self.scene.segments(origin.into(), dir.into(), t0, t1)? {
-            let grid = self.scene.grid(s.medium);
-            let params = self.scene.params(s.medium, s.placement);
-            let tracker = IndexTransmittance::new(grid, grid.ranges(), &params)?;
-            if let Some(c) = tracker.collision(&s.ray, rng)? {
-                if best.as_ref().is_none_or(|b| c.t < b.t) {
-                    best = Some(MediumEvent {
-                        t: c.t,
-                        optics: self.optics[s.medium as usize],
-                        value: c.density / params.density_scale.max(f64::MIN_POSITIVE),
-                    });
-                }
-            }
-        }
-        Ok(best)
+        let found = self
+            .scene
+            .collision(origin.into(), dir.into(), t0, t1, rng)?;
+        Ok(found.map(|c| MediumEvent {
+            t: c.t,
+            optics: self.optics[c.medium as usize],
+            value: c.density
+                / self
+                    .scene
+                    .params(c.medium, 0)
+                    .density_scale
+                    .max(f64::MIN_POSITIVE),
+        }))
     }
 
     /// Transmittance of the media over `[t0, t1]` of the ray: the emission-absorption

@@ -217,6 +217,7 @@ pub fn add_medium_solid(
         format: spec
             .format
             .map_or(STORED_FORMAT.to_string(), |f| f.to_string()),
+        ..Medium::default()
     });
     Ok(solid)
 }

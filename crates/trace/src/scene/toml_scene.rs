@@ -280,6 +280,10 @@ pub fn render_scene_from_toml(
         let identity = f.solid.len() as u32;
         let solid = add_medium_solid(&mut f, name, &spec, identity)
             .with_context(|| format!("{source}: volume `{name}`"))?;
+        // What photons meet there (renders take it from the render description).
+        if let Some(m) = f.optics.media.last_mut() {
+            (m.albedo, m.g) = (entry.albedo, entry.g);
+        }
         claim(name, Entry::Solid(solid, [0.0; 3]))?;
     }
     let mut gdml = Vec::with_capacity(file.gdml.len());

@@ -14,6 +14,8 @@ use hytrace_foundry::Foundry;
 use hytrace_trace::cpu::{CpuScene, Hit};
 use hytrace_trace::gpu::records::{STATUS_CUT_SHORT, STATUS_FLAGS};
 use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
+use hytrace_trace::photons::sources::{Source, Wavelength};
+use hytrace_trace::photons::{Origin, RunOptions};
 use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
 use hytrace_volume::{parse_nanovdb, NanoFile};
@@ -491,4 +493,21 @@ pub fn render_on_gpu(
     assert!(run.cut_short.is_empty(), "pixels past the loop budget");
     run.redo_cut_short(&renderer).unwrap();
     Some(run.image)
+}
+
+/// A photon run of `photons` photons from the torch `source` at 420 nm, from photon 0 with
+/// seed `seed`, keeping every history, no step points.
+pub fn torch_run(source: &str, photons: u64, seed: u32) -> RunOptions {
+    RunOptions {
+        origin: Origin::Torch {
+            source: Source::parse(source).unwrap(),
+            wavelength: Wavelength::Fixed(420.0),
+        },
+        photons,
+        first: 0,
+        seed,
+        max_steps: 10_000,
+        keep_histories: true,
+        records: 0,
+    }
 }
