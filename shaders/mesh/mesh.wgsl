@@ -302,7 +302,11 @@ fn mesh_crossing(tri: MeshTriangle, o: vec3<f32>, s: MeshShear, reach: f32) -> M
     let az = s.z * a[s.kz];
     let bz = s.z * b[s.kz];
     let cz = s.z * c[s.kz];
-    let bound = mesh_doubt(ax, ay, a[s.kz], bx, by, b[s.kz], cx, cy, c[s.kz], u, v, w, reach);
+    // A parity count (reach -1) asks for no doubt.
+    var bound = -1.0;
+    if reach >= 0.0 {
+        bound = mesh_doubt(ax, ay, a[s.kz], bx, by, b[s.kz], cx, cy, c[s.kz], u, v, w, reach);
+    }
     let doubtful = bound >= 0.0;
     var doubt = INF;
     if doubtful {
@@ -385,7 +389,8 @@ struct MeshWalk {
     best_doubtful: bool,
     // The least distance of a doubtful crossing (MeshCrossing::doubt) in range when seen.
     doubt: f32,
-    // The origin's largest coordinate plus |after| (mesh_doubt's `reach`).
+    // The origin's largest coordinate plus |after| (mesh_doubt's `reach`); -1 for a parity
+    // count, which needs no doubt.
     reach: f32,
     count: u32,
     crossings: array<f32, MESH_PARITY_BUFFER>,
@@ -498,7 +503,7 @@ fn mesh_walk_start(collect: bool, o: vec3<f32>, after: f32) -> MeshWalk {
     w.best_index = 0u;
     w.best_doubtful = false;
     w.doubt = INF;
-    w.reach = v3_max_abs(o) + abs(after);
+    w.reach = select(v3_max_abs(o) + abs(after), -1.0, collect);
     w.count = 0u;
     return w;
 }

@@ -620,7 +620,7 @@ fn mesh_cube_cases(
 fn cube_edge_point(rng: &mut Rng, i: usize) -> [f64; 3] {
     let axis = i % 3;
     let mut p = [0, 1, 2].map(|_| if rng.uniform() < 0.5 { -CUBE } else { CUBE });
-    if i % 4 != 0 {
+    if !i.is_multiple_of(4) {
         p[axis] = CUBE * (2.0 * rng.uniform() - 1.0);
     }
     p
