@@ -20,7 +20,6 @@
 mod batched;
 #[path = "common/heightfield.rs"]
 mod heightfield;
-#[cfg(feature = "embree")]
 #[path = "common/pairs.rs"]
 mod pairs;
 
@@ -39,6 +38,7 @@ use hytrace_trace::cpu::{CpuScene, Hit, BATCH};
 use hytrace_trace::scene::load_scene;
 #[cfg(feature = "embree")]
 use pairs::{paired_speed_ratio, PAIRS};
+use pairs::{simd_line, simd_over_portable};
 use rayon::prelude::*;
 
 /// Timed runs per measurement (the best is reported).
@@ -118,6 +118,7 @@ fn main() {
         faces.len(),
         count
     );
+    println!("{}", simd_line());
 
     let t0 = Instant::now();
     let foundry = load_scene(Some(&obj), &GdmlOptions::default()).unwrap();
@@ -209,6 +210,9 @@ fn main() {
         batch_rates.push(mrays(rays.len(), batch_s));
         prim_rates.push(mrays(rays.len(), prim_s));
         ours_t.push(hits);
+        if let Some(line) = simd_over_portable(&scene, &rays64) {
+            println!("{}: {line}", set.name);
+        }
     }
     rows.push(format!(
         "| hytrace CpuScene::<f32>::trace ({} threads) | {build_s:.2} | {:.2} | {:.2} |",
@@ -326,6 +330,15 @@ fn embree_backend_row(
     let t0 = Instant::now();
     let embree = hytrace_trace::embree::EmbreeScene::new(foundry, scene).unwrap();
     let build_s = t0.elapsed().as_secs_f64();
+    // Builds alternate too: Embree's (2 TBB threads here) against the CPU scene's, each
+    // from the same Foundry.
+    let [median, low, high] = paired_speed_ratio(
+        || drop(CpuScene::<f32>::new(foundry).unwrap()),
+        || drop(hytrace_trace::embree::EmbreeScene::new(foundry, scene).unwrap()),
+    );
+    println!(
+        "build: CpuScene::<f32>::new over Embree 3's (hytrace backend), {PAIRS} alternating pairs: median {median:.2}x, range {low:.2}-{high:.2}x"
+    );
     let mut rates = Vec::new();
     for (set, ours) in sets.iter().zip(ours) {
         let rays = set.rays();

@@ -15,7 +15,6 @@
 mod batched;
 #[path = "common/mixed_scene.rs"]
 mod mixed_scene;
-#[cfg(feature = "embree")]
 #[path = "common/pairs.rs"]
 mod pairs;
 
@@ -31,6 +30,7 @@ use hytrace_volume::{Estimator, TransmittanceParams};
 use mixed_scene::{coherent_rays, incoherent_rays, scene_text, scenes_dir};
 #[cfg(feature = "embree")]
 use pairs::{paired_speed_ratio, PAIRS};
+use pairs::{simd_line, simd_over_portable};
 use rayon::prelude::*;
 
 #[cfg(feature = "embree")]
@@ -71,6 +71,7 @@ fn main() {
         f.brick.len(),
         rayon::current_num_threads()
     );
+    println!("{}", simd_line());
     println!("| rays | query | backend | build s | Mrays/s | hits |");
     println!("|---|---|---|---|---|---|");
     #[cfg(feature = "embree")]
@@ -120,6 +121,9 @@ fn main() {
                 .count()
         });
         row("any hit", "hytrace cpu", build_s, secs, occluded);
+        if let Some(line) = simd_over_portable(&cpu, &rays64) {
+            println!("|  | {line} | | | | |");
+        }
         #[cfg(feature = "embree")]
         {
             let (secs, embree_hits) = best(|| {

@@ -20,6 +20,7 @@ mod prim_tree;
 mod real;
 mod serialize;
 mod shape;
+pub mod simd;
 mod solid_store;
 pub mod tessellate;
 pub mod wide_bvh;

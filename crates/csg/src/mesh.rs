@@ -22,8 +22,10 @@
 //!
 //! The f32 kernel's nearest-crossing search on the CPU does not walk this binary tree: it
 //! walks its wide form (module `wide`: 8 children per node and 4 triangles per SIMD test),
-//! built from it and giving the same answers bit for bit. The binary tree stays what the
-//! GPU kernels, the f64 kernel and the parity count of [`MeshPrim::contains`] traverse.
+//! built from it and giving the same answers bit for bit, with the instruction set chosen at
+//! run time ([`crate::simd`]: AVX2 where the CPU has it, SSE2 otherwise; the same bits).
+//! The binary tree stays what the GPU kernels, the f64 kernel and the parity count of
+//! [`MeshPrim::contains`] traverse.
 //!
 //! obvhs' own compressed 8-wide BVH (`build_cwbvh_from_tris`) was measured first and not
 //! adopted: with our triangle test it was only 3-13% (coherent) and 12-29% (incoherent)
@@ -35,14 +37,16 @@ use std::ops::Range;
 
 use glam::Vec3A;
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
+use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle as BvhTriangle;
 use obvhs::BvhBuildParams;
 
-use crate::bvh_build::shallow_bvh2_from_tris;
+use crate::bvh_build::{shallow_bvh2_from_tris, LeafPlan};
 use crate::kernel::Step;
 use crate::prim_tree::{ray_meets_bounds, tolerance, Bounds, SlabRay};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
+use crate::simd::{self, run_on, Isa, Kernel, SimdPath};
 use crate::wide_bvh::{ray_f32, PacketSlabs, PACKET};
 
 mod wide;
@@ -150,30 +154,54 @@ pub(crate) struct MeshNode<T> {
 /// triangles stay far below it).
 pub(crate) const MAX_BVH_DEPTH: usize = crate::wide_bvh::MAX_DEPTH;
 
-/// The nodes of a BVH rearranged for the traversal's memory accesses: sibling pairs in
-/// depth-first order (a subtree's nodes close together) and at even indices (slot 1, never
-/// visited, repeats the root to keep them there).
-fn depth_first_layout<T: Real>(nodes: &[MeshNode<T>]) -> Vec<MeshNode<T>> {
-    let Some(root) = nodes.first() else {
-        return Vec::new();
+/// The nodes and triangles of a mesh BVH as the traversals read them, from obvhs' tree and
+/// the leaves `plan` gives it. Nodes: sibling pairs in depth-first order (a subtree's nodes
+/// close together) and at even indices (slot 1, never visited, repeats the root), boxes
+/// padded by `pad` outward. Triangles: in leaf order, leaves met in a depth-first walk that
+/// visits second children first (the traversal breaks ties between equal distances by this
+/// numbering, see `nearest`, which keeps the answers of the unordered traversal earlier
+/// versions had), a merged leaf's triangles in its subtree's order
+/// ([`LeafPlan::prims_of`]).
+fn lay_out<T: Real>(
+    bvh: &Bvh2,
+    plan: &LeafPlan,
+    triangles: &[[[f64; 3]; 3]],
+    pad: f64,
+) -> (Vec<MeshNode<T>>, Vec<[V3<T>; 3]>) {
+    let padded = |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
+    let node = |i: usize, first: u32, count: u32| {
+        let aabb = &bvh.nodes[i].aabb;
+        MeshNode {
+            bounds: [padded(aabb.min, -1.0), padded(aabb.max, 1.0)],
+            first,
+            count,
+        }
     };
-    let mut out = vec![root.clone(), root.clone()];
-    // (index in `nodes`, index in `out`) of nodes whose children are still to be placed.
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((old, new)) = stack.pop() {
-        let n = &nodes[old];
-        if n.count != 0 {
+    let total = plan.prims.first().copied().unwrap_or(0) as usize;
+    let mut ordered = vec![triangles[0].map(V3::from_f64); total];
+    let mut nodes = vec![node(0, 0, 0), node(0, 0, 0)];
+    // (position in `plan`, slot in `nodes`, the number of its subtree's first triangle)
+    let mut stack = vec![(0usize, 0usize, 0u32)];
+    while let Some((pos, slot, start)) = stack.pop() {
+        let i = plan.node[pos] as usize;
+        if plan.leaf[pos] {
+            nodes[slot] = node(i, start, plan.prims[pos]);
+            let slots = &mut ordered[start as usize..][..plan.prims[pos] as usize];
+            for (slot, &p) in slots.iter_mut().zip(plan.prims_of(pos)) {
+                *slot = triangles[p as usize].map(V3::from_f64);
+            }
             continue;
         }
-        let base = out.len();
-        let (a, b) = (n.first as usize, n.first as usize + 1);
-        out.push(nodes[a].clone());
-        out.push(nodes[b].clone());
-        out[new].first = base as u32;
-        stack.push((b, base + 1));
-        stack.push((a, base));
+        let (a, b) = (pos + 1, plan.second[pos] as usize);
+        let base = nodes.len();
+        nodes[slot] = node(i, base as u32, 0);
+        nodes.extend([node(0, 0, 0), node(0, 0, 0)]);
+        // The second child's triangles are numbered first.
+        stack.push((b, base + 1, start));
+        stack.push((a, base, start + plan.prims[b]));
     }
-    out
+    nodes[1] = nodes[0].clone();
+    (nodes, ordered)
 }
 
 /// The per-ray part of the watertight test: axes permuted so `z` is the direction's
@@ -265,40 +293,9 @@ impl<T: Real> MeshPrim<T> {
                 BvhTriangle { v0, v1, v2 }
             })
             .collect();
-        let bvh = shallow_bvh2_from_tris(&bvh_input, build);
+        let (bvh, plan) = shallow_bvh2_from_tris(&bvh_input, build);
         // Node boxes come from f32 vertices: pad them like the mesh bounds.
-        let padded =
-            |v: Vec3A, sign: f64| V3::from_f64([v.x, v.y, v.z].map(|c| c as f64 + sign * pad));
-        let mut nodes: Vec<MeshNode<T>> = bvh
-            .nodes
-            .iter()
-            .map(|n| MeshNode {
-                bounds: [padded(n.aabb.min, -1.0), padded(n.aabb.max, 1.0)],
-                first: n.first_index,
-                count: n.prim_count,
-            })
-            .collect();
-        // Triangles in leaf order, leaves met in a depth-first walk that visits second
-        // children first: the traversal breaks ties between equal distances by this
-        // numbering (see `nearest`), which keeps the answers of the unordered traversal
-        // earlier versions had.
-        let mut ordered: Vec<[V3<T>; 3]> = Vec::with_capacity(triangles.len());
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            let Some(n) = bvh.nodes.get(i) else { continue };
-            let first = n.first_index as usize;
-            if n.prim_count == 0 {
-                stack.extend([first, first + 1]);
-                continue;
-            }
-            nodes[i].first = ordered.len() as u32;
-            ordered.extend(
-                bvh.primitive_indices[first..first + n.prim_count as usize]
-                    .iter()
-                    .map(|&p| triangles[p as usize].map(V3::from_f64)),
-            );
-        }
-        let nodes = depth_first_layout(&nodes);
+        let (nodes, ordered) = lay_out(&bvh, &plan, triangles, pad);
         let wide = (T::NAME == "f32")
             .then(|| {
                 let (nodes, triangles) = wide::to_f32(&nodes, &ordered);
@@ -468,9 +465,12 @@ impl<T: Real> MeshPrim<T> {
     /// in f64, which has nothing to fall back to).
     fn nearest(&self, ray: &Ray<T>, after: T) -> Nearest<T> {
         match &self.wide {
-            Some(wide) => {
-                from_wide(wide.nearest(&ray_f32(ray), after.to_f64() as f32, f32::INFINITY))
-            }
+            Some(wide) => from_wide(wide.nearest(
+                simd::selected(),
+                &ray_f32(ray),
+                after.to_f64() as f32,
+                f32::INFINITY,
+            )),
             None => {
                 let found = self.nearest_binary(ray, after).map(|(t, i)| {
                     let [v0, v1, v2] = self.triangles[i];
@@ -613,15 +613,50 @@ impl<T: Real> MeshPrim<T> {
     /// f32, consecutive queries of one mesh whose rays run close together (camera rays,
     /// fine sweeps: origins within [`PACKET_SPREAD`] of the mesh's half size, directions
     /// within [`PACKET_ANGLE`]) are searched [`PACKET`] at a time as a packet, each node
-    /// fetched and tested once for all of them ([`WideTree::walk_packet`]); the other
+    /// fetched and tested once for all of them (`WideTree::walk_packet`); the other
     /// searches run [`INTERLEAVED`] at a time on this thread, one step of each in turn,
     /// each step asking for the memory its next one reads: a search of a large mesh mostly
     /// waits on memory, and so waits for several at once. A finished search's place goes
     /// to the next query at once, so the searches stay that many until the queries run
-    /// out. Meshes in f64 are searched one query after another.
-    ///
-    /// [`WideTree::walk_packet`]: crate::wide_bvh::WideTree::walk_packet
+    /// out. Meshes in f64 are searched one query after another. The searches run on the
+    /// SIMD path [`simd::selected`] names.
     pub fn first_crossings(
+        queries: &[MeshQuery<'_, T>],
+        scratch: &mut CrossingScratch,
+        out: &mut Vec<Step<T>>,
+    ) {
+        Self::first_crossings_on(simd::selected(), queries, scratch, out);
+    }
+
+    /// [`Self::first_crossings`] on SIMD path `path`, whatever [`simd::selected`] says (the
+    /// same answers on every path; tests and benchmarks compare them). A path this CPU
+    /// does not run ([`SimdPath::supported`]) runs the portable one.
+    pub fn first_crossings_on(
+        path: SimdPath,
+        queries: &[MeshQuery<'_, T>],
+        scratch: &mut CrossingScratch,
+        out: &mut Vec<Step<T>>,
+    ) {
+        /// The searches as a [`Kernel`].
+        struct Crossings<'q, 'm, 's, T>(
+            &'q [MeshQuery<'m, T>],
+            &'s mut CrossingScratch,
+            &'s mut Vec<Step<T>>,
+        );
+        impl<T: Real> Kernel for Crossings<'_, '_, '_, T> {
+            type Output = ();
+            #[inline(always)]
+            fn run<S: Isa>(self) {
+                let Crossings(queries, scratch, out) = self;
+                MeshPrim::first_crossings_with::<S>(queries, scratch, out);
+            }
+        }
+        run_on(path, Crossings(queries, scratch, out));
+    }
+
+    /// [`Self::first_crossings`] with the vectors of `S`.
+    #[inline(always)]
+    fn first_crossings_with<S: Isa>(
         queries: &[MeshQuery<'_, T>],
         scratch: &mut CrossingScratch,
         out: &mut Vec<Step<T>>,
@@ -638,7 +673,7 @@ impl<T: Real> MeshPrim<T> {
             let end = (start + 1..stop)
                 .find(|&j| !std::ptr::eq(queries[j].mesh, mesh))
                 .unwrap_or(stop);
-            if !mesh.search_packet(&queries[start..end], &mut out[start..end]) {
+            if !mesh.search_packet::<S>(&queries[start..end], &mut out[start..end]) {
                 rest.extend(start..end);
             }
             start = end;
@@ -653,7 +688,7 @@ impl<T: Real> MeshPrim<T> {
             let mut busy = false;
             for (place, search) in running.iter_mut().zip(searches.iter_mut()) {
                 if let Some((i, wide, shift)) = *place {
-                    if !wide.advance::<true>(search) {
+                    if !wide.advance::<S, true>(search) {
                         let found = from_wide(wide.answer(search));
                         out[i] = Self::step_at(found, shift, &queries[i].ray);
                         *place = None;
@@ -685,7 +720,8 @@ impl<T: Real> MeshPrim<T> {
     /// one packet, into `out`, when the mesh has a wide BVH and at least two of the rays
     /// meet its box and run close together ([`coherent`]); false, `out` holding nothing of
     /// use, when not.
-    fn search_packet(&self, queries: &[MeshQuery<'_, T>], out: &mut [Step<T>]) -> bool {
+    #[inline(always)]
+    fn search_packet<S: Isa>(&self, queries: &[MeshQuery<'_, T>], out: &mut [Step<T>]) -> bool {
         let Some(wide) = &self.wide else {
             return false;
         };
@@ -718,7 +754,7 @@ impl<T: Real> MeshPrim<T> {
             doubt: f32::INFINITY,
         };
         let mut found = [none; PACKET];
-        wide.nearest_packet(&packet, &rays[..n], &after[..n], &mut found[..n]);
+        wide.nearest_packet::<S>(&packet, &rays[..n], &after[..n], &mut found[..n]);
         for (&(i, shift), found) in asked[..n].iter().zip(found) {
             out[i] = Self::step_at(from_wide(found), shift, &queries[i].ray);
         }

@@ -1,6 +1,7 @@
 //! Eight-wide BVH nodes for the f32 CPU traversals: a binary BVH collapsed so that each node
-//! holds up to 8 child boxes, tested against a ray all at once with SIMD (`wide`'s `f32x8`:
-//! SSE on x86-64, NEON on AArch64, plain arrays elsewhere). The triangle meshes' kernel
+//! holds up to 8 child boxes, tested against a ray all at once with SIMD (8 lanes of the
+//! instruction set [`crate::simd`] chose: one AVX register, two SSE halves, NEON, or plain
+//! arrays; the walks are generic over it). The triangle meshes' kernel
 //! (`mesh::wide`, leaves of triangle blocks) and the tracer's box BVHs over instances and a
 //! solid's prims (leaves of item ranges) share it.
 //!
@@ -21,7 +22,7 @@
 //! visit or leaf at a time (`Walker`), so that one thread can interleave the walks of
 //! several rays, each prefetching what it reads next while the others work: the mesh
 //! kernel's `MeshPrim::first_crossings`. Both share the node visit and the stack. Coherent
-//! rays walk it as packets of 8 instead ([`WideTree::walk_packet`], module `packet`).
+//! rays walk it as packets of 8 instead (`WideTree::walk_packet`, module `packet`).
 //!
 //! Why this shape, measured on the 1M-triangle heightfield of `cargo bench -p
 //! hytrace-tests --bench mesh` (2-core VM, 2026-11-22, BENCHMARKS.md): the binary walk
@@ -33,9 +34,9 @@
 use std::mem::MaybeUninit;
 
 use obvhs::bvh2::Bvh2;
-use wide::f32x8;
 
 use crate::real::{Ray, Real, V3};
+use crate::simd::{Isa, Lanes, Portable};
 
 mod packet;
 
@@ -243,9 +244,22 @@ impl WideTree {
     /// Calls `leaf(child, count)` for every leaf whose boxes the ray (`slabs`) meets within
     /// `[after, limit]`, nearer boxes first; `leaf` tests what it holds and returns the limit
     /// from then on (the nearest crossing so far; below `after` to stop). Boxes met exactly
-    /// at the limit are still visited, so crossings tied with the best one are seen.
+    /// at the limit are still visited, so crossings tied with the best one are seen. Runs
+    /// on the portable SIMD path.
     #[inline(always)]
     pub fn walk(
+        &self,
+        slabs: &WideSlabs,
+        after: f32,
+        limit: f32,
+        leaf: impl FnMut(u32, u32) -> f32,
+    ) {
+        self.walk_with::<Portable>(slabs, after, limit, leaf);
+    }
+
+    /// [`Self::walk`] with the vectors of `S`.
+    #[inline(always)]
+    pub(crate) fn walk_with<S: Isa>(
         &self,
         slabs: &WideSlabs,
         after: f32,
@@ -263,7 +277,7 @@ impl WideTree {
         loop {
             if count == 0 {
                 let node = &self.nodes[child as usize];
-                let (hit, entries) = slabs.entries(node, after, limit);
+                let (hit, entries) = slabs.entries::<S>(node, after, limit);
                 if hit != 0 {
                     (child, count) = enter(node, hit, &entries, &mut stack, &mut top);
                     continue;
@@ -389,7 +403,7 @@ impl Walker {
     /// `prefetch_leaf(child, count)` a leaf's items) is asked for before returning: it
     /// arrives while the caller steps other walks.
     #[inline(always)]
-    pub(crate) fn step<const AHEAD: bool>(
+    pub(crate) fn step<S: Isa, const AHEAD: bool>(
         &mut self,
         tree: &WideTree,
         slabs: &WideSlabs,
@@ -402,7 +416,7 @@ impl Walker {
         }
         let next = if self.count == 0 {
             let node = &tree.nodes[self.child as usize];
-            let (hit, entries) = slabs.entries(node, after, self.limit);
+            let (hit, entries) = slabs.entries::<S>(node, after, self.limit);
             if hit != 0 {
                 Some(enter(node, hit, &entries, &mut self.stack, &mut self.top))
             } else {
@@ -461,9 +475,9 @@ enum Axis {
 
 /// The per-ray part of the node-wide slab test.
 pub struct WideSlabs {
-    origin: [f32x8; 3],
+    origin: [f32; 3],
     /// Per axis: the reciprocal direction component, or (`Axis::Divide`) the component.
-    scale: [f32x8; 3],
+    scale: [f32; 3],
     /// Which of `planes` is each axis' entry plane (min for a positive component).
     near: [usize; 3],
     axis: [Axis; 3],
@@ -476,14 +490,14 @@ impl WideSlabs {
         // Per axis: how it is tested, and the reciprocal (or, to divide by, the component).
         // Written out axis by axis: maps of closures over `[0, 1, 2]` were left as calls, a
         // fifth of the instructions of a walk over one or two nodes.
-        let axis = |d: f32| -> (Axis, f32x8) {
+        let axis = |d: f32| -> (Axis, f32) {
             let inv = 1.0 / d;
             if d == 0.0 {
-                (Axis::Parallel, f32x8::splat(inv))
+                (Axis::Parallel, inv)
             } else if inv.is_finite() {
-                (Axis::Multiply, f32x8::splat(inv))
+                (Axis::Multiply, inv)
             } else {
-                (Axis::Divide, f32x8::splat(d))
+                (Axis::Divide, d)
             }
         };
         let ((ax, sx), (ay, sy), (az, sz)) = (
@@ -498,11 +512,7 @@ impl WideSlabs {
             near(ray.direction.z, 2),
         ];
         WideSlabs {
-            origin: [
-                f32x8::splat(ray.origin.x),
-                f32x8::splat(ray.origin.y),
-                f32x8::splat(ray.origin.z),
-            ],
+            origin: [ray.origin.x, ray.origin.y, ray.origin.z],
             scale: [sx, sy, sz],
             near,
             axis: [ax, ay, az],
@@ -512,54 +522,55 @@ impl WideSlabs {
     /// Which children's boxes the ray enters within `[after, limit]` (bit per lane) and
     /// where (see the module doc for why no box the exact test accepts is missed).
     #[inline(always)]
-    fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
-        let mut span = SlabSpan::new();
+    fn entries<S: Isa>(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
+        let mut span = SlabSpan::<S::F8>::new();
         for k in 0..3 {
-            let (near, far) = SlabSpan::planes(node, self.near[k]);
-            let o = self.origin[k];
+            let (near, far) = SlabSpan::<S::F8>::planes(node, self.near[k]);
+            let o = S::F8::splat(self.origin[k]);
+            let scale = S::F8::splat(self.scale[k]);
             let (t0, t1) = match self.axis[k] {
-                Axis::Multiply => ((near - o) * self.scale[k], (far - o) * self.scale[k]),
-                Axis::Divide => ((near - o) / self.scale[k], (far - o) / self.scale[k]),
+                Axis::Multiply => ((near - o) * scale, (far - o) * scale),
+                Axis::Divide => ((near - o) / scale, (far - o) / scale),
                 Axis::Parallel => {
                     // Inside the slab or not, at every distance.
-                    span.inside &= near.simd_le(o) & o.simd_le(far);
+                    span.inside = span.inside & near.le(o) & o.le(far);
                     continue;
                 }
             };
-            span.entry = span.entry.fast_max(t0);
-            span.exit = span.exit.fast_min(t1);
+            span.entry = span.entry.max(t0);
+            span.exit = span.exit.min(t1);
         }
-        span.hits(f32x8::splat(after), f32x8::splat(limit))
+        span.hits(S::F8::splat(after), S::F8::splat(limit))
     }
 }
 
 /// A node's slab test in progress, lane by lane: the latest entry and earliest exit over
 /// the axes so far, and whether every axis without a direction component holds the origin
 /// (all ones).
-struct SlabSpan {
-    entry: f32x8,
-    exit: f32x8,
-    inside: f32x8,
+struct SlabSpan<L> {
+    entry: L,
+    exit: L,
+    inside: L,
 }
 
-impl SlabSpan {
+impl<L: Lanes<Array = [f32; WIDTH]>> SlabSpan<L> {
     /// No axis yet: entered at -inf, left at +inf, inside.
     #[inline(always)]
     fn new() -> Self {
         SlabSpan {
-            entry: f32x8::splat(f32::NEG_INFINITY),
-            exit: f32x8::splat(f32::INFINITY),
-            inside: f32x8::splat(f32::from_bits(u32::MAX)),
+            entry: L::splat(f32::NEG_INFINITY),
+            exit: L::splat(f32::INFINITY),
+            inside: L::splat(f32::from_bits(u32::MAX)),
         }
     }
 
     /// The planes of every child of `node` on one axis: plane `near_of` (where a ray
     /// enters that axis' slab) and the opposite one.
     #[inline(always)]
-    fn planes(node: &WideNode, near_of: usize) -> (f32x8, f32x8) {
+    fn planes(node: &WideNode, near_of: usize) -> (L, L) {
         (
-            f32x8::from(node.planes[near_of]),
-            f32x8::from(node.planes[(near_of + 3) % 6]),
+            L::load(&node.planes[near_of]),
+            L::load(&node.planes[(near_of + 3) % 6]),
         )
     }
 
@@ -569,20 +580,20 @@ impl SlabSpan {
     /// keeps the empty lanes' infinities (no inf - inf). The widening is a monotonic
     /// function of the entry and of the exit (packet tests rely on it).
     #[inline(always)]
-    fn hits(self, after: f32x8, limit: f32x8) -> (u32, [f32; WIDTH]) {
+    fn hits(self, after: L, limit: L) -> (u32, [f32; WIDTH]) {
         let (less, more) = (
-            f32x8::splat(1.0 - 4.0 * f32::EPSILON),
-            f32x8::splat(1.0 + 4.0 * f32::EPSILON),
+            L::splat(1.0 - 4.0 * f32::EPSILON),
+            L::splat(1.0 + 4.0 * f32::EPSILON),
         );
-        let negative = |t: f32x8| t.simd_lt(f32x8::splat(0.0));
+        let negative = |t: L| t.lt(L::splat(0.0));
         let SlabSpan {
             entry,
             exit,
             inside,
         } = self;
-        let entry = (entry * negative(entry).bitselect(more, less)).fast_max(after);
-        let exit = (exit * negative(exit).bitselect(less, more)).fast_min(limit);
-        let hit = (entry.simd_le(exit) & inside).to_bitmask();
+        let entry = (entry * negative(entry).select(more, less)).max(after);
+        let exit = (exit * negative(exit).select(less, more)).min(limit);
+        let hit = (entry.le(exit) & inside).bitmask();
         (hit, entry.to_array())
     }
 }
@@ -615,6 +626,7 @@ mod tests {
 
     use super::*;
     use crate::prim_tree::ray_bounds_entry;
+    use crate::simd::{run_on, Kernel, SimdPath};
     use crate::test_common::{Random, Rng};
 
     /// Random boxes, a wide tree over them (leaves of up to 4 boxes) and the box numbers in
@@ -670,17 +682,36 @@ mod tests {
         /// Checks that walking the tree (the limit never lowered) reaches every box the
         /// exact dividing test finds the ray meeting within `[after, limit]`; returns how many.
         fn window(&self, origin: [f64; 3], direction: [f64; 3], after: f32, limit: f32) -> usize {
-            let (boxes, tree, order) = (&self.boxes, &self.tree, &self.order);
             let ray = &Ray::<f32>::from_f64(origin, direction);
-            let mut reached = vec![false; boxes.len()];
-            tree.walk(&WideSlabs::new(ray), after, limit, |first, count| {
-                for &i in &order[first as usize..(first + count) as usize] {
-                    reached[i as usize] = true;
+            /// The boxes a walk reaches, as a [`Kernel`].
+            struct Reach<'a>(&'a Forest, &'a WideSlabs, f32, f32);
+            impl Kernel for Reach<'_> {
+                type Output = Vec<bool>;
+                fn run<S: Isa>(self) -> Vec<bool> {
+                    let Reach(forest, slabs, after, limit) = self;
+                    let mut reached = vec![false; forest.boxes.len()];
+                    forest
+                        .tree
+                        .walk_with::<S>(slabs, after, limit, |first, count| {
+                            for &i in &forest.order[first as usize..(first + count) as usize] {
+                                reached[i as usize] = true;
+                            }
+                            limit
+                        });
+                    reached
                 }
-                limit
-            });
+            }
+            let slabs = WideSlabs::new(ray);
+            let reached = run_on(SimdPath::Portable, Reach(self, &slabs, after, limit));
+            // Every path reaches the same boxes (its node test gives the same bits).
+            for path in SimdPath::available() {
+                assert!(
+                    run_on(path, Reach(self, &slabs, after, limit)) == reached,
+                    "{path} reaches other boxes than the portable path for {ray:?}"
+                );
+            }
             let mut met = 0;
-            for (i, b) in boxes.iter().enumerate() {
+            for (i, b) in self.boxes.iter().enumerate() {
                 if ray_bounds_entry(ray, b, after, limit).is_some() {
                     met += 1;
                     assert!(

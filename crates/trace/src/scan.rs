@@ -1152,6 +1152,7 @@ pub fn stats_json(
         "trace_s": times.trace_s,
         "rays_per_s": if times.trace_s > 0.0 { rays as f64 / times.trace_s } else { 0.0 },
         "threads": rayon::current_num_threads(),
+        "simd": hytrace_csg::simd::selected().to_string(),
         "redone_in_f64": times.redone_in_f64,
         "fallback_s": times.fallback_s,
         "flagged": times.flagged,

@@ -482,3 +482,61 @@ fn scan_progress_counts_every_ray_and_changes_nothing() {
         assert_eq!(reported.ids, plain.ids);
     }
 }
+
+/// Every SIMD path this CPU runs (`HYTRACE_SIMD`) scans a mesh to the same bytes and
+/// reports itself in `--stats`; a name that is no path, or a path this CPU lacks, fails
+/// before any output, naming the variable.
+#[test]
+fn every_simd_path_scans_a_mesh_to_the_same_bytes_and_bad_paths_fail() {
+    use hytrace_csg::simd::SimdPath;
+    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/rock.obj");
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = |simd: &str, out: &Path| {
+        common::hytrace(
+            &[
+                "scan",
+                mesh.to_str().unwrap(),
+                "--sweep",
+                "circle",
+                "--count",
+                "3000",
+                "--stats",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &[("HYTRACE_SIMD", simd)],
+        )
+    };
+    let mut first: Option<Vec<u8>> = None;
+    for path in SimdPath::available() {
+        let out = tmp.path().join(format!("{path}.npy"));
+        let o = scan(&path.to_string(), &out);
+        assert!(o.status.success(), "{path}: {}", stderr(&o));
+        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(stats["simd"], path.to_string(), "{stats}");
+        assert!(stats["hits"].as_u64().unwrap() > 500, "{stats}");
+        let bytes = std::fs::read(&out).unwrap();
+        match &first {
+            None => first = Some(bytes),
+            Some(want) => assert!(bytes == *want, "{path} scans to other bytes"),
+        }
+    }
+    let missing = [SimdPath::Avx2, SimdPath::Avx512]
+        .into_iter()
+        .filter(|p| !p.supported())
+        .map(|p| (p.to_string(), "does not support"));
+    for (name, problem) in [("sse9".to_string(), "unknown SIMD path")]
+        .into_iter()
+        .chain(missing)
+    {
+        let out = tmp.path().join("refused.npy");
+        let o = scan(&name, &out);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{name} was accepted");
+        assert!(
+            err.contains("HYTRACE_SIMD") && err.contains(problem),
+            "{name}: {err}"
+        );
+        assert!(!out.exists(), "{name} left {}", out.display());
+    }
+}

@@ -1,6 +1,7 @@
 //! The f32 CPU kernel's form of a mesh BVH: the mesh's binary BVH (the one the GPU
 //! traverses) collapsed into eight-wide nodes ([`crate::wide_bvh`]), with leaves holding
-//! triangles in blocks of 4 stored lane by lane, tested all at once with `wide`'s `f32x4`.
+//! triangles in blocks of 4 stored lane by lane, tested all at once with 4-lane SIMD (of
+//! the instruction set the search runs with, [`crate::simd`]).
 //! A leaf's last block repeats its first triangle in the unused lanes, a duplicate that can
 //! never win (same distance, same number).
 //!
@@ -24,6 +25,7 @@ use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
+use crate::simd::{run_on, Isa, Kernel, Lanes, SimdPath};
 use crate::wide_bvh::{
     point_f32, prefetch_lines, BinaryNode, PacketSlabs, Walker, WideBvhError, WideSlabs, WideTree,
     PACKET,
@@ -108,15 +110,31 @@ impl WideBvh {
 
     /// The nearest crossing after `after` and strictly before `limit` of a (recentred) ray:
     /// its distance, triangle number and geometric normal `(v1 - v0) x (v2 - v0)`, and where
-    /// a crossing is doubtful ([`Found`]). `MeshPrim::nearest_binary`'s search, 8 boxes and
-    /// 4 triangles at a time.
-    pub(crate) fn nearest(&self, ray: &Ray<f32>, after: f32, limit: f32) -> Found {
+    /// a crossing is doubtful ([`Found`]). `MeshPrim::nearest_binary`'s search, 8 boxes and 4 triangles at a time, on SIMD
+    /// path `path` (the same answers on every path).
+    pub(crate) fn nearest(&self, path: SimdPath, ray: &Ray<f32>, after: f32, limit: f32) -> Found {
+        /// The search as a [`Kernel`].
+        struct Nearest<'a>(&'a WideBvh, &'a Ray<f32>, f32, f32);
+        impl Kernel for Nearest<'_> {
+            type Output = Found;
+            #[inline(always)]
+            fn run<S: Isa>(self) -> Self::Output {
+                let Nearest(wide, ray, after, limit) = self;
+                wide.nearest_with::<S>(ray, after, limit)
+            }
+        }
+        run_on(path, Nearest(self, ray, after, limit))
+    }
+
+    /// [`Self::nearest`] with the vectors of `S`.
+    #[inline(always)]
+    fn nearest_with<S: Isa>(&self, ray: &Ray<f32>, after: f32, limit: f32) -> Found {
         let triangles = WideRay::new(ray);
         let mut best = Best::none(limit);
         self.tree
-            .walk(&WideSlabs::new(ray), after, limit, |first, count| {
+            .walk_with::<S>(&WideSlabs::new(ray), after, limit, |first, count| {
                 for b in first..first + count {
-                    triangles.test(&self.blocks[b as usize], b, ray, after, &mut best);
+                    triangles.test::<S>(&self.blocks[b as usize], b, ray, after, &mut best);
                 }
                 best.t
             });
@@ -125,8 +143,9 @@ impl WideBvh {
 
     /// [`Self::nearest`] of each ray of a packet (`rays`, at most [`PACKET`], each with its
     /// `after` and no limit; `packet` is their [`PacketSlabs`]), walked together
-    /// ([`WideTree::walk_packet`]): the same answers, bit for bit, in `out`.
-    pub(crate) fn nearest_packet(
+    /// (`WideTree::walk_packet`): the same answers, bit for bit, in `out`.
+    #[inline(always)]
+    pub(crate) fn nearest_packet<S: Isa>(
         &self,
         packet: &PacketSlabs,
         rays: &[Ray<f32>],
@@ -145,13 +164,13 @@ impl WideBvh {
                 f32::NEG_INFINITY
             }
         });
-        self.tree.walk_packet(
+        self.tree.walk_packet::<S>(
             packet,
             &lanes,
             &mut limits,
             |r, first, count| {
                 for b in first..first + count {
-                    triangles[r].test(
+                    triangles[r].test::<S>(
                         &self.blocks[b as usize],
                         b,
                         &rays[r],
@@ -175,7 +194,7 @@ impl WideBvh {
     /// Advances `search` by one node visit or one leaf (see [`Walker::step`] for `AHEAD`);
     /// false once it is over.
     #[inline(always)]
-    pub(crate) fn advance<const AHEAD: bool>(&self, search: &mut Search) -> bool {
+    pub(crate) fn advance<S: Isa, const AHEAD: bool>(&self, search: &mut Search) -> bool {
         let Search {
             ray,
             triangles,
@@ -185,13 +204,13 @@ impl WideBvh {
             walker,
         } = search;
         let after = *after;
-        walker.step::<AHEAD>(
+        walker.step::<S, AHEAD>(
             &self.tree,
             slabs,
             after,
             &mut |first, count| {
                 for b in first..first + count {
-                    triangles.test(&self.blocks[b as usize], b, ray, after, best);
+                    triangles.test::<S>(&self.blocks[b as usize], b, ray, after, best);
                 }
                 best.t
             },
@@ -361,12 +380,10 @@ impl Best {
 /// The per-ray part of the 4-lane watertight triangle test (see `MeshPrim::crossing`).
 struct WideRay {
     shear: Shear<f32>,
-    origin: [f32x4; 3],
+    /// The origin's coordinates in the sheared frame's axis order.
+    origin: [f32; 3],
     /// The origin's largest coordinate (its rounding is part of [`edge_doubt`]'s bound).
     origin_max: f32,
-    shear_x: f32x4,
-    shear_y: f32x4,
-    shear_z: f32x4,
 }
 
 impl WideRay {
@@ -378,11 +395,8 @@ impl WideRay {
 
     fn new(ray: &Ray<f32>) -> Self {
         let shear = Shear::new(ray.direction);
-        let origin = shear.axes.map(|k| f32x4::splat(ray.origin.get(k)));
+        let origin = shear.axes.map(|k| ray.origin.get(k));
         WideRay {
-            shear_x: f32x4::splat(shear.x),
-            shear_y: f32x4::splat(shear.y),
-            shear_z: f32x4::splat(shear.z),
             origin,
             origin_max: ray.origin.max_abs(),
             shear,
@@ -391,16 +405,26 @@ impl WideRay {
 
     /// Offers `best` the crossings after `after` of the triangles of block `index`.
     #[inline(always)]
-    fn test(&self, block: &TriangleBlock, index: u32, ray: &Ray<f32>, after: f32, best: &mut Best) {
+    fn test<S: Isa>(
+        &self,
+        block: &TriangleBlock,
+        index: u32,
+        ray: &Ray<f32>,
+        after: f32,
+        best: &mut Best,
+    ) {
         let [kx, ky, kz] = self.shear.axes;
-        let zero = f32x4::splat(0.0);
+        let zero = S::F4::splat(0.0);
+        let origin = self.origin.map(S::F4::splat);
+        let [shear_x, shear_y, shear_z] =
+            [self.shear.x, self.shear.y, self.shear.z].map(S::F4::splat);
         // Vertex j relative to the origin, sheared: (x, y) and the unsheared height.
         let vertex = |j: usize| {
             let v = &block.vertex[j];
-            let px = f32x4::from(v[kx]) - self.origin[0];
-            let py = f32x4::from(v[ky]) - self.origin[1];
-            let pz = f32x4::from(v[kz]) - self.origin[2];
-            (px - self.shear_x * pz, py - self.shear_y * pz, pz)
+            let px = S::F4::load(&v[kx]) - origin[0];
+            let py = S::F4::load(&v[ky]) - origin[1];
+            let pz = S::F4::load(&v[kz]) - origin[2];
+            (px - shear_x * pz, py - shear_y * pz, pz)
         };
         let (ax, ay, az) = vertex(0);
         let (bx, by, bz) = vertex(1);
@@ -409,19 +433,21 @@ impl WideRay {
         let v = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
         let det = u + v + w;
-        let negative = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
-        let positive = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
-        let t = (u * (self.shear_z * az) + v * (self.shear_z * bz) + w * (self.shear_z * cz)) / det;
-        let crossed = !(negative & positive) & det.simd_ne(zero);
-        let in_range = t.simd_gt(f32x4::splat(after)) & t.simd_le(f32x4::splat(best.t));
-        let candidate = crossed & in_range;
+        let negative = u.lt(zero) | v.lt(zero) | w.lt(zero);
+        let positive = u.gt(zero) | v.gt(zero) | w.gt(zero);
+        let t = (u * (shear_z * az) + v * (shear_z * bz) + w * (shear_z * cz)) / det;
+        let crossed = !(negative & positive) & det.ne(zero);
+        let candidate = crossed & t.gt(S::F4::splat(after)) & t.le(S::F4::splat(best.t));
+        // The doubt, in `wide`'s f32x4 (what every path's 4 lanes are).
+        let four = |x: S::F4| f32x4::from(x.to_array());
         let reach = f32x4::splat(self.reach(after));
-        let (doubt, bound) =
-            edge_doubt([(ax, ay, az), (bx, by, bz), (cx, cy, cz)], [u, v, w], reach);
+        let sheared =
+            [(ax, ay, az), (bx, by, bz), (cx, cy, cz)].map(|(x, y, z)| (four(x), four(y), four(z)));
+        let (doubt, bound) = edge_doubt(sheared, [four(u), four(v), four(w)], reach);
         let doubtful = doubt.to_bitmask();
         if doubtful != 0 {
             // Rare: the latest each doubtful triangle's plane may be crossed.
-            let heights = [az, bz, cz].map(|z| (self.shear_z * z).to_array());
+            let heights = [az, bz, cz].map(|z| (shear_z * z).to_array());
             let (t, det, bound) = (t.to_array(), det.to_array(), bound.to_array());
             let mut lanes = doubtful;
             while lanes != 0 {
@@ -431,8 +457,8 @@ impl WideRay {
                 best.doubt_at(latest_crossing(t[lane], z, det[lane], bound[lane]), after);
             }
         }
-        let on_edge = (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask();
-        let mut lanes = (candidate.to_bitmask() & !on_edge) | on_edge;
+        let on_edge = (u.eq(zero) | v.eq(zero) | w.eq(zero)).bitmask();
+        let mut lanes = (candidate.bitmask() & !on_edge) | on_edge;
         if lanes == 0 {
             return;
         }
@@ -566,14 +592,19 @@ mod tests {
         MeshPrim::<f32>::new(&soup).unwrap()
     }
 
-    /// Runs both searches on a ray and its recentred form; returns whether it hit.
+    /// Runs the binary search and the wide one on every SIMD path this CPU has, on a ray
+    /// and its recentred form; returns whether it hit.
     fn both_agree(mesh: &MeshPrim<f32>, origin: [f64; 3], direction: [f64; 3]) -> bool {
         let wide = mesh.wide.as_ref().expect("f32 meshes have a wide BVH");
         let ray = Ray::from_f64(origin, direction);
         let (moved, shift) = mesh.recentred(&ray);
         let mut hit = false;
-        for (r, after) in [(ray, 0.0f32), (moved, -shift)] {
-            let got = wide.nearest(&r, after, f32::INFINITY).crossing;
+        let paths = SimdPath::available();
+        for (r, after, path) in [(ray, 0.0f32), (moved, -shift)]
+            .into_iter()
+            .flat_map(|(r, after)| paths.iter().map(move |&p| (r, after, p)))
+        {
+            let got = wide.nearest(path, &r, after, f32::INFINITY).crossing;
             let want = mesh.nearest_binary(&r, after);
             if let Some((_, i, normal)) = got {
                 let [v0, v1, v2] = mesh.triangles[i];
@@ -582,7 +613,7 @@ mod tests {
             assert_eq!(
                 got.map(|(t, i, _)| (t.to_bits(), i)),
                 want.map(|(t, i)| (t.to_bits(), i)),
-                "ray {origin:?} + t {direction:?} after {after}: wide {got:?}, binary {want:?}"
+                "ray {origin:?} + t {direction:?} after {after}: wide ({path}) {got:?}, binary {want:?}"
             );
             hit |= got.is_some();
         }
@@ -637,10 +668,10 @@ mod tests {
     }
 
     /// Checks [`WideBvh::nearest_packet`] of `rays` (origin, direction) against
-    /// [`WideBvh::nearest`] ray by ray, bit for bit, each ray recentred as the mesh's
-    /// searches recentre it; returns how many hit, or `None` when the rays have no packet
-    /// form. With `coherent`, also checks that the mesh's searches would take them as a
-    /// packet.
+    /// [`WideBvh::nearest`] ray by ray, bit for bit, on every SIMD path this CPU has (the
+    /// single searches on the portable one), each ray recentred as the mesh's searches
+    /// recentre it; returns how many hit, or `None` when the rays have no packet form. With
+    /// `coherent`, also checks that the mesh's searches would take them as a packet.
     fn packet_agrees(
         mesh: &MeshPrim<f32>,
         rays: &[([f64; 3], [f64; 3])],
@@ -665,23 +696,43 @@ mod tests {
             crossing: None,
             doubt: f32::INFINITY,
         };
-        let mut got = vec![none; rays.len()];
-        wide.nearest_packet(&packet, &moved, &after, &mut got);
-        for ((ray, after), got) in moved.iter().zip(&after).zip(&got) {
-            let want = wide.nearest(ray, *after, f32::INFINITY);
-            assert_eq!(
-                (
-                    got.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
-                    got.doubt.to_bits()
-                ),
-                (
-                    want.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
-                    want.doubt.to_bits()
-                ),
-                "ray {ray:?} after {after} in the packet {rays:?}"
-            );
+        /// The packet search as a [`Kernel`].
+        struct Packet<'a>(
+            &'a WideBvh,
+            &'a PacketSlabs,
+            &'a [Ray<f32>],
+            &'a [f32],
+            Found,
+        );
+        impl Kernel for Packet<'_> {
+            type Output = Vec<Found>;
+            fn run<S: Isa>(self) -> Self::Output {
+                let Packet(wide, packet, rays, after, none) = self;
+                let mut got = vec![none; rays.len()];
+                wide.nearest_packet::<S>(packet, rays, after, &mut got);
+                got
+            }
         }
-        Some(got.iter().filter(|g| g.crossing.is_some()).count())
+        let mut hits = 0;
+        for path in SimdPath::available() {
+            let got = run_on(path, Packet(wide, &packet, &moved, &after, none));
+            for ((ray, after), got) in moved.iter().zip(&after).zip(&got) {
+                let want = wide.nearest(SimdPath::Portable, ray, *after, f32::INFINITY);
+                assert_eq!(
+                    (
+                        got.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
+                        got.doubt.to_bits()
+                    ),
+                    (
+                        want.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
+                        want.doubt.to_bits()
+                    ),
+                    "ray {ray:?} after {after} in the packet {rays:?} ({path})"
+                );
+            }
+            hits = got.iter().filter(|g| g.crossing.is_some()).count();
+        }
+        Some(hits)
     }
 
     #[test]

@@ -12,12 +12,11 @@
 
 use std::mem::MaybeUninit;
 
-use wide::{f32x8, u32x8};
-
 use super::{enter, prefetch_lines, resume, Postponed, SlabSpan, WideNode, WideTree, STACK, WIDTH};
 use crate::real::Ray;
+use crate::simd::{Isa, Lanes};
 
-/// Most rays a packet holds: one per lane of `f32x8`.
+/// Most rays a packet holds: one per lane of the 8-lane vectors.
 pub const PACKET: usize = 8;
 
 /// An array of `f(lane)` for every lane of a packet.
@@ -31,19 +30,19 @@ pub struct PacketSlabs {
     /// Per axis, the origin bound that gives the lowest entry: the highest origin for a
     /// positive direction, the lowest for a negative one; for a zero component, the
     /// highest origin.
-    entry_origin: [f32x8; 3],
+    entry_origin: [f32; 3],
     /// Per axis, the origin bound that gives the highest exit (the other one).
-    exit_origin: [f32x8; 3],
+    exit_origin: [f32; 3],
     /// Per axis, the lowest and highest reciprocal direction component.
-    scale: [[f32x8; 2]; 3],
+    scale: [[f32; 2]; 3],
     /// Which of the node's planes is each axis' entry plane (min for a positive component).
     near: [usize; 3],
     /// Per axis: whether the rays' components are all zero.
     parallel: [bool; 3],
     /// The rays lane by lane (lanes past the last ray repeat it): per axis, the origin and
     /// the reciprocal direction component, as [`WideSlabs`] holds them for one ray.
-    origin: [f32x8; 3],
-    inverse: [f32x8; 3],
+    origin: [[f32; PACKET]; 3],
+    inverse: [[f32; PACKET]; 3],
     /// The rays, in lanes from the first.
     rays: usize,
 }
@@ -59,20 +58,19 @@ impl PacketSlabs {
         // Lanes past the last ray repeat it, so bounds over all lanes are the rays' bounds.
         let lane = |i: usize| &rays[i.min(rays.len() - 1)];
         let mut packet = PacketSlabs {
-            entry_origin: [f32x8::ZERO; 3],
-            exit_origin: [f32x8::ZERO; 3],
-            scale: [[f32x8::ZERO; 2]; 3],
+            entry_origin: [0.0; 3],
+            exit_origin: [0.0; 3],
+            scale: [[0.0; 2]; 3],
             near: [0; 3],
             parallel: [false; 3],
-            origin: [f32x8::ZERO; 3],
-            inverse: [f32x8::ZERO; 3],
+            origin: [[0.0; PACKET]; 3],
+            inverse: [[0.0; PACKET]; 3],
             rays: rays.len(),
         };
         for k in 0..3 {
             let d = lanes(|i| lane(i).direction.get(k));
             let o = lanes(|i| lane(i).origin.get(k));
-            let inverse = f32x8::splat(1.0) / f32x8::from(d);
-            let inv = inverse.to_array();
+            let inv = d.map(|d| 1.0 / d);
             let (positive, parallel) = (d[0] >= 0.0, d[0] == 0.0);
             let alike = (0..PACKET).all(|i| {
                 (d[i] >= 0.0) == positive
@@ -91,13 +89,13 @@ impl PacketSlabs {
             } else {
                 (low(&o), high(&o))
             };
-            packet.entry_origin[k] = f32x8::splat(entry_o);
-            packet.exit_origin[k] = f32x8::splat(exit_o);
-            packet.scale[k] = [f32x8::splat(low(&inv)), f32x8::splat(high(&inv))];
+            packet.entry_origin[k] = entry_o;
+            packet.exit_origin[k] = exit_o;
+            packet.scale[k] = [low(&inv), high(&inv)];
             packet.near[k] = if positive { k } else { k + 3 };
             packet.parallel[k] = parallel;
-            packet.origin[k] = f32x8::from(o);
-            packet.inverse[k] = inverse;
+            packet.origin[k] = o;
+            packet.inverse[k] = inv;
         }
         Some(packet)
     }
@@ -106,27 +104,29 @@ impl PacketSlabs {
     /// per lane), and a lower bound of each one's entry for every ray: `after` is the
     /// lowest of the rays' and `limit` the highest.
     #[inline(always)]
-    fn entries(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
-        let mut span = SlabSpan::new();
+    fn entries<S: Isa>(&self, node: &WideNode, after: f32, limit: f32) -> (u32, [f32; WIDTH]) {
+        let mut span = SlabSpan::<S::F8>::new();
         for k in 0..3 {
-            let (near, far) = SlabSpan::planes(node, self.near[k]);
+            let (near, far) = SlabSpan::<S::F8>::planes(node, self.near[k]);
+            let entry_origin = S::F8::splat(self.entry_origin[k]);
+            let exit_origin = S::F8::splat(self.exit_origin[k]);
             if self.parallel[k] {
                 // Some origin inside the slab, at every distance.
-                span.inside &= near.simd_le(self.entry_origin[k]);
-                span.inside &= self.exit_origin[k].simd_le(far);
+                span.inside = span.inside & near.le(entry_origin);
+                span.inside = span.inside & exit_origin.le(far);
                 continue;
             }
             // Each ray's (near - o) * inv is at least the lowest product of the bounding
             // difference with either end of the reciprocals' interval (the product is
             // monotonic in each factor, and so is its rounding); likewise for the exit.
-            let [lo, hi] = self.scale[k];
-            let x0 = near - self.entry_origin[k];
-            let x1 = far - self.exit_origin[k];
-            span.entry = span.entry.fast_max((x0 * lo).fast_min(x0 * hi));
-            span.exit = span.exit.fast_min((x1 * lo).fast_max(x1 * hi));
+            let [lo, hi] = self.scale[k].map(S::F8::splat);
+            let x0 = near - entry_origin;
+            let x1 = far - exit_origin;
+            span.entry = span.entry.max((x0 * lo).min(x0 * hi));
+            span.exit = span.exit.min((x1 * lo).max(x1 * hi));
         }
         // The per-ray test's widening, monotonic in the entry and in the exit.
-        span.hits(f32x8::splat(after), f32x8::splat(limit))
+        span.hits(S::F8::splat(after), S::F8::splat(limit))
     }
 }
 
@@ -135,24 +135,25 @@ impl PacketSlabs {
     /// `[after, limit]` (each ray's, lane by lane), and where: for each ray, what
     /// [`WideSlabs::entries`] answers for that box, by the same operations.
     #[inline(always)]
-    fn rays_entering(
+    fn rays_entering<S: Isa>(
         &self,
         node: &WideNode,
         lane: usize,
-        after: f32x8,
-        limit: f32x8,
+        after: S::F8,
+        limit: S::F8,
     ) -> (u32, [f32; PACKET]) {
-        let mut span = SlabSpan::new();
+        let mut span = SlabSpan::<S::F8>::new();
         for k in 0..3 {
-            let near = f32x8::splat(node.planes[self.near[k]][lane]);
-            let far = f32x8::splat(node.planes[(self.near[k] + 3) % 6][lane]);
-            let o = self.origin[k];
+            let near = S::F8::splat(node.planes[self.near[k]][lane]);
+            let far = S::F8::splat(node.planes[(self.near[k] + 3) % 6][lane]);
+            let o = S::F8::load(&self.origin[k]);
             if self.parallel[k] {
-                span.inside &= near.simd_le(o) & o.simd_le(far);
+                span.inside = span.inside & (near.le(o) & o.le(far));
                 continue;
             }
-            span.entry = span.entry.fast_max((near - o) * self.inverse[k]);
-            span.exit = span.exit.fast_min((far - o) * self.inverse[k]);
+            let inverse = S::F8::load(&self.inverse[k]);
+            span.entry = span.entry.max((near - o) * inverse);
+            span.exit = span.exit.min((far - o) * inverse);
         }
         let (hit, entries) = span.hits(after, limit);
         (hit & ((1 << self.rays) - 1), entries)
@@ -161,8 +162,8 @@ impl PacketSlabs {
 
 /// The lanes of `node` that hold leaves (bit per lane).
 #[inline(always)]
-fn leaf_lanes(node: &WideNode) -> u32 {
-    !u32x8::from(node.count).simd_eq(u32x8::ZERO).to_bitmask() & ((1 << WIDTH) - 1)
+fn leaf_lanes<S: Isa>(node: &WideNode) -> u32 {
+    S::nonzero(&node.count)
 }
 
 impl WideTree {
@@ -178,7 +179,7 @@ impl WideTree {
     /// `prefetch_leaf(child, count)` a leaf's items): a coherent packet visits most of
     /// them, and their misses then overlap.
     #[inline(always)]
-    pub fn walk_packet(
+    pub(crate) fn walk_packet<S: Isa>(
         &self,
         packet: &PacketSlabs,
         after: &[f32; PACKET],
@@ -190,7 +191,7 @@ impl WideTree {
             return;
         }
         let lowest_after = after.iter().copied().fold(f32::INFINITY, f32::min);
-        let after_lanes = f32x8::from(*after);
+        let after_lanes = S::F8::load(after);
         let highest = |limits: &[f32]| limits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let mut limit = highest(limits);
         let mut stack = [MaybeUninit::<Postponed>::uninit(); STACK];
@@ -198,8 +199,8 @@ impl WideTree {
         let mut child = 0u32;
         loop {
             let node = &self.nodes[child as usize];
-            let (hit, entries) = packet.entries(node, lowest_after, limit);
-            let leaves = hit & leaf_lanes(node);
+            let (hit, entries) = packet.entries::<S>(node, lowest_after, limit);
+            let leaves = hit & leaf_lanes::<S>(node);
             let mut lanes = hit;
             while lanes != 0 {
                 let lane = lanes.trailing_zeros() as usize;
@@ -224,7 +225,7 @@ impl WideTree {
                 }
                 lanes &= !(1 << lane);
                 let (mut rays, _) =
-                    packet.rays_entering(node, lane, after_lanes, f32x8::from(*limits));
+                    packet.rays_entering::<S>(node, lane, after_lanes, S::F8::load(limits));
                 while rays != 0 {
                     let ray = rays.trailing_zeros() as usize;
                     rays &= rays - 1;

@@ -81,6 +81,10 @@ pub enum Command {
 
 /// Runs the command `cli` names.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    // A HYTRACE_SIMD that names no path, or one this CPU lacks, is refused before any work.
+    if let Some(path) = hytrace_csg::simd::SimdPath::from_env()? {
+        hytrace_csg::simd::select(path)?;
+    }
     let options = GdmlOptions {
         lenient: cli.lenient,
     };
