@@ -64,8 +64,9 @@ fn scan(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         start_in = located[i];
     }
     let h = cross_from(start_in, ray_origin(r), ray_origin_lo(r), d, r.tmin, min(r.tmax, INF));
-    // A short span dropped (CpuScene::trace_flagged): the host traces such rays again in f64.
-    if trace_dropped {
+    // A short span dropped, or a mesh triangle decided within rounding, not beyond the answer
+    // (CpuScene::trace_flagged): the host traces such rays again in f64.
+    if trace_dropped_at < INF && trace_dropped_at <= h.t {
         status |= STATUS_DROPPED_SPAN;
     }
     var out: HitRecord;

@@ -23,6 +23,9 @@
 // One stack slot per BVH level below the root, plus one (the CPU's stack size).
 const MESH_STACK: u32 = MESH_MAX_BVH_DEPTH + 1u;
 
+// The gap between 1 and the next f32 (f32::EPSILON).
+const MESH_EPSILON: f32 = 1.1920929e-7;
+
 fn mesh_lo(m: MeshRecord) -> vec3<f32> {
     return vec3<f32>(m.lo[0], m.lo[1], m.lo[2]);
 }
@@ -243,9 +246,47 @@ fn mesh_shear(d: vec3<f32>) -> MeshShear {
     return MeshShear(kx, ky, kz, d[kx] / dz, d[ky] / dz, 1.0 / dz);
 }
 
-// Where the ray o + t d meets triangle `tri` (MeshPrim::crossing): `ok` false if it does
-// not. Zero edge functions count as inside, so a ray through a shared edge hits both sides.
-fn mesh_crossing(tri: MeshTriangle, o: vec3<f32>, s: MeshShear) -> MaybeT {
+// Whether the triangle's hit or miss is within f32 rounding (twin of edge_doubt in
+// crates/csg/src/mesh/wide.rs, operation by operation): some edge function is within the
+// bound of its rounding of 0, and moving each by that bound can make all three agree.
+// (x, y) are the vertices' sheared coordinates, z their unsheared heights, `reach` the
+// origin's largest coordinate plus how far the recentring moved its parameter.
+// Returns the bound when the triangle is doubtful, else -1.
+fn mesh_doubt(ax: f32, ay: f32, az: f32, bx: f32, by: f32, bz: f32, cx: f32, cy: f32, cz: f32, u: f32, v: f32, w: f32, reach: f32) -> f32 {
+    let sheared = abs(ax) + abs(ay) + (abs(bx) + abs(by)) + (abs(cx) + abs(cy));
+    let heights = abs(az) + abs(bz) + abs(cz);
+    let bound = (2.0 * MESH_EPSILON) * sheared * ((sheared + heights) * 2.0 + reach);
+    let low = -bound;
+    let near = abs(u) <= bound || abs(v) <= bound || abs(w) <= bound;
+    let from_front = u >= low && v >= low && w >= low;
+    let from_behind = u <= bound && v <= bound && w <= bound;
+    return select(-1.0, bound, near && (from_front || from_behind));
+}
+
+// The latest distance at which the ray may cross a doubtful triangle's plane (twin of
+// latest_crossing in crates/csg/src/mesh/wide.rs, operation by operation).
+fn mesh_latest_crossing(t: f32, za: f32, zb: f32, zc: f32, det: f32, bound: f32) -> f32 {
+    let spread = abs(za - t) + abs(zb - t) + abs(zc - t);
+    let late = t + bound * spread / abs(det);
+    var far = select(zb, za, za > zb);
+    far = select(far, zc, zc > far);
+    return select(far, late, late < far);
+}
+
+// A triangle test's answer: `ok` and `t` where the ray crosses it, whether its hit or miss
+// is within rounding (`doubtful`, mesh_doubt) and then `doubt`, the latest distance at
+// which the ray may cross its plane (mesh_latest_crossing; else INF).
+struct MeshCrossing {
+    ok: bool,
+    t: f32,
+    doubtful: bool,
+    doubt: f32,
+}
+
+// Where the ray o + t d meets triangle `tri` (MeshPrim::crossing, and the doubt of the
+// CPU's 4-lane test, WideRay::test): `ok` false if it does not. Zero edge functions count
+// as inside, so a ray through a shared edge hits both sides.
+fn mesh_crossing(tri: MeshTriangle, o: vec3<f32>, s: MeshShear, reach: f32) -> MeshCrossing {
     let a = tri.v[0].xyz - o;
     let b = tri.v[1].xyz - o;
     let c = tri.v[2].xyz - o;
@@ -258,6 +299,20 @@ fn mesh_crossing(tri: MeshTriangle, o: vec3<f32>, s: MeshShear) -> MaybeT {
     var u = cx * by - cy * bx;
     var v = ax * cy - ay * cx;
     var w = bx * ay - by * ax;
+    let az = s.z * a[s.kz];
+    let bz = s.z * b[s.kz];
+    let cz = s.z * c[s.kz];
+    // A parity count (reach -1) asks for no doubt.
+    var bound = -1.0;
+    if reach >= 0.0 {
+        bound = mesh_doubt(ax, ay, a[s.kz], bx, by, b[s.kz], cx, cy, c[s.kz], u, v, w, reach);
+    }
+    let doubtful = bound >= 0.0;
+    var doubt = INF;
+    if doubtful {
+        let det32 = u + v + w;
+        doubt = mesh_latest_crossing((u * az + v * bz + w * cz) / det32, az, bz, cz, det32, bound);
+    }
     if u == 0.0 || v == 0.0 || w == 0.0 {
         u = mesh_exact_edge(cx, cy, bx, by);
         v = mesh_exact_edge(ax, ay, cx, cy);
@@ -267,12 +322,9 @@ fn mesh_crossing(tri: MeshTriangle, o: vec3<f32>, s: MeshShear) -> MaybeT {
     let positive = u > 0.0 || v > 0.0 || w > 0.0;
     let det = u + v + w;
     if (negative && positive) || det == 0.0 {
-        return MaybeT(false, 0.0);
+        return MeshCrossing(false, 0.0, doubtful, doubt);
     }
-    let az = s.z * a[s.kz];
-    let bz = s.z * b[s.kz];
-    let cz = s.z * c[s.kz];
-    return MaybeT(true, (u * az + v * bz + w * cz) / det);
+    return MeshCrossing(true, (u * az + v * bz + w * cz) / det, doubtful, doubt);
 }
 
 // The ray's entry into a padded node box within [after, limit] (SlabRay::entry).
@@ -333,6 +385,13 @@ struct MeshWalk {
     found: bool,
     best_t: f32,
     best_index: u32,
+    // Whether the best crossing's triangle is doubtful.
+    best_doubtful: bool,
+    // The least distance of a doubtful crossing (MeshCrossing::doubt) in range when seen.
+    doubt: f32,
+    // The origin's largest coordinate plus |after| (mesh_doubt's `reach`); -1 for a parity
+    // count, which needs no doubt.
+    reach: f32,
     count: u32,
     crossings: array<f32, MESH_PARITY_BUFFER>,
 }
@@ -341,7 +400,12 @@ struct MeshWalk {
 // MeshPrim::contains); returns the new limit.
 fn mesh_leaf(m: MeshRecord, first: u32, count: u32, o: vec3<f32>, s: MeshShear, limit: f32, w: ptr<function, MeshWalk>) -> f32 {
     for (var i = first; i < first + count; i += 1u) {
-        let c = mesh_crossing(mesh_triangle(m.triangle_offset + i), o, s);
+        let c = mesh_crossing(mesh_triangle(m.triangle_offset + i), o, s, (*w).reach);
+        // A doubtful crossing within the search's range so far (Best::doubt_at).
+        let within = select(limit, (*w).best_t, (*w).found);
+        if c.doubt > (*w).after && c.doubt <= within && c.doubt < (*w).doubt {
+            (*w).doubt = c.doubt;
+        }
         if !c.ok {
             continue;
         }
@@ -364,6 +428,7 @@ fn mesh_leaf(m: MeshRecord, first: u32, count: u32, o: vec3<f32>, s: MeshShear, 
             (*w).found = true;
             (*w).best_t = c.t;
             (*w).best_index = i;
+            (*w).best_doubtful = c.doubtful;
         }
     }
     if !(*w).collect && (*w).found {
@@ -429,13 +494,16 @@ fn mesh_walk(m: MeshRecord, o: vec3<f32>, d: vec3<f32>, s: MeshShear, w: ptr<fun
     }
 }
 
-fn mesh_walk_start(collect: bool, after: f32) -> MeshWalk {
+fn mesh_walk_start(collect: bool, o: vec3<f32>, after: f32) -> MeshWalk {
     var w: MeshWalk;
     w.collect = collect;
     w.after = after;
     w.found = false;
     w.best_t = INF;
     w.best_index = 0u;
+    w.best_doubtful = false;
+    w.doubt = INF;
+    w.reach = select(v3_max_abs(o) + abs(after), -1.0, collect);
     w.count = 0u;
     return w;
 }
@@ -443,7 +511,7 @@ fn mesh_walk_start(collect: bool, after: f32) -> MeshWalk {
 // The nearest crossing after `after` of a recentred ray (MeshPrim::nearest): `found`,
 // `best_t` and `best_index` (relative to the mesh) of the returned walk.
 fn mesh_nearest(m: MeshRecord, o: vec3<f32>, d: vec3<f32>, s: MeshShear, after: f32) -> MeshWalk {
-    var w = mesh_walk_start(false, after);
+    var w = mesh_walk_start(false, o, after);
     mesh_walk(m, o, d, s, &w);
     return w;
 }
@@ -465,6 +533,21 @@ fn mesh_first_crossing(mesh: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step
     let after = tmin + SURFACE_TOLERANCE * (m.scale + abs(tmin));
     let moved = mesh_recentred(m, o, d);
     let w = mesh_nearest(m, moved.o, d, mesh_shear(d), after - moved.shift);
+    // Doubtful crossings (WideBvh::found): the answer's own triangle, and those met before
+    // it by more than the rounding of its distance (all of them when there is none). The
+    // scan traces the ray again in f64, as for a dropped span (MeshPrim::step_at).
+    var earlier = w.doubt < INF;
+    if w.found {
+        let margin = (2.0 * MESH_EPSILON) * (w.reach + abs(w.best_t));
+        earlier = w.doubt < w.best_t - margin;
+    }
+    var doubt = select(INF, w.doubt, earlier);
+    if w.found && w.best_doubtful {
+        doubt = min(doubt, w.best_t);
+    }
+    if doubt < INF {
+        dropped_span = min(dropped_span, doubt + moved.shift);
+    }
     if !w.found {
         return step_miss(false);
     }
@@ -484,7 +567,7 @@ fn mesh_contains(mesh: u32, x: vec3<f32>) -> bool {
     }
     let moved = mesh_recentred(m, x, d);
     let s = mesh_shear(d);
-    var w = mesh_walk_start(true, -moved.shift);
+    var w = mesh_walk_start(true, moved.o, -moved.shift);
     mesh_walk(m, moved.o, d, s, &w);
     var inside = false;
     if w.count > MESH_PARITY_BUFFER {

@@ -60,9 +60,11 @@ fn prim_first_crossing(p: SurfacePrim, o: vec3<f32>, d: vec3<f32>, tmin: f32) ->
     return step_miss(false);
 }
 
-// Whether a prim of the trace skipped a short span as a touch before its search's limit
-// (the CPU's Crossings::note_dropped): the scan reports STATUS_DROPPED_SPAN.
-var<private> trace_dropped: bool = false;
+// The least world parameter at which a prim of the trace skipped a short span as a touch,
+// or a mesh decided a triangle within rounding, before its search's limit (the CPU's
+// Crossings::note_dropped); INF when none did. The scan reports STATUS_DROPPED_SPAN when it
+// is not beyond the answer.
+var<private> trace_dropped_at: f32 = INF;
 
 fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
     // #if csg
@@ -80,7 +82,8 @@ fn prim_contains(p: SurfacePrim, x: vec3<f32>) -> bool {
 
 // The first crossing in (tmin, limit) of a ray in solid `solid`'s frame; of crossings at
 // the same t, the lowest prim's (twin of SolidAccel::cross). `instance` is left unset.
-fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) -> Hit {
+// `shift` is the world parameter of the local ray's origin (for trace_dropped_at).
+fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32, shift: f32) -> Hit {
     let list = solid_list(solid);
     var best_index = UNSET;
     var best_t = INF;
@@ -99,14 +102,17 @@ fn solid_cross(solid: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, limit: f32) ->
             continue;
         }
         let p = surface_prim(list.first + i);
-        if !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
+        // A mesh tests its own box (mesh_first_crossing), as the CPU's does when it is a
+        // lone prim: the exact test here would skip near misses its f32 test doubts.
+        if p.kind != PRIM_MESH && !ray_bounds_entry(o, d, prim_lo(p), prim_hi(p), tmin, within).ok {
             continue;
         }
         dropped_span = INF;
         let step = prim_first_crossing(p, o, d, tmin);
-        // A span skipped as a touch before the limit: within rounding (the f64 fallback).
+        // A span skipped as a touch, or a mesh triangle decided within rounding, before the
+        // limit (the f64 fallback).
         if dropped_span < INF && dropped_span < within {
-            trace_dropped = true;
+            trace_dropped_at = min(trace_dropped_at, shift + dropped_span);
         }
         let tie_won = step.t == within && found && i < best_index;
         if step.t > tmin && (step.t < within || tie_won) {
@@ -173,14 +179,16 @@ fn placement_rebase(p: Placement, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>) -
 fn cross_instance(index: u32, o: vec3<f32>, o_lo: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, best: Hit) -> Hit {
     let p = placement(index);
     let limit = hit_limit(best, tmax);
-    if !ray_bounds_entry(o, d, placement_lo(p), placement_hi(p), tmin, limit).ok {
+    // The CPU's culling test (Placement::local_ray), a superset of the exact one: a mesh's
+    // near misses within its rounding are searched alike, so their doubt flags alike.
+    if !slab_entry_conservative(slab_ray(o, d), placement_lo(p), placement_hi(p), tmin, limit).ok {
         return best;
     }
     let local = placement_rebase(p, o, o_lo, d);
     let shift = local.shift;
     let past = limit - shift;
     let limit_local = past + 4.0 * EPSILON * abs(past);
-    var c = solid_cross(p.solid, local.o, local.d, tmin - shift, limit_local);
+    var c = solid_cross(p.solid, local.o, local.d, tmin - shift, limit_local, shift);
     if !c.found {
         return best;
     }

@@ -51,7 +51,7 @@ use crate::wide_bvh::{ray_f32, PacketSlabs, PACKET};
 
 mod wide;
 
-use wide::{Search, WideBvh};
+use wide::{Found, Search, WideBvh};
 
 /// How many mesh searches [`MeshPrim::first_crossings`] interleaves on one thread. Measured
 /// on the 1M-triangle heightfield of `cargo bench -p hytrace-tests --bench mesh` (2-core VM,
@@ -106,10 +106,17 @@ fn coherent(rays: &[Ray<f32>], scale: f32) -> Option<PacketSlabs> {
     }
 }
 
-/// A crossing of the f32 wide search in precision `T` (exact: `T` is f32 there).
-fn from_wide<T: Real>(found: Option<(f32, usize, V3<f32>)>) -> Option<(T, V3<T>)> {
+/// The nearest crossing (distance and normal) and the least doubtful one's distance
+/// (`+inf`: none) of a search, in precision `T`.
+type Nearest<T> = (Option<(T, V3<T>)>, T);
+
+/// What the f32 wide search found, in precision `T` (exact: `T` is f32 there).
+fn from_wide<T: Real>(found: Found) -> Nearest<T> {
     let from_f32 = |v: V3<f32>| V3::new(T::from_f32(v.x), T::from_f32(v.y), T::from_f32(v.z));
-    found.map(|(t, _, normal)| (T::from_f32(t), from_f32(normal)))
+    let crossing = found
+        .crossing
+        .map(|(t, _, normal)| (T::from_f32(t), from_f32(normal)));
+    (crossing, T::from_f32(found.doubt))
 }
 
 /// A triangle mesh ready for intersection in precision `T`, closed or open.
@@ -453,8 +460,10 @@ impl<T: Real> MeshPrim<T> {
     /// geometric, not normalized, normal. Crossings at equal distances go to the lowest
     /// triangle index, so the answer does not depend on the order leaves are visited in
     /// (triangles are numbered in the order a depth-first walk visiting second children
-    /// first meets them, the order earlier versions searched them in).
-    fn nearest(&self, ray: &Ray<T>, after: T) -> Option<(T, V3<T>)> {
+    /// first meets them, the order earlier versions searched them in). With it, in f32, the
+    /// least distance of a crossing within rounding not beyond it (`Found::doubt`; `+inf`
+    /// in f64, which has nothing to fall back to).
+    fn nearest(&self, ray: &Ray<T>, after: T) -> Nearest<T> {
         match &self.wide {
             Some(wide) => from_wide(wide.nearest(
                 simd::selected(),
@@ -462,10 +471,13 @@ impl<T: Real> MeshPrim<T> {
                 after.to_f64() as f32,
                 f32::INFINITY,
             )),
-            None => self.nearest_binary(ray, after).map(|(t, i)| {
-                let [v0, v1, v2] = self.triangles[i];
-                (t, (v1 - v0).cross(v2 - v0))
-            }),
+            None => {
+                let found = self.nearest_binary(ray, after).map(|(t, i)| {
+                    let [v0, v1, v2] = self.triangles[i];
+                    (t, (v1 - v0).cross(v2 - v0))
+                });
+                (found, T::INFINITY)
+            }
         }
     }
 
@@ -578,17 +590,22 @@ impl<T: Real> MeshPrim<T> {
         Some((moved, shift, after - shift))
     }
 
-    /// [`Self::first_crossing`]'s answer from the `found` crossing of the search recentred
-    /// by `shift`.
-    fn step_at(found: Option<(T, V3<T>)>, shift: T, ray: &Ray<T>) -> Step<T> {
+    /// [`Self::first_crossing`]'s answer from what the search recentred by `shift` found.
+    /// A doubtful crossing is reported as [`Step::dropped`]: a decision within rounding,
+    /// which scans trace again in f64.
+    fn step_at((found, doubt): Nearest<T>, shift: T, ray: &Ray<T>) -> Step<T> {
+        let dropped = doubt + shift;
         match found {
             Some((t, normal)) => Step {
                 t: t + shift,
                 normal,
                 inside_before: normal.dot(ray.direction) > T::ZERO,
-                dropped: T::INFINITY,
+                dropped,
             },
-            None => Step::miss(false),
+            None => Step {
+                dropped,
+                ..Step::miss(false)
+            },
         }
     }
 
@@ -732,7 +749,11 @@ impl<T: Real> MeshPrim<T> {
             Some(packet) if n >= 2 => packet,
             _ => return false,
         };
-        let mut found = [None; PACKET];
+        let none = Found {
+            crossing: None,
+            doubt: f32::INFINITY,
+        };
+        let mut found = [none; PACKET];
         wide.nearest_packet::<S>(&packet, &rays[..n], &after[..n], &mut found[..n]);
         for (&(i, shift), found) in asked[..n].iter().zip(found) {
             out[i] = Self::step_at(from_wide(found), shift, &queries[i].ray);
@@ -774,7 +795,7 @@ impl<T: Real> MeshPrim<T> {
         if count > PARITY_BUFFER {
             let mut inside = false;
             let mut after = -shift;
-            while let Some((t, _)) = self.nearest(&moved, after) {
+            while let (Some((t, _)), _) = self.nearest(&moved, after) {
                 inside = !inside;
                 after = t;
             }

@@ -504,3 +504,177 @@ both_precisions!(
     chord_through_a_boolean_edge_f32,
     chord_through_a_boolean_edge_f64
 );
+
+/// Half side of the mesh cube of the mesh cases (mm).
+const CUBE: f64 = 10.0;
+
+/// A scene of one cube mesh of half side [`CUBE`] (12 triangles, counter-clockwise seen
+/// from outside) placed by a translation to `at`.
+fn cube_mesh(at: [f64; 3]) -> Foundry {
+    let mut triangles = Vec::new();
+    for k in 0..3 {
+        let (u, v) = ((k + 1) % 3, (k + 2) % 3);
+        for side in [-1.0f32, 1.0] {
+            // Corners counter-clockwise about +axis k (e_u x e_v = e_k), reversed for -k.
+            let mut quad = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(a, b)| {
+                let mut p = [0.0f32; 4];
+                p[k] = side * CUBE as f32;
+                p[u] = a * CUBE as f32;
+                p[v] = b * CUBE as f32;
+                p
+            });
+            if side < 0.0 {
+                quad.reverse();
+            }
+            for [i, j, l] in [[0, 1, 2], [0, 2, 3]] {
+                triangles.push(hytrace_foundry::Triangle {
+                    v: [quad[i], quad[j], quad[l]],
+                });
+            }
+        }
+    }
+    let mut f = Foundry::new();
+    let mut s = f.begin_solid("cube");
+    s.add_mesh(&triangles, None, 0, UNSET).unwrap();
+    let solid = s.finish(0).unwrap();
+    f.add_instance(solid, Transform64::translation(at), 0, 0)
+        .unwrap();
+    f
+}
+
+/// A unit vector near `d` that is its own f32 unit vector: rounded to f32, normalized in
+/// f64 and rounded again it is unchanged, so the f32 trace (which rounds directions) and
+/// the f64 references trace the same ray.
+fn own_unit_f32(d: [f64; 3], rng: &mut Rng) -> [f64; 3] {
+    let want = unit(d);
+    let mut r = want.map(|c| c as f32);
+    loop {
+        let again = unit(r.map(f64::from)).map(|c| c as f32);
+        if again == r {
+            return r.map(f64::from);
+        }
+        r = unit(want.map(|c| c * (1.0 + 1e-7 * (2.0 * rng.uniform() - 1.0)))).map(|c| c as f32);
+    }
+}
+
+/// The mesh accuracy tolerance of issue 30 (`mesh_oracle.rs`): 4e-7 of the origin's
+/// largest coordinate plus the distance travelled.
+fn mesh_tolerance(r: &RayRow, t: f64) -> f64 {
+    let o = r.origin.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+    4e-7 * (o + if t.is_finite() { t } else { 0.0 })
+}
+
+/// `count` rays `ray(rng, i)` (a start in the cube's frame and a direction, which is made
+/// its own f32 unit vector) traced through the mesh cube placed at the origin and 1e5 mm
+/// out, against the exact slab answer of the cube, within [`mesh_tolerance`]. In f32, the
+/// plain trace (no fallback) must be wrong on some of them (at the origin: 1e5 mm out the
+/// tolerance is that distance's, and f32 in the cube's frame is well within it): the
+/// scan's f64 fallback is what makes them right.
+fn mesh_cube_cases(
+    name: &str,
+    p: Precision,
+    seed: u64,
+    count: usize,
+    mut ray: impl FnMut(&mut Rng, usize) -> ([f64; 3], [f64; 3]),
+) {
+    let h = [CUBE; 3];
+    for distance in [0.0, 1e5] {
+        let at = [0.6, -0.48, 0.64].map(|c| c * distance);
+        let f = cube_mesh(at);
+        let mut rng = Rng(seed + distance as u64);
+        let (mut rows, mut want) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let (local, d) = ray(&mut rng, i);
+            let d = own_unit_f32(d, &mut rng);
+            let origin = [0, 1, 2].map(|k| at[k] + local[k]);
+            // The cube's frame as the trace rebases into it (the same f64 subtraction).
+            let local = [0, 1, 2].map(|k| origin[k] - at[k]);
+            rows.push(row(origin, d));
+            want.push(box_distance(h, local, d));
+        }
+        let label = format!("{name} at {distance} mm");
+        if p == Precision::F32 {
+            let cpu = CpuScene::<f32>::new(&f).unwrap();
+            let plain_wrong = rows
+                .iter()
+                .zip(&want)
+                .filter(|(r, &w)| {
+                    let (_, tmin, tmax) = f32_ray(r);
+                    let hit = cpu.trace(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+                    let t = hit.map_or(f64::INFINITY, |h| f64::from(h.t));
+                    !((t.is_infinite() && w.is_infinite()) || (t - w).abs() <= mesh_tolerance(r, w))
+                })
+                .count();
+            eprintln!("{label}: the plain f32 trace is wrong on {plain_wrong} rays");
+            assert!(
+                distance > 0.0 || plain_wrong > 0,
+                "{label}: no ray is hard for f32"
+            );
+        }
+        let got = scanned(&f, &rows, p, true);
+        check(&label, &rows, &got, &want, mesh_tolerance);
+    }
+}
+
+/// A random point of a random edge (a vertex on every fourth ray) of the cube.
+fn cube_edge_point(rng: &mut Rng, i: usize) -> [f64; 3] {
+    let axis = i % 3;
+    let mut p = [0, 1, 2].map(|_| if rng.uniform() < 0.5 { -CUBE } else { CUBE });
+    if !i.is_multiple_of(4) {
+        p[axis] = CUBE * (2.0 * rng.uniform() - 1.0);
+    }
+    p
+}
+
+/// Rays from every direction passing 1e-9 to 1e-5 of the cube's size beside its edges and
+/// vertices (inside or outside): where a silhouette edge is, the f32 triangle test's hit or
+/// miss is within rounding, and so, through a shared edge, is which face is crossed.
+fn mesh_edges_and_vertices(p: Precision) {
+    mesh_cube_cases("mesh edges and vertices", p, 29, 3000, |rng, i| {
+        let target = cube_edge_point(rng, i);
+        let d = isotropic(rng);
+        let side = unit(isotropic(rng));
+        // `side` made perpendicular to d.
+        let dot: f64 = (0..3).map(|k| side[k] * d[k]).sum();
+        let across = unit([0, 1, 2].map(|k| side[k] - dot * d[k]));
+        let off = 2.0 * CUBE * 10f64.powf(-9.0 + 4.0 * rng.uniform());
+        let start = 3.0 * CUBE;
+        (
+            [0, 1, 2].map(|k| target[k] + off * across[k] - start * d[k]),
+            d,
+        )
+    });
+}
+
+both_precisions!(
+    mesh_edges_and_vertices,
+    mesh_edges_and_vertices_f32,
+    mesh_edges_and_vertices_f64
+);
+
+/// Rays meeting a face of the cube at 0.5 to 8 degrees from its plane, at random points
+/// (some beside an edge): the f32 distance along a shallow crossing is off by the
+/// rounding of the coordinates over the sine of the angle.
+fn grazing_mesh_facets(p: Precision) {
+    mesh_cube_cases("grazing mesh facets", p, 31, 3000, |rng, i| {
+        let axis = i % 3;
+        let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+        let mut target = [0, 1, 2].map(|_| CUBE * (2.0 * rng.uniform() - 1.0));
+        target[axis] = sign * CUBE;
+        // A direction `angle` below the face's plane, heading into the cube.
+        let angle = (0.5 + 7.5 * rng.uniform()).to_radians();
+        let phi = std::f64::consts::TAU * rng.uniform();
+        let mut d = [0.0; 3];
+        d[(axis + 1) % 3] = angle.cos() * phi.cos();
+        d[(axis + 2) % 3] = angle.cos() * phi.sin();
+        d[axis] = -sign * angle.sin();
+        let start = 3.0 * CUBE;
+        ([0, 1, 2].map(|k| target[k] - start * d[k]), d)
+    });
+}
+
+both_precisions!(
+    grazing_mesh_facets,
+    grazing_mesh_facets_f32,
+    grazing_mesh_facets_f64
+);

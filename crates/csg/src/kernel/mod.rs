@@ -251,6 +251,9 @@ pub struct Step<T> {
     /// than the tolerance) although it ended past the start of the search; `+inf` when
     /// none was. Such a span is a decision within rounding: a chord through an edge or a
     /// near-tangent that an exact evaluation may keep (scans trace such rays again in f64).
+    /// A mesh in f32 reports here the least distance, not beyond its answer, of a triangle
+    /// whose hit or miss is within the rounding of its edge functions (a crossing beside
+    /// an edge or vertex, or a near miss of one).
     pub dropped: T,
 }
 

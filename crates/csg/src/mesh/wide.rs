@@ -11,6 +11,17 @@
 //! multiply-add), lanes with an edge function of exactly 0 are redone by the scalar test
 //! (its f64 fallback), and ties between equal distances go to the lowest triangle number,
 //! so the order leaves are visited in does not matter.
+//!
+//! Each search also reports where the f32 test's hit or miss of a triangle is within its
+//! rounding ([`edge_doubt`], [`Found::doubt`]): scans trace such rays again in f64. Only
+//! doubtful triangles not beyond the answer count, and every walk enters every box the ray
+//! meets before its answer, so that too does not depend on the order leaves are visited
+//! in, but for a doubtful triangle in a box that the ray grazes within the box test's own
+//! rounding (a triangle at most the doubt's bound from the ray, outside the box's
+//! padding). The GPU's binary walk reports the same (`mesh_doubt` in
+//! `shaders/mesh/mesh.wgsl`).
+
+use wide::f32x4;
 
 use super::{MeshNode, MeshPrim, Shear};
 use crate::real::{Ray, Real, V3};
@@ -98,20 +109,14 @@ impl WideBvh {
     }
 
     /// The nearest crossing after `after` and strictly before `limit` of a (recentred) ray:
-    /// its distance, triangle number and geometric normal `(v1 - v0) x (v2 - v0)`.
-    /// `MeshPrim::nearest_binary`'s search, 8 boxes and 4 triangles at a time, on SIMD
+    /// its distance, triangle number and geometric normal `(v1 - v0) x (v2 - v0)`, and where
+    /// a crossing is doubtful ([`Found`]). `MeshPrim::nearest_binary`'s search, 8 boxes and 4 triangles at a time, on SIMD
     /// path `path` (the same answers on every path).
-    pub(crate) fn nearest(
-        &self,
-        path: SimdPath,
-        ray: &Ray<f32>,
-        after: f32,
-        limit: f32,
-    ) -> Option<(f32, usize, V3<f32>)> {
+    pub(crate) fn nearest(&self, path: SimdPath, ray: &Ray<f32>, after: f32, limit: f32) -> Found {
         /// The search as a [`Kernel`].
         struct Nearest<'a>(&'a WideBvh, &'a Ray<f32>, f32, f32);
         impl Kernel for Nearest<'_> {
-            type Output = Option<(f32, usize, V3<f32>)>;
+            type Output = Found;
             #[inline(always)]
             fn run<S: Isa>(self) -> Self::Output {
                 let Nearest(wide, ray, after, limit) = self;
@@ -123,12 +128,7 @@ impl WideBvh {
 
     /// [`Self::nearest`] with the vectors of `S`.
     #[inline(always)]
-    fn nearest_with<S: Isa>(
-        &self,
-        ray: &Ray<f32>,
-        after: f32,
-        limit: f32,
-    ) -> Option<(f32, usize, V3<f32>)> {
+    fn nearest_with<S: Isa>(&self, ray: &Ray<f32>, after: f32, limit: f32) -> Found {
         let triangles = WideRay::new(ray);
         let mut best = Best::none(limit);
         self.tree
@@ -138,7 +138,7 @@ impl WideBvh {
                 }
                 best.t
             });
-        self.found(&best)
+        self.found(&best, triangles.reach(after))
     }
 
     /// [`Self::nearest`] of each ray of a packet (`rays`, at most [`PACKET`], each with its
@@ -150,7 +150,7 @@ impl WideBvh {
         packet: &PacketSlabs,
         rays: &[Ray<f32>],
         after: &[f32],
-        out: &mut [Option<(f32, usize, V3<f32>)>],
+        out: &mut [Found],
     ) {
         let n = rays.len();
         let triangles: [WideRay; PACKET] =
@@ -186,8 +186,8 @@ impl WideBvh {
                 }
             },
         );
-        for (slot, best) in out.iter_mut().zip(&best[..n]) {
-            *slot = self.found(best);
+        for (r, (slot, best)) in out.iter_mut().zip(&best[..n]).enumerate() {
+            *slot = self.found(best, triangles[r].reach(after[r]));
         }
     }
 
@@ -223,19 +223,52 @@ impl WideBvh {
     }
 
     /// What a finished `search` found: as [`Self::nearest`].
-    pub(crate) fn answer(&self, search: &Search) -> Option<(f32, usize, V3<f32>)> {
-        self.found(&search.best)
+    pub(crate) fn answer(&self, search: &Search) -> Found {
+        self.found(&search.best, search.triangles.reach(search.after))
     }
 
-    /// The crossing `best` holds, with its triangle number and geometric normal.
-    fn found(&self, best: &Best) -> Option<(f32, usize, V3<f32>)> {
-        best.found.then(|| {
+    /// The crossing `best` holds, with its triangle number and geometric normal, and where a
+    /// doubtful crossing lies ([`Found::doubt`]) for a ray of [`WideRay::reach`] `reach`.
+    fn found(&self, best: &Best, reach: f32) -> Found {
+        let crossing = best.found.then(|| {
             let v = &self.blocks[best.block as usize].vertex;
             let [v0, v1, v2] = [0, 1, 2]
                 .map(|j| V3::new(v[j][0][best.lane], v[j][1][best.lane], v[j][2][best.lane]));
             (best.t, best.number as usize, (v1 - v0).cross(v2 - v0))
-        })
+        });
+        // Doubtful triangles met beyond the answer were seen only because the walk had not
+        // yet found it (which depends on the order leaves are visited in), and those met
+        // within the rounding of its distance (a coincident face, a neighbour across an
+        // edge) change nothing that matters: neither counts. The answer's own triangle does
+        // when it is doubtful (an exact test may miss it).
+        let earlier = if best.found {
+            let margin = 2.0 * f32::EPSILON * (reach + best.t.abs());
+            best.doubt < best.t - margin
+        } else {
+            best.doubt <= best.t
+        };
+        let earlier = if earlier { best.doubt } else { f32::INFINITY };
+        let doubt = if best.found && best.doubtful {
+            earlier.min(best.t)
+        } else {
+            earlier
+        };
+        Found { crossing, doubt }
     }
+}
+
+/// What a search of a [`WideBvh`] found.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Found {
+    /// The nearest crossing: its distance, triangle number and geometric normal.
+    pub crossing: Option<(f32, usize, V3<f32>)>,
+    /// The least distance at which the ray may meet the plane of a triangle whose hit or
+    /// miss is within f32 rounding ([`edge_doubt`]; the latest such distance,
+    /// [`latest_crossing`], or the crossing's own), counting only the nearest crossing's
+    /// own triangle and those met surely before it by more than the rounding of its
+    /// distance (all of them, up to the search's limit, when there is none); `+inf` when
+    /// there is none. An exact search may answer otherwise.
+    pub doubt: f32,
 }
 
 /// One ray's search of a [`WideBvh`] for its nearest crossing, advanced a step at a time
@@ -289,6 +322,11 @@ struct Best {
     block: u32,
     lane: usize,
     found: bool,
+    /// The least distance of a doubtful crossing seen ([`Found::doubt`], before the
+    /// answer is known).
+    doubt: f32,
+    /// Whether the crossing held is doubtful.
+    doubtful: bool,
 }
 
 impl Best {
@@ -300,14 +338,26 @@ impl Best {
             block: 0,
             lane: 0,
             found: false,
+            doubt: f32::INFINITY,
+            doubtful: false,
         }
     }
 
-    /// Takes a crossing at `t` of triangle `number` if it is nearer, or as near with a
-    /// lower number; before any is found, only one strictly before the limit (an
-    /// overflowed, infinite distance is no crossing).
+    /// Notes a doubtful triangle whose plane the ray crosses at `latest` at the latest
+    /// ([`latest_crossing`]), if that is after `after` and not beyond the crossing held (or
+    /// the limit).
     #[inline(always)]
-    fn offer(&mut self, t: f32, number: u32, block: u32, lane: usize) {
+    fn doubt_at(&mut self, latest: f32, after: f32) {
+        if latest > after && latest <= self.t && latest < self.doubt {
+            self.doubt = latest;
+        }
+    }
+
+    /// Takes a crossing at `t` of triangle `number` (`doubtful` or not) if it is nearer, or
+    /// as near with a lower number; before any is found, only one strictly before the
+    /// limit (an overflowed, infinite distance is no crossing).
+    #[inline(always)]
+    fn offer(&mut self, t: f32, number: u32, block: u32, lane: usize, doubtful: bool) {
         let better = if self.found {
             t < self.t || (t == self.t && number < self.number)
         } else {
@@ -320,6 +370,8 @@ impl Best {
                 block,
                 lane,
                 found: true,
+                doubt: self.doubt,
+                doubtful,
             };
         }
     }
@@ -330,13 +382,25 @@ struct WideRay {
     shear: Shear<f32>,
     /// The origin's coordinates in the sheared frame's axis order.
     origin: [f32; 3],
+    /// The origin's largest coordinate (its rounding is part of [`edge_doubt`]'s bound).
+    origin_max: f32,
 }
 
 impl WideRay {
+    /// The `reach` of [`edge_doubt`] for a search after `after`.
+    #[inline(always)]
+    fn reach(&self, after: f32) -> f32 {
+        self.origin_max + after.abs()
+    }
+
     fn new(ray: &Ray<f32>) -> Self {
         let shear = Shear::new(ray.direction);
         let origin = shear.axes.map(|k| ray.origin.get(k));
-        WideRay { origin, shear }
+        WideRay {
+            origin,
+            origin_max: ray.origin.max_abs(),
+            shear,
+        }
     }
 
     /// Offers `best` the crossings after `after` of the triangles of block `index`.
@@ -374,6 +438,25 @@ impl WideRay {
         let t = (u * (shear_z * az) + v * (shear_z * bz) + w * (shear_z * cz)) / det;
         let crossed = !(negative & positive) & det.ne(zero);
         let candidate = crossed & t.gt(S::F4::splat(after)) & t.le(S::F4::splat(best.t));
+        // The doubt, in `wide`'s f32x4 (what every path's 4 lanes are).
+        let four = |x: S::F4| f32x4::from(x.to_array());
+        let reach = f32x4::splat(self.reach(after));
+        let sheared =
+            [(ax, ay, az), (bx, by, bz), (cx, cy, cz)].map(|(x, y, z)| (four(x), four(y), four(z)));
+        let (doubt, bound) = edge_doubt(sheared, [four(u), four(v), four(w)], reach);
+        let doubtful = doubt.to_bitmask();
+        if doubtful != 0 {
+            // Rare: the latest each doubtful triangle's plane may be crossed.
+            let heights = [az, bz, cz].map(|z| (shear_z * z).to_array());
+            let (t, det, bound) = (t.to_array(), det.to_array(), bound.to_array());
+            let mut lanes = doubtful;
+            while lanes != 0 {
+                let lane = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let z = heights.map(|h| h[lane]);
+                best.doubt_at(latest_crossing(t[lane], z, det[lane], bound[lane]), after);
+            }
+        }
         let on_edge = (u.eq(zero) | v.eq(zero) | w.eq(zero)).bitmask();
         let mut lanes = (candidate.bitmask() & !on_edge) | on_edge;
         if lanes == 0 {
@@ -397,8 +480,67 @@ impl WideRay {
             } else {
                 t[lane]
             };
-            best.offer(t, number, index, lane);
+            best.offer(t, number, index, lane, doubtful & (1 << lane) != 0);
         }
+    }
+}
+
+/// Which lanes' hit or miss is within f32 rounding: the ray passes within the rounding of
+/// the test's values of the triangle's boundary (a near-edge or near-vertex crossing, or a
+/// near miss), so an exact test may decide otherwise. From the test's own values: each
+/// vertex's sheared coordinates relative to the origin and its unsheared height
+/// (`vertex[j] = (x, y, z)`), the edge functions `edge` and `reach`, the largest coordinate
+/// of the ray's origin plus how far its parameter was moved (the rounding of the recentred
+/// origin). The WGSL twin is `mesh_doubt` in `shaders/mesh/mesh.wgsl`, operation by
+/// operation.
+///
+/// The bound: each sheared coordinate is off by at most `u (2 |x| + 4 |z| + 2 reach)`
+/// (`u` the unit roundoff 2^-24: the origin's rounding, the difference, the shear's ratio
+/// and product), so an edge function `px qy - py qx` is off by that times the four
+/// coordinates it multiplies, plus the rounding of its products and difference: with
+/// `S` the sum of all six |sheared coordinates| and `Z` of the three |heights|, at most
+/// `2u S (1.5 S + 2 Z + reach)`. Twice that, `2 eps S (2 S + 2 Z + reach)` (eps = 2u),
+/// is `bound`. A lane is doubtful when some edge function is within `bound` of 0 and
+/// moving each by at most `bound` can make all three agree in sign (a hit).
+/// Returns the mask and `bound`.
+#[inline(always)]
+fn edge_doubt(
+    vertex: [(f32x4, f32x4, f32x4); 3],
+    edge: [f32x4; 3],
+    reach: f32x4,
+) -> (f32x4, f32x4) {
+    let [(ax, ay, az), (bx, by, bz), (cx, cy, cz)] = vertex;
+    let sheared = ax.abs() + ay.abs() + (bx.abs() + by.abs()) + (cx.abs() + cy.abs());
+    let heights = az.abs() + bz.abs() + cz.abs();
+    let bound = f32x4::splat(2.0 * f32::EPSILON)
+        * sheared
+        * ((sheared + heights) * f32x4::splat(2.0) + reach);
+    let [u, v, w] = edge;
+    let low = -bound;
+    let near = u.abs().simd_le(bound) | v.abs().simd_le(bound) | w.abs().simd_le(bound);
+    let may_hit_from_front = u.simd_ge(low) & v.simd_ge(low) & w.simd_ge(low);
+    let may_hit_from_behind = u.simd_le(bound) & v.simd_le(bound) & w.simd_le(bound);
+    (near & (may_hit_from_front | may_hit_from_behind), bound)
+}
+
+/// The latest distance at which the ray may cross a doubtful triangle: `t`, the test's
+/// `sum(e_j z_j) / det` (`z` the vertices' distances along the ray, their heights times the
+/// shear's `z`; `det` the sum of the edge functions `e_j`), plus its change when each
+/// `e_j` moves by `bound` ([`edge_doubt`]), `bound sum |z_j - t| / |det|`, but no later
+/// than its farthest vertex (a crossing lies within the triangle). Nearly edge-on
+/// triangles have garbage plane distances; this keeps a doubtful one from counting as met
+/// before the answer when it may not be. The WGSL twin is `mesh_latest_crossing`,
+/// operation by operation (comparisons, not `min`/`max`, which differ on NaN).
+#[inline(always)]
+fn latest_crossing(t: f32, z: [f32; 3], det: f32, bound: f32) -> f32 {
+    let spread = (z[0] - t).abs() + (z[1] - t).abs() + (z[2] - t).abs();
+    let late = t + bound * spread / det.abs();
+    let far = if z[0] > z[1] { z[0] } else { z[1] };
+    let far = if z[2] > far { z[2] } else { far };
+    if late < far {
+        late
+    } else {
+        far
     }
 }
 
@@ -462,7 +604,7 @@ mod tests {
             .into_iter()
             .flat_map(|(r, after)| paths.iter().map(move |&p| (r, after, p)))
         {
-            let got = wide.nearest(path, &r, after, f32::INFINITY);
+            let got = wide.nearest(path, &r, after, f32::INFINITY).crossing;
             let want = mesh.nearest_binary(&r, after);
             if let Some((_, i, normal)) = got {
                 let [v0, v1, v2] = mesh.triangles[i];
@@ -550,29 +692,45 @@ mod tests {
             );
         }
         let packet = PacketSlabs::new(&moved)?;
+        let none = Found {
+            crossing: None,
+            doubt: f32::INFINITY,
+        };
         /// The packet search as a [`Kernel`].
-        struct Packet<'a>(&'a WideBvh, &'a PacketSlabs, &'a [Ray<f32>], &'a [f32]);
+        struct Packet<'a>(
+            &'a WideBvh,
+            &'a PacketSlabs,
+            &'a [Ray<f32>],
+            &'a [f32],
+            Found,
+        );
         impl Kernel for Packet<'_> {
-            type Output = Vec<Option<(f32, usize, V3<f32>)>>;
+            type Output = Vec<Found>;
             fn run<S: Isa>(self) -> Self::Output {
-                let Packet(wide, packet, rays, after) = self;
-                let mut got = vec![None; rays.len()];
+                let Packet(wide, packet, rays, after, none) = self;
+                let mut got = vec![none; rays.len()];
                 wide.nearest_packet::<S>(packet, rays, after, &mut got);
                 got
             }
         }
         let mut hits = 0;
         for path in SimdPath::available() {
-            let got = run_on(path, Packet(wide, &packet, &moved, &after));
+            let got = run_on(path, Packet(wide, &packet, &moved, &after, none));
             for ((ray, after), got) in moved.iter().zip(&after).zip(&got) {
                 let want = wide.nearest(SimdPath::Portable, ray, *after, f32::INFINITY);
                 assert_eq!(
-                    got.map(|(t, i, n)| (t.to_bits(), i, n)),
-                    want.map(|(t, i, n)| (t.to_bits(), i, n)),
+                    (
+                        got.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
+                        got.doubt.to_bits()
+                    ),
+                    (
+                        want.crossing.map(|(t, i, n)| (t.to_bits(), i, n)),
+                        want.doubt.to_bits()
+                    ),
                     "ray {ray:?} after {after} in the packet {rays:?} ({path})"
                 );
             }
-            hits = got.iter().filter(|g| g.is_some()).count();
+            hits = got.iter().filter(|g| g.crossing.is_some()).count();
         }
         Some(hits)
     }

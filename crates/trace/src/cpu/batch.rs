@@ -67,9 +67,10 @@ pub(super) trait Crossings<'a, T: Real> {
     /// The deepest instance containing the ray's origin, which `locate` finds.
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32>;
 
-    /// A prim asked for its first crossing skipped a short span as a touch before the
-    /// search's limit ([`Step::dropped`]): the answer is within rounding of a decision.
-    fn note_dropped(&mut self);
+    /// A prim asked for its first crossing skipped a short span as a touch, or a mesh
+    /// decided a triangle within rounding, before the search's limit ([`Step::dropped`]),
+    /// at world parameter `at`: an answer not beyond it is within rounding of a decision.
+    fn note_dropped(&mut self, at: T);
 }
 
 /// Every crossing computed when asked: the per-ray trace.
@@ -82,27 +83,36 @@ impl<T: Real> Crossings<'_, T> for Direct {
     }
 
     #[inline(always)]
-    fn note_dropped(&mut self) {}
+    fn note_dropped(&mut self, _at: T) {}
 }
 
 /// Every crossing computed when asked, noting what the f32 fallback asks of the trace
-/// ([`CpuScene::trace_flagged`]): where the origin was located and whether a span was
-/// dropped.
-#[derive(Default)]
-pub(super) struct Noting {
+/// ([`CpuScene::trace_flagged`]): where the origin was located and where a decision was
+/// within rounding.
+pub(super) struct Noting<T> {
     /// Where the origin was located, once it was.
     pub located: Option<Option<u32>>,
-    /// Whether a prim dropped a short span before its search's limit.
-    pub dropped: bool,
+    /// The least world parameter of a decision within rounding ([`Crossings::note_dropped`]);
+    /// `+inf` when there was none.
+    pub dropped: T,
 }
 
-impl<T: Real> Crossings<'_, T> for Noting {
+impl<T: Real> Default for Noting<T> {
+    fn default() -> Self {
+        Noting {
+            located: None,
+            dropped: T::INFINITY,
+        }
+    }
+}
+
+impl<T: Real> Crossings<'_, T> for Noting<T> {
     fn located(&mut self, locate: impl FnOnce() -> Option<u32>) -> Option<u32> {
         *self.located.get_or_insert_with(locate)
     }
 
-    fn note_dropped(&mut self) {
-        self.dropped = true;
+    fn note_dropped(&mut self, at: T) {
+        self.dropped = self.dropped.min(at);
     }
 }
 
@@ -113,17 +123,18 @@ struct RayLog<T> {
     answers: Vec<Step<T>>,
     /// Where its origin was located, once it was.
     located: Option<Option<u32>>,
-    /// Whether a prim dropped a short span before its search's limit (a replay repeats the
-    /// decisions of the one before, so the last one's notes are all of them).
-    dropped: bool,
+    /// The least world parameter of a decision within rounding, as [`Noting::dropped`] (a
+    /// replay repeats the decisions of the one before, so the last one's notes are all of
+    /// them).
+    dropped: T,
 }
 
-impl<T> Default for RayLog<T> {
+impl<T: Real> Default for RayLog<T> {
     fn default() -> Self {
         RayLog {
             answers: Vec::new(),
             located: None,
-            dropped: false,
+            dropped: T::INFINITY,
         }
     }
 }
@@ -176,8 +187,8 @@ impl<'a, T: Real> Crossings<'a, T> for Replay<'a, '_, T> {
         *self.log.located.get_or_insert_with(locate)
     }
 
-    fn note_dropped(&mut self) {
-        self.log.dropped = true;
+    fn note_dropped(&mut self, at: T) {
+        self.log.dropped = self.log.dropped.min(at);
     }
 }
 
@@ -272,13 +283,16 @@ impl<T: Real> CpuScene<T> {
         out.resize(rays.len(), None);
         if let Some((index, mesh)) = self.lone_mesh() {
             if mesh.bvh_bytes() >= scratch.min_bytes {
-                self.trace_lone_mesh(index, mesh, rays, scratch, out);
+                let mut dropped = vec![T::INFINITY; rays.len()];
+                self.trace_lone_mesh(index, mesh, rays, scratch, out, &mut dropped);
                 if let Some(flags) = flags {
                     flags.clear();
-                    flags.extend(rays.iter().map(|(r, tmin, _)| {
-                        let world = WorldRay::new(r);
-                        self.flags_of(&world, *tmin, None, false)
-                    }));
+                    flags.extend(rays.iter().zip(out.iter()).zip(&dropped).map(
+                        |(((r, tmin, _), hit), &dropped)| {
+                            let world = WorldRay::new(r);
+                            self.flags_of(&world, *tmin, None, dropped, hit.as_ref())
+                        },
+                    ));
                 }
                 return;
             }
@@ -296,7 +310,7 @@ impl<T: Real> CpuScene<T> {
         for log in &mut logs[..rays.len()] {
             log.answers.clear();
             log.located = None;
-            log.dropped = false;
+            log.dropped = T::INFINITY;
         }
         // The rays still open: all at first, then those whose last replay was abandoned.
         askers.clear();
@@ -330,9 +344,12 @@ impl<T: Real> CpuScene<T> {
         }
         if let Some(flags) = flags {
             flags.clear();
-            flags.extend(rays.iter().zip(logs.iter()).map(|((r, tmin, _), log)| {
-                self.flags_of(&WorldRay::new(r), *tmin, log.located, log.dropped)
-            }));
+            flags.extend(rays.iter().zip(logs.iter()).zip(out.iter()).map(
+                |(((r, tmin, _), log), hit)| {
+                    let world = WorldRay::new(r);
+                    self.flags_of(&world, *tmin, log.located, log.dropped, hit.as_ref())
+                },
+            ));
         }
     }
 }
@@ -341,7 +358,9 @@ impl<T: Real> CpuScene<T> {
     /// [`Self::trace_batch`] of a scene that is one placed mesh, instance `index`
     /// ([`CpuScene::lone_mesh`]): each ray's trace asks that mesh one query, its last act,
     /// so the queries are made and their answers finished here as the trace does, and no
-    /// trace is replayed.
+    /// trace is replayed. `dropped` gets, per ray, the world parameter of a decision within
+    /// rounding before the search's limit, as [`Crossings::note_dropped`] notes it (`+inf`
+    /// when none).
     fn trace_lone_mesh(
         &self,
         index: usize,
@@ -349,6 +368,7 @@ impl<T: Real> CpuScene<T> {
         rays: &[(Ray<f64>, T, T)],
         scratch: &mut TraceScratch<T>,
         out: &mut [Option<Hit<T>>],
+        dropped: &mut [T],
     ) {
         let TraceScratch {
             askers,
@@ -378,6 +398,10 @@ impl<T: Real> CpuScene<T> {
         let solid = &self.solids[placement.solid];
         for ((&i, step), local) in askers.iter().zip(steps.iter()).zip(&locals) {
             let (_, tmin, tmax) = rays[i];
+            // `SolidAccel::cross`'s note for a lone prim.
+            if step.dropped < local.past_local(tmax) {
+                dropped[i] = local.shift + step.dropped;
+            }
             out[i] = solid
                 .lone_crossing(step, local.local_t(tmin), local.past_local(tmax))
                 .and_then(|c| local.world_hit(c, index as u32, tmax))

@@ -460,7 +460,14 @@ impl<T: Real> CpuScene<T> {
         let local = p.local_ray(ray, cull, tmin, limit)?;
         let (tmin_local, limit_local) = (local.local_t(tmin), local.past_local(limit));
         self.solids[p.solid]
-            .cross(&local.ray, tmin_local, limit_local, p.aligned, crossings)
+            .cross(
+                &local.ray,
+                tmin_local,
+                limit_local,
+                local.shift,
+                p.aligned,
+                crossings,
+            )
             .and_then(|c| local.world_hit(c, index as u32, limit))
     }
 
@@ -676,20 +683,24 @@ impl<T: Real> CpuScene<T> {
         let hit = self.trace_with(&world, tmin, tmax, &mut noting);
         Traced {
             hit,
-            flags: self.flags_of(&world, tmin, noting.located, noting.dropped),
+            flags: self.flags_of(&world, tmin, noting.located, noting.dropped, hit.as_ref()),
         }
     }
 
-    /// The flags of a trace of `ray` from `tmin`: [`STATUS_DROPPED_SPAN`] when `dropped`
-    /// (a prim skipped a short span before its search's limit), and the start's flags
-    /// ([`Self::start_flags`]) from the instance the trace located the origin in
-    /// (`located`; a hierarchical scene's trace always locates it, a flat one's never).
+    /// The flags of a trace of `ray` from `tmin` that answered `hit`: [`STATUS_DROPPED_SPAN`]
+    /// when a decision within rounding was noted at a world parameter `dropped` not beyond
+    /// the answer (a prim skipped a short span, or a mesh decided a triangle within
+    /// rounding: see [`Crossings::note_dropped`]; one beyond the answer changes nothing,
+    /// and whether it was seen depends on the order instances were searched in), and the
+    /// start's flags ([`Self::start_flags`]) from the instance the trace located the origin
+    /// in (`located`; a hierarchical scene's trace always locates it, a flat one's never).
     fn flags_of(
         &self,
         ray: &WorldRay<T>,
         tmin: T,
         located: Option<Option<u32>>,
-        dropped: bool,
+        dropped: T,
+        hit: Option<&Hit<T>>,
     ) -> u32 {
         let group = match &self.layout {
             Layout::Tree(h) => {
@@ -701,7 +712,12 @@ impl<T: Real> CpuScene<T> {
             }
             Layout::Flat(all) => (None, all),
         };
-        let dropped = if dropped { STATUS_DROPPED_SPAN } else { 0 };
+        let answer = hit.map_or(T::INFINITY, |h| h.t);
+        let dropped = if dropped < T::INFINITY && dropped <= answer {
+            STATUS_DROPPED_SPAN
+        } else {
+            0
+        };
         dropped | self.start_flags(ray, tmin, group)
     }
 

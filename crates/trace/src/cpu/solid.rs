@@ -151,19 +151,22 @@ impl<T: Real> SolidAccel<T> {
     /// meeting a box as tight as the solid's (an axis-aligned placement's world box), so a
     /// lone prim's own box test would cull nothing more.
     /// The prims' first crossings come from `crossings`; when it abandons the trace, the
-    /// search stops and its answer means nothing.
+    /// search stops and its answer means nothing. Decisions within rounding are noted there
+    /// ([`Crossings::note_dropped`]) at world parameters: `shift` (the world parameter of
+    /// the local ray's origin) plus the local one.
     pub fn cross<'a>(
         &'a self,
         ray: &Ray<T>,
         tmin: T,
         limit: T,
+        shift: T,
         boxed: bool,
         crossings: &mut impl Crossings<'a, T>,
     ) -> Option<PrimCrossing<T>> {
         if boxed && self.prims.len() == 1 {
             let step = crossings.first_crossing(&self.prims[0], ray, tmin)?;
             if step.dropped < limit {
-                crossings.note_dropped();
+                crossings.note_dropped(shift + step.dropped);
             }
             return self.lone_crossing(&step, tmin, limit);
         }
@@ -189,9 +192,10 @@ impl<T: Real> SolidAccel<T> {
                 let Some(step) = crossings.first_crossing(prim, ray, tmin) else {
                     return false;
                 };
-                // A span skipped as a touch before the limit: within rounding (the fallback).
+                // A span skipped as a touch, or a mesh triangle decided within rounding,
+                // before the limit: the fallback.
                 if step.dropped < within {
-                    crossings.note_dropped();
+                    crossings.note_dropped(shift + step.dropped);
                 }
                 let tie_won = step.t == within && best.is_some_and(|b| i < b.0);
                 if step.t > tmin && (step.t < within || tie_won) {

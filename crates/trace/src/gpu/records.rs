@@ -173,9 +173,11 @@ pub const STATUS_START_NEAR: u32 = 4;
 /// does not decide nearness (meshes, frames that scale distances): the host searches the
 /// band ([`crate::cpu::CpuScene::starts_near_surface`]).
 pub const STATUS_START_BAND: u32 = 8;
-/// Status bit: a prim skipped a span shorter than the tolerance as a touch before the
-/// limit of its search (a chord through an edge, a near-tangent), a decision within
-/// rounding.
+/// Status bit: a prim made a decision within rounding before the limit of its search: a
+/// CSG prim skipped a span shorter than the tolerance as a touch (a chord through an edge,
+/// a near-tangent), or a mesh's f32 triangle test hit or missed a triangle within the
+/// rounding of its edge functions (a crossing beside an edge or vertex, or a near miss of
+/// one: `Step::dropped`).
 pub const STATUS_DROPPED_SPAN: u32 = 16;
 /// The status bits of a ray whose search was cut short (its answer is not the trace's).
 pub const STATUS_CUT_SHORT: u32 = STATUS_DEPTH_LIMIT | STATUS_LOOPS_CUT;
