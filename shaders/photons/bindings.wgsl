@@ -64,20 +64,6 @@ struct History {
     last: u32,
 }
 
-// Label codes (photons::output::Label).
-const LABEL_MI: u32 = 3u;
-const LABEL_AB: u32 = 4u;
-const LABEL_RE: u32 = 5u;
-const LABEL_SC: u32 = 6u;
-const LABEL_SD: u32 = 7u;
-const LABEL_SA: u32 = 8u;
-const LABEL_DR: u32 = 9u;
-const LABEL_SR: u32 = 10u;
-const LABEL_BR: u32 = 11u;
-const LABEL_BT: u32 = 12u;
-const LABEL_TO: u32 = 13u;
-const LABEL_TR: u32 = 15u;
-
 fn history_push(h: ptr<function, History>, label: u32) {
     let n = (*h).len;
     if n < 8u {

@@ -343,4 +343,7 @@ pub fn push_photon_wgsl(out: &mut String) {
     ] {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }
+    for (code, name) in crate::photons::output::LABELS {
+        out.push_str(&format!("const LABEL_{name}: u32 = {code}u;\n"));
+    }
 }

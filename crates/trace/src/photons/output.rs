@@ -57,7 +57,9 @@ pub enum Label {
     Tr = 15,
 }
 
-const LABELS: [(u8, &str); 12] = [
+/// Every label's code and its two letters (the GPU kernel's `LABEL_*` constants are
+/// generated from this table).
+pub const LABELS: [(u8, &str); 12] = [
     (3, "MI"),
     (4, "AB"),
     (5, "RE"),
