@@ -23,7 +23,6 @@ use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
     load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
 };
-use hytrace_volume::{convert_grid, ConvertOptions, DenseGrid};
 
 fn options(source: &str, photons: u64) -> RunOptions {
     RunOptions {
@@ -698,46 +697,6 @@ fn the_command_runs_media_on_the_gpu_and_auto_picks_it() {
     );
 }
 
-/// A scene whose medium is a brick store read as stored (16^3 voxels of density 1, an
-/// extinction of 0.05 per mm) in the tank of `media_tank.gdml`, written into `dir`.
-fn stored_medium(dir: &Path) -> PathBuf {
-    let mut grid = DenseGrid::new([0; 3], [16; 3], 0.0).unwrap();
-    for z in 0..16 {
-        for y in 0..16 {
-            for x in 0..16 {
-                grid.set([x, y, z], 1.0);
-            }
-        }
-    }
-    let options = ConvertOptions {
-        background: 0.0,
-        threshold: 0.0,
-        range: None,
-        memory: 1 << 26,
-    };
-    convert_grid(
-        &grid,
-        "density",
-        &options,
-        &dir.join("fog.bricks"),
-        &|_, _| (),
-    )
-    .unwrap();
-    let path = dir.join("stored.toml");
-    let tank = repo("tests/data/photons/media_tank.gdml");
-    std::fs::write(
-        &path,
-        format!(
-            "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"fog.bricks\"\n\
-             density_scale = 0.05\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
-             translate = [-8, -8, -8]\n",
-            tank.display()
-        ),
-    )
-    .unwrap();
-    path
-}
-
 /// The kernel reads media bricked in memory only: `GpuPhotons::new` refuses a brick store
 /// read as stored naming the medium, `--backend gpu` fails without output, and `--backend
 /// auto` says why on stderr and gives the CPU run's histories and hits exactly.
@@ -747,7 +706,7 @@ fn stored_media_are_refused_by_the_kernel_and_auto_runs_them_on_the_cpu() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let path = stored_medium(dir.path());
+    let path = common::stored_medium(dir.path());
     let source = "beam:0,0,-150:0,0,1:0";
     let Err(e) = GpuPhotons::new(&ctx, &scene(&path, Precision::F32), &options(source, 100)) else {
         panic!("the kernel accepted a medium read as stored");

@@ -354,3 +354,38 @@ fn bad_media_fail_naming_the_file_and_entry_without_output() {
         assert!(!hits.exists(), "{volume}: wrote {}", hits.display());
     }
 }
+
+/// A medium read as stored from a brick store whose bricks file is cut short while the
+/// run is under way: the failed lookups read the background, so the run fails naming the
+/// file instead of handing over photons propagated through a wrong medium.
+#[test]
+fn a_stored_medium_cut_short_while_open_fails_naming_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = common::stored_medium(dir.path());
+    let scene = scene(&path);
+    let run = options("beam:0,0,-150:0,0,1:0", 500, 0);
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(dir.path().join("fog.bricks/bricks.bin"))
+        .unwrap()
+        .set_len(4096)
+        .unwrap();
+    let mut handed = 0;
+    let err = propagate_batches(
+        &scene,
+        &run,
+        100,
+        &mut |_| {
+            handed += 1;
+            Ok(())
+        },
+        &|_| (),
+    )
+    .expect_err("a store cut short must fail the run");
+    let text = err.to_string();
+    assert!(text.contains("bricks.bin"), "{text}");
+    assert_eq!(
+        handed, 0,
+        "a batch through the wrong medium was handed over"
+    );
+}

@@ -128,6 +128,17 @@ impl PhotonMedia {
         &self.scattering
     }
 
+    /// An error naming the store when a medium read as stored could not read a brick since
+    /// it was opened: those lookups read the background, so the photons propagated
+    /// meanwhile went through a wrong medium and must not be written.
+    pub fn check_reads(&self, tracer: &PhotonTracer) -> Result<(), PhotonError> {
+        let checked = match tracer {
+            PhotonTracer::F64(s) => self.open.on(s).check_reads(),
+            PhotonTracer::F32(s) => self.open.on(s).check_reads(),
+        };
+        checked.map_err(|e| PhotonError::Scene(crate::error::report(&e)))
+    }
+
     /// Each medium's source, extinction scale and scattering, for `--explain`.
     pub fn describe(&self) -> impl Iterator<Item = String> + '_ {
         self.described

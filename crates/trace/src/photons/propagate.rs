@@ -686,12 +686,16 @@ pub fn propagate_batches(
     progress: &dyn Fn(u64),
 ) -> Result<RunSummary, PhotonError> {
     let mut on_cpu = |photons: Range<u64>, _: Option<Range<u64>>, emitting: &Emitting| {
-        Ok::<_, PhotonError>(BatchEnds::of(
+        let ends = BatchEnds::of(
             photons
                 .into_par_iter()
                 .map(|i| scene.photon(i, run, emitting))
                 .collect(),
-        ))
+        );
+        if let Some(media) = &scene.media {
+            media.check_reads(&scene.tracer)?;
+        }
+        Ok::<_, PhotonError>(ends)
     };
     drive_batches(scene, run, batch, &mut on_cpu, sink, progress)
 }

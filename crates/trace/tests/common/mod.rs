@@ -18,7 +18,7 @@ use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::{Origin, RunOptions};
 use hytrace_trace::scan::{ray_record, RayRow};
 use hytrace_trace::sweep::{generate, scene_bounds, Sweep};
-use hytrace_volume::{parse_nanovdb, NanoFile};
+use hytrace_volume::{convert_grid, parse_nanovdb, ConvertOptions, DenseGrid, NanoFile};
 
 /// The tests' deterministic generator (SplitMix64).
 #[allow(unused_imports)] // not every test file draws
@@ -510,4 +510,44 @@ pub fn torch_run(source: &str, photons: u64, seed: u32) -> RunOptions {
         keep_histories: true,
         records: 0,
     }
+}
+
+/// A scene whose medium is a brick store read as stored (16^3 voxels of density 1, an
+/// extinction of 0.05 per mm) in the tank of `media_tank.gdml`, written into `dir`.
+pub fn stored_medium(dir: &Path) -> PathBuf {
+    let mut grid = DenseGrid::new([0; 3], [16; 3], 0.0).unwrap();
+    for z in 0..16 {
+        for y in 0..16 {
+            for x in 0..16 {
+                grid.set([x, y, z], 1.0);
+            }
+        }
+    }
+    let options = ConvertOptions {
+        background: 0.0,
+        threshold: 0.0,
+        range: None,
+        memory: 1 << 26,
+    };
+    convert_grid(
+        &grid,
+        "density",
+        &options,
+        &dir.join("fog.bricks"),
+        &|_, _| (),
+    )
+    .unwrap();
+    let path = dir.join("stored.toml");
+    let tank = repo("tests/data/photons/media_tank.gdml");
+    std::fs::write(
+        &path,
+        format!(
+            "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"fog.bricks\"\n\
+             density_scale = 0.05\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
+             translate = [-8, -8, -8]\n",
+            tank.display()
+        ),
+    )
+    .unwrap();
+    path
 }
