@@ -318,6 +318,39 @@ impl<'a> StorePool<'a> {
         layout
     }
 
+    /// The layout of group 0 of a kernel that streams a store: its parameters (binding 0)
+    /// beside the pool's arrays, state and levels of detail ([`StorePool::layout_entries`]).
+    pub fn group_layout(ctx: &GpuContext, label: &str) -> wgpu::BindGroupLayout {
+        let mut entries = vec![storage_layout_entry(0, true)];
+        entries.extend(Self::layout_entries());
+        ctx.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
+    /// Group 0 of a pass in `layout` ([`StorePool::group_layout`]): `params` beside the
+    /// pool's buffers (made again each pass: the pool's buffer changes as it grows).
+    pub fn group(
+        &self,
+        ctx: &GpuContext,
+        layout: &wgpu::BindGroupLayout,
+        label: &str,
+        params: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: params.as_entire_binding(),
+        }];
+        entries.extend(self.entries());
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+
     /// The bind group entries of the arrays, the state and the levels of detail (the pool's
     /// buffer changes as it grows: bind them again each pass).
     pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
