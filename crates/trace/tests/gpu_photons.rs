@@ -826,12 +826,7 @@ fn the_command_streams_stored_media_on_the_gpu_and_auto_picks_it() {
         "{err}"
     );
     assert!(!hits.exists());
-    std::fs::OpenOptions::new()
-        .write(true)
-        .open(dir.path().join("fog.bricks/bricks.bin"))
-        .unwrap()
-        .set_len(4096)
-        .unwrap();
+    common::cut_store_short(dir.path());
     let (cut, hits, history) = photons_command(&failed, &path, source, 500, "gpu", &[]);
     assert!(!cut.status.success());
     let err = stderr(&cut);

@@ -555,3 +555,14 @@ pub fn stored_slab(dir: &Path, dims: [u32; 3], voxel: f64, density_scale: f64) -
     .unwrap();
     path
 }
+
+/// Cuts the bricks file of the store [`stored_slab`] wrote into `dir` short, to its first
+/// four bricks (a store damaged while a run reads it).
+pub fn cut_store_short(dir: &Path) {
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(dir.join("fog.bricks/bricks.bin"))
+        .unwrap()
+        .set_len(4096)
+        .unwrap();
+}
