@@ -430,8 +430,9 @@ impl GpuPhotons {
     /// finishes ([`crate::photons::propagate_batches`] on the GPU); `progress` hears the
     /// photons done after each. The next batch runs on the GPU while the host works
     /// through the results of the one before and the sink writes them. A medium read as
-    /// stored is streamed through a brick pool, each batch in passes
-    /// ([`GpuPhotons::passes`]).
+    /// stored is streamed through a brick pool of [`GpuPhotons::with_memory`] bytes, each
+    /// batch in passes: a photon that read an absent brick runs again from its start once
+    /// the brick is resident.
     pub fn propagate_into(
         &self,
         ctx: &GpuContext,
