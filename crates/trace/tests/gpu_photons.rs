@@ -703,8 +703,9 @@ fn the_command_runs_media_on_the_gpu_and_auto_picks_it() {
 const SLAB_SOURCE: &str = "beam:0,0,-150:0,0,1:128";
 
 /// A medium read as stored streams through the kernel's brick pool. With the least budget
-/// the pool accepts (one superchunk's bricks), the photons touch more bricks than it holds:
-/// the run takes several passes, evicts bricks and defers photons, and still gives the
+/// the pool accepts (one superchunk's bricks) and batches of 1500 photons sharing the pool,
+/// the photons touch more bricks than it holds: the run takes several passes, evicts bricks
+/// and defers photons, and still gives the
 /// histories and hit rows of the run with the whole store resident bit for bit (a deferred
 /// photon runs again from its start on its own stream); that run matches the f32 CPU twin
 /// photon by photon as the in-core media do ([`twin_within`], through the default 1 GiB
@@ -734,7 +735,14 @@ fn stored_media_stream_through_a_brick_pool_and_match_the_resident_run() {
     let mut tight = Batch::default();
     let (_, _, host) = kernel()
         .with_memory(least)
-        .propagate_into(&ctx, &s32, &run, None, &mut |b| tight.gather(b), &|_| ())
+        .propagate_into(
+            &ctx,
+            &s32,
+            &run,
+            Some(1500),
+            &mut |b| tight.gather(b),
+            &|_| (),
+        )
         .unwrap();
     let stream = host.stream.expect("the run streamed the store");
     eprintln!("stored slab, pool of {least} bytes: {stream:?}");
