@@ -443,17 +443,24 @@ fn stats_line(o: &std::process::Output) -> serde_json::Value {
 
 /// Batches overlap on the GPU (the next one runs while the host handles the last) and the
 /// kernel appends its hits in the order photons finish: whatever the batch, a run gives
-/// the one-batch run's histories and hit rows exactly, hits in photon order.
+/// the one-batch run's histories, hit rows and step points exactly, hits in photon order
+/// (the points past a photon's end zero, not those of a photon of the batch before).
 #[test]
 fn gpu_batches_give_the_one_batch_run_with_hits_in_photon_order() {
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
     let path = repo("tests/data/photons/every_process.gdml");
-    let run = options("point:0,0,0", 1000);
+    let run = RunOptions {
+        records: 3,
+        ..options("point:0,0,0", 1000)
+    };
     let s32 = scene(&path, Precision::F32);
     let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
     let whole = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap().run;
+    // Photons ending before their third point: a batch before must not leave its points.
+    let short = whole.records.chunks(3).filter(|p| p[2][11] == 0.0).count();
+    assert!(short > 10, "{short} photons with fewer than 3 points");
     let photon_order = |hits: &[HitRow]| hits.windows(2).all(|w| w[0].0[13] < w[1].0[13]);
     assert!(whole.hits.len() >= 10, "{} hits", whole.hits.len());
     assert!(photon_order(&whole.hits));
@@ -481,6 +488,7 @@ fn gpu_batches_give_the_one_batch_run_with_hits_in_photon_order() {
         );
         assert_eq!(all.histories, whole.histories, "batch {batch}");
         assert_eq!(all.hits, whole.hits, "batch {batch}");
+        assert_eq!(all.records, whole.records, "batch {batch}");
         assert_eq!(summary.counts, whole.counts, "batch {batch}");
         assert_eq!(summary.hits as usize, whole.hits.len());
     }
@@ -706,7 +714,7 @@ const SLAB_SOURCE: &str = "beam:0,0,-150:0,0,1:128";
 /// the pool accepts (one superchunk's bricks) and batches of 1500 photons sharing the pool,
 /// the photons touch more bricks than it holds: the run takes several passes, evicts bricks
 /// and defers photons, and still gives the
-/// histories and hit rows of the run with the whole store resident bit for bit (a deferred
+/// histories, hit rows and step points of the run with the whole store resident bit for bit (a deferred
 /// photon runs again from its start on its own stream); that run matches the f32 CPU twin
 /// photon by photon as the in-core media do ([`twin_within`], through the default 1 GiB
 /// pool), and the streamed runs give the same results whatever the budget.
@@ -717,7 +725,10 @@ fn stored_media_stream_through_a_brick_pool_and_match_the_resident_run() {
     };
     let dir = tempfile::tempdir().unwrap();
     let path = common::stored_slab(dir.path(), [512, 512, 16], 0.5, 0.5);
-    let run = options(SLAB_SOURCE, 4000);
+    let run = RunOptions {
+        records: 4,
+        ..options(SLAB_SOURCE, 4000)
+    };
     let (roomy, twin_same) =
         twin_within("stored slab", path.clone(), run.clone(), 100, 0.0).unwrap();
     assert!(twin_same >= 0.999, "{twin_same}");
@@ -770,6 +781,12 @@ fn stored_media_stream_through_a_brick_pool_and_match_the_resident_run() {
     assert!(!resident.hits.is_empty());
     assert_eq!(bits(&tight.hits), bits(&resident.hits));
     assert_eq!(bits(&roomy.hits), bits(&resident.hits));
+    let points = |r: &[hytrace_trace::photons::output::RecordPoint]| -> Vec<[u32; 12]> {
+        r.iter().map(|p| p.map(f32::to_bits)).collect()
+    };
+    assert_eq!(resident.records.len(), 4 * 4000);
+    assert_eq!(points(&tight.records), points(&resident.records));
+    assert_eq!(points(&roomy.records), points(&resident.records));
 }
 
 /// The command streams a medium read as stored on the GPU: `--backend gpu` reports the

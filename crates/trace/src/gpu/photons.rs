@@ -159,11 +159,11 @@ impl MediaUpload {
         }))
     }
 
-    /// Bindings of group 0.
-    fn binding_count(&self) -> u32 {
+    /// Bindings of group 0 (a streamed store's levels of detail with `lods`).
+    fn binding_count(&self, lods: bool) -> u32 {
         match &self.grids {
             MediaGrids::InCore(volume) => volume.binding_count(),
-            MediaGrids::Streamed => 1 + StorePool::layout_entries().len() as u32,
+            MediaGrids::Streamed => 1 + StorePool::layout_entries(lods).len() as u32,
         }
     }
 }
@@ -182,8 +182,9 @@ enum MediaGroup {
     /// Grids bricked in memory: their bind group.
     InCore(wgpu::BindGroup),
     /// A brick store streamed: the group's layout and the medium's parameters, bound
-    /// beside the pool's buffers each pass.
-    Streamed(wgpu::BindGroupLayout, wgpu::Buffer),
+    /// beside the pool's buffers each pass, and whether the kernel reads the store's
+    /// levels of detail (feature `stream_lods`).
+    Streamed(wgpu::BindGroupLayout, wgpu::Buffer, bool),
 }
 
 /// What a GPU photon run gives back.
@@ -236,6 +237,8 @@ struct Streaming<'a> {
     pool: StorePool<'a>,
     layout: &'a wgpu::BindGroupLayout,
     params: &'a wgpu::Buffer,
+    /// The kernel reads the store's levels of detail.
+    lods: bool,
 }
 
 /// What a batch's kernel gives back: every photon's packed history, and the records of
@@ -263,7 +266,6 @@ impl GpuPhotons {
             ));
         };
         let media = MediaUpload::new(ctx, scene)?;
-        let media_bindings = media.as_ref().map_or(0, MediaUpload::binding_count);
         let physics = kernel_features(&scene.tables, media.is_some(), run);
         // Only the bindings the kernel declares: a device may allow as few as 32 storage
         // buffers a stage (lavapipe), which a streamed medium's pool comes close to.
@@ -273,8 +275,20 @@ impl GpuPhotons {
                 .filter(|(feature, _)| physics.contains(feature))
                 .map(|&(_, binding)| binding),
         );
-        let kernel_bindings = bindings.len() as u32 + media_bindings;
-        let upload = SceneUpload::new(ctx, f32_scene, "photons", kernel_bindings)?;
+        let kernel_bindings =
+            |lods| bindings.len() as u32 + media.as_ref().map_or(0, |m| m.binding_count(lods));
+        // A streamed store's coarser levels of detail stand in for its absent bricks where
+        // the device has a binding to spare (a pass's paths then stay close to those through
+        // the bricks they lack, which they request); else the background does.
+        let streamed = matches!(media.as_ref().map(|m| &m.grids), Some(MediaGrids::Streamed));
+        let mut lods = streamed;
+        let upload = match SceneUpload::new(ctx, f32_scene, "photons", kernel_bindings(lods)) {
+            Err(GpuError::SceneTooBig(_)) if lods => {
+                lods = false;
+                SceneUpload::new(ctx, f32_scene, "photons", kernel_bindings(false))?
+            }
+            upload => upload?,
+        };
         let mut flat = GpuTables::new(scene);
         // A torch spectrum that does not resolve is left to the run, which names it.
         let spectrum = match &run.origin {
@@ -300,7 +314,12 @@ impl GpuPhotons {
                 features.extend(chunked);
                 constants.extend(volume_constants);
             }
-            Some(MediaGrids::Streamed) => features.push("streamed"),
+            Some(MediaGrids::Streamed) => {
+                features.push("streamed");
+                if lods {
+                    features.push("stream_lods");
+                }
+            }
             None => {}
         }
         let source = kernel_source(KERNEL, &features)?;
@@ -323,10 +342,10 @@ impl GpuPhotons {
                     (layout, MediaGroup::InCore(group))
                 }
                 MediaGrids::Streamed => {
-                    let layout = StorePool::group_layout(ctx, "streamed photon medium");
+                    let layout = StorePool::group_layout(ctx, "streamed photon medium", lods);
                     (
                         layout.clone(),
-                        MediaGroup::Streamed(layout, m.params.clone()),
+                        MediaGroup::Streamed(layout, m.params.clone(), lods),
                     )
                 }
             });
@@ -501,7 +520,7 @@ impl GpuPhotons {
         ctx: &GpuContext,
         scene: &'a PhotonScene,
     ) -> crate::Result<Option<Streaming<'a>>> {
-        let Some(MediaGroup::Streamed(layout, params)) = &self.media_group else {
+        let Some(MediaGroup::Streamed(layout, params, lods)) = &self.media_group else {
             return Ok(None);
         };
         let (store, mips) = streamed_store(scene).ok_or_else(|| GpuError::Operation {
@@ -516,6 +535,7 @@ impl GpuPhotons {
             pool,
             layout,
             params,
+            lods: *lods,
         }))
     }
 
@@ -551,11 +571,12 @@ impl GpuPhotons {
             pool,
             layout,
             params,
+            lods,
         } = streaming;
         while !pending.is_empty() {
             let pass = pool.begin_pass(ctx)?;
             let listed = &pending[..size.of(pending.len())];
-            let group = pool.group(ctx, layout, "streamed photon medium", params);
+            let group = pool.group(ctx, layout, "streamed photon medium", params, *lods);
             let done = self.submit(
                 ctx,
                 run,
@@ -610,8 +631,8 @@ impl GpuPhotons {
 
     /// The output buffers of batches of `batch` photons with `k` step points each.
     fn outputs(&self, ctx: &GpuContext, batch: u64, k: u32) -> Result<Outputs, GpuError> {
-        // Outputs the host also writes: the record count (reset each batch) and the
-        // histories (a streamed pass's photons).
+        // Outputs the host also writes: the record count (reset each batch), the histories
+        // (a streamed pass's photons) and the step points (cleared each batch).
         let written = |label: &str, size: u64| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -623,7 +644,7 @@ impl GpuPhotons {
             })
         };
         ctx.checked("photon output buffers", || Outputs {
-            steps: ctx.output_buffer(
+            steps: written(
                 "photon step points",
                 (batch * u64::from(k)).max(1) * POINT_BYTES,
             ),
@@ -702,6 +723,14 @@ impl GpuPhotons {
             }
             ctx.queue
                 .write_buffer(&outputs.count, 0, &0u32.to_le_bytes());
+            // The kernel writes a photon's step points up to its end: the rest of its K
+            // must read zero, not a point of the batch or pass before.
+            let points = u64::from(params.photon_count) * u64::from(run.records) * POINT_BYTES;
+            if points > 0 {
+                let mut encoder = ctx.device.create_command_encoder(&Default::default());
+                encoder.clear_buffer(&outputs.steps, 0, Some(points));
+                ctx.queue.submit([encoder.finish()]);
+            }
             ctx.submit_pass(
                 "photons",
                 &[&self.pipeline],

@@ -322,7 +322,7 @@ pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, 
     let mut features = super::tracer::scene_features(&arrays);
     features.extend(effect_features(renderer).0);
     if streamed_medium(renderer).is_some() {
-        features.push("streamed");
+        features.extend(["streamed", "stream_lods"]);
     }
     let source = kernel_source(KERNEL, &features)?;
     Ok((features, source))
@@ -537,7 +537,7 @@ impl GpuRenderer {
             });
             let medium_group = medium_group.or_else(|| {
                 let (grid, _) = streamed.as_ref()?;
-                let layout = StorePool::group_layout(ctx, "streamed medium");
+                let layout = StorePool::group_layout(ctx, "streamed medium", true);
                 Some((
                     layout.clone(),
                     MediumGroup::Streamed(layout, Box::new(*grid)),
@@ -698,7 +698,7 @@ impl GpuRenderer {
             let run = &pending[..size.of(pending.len())];
             let mut missing = Vec::new();
             for chunk in run.chunks(batch) {
-                let group0 = pool.group(ctx, layout, "streamed medium", &params);
+                let group0 = pool.group(ctx, layout, "streamed medium", &params, true);
                 let batch = Batch::Listed(chunk);
                 let texels =
                     self.dispatch(ctx, inputs, batch, Some(&group0), &mut times, &|_| {})?;
