@@ -21,6 +21,7 @@ use hytrace_trace::gpu::TexelStore;
 use hytrace_trace::photons::gensteps::{GenstepFile, GENSTEP_COLUMNS};
 use hytrace_trace::photons::run::{prepare, propagate_in};
 use hytrace_trace::photons::sources::{Source, Wavelength};
+use hytrace_trace::photons::tracer::Precision as PhotonPrecision;
 use hytrace_trace::photons::{load_photon_scene, Origin, PhotonScene, RunOptions};
 use hytrace_trace::render::run::{parse_size, render, RenderBackend, RenderSettings};
 use hytrace_trace::render::spec::RenderSpec;
@@ -76,7 +77,13 @@ impl Scene {
             return Ok(s);
         }
         let (f, surfaces) = load_photon_scene(&self.path, &self.options())?;
-        let scene = prepare(&f, surfaces, &self.path)?;
+        let scene = prepare(
+            &f,
+            surfaces,
+            &self.path,
+            PhotonPrecision::F64,
+            DEFAULT_STORE_BUDGET,
+        )?;
         Ok(self.photon_scene.get_or_init(|| scene))
     }
 }

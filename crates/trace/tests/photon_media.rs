@@ -3,8 +3,9 @@
 //! exponential of the optical depth integral), the first scattering angles of a thin
 //! scattering slab against the Henyey-Greenstein formula, every photon accounted for;
 //! results independent of threads and batches; `--explain`; bad media refused by name
-//! with no output written. The Beer-Lambert checks run on the GPU kernel too where an
-//! adapter opens.
+//! with no output written; a medium read as stored within a small `--memory` (its brick
+//! cache evicting) giving the files of a roomy one. The Beer-Lambert checks run on the GPU
+//! kernel too where an adapter opens.
 //!
 //! The scenes are `tests/data/photons/media_tank.gdml` (a vacuum world with a sensor plate
 //! at z = 150 that detects everything reaching it) with procedural volumes placed at the
@@ -23,6 +24,7 @@ use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
     load_photon_scene, propagate, propagate_batches, Batch, PhotonRun, PhotonScene, RunOptions,
 };
+use hytrace_volume::BRICK_BYTES;
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -383,4 +385,100 @@ fn a_stored_medium_cut_short_while_open_fails_naming_its_file() {
         handed, 0,
         "a batch through the wrong medium was handed over"
     );
+}
+
+/// `hytrace photons --memory` on the CPU bounds the brick cache of a medium read as stored:
+/// a budget of one byte is refused naming the option, the store and the least it needs,
+/// writing nothing; a run within that least (tables and a cache of one superchunk's 4096
+/// bricks, for a slab of 8192 bricks of which the beam's photons read more than 4096) evicts
+/// bricks and writes the hits and histories of the run whose cache holds every brick, byte
+/// for byte. `--stats` reports each cache under `store`.
+#[test]
+fn a_cpu_run_in_a_small_memory_evicts_bricks_and_writes_the_roomy_runs_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = common::stored_slab(dir.path(), [512, 512, 16], 0.5, 0.5);
+    let run = |name: &str, memory: &str| {
+        let hits = dir.path().join(format!("{name}.npy"));
+        let history = dir.path().join(format!("{name}-history.npy"));
+        let history_arg = format!("--history={}", history.display());
+        let out = hytrace(
+            &[
+                "photons",
+                path.to_str().unwrap(),
+                "--source",
+                "beam:0,0,-150:0,0,1:128",
+                "-n",
+                "4000",
+                "-o",
+                hits.to_str().unwrap(),
+                &history_arg,
+                "--top",
+                "0",
+                "--memory",
+                memory,
+                "--stats",
+            ],
+            &[],
+        );
+        (out, hits, history)
+    };
+    let (refused, hits, history) = run("refused", "1");
+    let err = stderr(&refused);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("stored.toml")
+            && err.contains("fog.bricks")
+            && err.contains("--memory")
+            && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!hits.exists() && !history.exists());
+    let least: u64 = err
+        .split("give at least ")
+        .nth(1)
+        .and_then(|s| s.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no least budget in: {err}"));
+    let store = |o: &std::process::Output| {
+        assert!(o.status.success(), "{}", stderr(o));
+        let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+        let line: serde_json::Value =
+            serde_json::from_str(stdout.lines().last().unwrap_or_default()).unwrap();
+        assert_eq!(line["backend"], "cpu", "{line}");
+        let count = |key: &str| {
+            line["store"][key]
+                .as_u64()
+                .unwrap_or_else(|| panic!("{line}"))
+        };
+        (
+            count("bricks_read"),
+            count("bricks_evicted"),
+            count("cache_bricks"),
+            count("table_bytes"),
+        )
+    };
+    let (tight, tight_hits, tight_history) = run("tight", &least.to_string());
+    let (read, evicted, holds, tables) = store(&tight);
+    assert!(holds < 8192 && tables + holds * BRICK_BYTES as u64 <= least);
+    assert!(
+        evicted > 0 && read > holds,
+        "read {read}, evicted {evicted}"
+    );
+    let (roomy, roomy_hits, roomy_history) = run("roomy", "1G");
+    let (read, evicted, holds, _) = store(&roomy);
+    assert!(
+        holds >= 8192 && read > 0 && evicted == 0,
+        "{read} {evicted}"
+    );
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    assert_eq!(bytes(&tight_hits), bytes(&roomy_hits));
+    assert_eq!(bytes(&tight_history), bytes(&roomy_history));
+    // The medium shaped the run: photons scattered or were absorbed in it.
+    let histories = bytes(&roomy_history);
+    let through_medium = histories[128..]
+        .chunks_exact(8)
+        .map(|b| history_string(u64::from_le_bytes(b.try_into().unwrap())))
+        .filter(|h| h.contains("SC") || h.contains("AB"))
+        .count();
+    assert!(through_medium > 1000, "{through_medium}");
 }

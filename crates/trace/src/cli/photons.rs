@@ -95,10 +95,11 @@ pub struct PhotonsArgs {
     /// needs) or auto (the GPU when an adapter opens, else the CPU).
     #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
     pub backend: PhotonBackend,
-    /// Device memory a medium read as stored in a brick store may take on the GPU (its
-    /// brick pool, page table and request buffer), e.g. 256M; the run streams the store
-    /// through it in passes. A budget too small for one superchunk's bricks, or for the
-    /// bricks one photon reads, is refused.
+    /// Bytes each medium read as stored in a brick store may hold resident (its tables and
+    /// a cache of the bricks photons read; on the GPU also its brick pool, page table and
+    /// request buffer in device memory, through which the run streams the store in
+    /// passes), e.g. 256M. A budget too small for one superchunk's bricks, or for the
+    /// bricks one photon reads, is refused; results do not depend on it.
     #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
     pub memory: u64,
     /// Print the processes the run calls for (source, bulk processes with their materials,
@@ -108,9 +109,10 @@ pub struct PhotonsArgs {
     pub explain: bool,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
     /// propagate_s and of it tally_s and write_s, photons_per_s, threads, backend; on the
-    /// GPU also the adapter, its times, the host's work on the results and the batch, and
-    /// `stream` for a medium read as stored: passes, photons_deferred, bricks uploaded and
-    /// evicted, the pool's slots and device bytes).
+    /// GPU also the adapter, its times, the host's work on the results and the batch; for a
+    /// medium read as stored `store`, its brick cache: bricks read and evicted, the bricks
+    /// it holds and its tables' bytes, and on the GPU `stream`: passes, photons_deferred,
+    /// bricks uploaded and evicted, the pool's slots and device bytes).
     #[arg(long)]
     pub stats: bool,
 }
@@ -187,7 +189,12 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         records_tmp.as_ref().map(|(p, k)| (p.as_path(), *k)),
     )?;
     let bar = hytrace_trace::progress::bar(photons, "propagating", "photons");
-    let BackendRun { run, build_s, gpu } = propagate_on(
+    let BackendRun {
+        run,
+        build_s,
+        gpu,
+        stores,
+    } = propagate_on(
         &f,
         surfaces,
         &args.scene,
@@ -236,6 +243,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             if let Some(st) = &g.host.stream {
                 line["stream"] = st.json("photons_deferred");
             }
+        }
+        if let Some(c) = stores {
+            line["store"] = c.json();
         }
         println!("{line}");
     } else {

@@ -153,10 +153,7 @@ pub fn run(args: RenderArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             }
         }
         if let Some(c) = stores {
-            line["store"] = serde_json::json!({
-                "bricks_read": c.bricks_read, "cache_bricks": c.capacity_bricks,
-                "table_bytes": c.table_bytes,
-            });
+            line["store"] = c.json();
         }
         println!("{line}");
     }

@@ -198,6 +198,16 @@ impl OpenMedia {
     pub fn grid(&self, medium: u32) -> &MediumGrid {
         &self.grids[medium as usize].grid
     }
+
+    /// What the caches of the media read as stored did, summed over them (`None` when no
+    /// medium is read as stored).
+    pub fn store_stats(&self) -> Option<CacheStats> {
+        let stores = self.grids.iter().filter_map(|m| match &m.grid {
+            MediumGrid::Store(s, _) => Some(s.stats()),
+            MediumGrid::Bricked(_) => None,
+        });
+        stores.reduce(|a, b| a + b)
+    }
 }
 
 /// Seed of the random streams of the `k`-th placed medium on a ray (a Weyl step keeps the
@@ -443,18 +453,9 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         self.open.grid(medium)
     }
 
-    /// What the caches of the media read as stored did, summed over them (`None` when no
-    /// medium is read as stored).
+    /// What the caches of the media read as stored did ([`OpenMedia::store_stats`]).
     pub fn store_stats(&self) -> Option<CacheStats> {
-        let stores = self.open.grids.iter().filter_map(|m| match &m.grid {
-            MediumGrid::Store(s, _) => Some(s.stats()),
-            MediumGrid::Bricked(_) => None,
-        });
-        stores.reduce(|a, b| CacheStats {
-            bricks_read: a.bricks_read + b.bricks_read,
-            capacity_bricks: a.capacity_bricks + b.capacity_bricks,
-            table_bytes: a.table_bytes + b.table_bytes,
-        })
+        self.open.store_stats()
     }
 
     /// An error when a medium read as stored could not read a brick it needed since it was

@@ -6,10 +6,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use hytrace_foundry::Foundry;
+use hytrace_volume::CacheStats;
 
 use super::run::{prepare, propagate_batches_in};
 use super::tracer::Precision;
-use super::{Batch, PhotonError, PhotonScene, RunOptions, RunSummary};
+use super::{Batch, PhotonError, RunOptions, RunSummary};
 use crate::error::Context;
 use crate::gpu::{gpu_or_cpu, GpuContext, GpuPhotons, GpuTimes, PhotonHostWork};
 use crate::scene::VolumeSurfaces;
@@ -53,14 +54,18 @@ pub struct BackendRun {
     pub build_s: f64,
     /// The GPU's report; `None` when the CPU ran.
     pub gpu: Option<GpuPhotonInfo>,
+    /// The brick caches of the media read as stored in brick stores, summed (on the GPU
+    /// their reads include the bricks uploaded to its pool); `None` without such media.
+    pub stores: Option<CacheStats>,
 }
 
 /// Prepares the scene `f` read from `path` and propagates `run` on `backend`, `batch`
 /// photons at a time (by default the CPU's [`super::propagate::BATCH`], on the GPU as many
 /// as fill it), handing each batch's results to `sink` as it finishes; errors name the
-/// file. On the GPU a medium read as stored streams through a brick pool of at most
-/// `memory` device bytes ([`GpuPhotons::with_memory`]). `auto` tells on stderr why it fell
-/// back to the CPU.
+/// file. A medium read as stored holds at most `memory` bytes resident on the host (its
+/// tables and brick cache, [`super::PhotonScene::with_memory`]) and on the GPU streams
+/// through a brick pool of at most `memory` device bytes ([`GpuPhotons::with_memory`]).
+/// `auto` tells on stderr why it fell back to the CPU.
 #[allow(clippy::too_many_arguments)]
 pub fn propagate_on(
     f: &Foundry,
@@ -85,7 +90,7 @@ pub fn propagate_on(
             );
         }
         let t = Instant::now();
-        let scene = prepare(f, surfaces, path)?;
+        let scene = prepare(f, surfaces, path, Precision::F64, memory)?;
         let build_s = t.elapsed().as_secs_f64();
         let mut sink = sink.borrow_mut();
         Ok(BackendRun {
@@ -99,12 +104,12 @@ pub fn propagate_on(
             )?,
             build_s,
             gpu: None,
+            stores: scene.store_stats(),
         })
     };
     let gpu = |ctx: GpuContext, surfaces| {
         let t = Instant::now();
-        let scene = PhotonScene::with_precision(f, surfaces, Precision::F32)
-            .with_context(|| format!("{}: preparing for photons", path.display()))?;
+        let scene = prepare(f, surfaces, path, Precision::F32, memory)?;
         let kernel = GpuPhotons::new(&ctx, &scene, run)
             .with_context(|| format!("{}: the GPU photon kernel", path.display()))?
             .with_memory(memory);
@@ -126,6 +131,7 @@ pub fn propagate_on(
                 times,
                 host,
             }),
+            stores: scene.store_stats(),
         })
     };
     match backend {

@@ -15,7 +15,7 @@
 use glam::DVec3;
 use hytrace_csg::Real;
 use hytrace_foundry::Foundry;
-use hytrace_volume::{global_range, Estimator, Rng, TransmittanceParams, DEFAULT_STORE_BUDGET};
+use hytrace_volume::{global_range, Estimator, Rng, TransmittanceParams};
 
 use super::bulk::rotate_uz;
 use super::tracer::PhotonTracer;
@@ -56,17 +56,23 @@ pub struct PhotonMedia {
 
 impl PhotonMedia {
     /// Opens the media of `f` on the scene `tracer` navigates (`None` without placed
-    /// media).
-    /// Errors name the medium and its source: a grid that cannot be opened, a density
-    /// below zero (delta tracking needs `>= 0`), or a medium so dense that tracking across
-    /// it would take more than 10^7 density lookups.
-    pub fn new(f: &Foundry, tracer: &PhotonTracer) -> Result<Option<Self>, PhotonError> {
+    /// media), each medium read as stored in a brick store holding at most `memory` bytes
+    /// resident (its tables and a cache of bricks read on demand).
+    /// Errors name the medium and its source: a grid that cannot be opened (a `memory` too
+    /// small for a store among them), a density below zero (delta tracking needs `>= 0`),
+    /// or a medium so dense that tracking across it would take more than 10^7 density
+    /// lookups.
+    pub fn new(
+        f: &Foundry,
+        tracer: &PhotonTracer,
+        memory: u64,
+    ) -> Result<Option<Self>, PhotonError> {
         if f.optics.media.is_empty() {
             return Ok(None);
         }
         let (open, placed) = match tracer {
-            PhotonTracer::F64(s) => opened(s, f)?,
-            PhotonTracer::F32(s) => opened(s, f)?,
+            PhotonTracer::F64(s) => opened(s, f, memory)?,
+            PhotonTracer::F32(s) => opened(s, f, memory)?,
         };
         // Media no instance places are never met.
         if !placed {
@@ -150,9 +156,13 @@ impl PhotonMedia {
 
 /// The media of `f` opened on `scene` and checked for delta tracking (see
 /// [`PhotonMedia::new`]), and whether any is placed.
-fn opened<T: Real>(scene: &CpuScene<T>, f: &Foundry) -> Result<(OpenMedia, bool), PhotonError> {
+fn opened<T: Real>(
+    scene: &CpuScene<T>,
+    f: &Foundry,
+    memory: u64,
+) -> Result<(OpenMedia, bool), PhotonError> {
     let params = TransmittanceParams::new(Estimator::Delta);
-    let open = OpenMedia::open(scene, f, &params, DEFAULT_STORE_BUDGET)
+    let open = OpenMedia::open(scene, f, &params, memory)
         .map_err(|e| PhotonError::Scene(crate::error::report(&e)))?;
     let media = open.on(scene);
     let placements: Vec<(u32, u32)> = media.placements().map(|(k, _)| k).collect();

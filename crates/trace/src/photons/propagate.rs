@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use hytrace_csg::Ray;
 use hytrace_foundry::{Foundry, UNSET};
-use hytrace_volume::Rng;
+use hytrace_volume::{CacheStats, Rng, DEFAULT_STORE_BUDGET};
 use rayon::prelude::*;
 
 use super::bulk::{isotropic, rayleigh_scatter, sample_distance};
@@ -74,6 +74,19 @@ impl PhotonScene {
         surfaces: Option<VolumeSurfaces>,
         precision: Precision,
     ) -> Result<Self, PhotonError> {
+        Self::with_memory(f, surfaces, precision, DEFAULT_STORE_BUDGET)
+    }
+
+    /// [`PhotonScene::with_precision`] with each medium read as stored in a brick store
+    /// holding at most `memory` bytes resident: its tables and a cache of the bricks
+    /// photons read (`hytrace photons --memory`); a budget too small for a store is refused
+    /// naming it and the least it needs. Results do not depend on it.
+    pub fn with_memory(
+        f: &Foundry,
+        surfaces: Option<VolumeSurfaces>,
+        precision: Precision,
+        memory: u64,
+    ) -> Result<Self, PhotonError> {
         let tracer =
             PhotonTracer::new(f, precision).map_err(|e| PhotonError::Scene(format!("{e:#}")))?;
         let boundaries = &f.optics.boundaries;
@@ -112,7 +125,7 @@ impl PhotonScene {
                 .any(|b| b.inner_surface == s || b.outer_surface == s),
         };
         let tables = OpticsTables::new(&f.optics, used)?;
-        let media = PhotonMedia::new(f, &tracer)?;
+        let media = PhotonMedia::new(f, &tracer, memory)?;
         Ok(PhotonScene {
             media,
             tracer,
@@ -124,6 +137,12 @@ impl PhotonScene {
             copy: f.inst.iter().map(|i| i.copy_number).collect(),
             surfaces,
         })
+    }
+
+    /// What the brick caches of the media read as stored did so far, summed (`None` when
+    /// no medium is read as stored).
+    pub fn store_stats(&self) -> Option<CacheStats> {
+        self.media.as_ref().and_then(|m| m.open().store_stats())
     }
 
     /// Resolves where a run's photons come from: a torch source with its wavelength, or

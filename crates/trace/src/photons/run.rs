@@ -6,20 +6,24 @@ use std::path::Path;
 use crate::error::Context;
 use hytrace_foundry::Foundry;
 
+use super::tracer::Precision;
 use super::{
     propagate_batches, propagate_reporting, Batch, PhotonError, PhotonRun, PhotonScene, RunOptions,
     RunSummary,
 };
 use crate::scene::VolumeSurfaces;
 
-/// Prepares the scene `f` read from `path` for photons ([`PhotonScene::new`]), errors
-/// naming the file.
+/// Prepares the scene `f` read from `path` for photons, navigating in `precision`, each
+/// medium read as stored holding at most `memory` bytes resident
+/// ([`PhotonScene::with_memory`]); errors name the file.
 pub fn prepare(
     f: &Foundry,
     surfaces: Option<VolumeSurfaces>,
     path: &Path,
+    precision: Precision,
+    memory: u64,
 ) -> crate::Result<PhotonScene> {
-    PhotonScene::new(f, surfaces)
+    PhotonScene::with_memory(f, surfaces, precision, memory)
         .with_context(|| format!("{}: preparing for photons", path.display()))
 }
 

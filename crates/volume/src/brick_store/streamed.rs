@@ -45,10 +45,39 @@ thread_local! {
 pub struct CacheStats {
     /// Bricks read from disk (a brick evicted and needed again is read again).
     pub bricks_read: u64,
+    /// Bricks the cache dropped, least recently used first, to make room for others.
+    pub bricks_evicted: u64,
     /// Bricks the cache may hold.
     pub capacity_bricks: u64,
     /// Bytes of the index, ranges and levels of detail, resident while the store is open.
     pub table_bytes: u64,
+}
+
+impl std::ops::Add for CacheStats {
+    type Output = CacheStats;
+
+    /// The counts of two caches together (a scene's media read as stored, summed).
+    fn add(self, o: CacheStats) -> CacheStats {
+        CacheStats {
+            bricks_read: self.bricks_read + o.bricks_read,
+            bricks_evicted: self.bricks_evicted + o.bricks_evicted,
+            capacity_bricks: self.capacity_bricks + o.capacity_bricks,
+            table_bytes: self.table_bytes + o.table_bytes,
+        }
+    }
+}
+
+impl CacheStats {
+    /// The counts as the commands' `--stats` report them under `store`: `bricks_read`,
+    /// `bricks_evicted`, `cache_bricks` (the capacity) and `table_bytes`.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "bricks_read": self.bricks_read,
+            "bricks_evicted": self.bricks_evicted,
+            "cache_bricks": self.capacity_bricks,
+            "table_bytes": self.table_bytes,
+        })
+    }
 }
 
 /// An opened brick store: its tables resident, its bricks read through the cache.
@@ -62,6 +91,7 @@ pub struct BrickStore {
     bricks: File,
     shards: Vec<Mutex<LruCache<u32, Brick>>>,
     bricks_read: AtomicU64,
+    bricks_evicted: AtomicU64,
     capacity_bricks: u64,
     /// This store's number (for the per-thread memo).
     id: u64,
@@ -150,7 +180,7 @@ impl BrickStore {
             return Err(file_error(
                 dir,
                 format!(
-                    "a memory budget of {budget} bytes is too small: the store's tables take {table_bytes} bytes and its cache needs one superchunk's {SUPERCHUNK_BRICKS} bricks ({} bytes); give at least {least}",
+                    "a memory budget (--memory) of {budget} bytes is too small: the store's tables take {table_bytes} bytes and its cache needs one superchunk's {SUPERCHUNK_BRICKS} bricks ({} bytes); give at least {least}",
                     SUPERCHUNK_BRICKS as u64 * CACHED_BRICK_BYTES
                 ),
             ));
@@ -172,6 +202,7 @@ impl BrickStore {
                 .map(|_| Mutex::new(LruCache::new(per_shard)))
                 .collect(),
             bricks_read: AtomicU64::new(0),
+            bricks_evicted: AtomicU64::new(0),
             capacity_bricks: per_shard.get() as u64 * SHARDS as u64,
             id: STORES_OPENED.fetch_add(1, Ordering::Relaxed),
             failure: Mutex::new(None),
@@ -254,6 +285,7 @@ impl BrickStore {
     pub fn stats(&self) -> CacheStats {
         CacheStats {
             bricks_read: self.bricks_read.load(Ordering::Relaxed),
+            bricks_evicted: self.bricks_evicted.load(Ordering::Relaxed),
             capacity_bricks: self.capacity_bricks,
             table_bytes: (self.table.len() * 4 + self.lods.len() * 4 + self.mips.memory_bytes())
                 as u64,
@@ -326,10 +358,15 @@ impl BrickStore {
             }
         };
         let brick: Brick = Arc::new(codes);
-        shard
+        // `push` hands back the entry it displaced: another brick when the shard was full,
+        // or this one when another thread read it meanwhile.
+        let displaced = shard
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .put(record, brick.clone());
+            .push(record, brick.clone());
+        if displaced.is_some_and(|(r, _)| r != record) {
+            self.bricks_evicted.fetch_add(1, Ordering::Relaxed);
+        }
         Some(brick)
     }
 }
