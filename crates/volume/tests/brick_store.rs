@@ -324,6 +324,10 @@ fn transmittance_through_a_budget_far_below_the_volume_equals_the_in_core_answer
         stats.bricks_read > stats.capacity_bricks,
         "the cache evicted and read bricks again: {stats:?}"
     );
+    assert!(
+        stats.bricks_evicted > 0 && stats.bricks_evicted < stats.bricks_read,
+        "evictions counted: {stats:?}"
+    );
 }
 
 #[test]
