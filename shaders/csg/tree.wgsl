@@ -121,7 +121,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
         ld = frame_linear(f, d);
     }
     let shift = csg_origin_shift(n.code & ~COMPLEMENT_BIT, csg_node_params(n), lo, ld);
-    let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo + ld * shift, ld);
+    let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo, ld, shift);
     // Short spans of curved primitives and of leaves sharing faces are touches; a planar
     // leaf alone skips spans within a few ulps of the solid's size of empty only.
     var touch = tol;

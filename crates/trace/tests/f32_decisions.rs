@@ -4,7 +4,8 @@
 //! on a face and running along it, grazing crossings of a large sphere, thin chords past
 //! the edge of a long box, rays from inside a long thin tube (an optical fibre), and a
 //! thin horn torus seen from metres away, and chords shorter than the tolerance through the
-//! edge where two operands of a boolean solid meet. An f32 scan answers these as f64 does:
+//! edge where two operands of a boolean solid meet, and a polycone's internal face crossed
+//! at a shallow angle (a ray of CMS's `cmse.gdml`). An f32 scan answers these as f64 does:
 //! it traces again in f64 the rays its trace flags (starts within its tolerance of a
 //! surface, short spans dropped as touches), that cross at grazing incidence, or whose
 //! crossing of a torus lies off the f64 surface (`scan::redo_flagged_in_f64`); each f32
@@ -503,6 +504,101 @@ both_precisions!(
     chord_through_a_boolean_edge,
     chord_through_a_boolean_edge_f32,
     chord_through_a_boolean_edge_f64
+);
+
+/// The polycone `TotemT1` of CMS (`celeritas/cmse.gdml`): hollow pieces from z = 7499 mm
+/// to 10500 mm, a cone frustum of outer radius 814 mm at z = 7950 mm to 1041.1 mm at
+/// z = 10165 mm under a cylinder of radius 1130 mm from there; the plane z = 10165 mm is a
+/// face the two pieces share, inside the solid.
+fn totem_t1() -> Shape {
+    use hytrace_csg::geant4::{G4Mapping, G4Solid};
+    G4Solid::Polycone {
+        sphi: 0.0,
+        dphi: std::f64::consts::TAU,
+        z: vec![7499.0, 7950.0, 7950.0, 10165.0, 10165.0, 10500.0],
+        rmin: vec![117.85, 121.5, 122.0, 154.1, 154.1, 159.0],
+        rmax: vec![768.0, 814.0, 814.0, 1041.1, 1130.0, 1130.0],
+    }
+    .to_shape()
+    .unwrap()
+}
+
+/// Where a ray from `o` along the unit `d`, inside the cone of [`totem_t1`]'s middle piece
+/// (extended past its caps), leaves that cone: the larger root of the quadratic, in f64.
+fn totem_t1_cone_exit(o: [f64; 3], d: [f64; 3]) -> f64 {
+    let k = (1041.1 - 814.0) / (10165.0 - 7950.0);
+    let r0 = 814.0 + k * (o[2] - 7950.0);
+    let a = d[0] * d[0] + d[1] * d[1] - k * k * d[2] * d[2];
+    let b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0;
+    let c = o[0] * o[0] + o[1] * o[1] - r0 * r0;
+    (-b + (b * b - a * c).sqrt()) / a
+}
+
+/// Rays from inside the top piece of the polycone [`totem_t1`], moving outward and down
+/// across the face z = 10165 mm that its top two pieces share, at 7 to 17 degrees to it,
+/// to leave through the middle piece's cone: ray 8996 of the GDML oracle's `cmse.gdml`
+/// sample (Geant4: 916.7113927192937 mm) and 400 like it. The f32 cone met its cap from
+/// the ray's origin moved to the cone's centre, rounded at the frame's coordinates (z about
+/// 10^4 mm) where the cylinder met the same plane from the origin itself: over the cosine
+/// of 0.131 the two crossings of the face came 3.7e-3 mm apart, over the tolerance, and
+/// the plain f32 trace answered the face (93.8 mm) as an exit, unflagged. Both now meet
+/// shared caps from the unmoved origin, to the same bits: the plain f32 trace must answer
+/// right on every ray, flagged or not.
+fn polycone_face_at_a_shallow_angle(p: Precision) {
+    let f = placed(totem_t1(), Transform64::IDENTITY);
+    let mut rows = vec![row(
+        [249.32925415039062, -44.159305572509766, 10177.3037109375],
+        [
+            0.20207668687199148,
+            -0.9705437803022788,
+            -0.13118606305321087,
+        ],
+    )];
+    let mut rng = Rng(8996);
+    while rows.len() < 401 {
+        let (r0, phi) = (
+            200.0 + 700.0 * rng.uniform(),
+            std::f64::consts::TAU * rng.uniform(),
+        );
+        let z0 = 10165.0 + 10f64.powf(-0.3 + 1.5 * rng.uniform());
+        let cos = 0.12 + 0.18 * rng.uniform();
+        let heading = phi + (2.0 * rng.uniform() - 1.0) * 60f64.to_radians();
+        let across = (1.0 - cos * cos).sqrt();
+        let d = [across * heading.cos(), across * heading.sin(), -cos];
+        rows.push(row([r0 * phi.cos(), r0 * phi.sin(), z0], d));
+    }
+    let want: Vec<f64> = rows
+        .iter()
+        .map(|r| totem_t1_cone_exit(r.origin, r.direction))
+        .collect();
+    assert!((want[0] - 916.7113927192937).abs() < 1e-9, "{}", want[0]);
+    if p == Precision::F32 {
+        let cpu = CpuScene::<f32>::new(&f).unwrap();
+        for (i, r) in rows.iter().enumerate() {
+            let (_, tmin, tmax) = f32_ray(r);
+            let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+            let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
+            assert!(
+                (t - want[i]).abs() <= relative(r, want[i]),
+                "ray {i} {r:?}: plain f32 trace {t}, exact {}",
+                want[i]
+            );
+        }
+    }
+    let got = scanned(&f, &rows, p, false);
+    check(
+        "a polycone's shared face at a shallow angle",
+        &rows,
+        &got,
+        &want,
+        relative,
+    );
+}
+
+both_precisions!(
+    polycone_face_at_a_shallow_angle,
+    polycone_face_at_a_shallow_angle_f32,
+    polycone_face_at_a_shallow_angle_f64
 );
 
 /// Half side of the mesh cube of the mesh cases (mm).
