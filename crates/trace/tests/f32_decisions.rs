@@ -16,7 +16,7 @@ mod common;
 
 use common::{f32_ray, gpu_run, unit, Random, Rng};
 use hytrace_csg::Ray;
-use hytrace_csg::{box3, sphere, to_tree, torus, tube, Shape};
+use hytrace_csg::{box3, polyhedron, sphere, to_tree, torus, tube, Shape};
 use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
 use hytrace_trace::cpu::{CpuScene, STATUS_DROPPED_SPAN};
 use hytrace_trace::gpu::GpuContext;
@@ -439,55 +439,74 @@ both_precisions!(
 );
 
 /// A concrete block 2 x 2 x 1 m with a pit 0.4 x 0.4 m cut into its top face (a box minus a
-/// box that rises above it), and rays from inside the pit crossing its wall 1e-4 to 2e-3
-/// mm below the top face at about 30 degrees of elevation: each cuts the edge where the
-/// wall meets the top in a chord of 2e-4 to 4e-3 mm, under the f32 tolerance there (4.4e-3
-/// mm, so the tree merges the wall's and the top's crossings and drops the chord) and over
-/// the rounding of `t` there (1.5e-5 mm: a chord within it has both ends at one f32 `t`,
-/// as the faces two operands share do, and is not flagged). Exact (f64, and Geant4 with its 1e-9 mm)
-/// answer: the entry through the wall, 200 mm on. Without the trace flagging the dropped
-/// chord, the f32 scan misses the block. Half the rays come at an angle across the wall.
-fn chord_through_a_boolean_edge(p: Precision) {
+/// box that rises above it).
+fn block_with_pit() -> Foundry {
     let pit = box3(400.0, 400.0, 400.0)
         .unwrap()
         .translate(0.0, 0.0, 500.0);
-    let f = placed(
+    placed(
         box3(2000.0, 2000.0, 1000.0).unwrap() - pit,
         Transform64::IDENTITY,
-    );
-    let mut rng = Rng(23);
-    let (mut rows, mut want) = (Vec::new(), Vec::new());
+    )
+}
+
+/// `count` rays from inside the pit of [`block_with_pit`] crossing its wall `10^e` mm below
+/// the top face (`e` uniform in `exponents`) at about 30 degrees of elevation, half of them
+/// at an angle across the wall, each cutting the edge where the wall meets the top in a
+/// chord of about twice that. Exact (f64, and Geant4 with its 1e-9 mm) answer: the entry
+/// through the wall, 200 mm on.
+fn rays_across_the_pit_edge(seed: u64, count: usize, exponents: [f64; 2]) -> Vec<RayRow> {
+    let mut rng = Rng(seed);
     let elevation = 30f64.to_radians();
-    for i in 0..400 {
-        let below = 10f64.powf(-4.0 + 1.3 * rng.uniform());
-        let across = if i % 2 == 0 {
-            0.0
-        } else {
-            0.3 * (2.0 * rng.uniform() - 1.0)
-        };
-        let d = unit([elevation.cos(), across, elevation.sin()]);
-        // Where the ray meets the wall x = 200, `below` under the top face z = 500.
-        let wall = [200.0, 100.0 * (2.0 * rng.uniform() - 1.0), 500.0 - below];
-        let back = 200.0;
-        rows.push(row([0, 1, 2].map(|k| wall[k] - back * d[k]), d));
-        want.push(back);
+    (0..count)
+        .map(|i| {
+            let below = 10f64.powf(exponents[0] + (exponents[1] - exponents[0]) * rng.uniform());
+            let across = if i % 2 == 0 {
+                0.0
+            } else {
+                0.3 * (2.0 * rng.uniform() - 1.0)
+            };
+            let d = unit([elevation.cos(), across, elevation.sin()]);
+            // Where the ray meets the wall x = 200, `below` under the top face z = 500.
+            let wall = [200.0, 100.0 * (2.0 * rng.uniform() - 1.0), 500.0 - below];
+            row([0, 1, 2].map(|k| wall[k] - 200.0 * d[k]), d)
+        })
+        .collect()
+}
+
+/// How many of `rows` the plain f32 trace of `f` flags as passing a dropped span, checking
+/// that it answers every other one within the oracle's tolerance of `want`.
+fn flagged_or_right(f: &Foundry, rows: &[RayRow], want: &[f64]) -> usize {
+    let cpu = CpuScene::<f32>::new(f).unwrap();
+    let mut flagged = 0;
+    for (i, r) in rows.iter().enumerate() {
+        let (_, tmin, tmax) = f32_ray(r);
+        let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+        let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
+        let dropped = traced.flags & STATUS_DROPPED_SPAN != 0;
+        flagged += usize::from(dropped);
+        assert!(
+            dropped || (t - want[i]).abs() <= relative(r, want[i]),
+            "ray {i} {r:?}: f32 {t}, exact {}, not flagged",
+            want[i]
+        );
     }
+    eprintln!("{flagged} of {} rays flagged", rows.len());
+    flagged
+}
+
+/// Rays crossing the wall of [`block_with_pit`] 1e-4 to 2e-3 mm below the top face: chords
+/// of 2e-4 to 4e-3 mm, under the f32 tolerance there (4.4e-3 mm, so the tree merges the
+/// wall's and the top's crossings and drops the chord) and over the rounding of `t` there
+/// (1.5e-5 mm). Without the trace flagging the dropped chord, the f32 scan misses the
+/// block.
+fn chord_through_a_boolean_edge(p: Precision) {
+    let f = block_with_pit();
+    let rows = rays_across_the_pit_edge(23, 400, [-4.0, -2.7]);
+    let want = vec![200.0; rows.len()];
     if p == Precision::F32 {
         // Every ray the plain f32 trace gets wrong is flagged (the longer chords it keeps).
-        let cpu = CpuScene::<f32>::new(&f).unwrap();
-        let mut flagged = 0;
-        for (i, r) in rows.iter().enumerate() {
-            let (_, tmin, tmax) = f32_ray(r);
-            let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
-            let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
-            let dropped = traced.flags & STATUS_DROPPED_SPAN != 0;
-            flagged += usize::from(dropped);
-            assert!(
-                dropped || (t - want[i]).abs() <= relative(r, want[i]),
-                "ray {i} {r:?}: f32 {t}, not flagged"
-            );
-        }
-        eprintln!("{flagged} of {} rays flagged", rows.len());
+        let flagged = flagged_or_right(&f, &rows, &want);
         assert!(flagged > rows.len() / 2, "{flagged} rays flagged");
     }
     let got = scanned(&f, &rows, p, true);
@@ -505,6 +524,59 @@ both_precisions!(
     chord_through_a_boolean_edge_f32,
     chord_through_a_boolean_edge_f64
 );
+
+/// Chords under one ulp of `t` through the edge of [`block_with_pit`]: rays crossing its
+/// wall 1e-7 to 3e-6 mm below the top face, 200 mm from their start (f32 spacing there:
+/// 1.5e-5 mm), so that both ends of most chords round to one f32 `t` (as the ends of a face
+/// two operands share do) or to the wrong order; f64 (tolerance 1.2e-8 mm here) keeps them
+/// all. The trace tells them apart by the surfaces' normals: the wall and the top meet at a
+/// right angle, shared faces are parallel. The plain f32 trace flags every ray it gets wrong and the scan
+/// answers the exact entry; rays across the face that two boxes of a union share, at the
+/// same parameters and angles, are never flagged. The GPU kernel gives the CPU's flags bit
+/// for bit.
+#[test]
+fn chords_under_one_ulp_are_traced_in_f64() {
+    let f = block_with_pit();
+    let rows = rays_across_the_pit_edge(29, 400, [-7.0, -5.5]);
+    let want = vec![200.0; rows.len()];
+    let flagged = flagged_or_right(&f, &rows, &want);
+    assert!(flagged > rows.len() / 2, "{flagged} rays flagged");
+    for p in [Precision::F32, Precision::F64] {
+        let got = scanned(&f, &rows, p, p == Precision::F32);
+        check("chords under one ulp of t", &rows, &got, &want, relative);
+    }
+    // The block as two convex halves split at x = 200 (the pit's wall extended), the same
+    // rays 100 mm lower: both halves meet the face they share at one parameter, to the bit,
+    // with parallel normals; crossing it changes nothing, the top is the exit, and no ray
+    // is flagged.
+    let half = |x0: f64, x1: f64| {
+        polyhedron(&[
+            [1.0, 0.0, 0.0, x1],
+            [-1.0, 0.0, 0.0, -x0],
+            [0.0, 1.0, 0.0, 1000.0],
+            [0.0, -1.0, 0.0, 1000.0],
+            [0.0, 0.0, 1.0, 500.0],
+            [0.0, 0.0, -1.0, 500.0],
+        ])
+        .unwrap()
+    };
+    let f = placed(
+        half(-1000.0, 200.0) + half(200.0, 1000.0),
+        Transform64::IDENTITY,
+    );
+    let rows: Vec<RayRow> = rows
+        .iter()
+        .map(|r| row([r.origin[0], r.origin[1], r.origin[2] - 100.0], r.direction))
+        .collect();
+    let block = [1000.0, 1000.0, 500.0];
+    let want: Vec<f64> = rows
+        .iter()
+        .map(|r| box_distance(block, r.origin, r.direction))
+        .collect();
+    assert_eq!(flagged_or_right(&f, &rows, &want), 0);
+    let got = scanned(&f, &rows, Precision::F32, false);
+    check("rays across a shared face", &rows, &got, &want, relative);
+}
 
 /// The polycone `TotemT1` of CMS (`celeritas/cmse.gdml`): hollow pieces from z = 7499 mm
 /// to 10500 mm, a cone frustum of outer radius 814 mm at z = 7950 mm to 1041.1 mm at
