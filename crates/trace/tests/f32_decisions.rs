@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::{f32_ray, gpu_run, unit, Random, Rng};
+use common::{block_with_pit, f32_ray, gpu_run, rays_across_the_pit_edge, unit, Random, Rng};
 use hytrace_csg::Ray;
 use hytrace_csg::{box3, polyhedron, sphere, to_tree, torus, tube, Shape};
 use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
@@ -437,42 +437,6 @@ both_precisions!(
     horn_torus_from_afar_f32,
     horn_torus_from_afar_f64
 );
-
-/// A concrete block 2 x 2 x 1 m with a pit 0.4 x 0.4 m cut into its top face (a box minus a
-/// box that rises above it).
-fn block_with_pit() -> Foundry {
-    let pit = box3(400.0, 400.0, 400.0)
-        .unwrap()
-        .translate(0.0, 0.0, 500.0);
-    placed(
-        box3(2000.0, 2000.0, 1000.0).unwrap() - pit,
-        Transform64::IDENTITY,
-    )
-}
-
-/// `count` rays from inside the pit of [`block_with_pit`] crossing its wall `10^e` mm below
-/// the top face (`e` uniform in `exponents`) at about 30 degrees of elevation, half of them
-/// at an angle across the wall, each cutting the edge where the wall meets the top in a
-/// chord of about twice that. Exact (f64, and Geant4 with its 1e-9 mm) answer: the entry
-/// through the wall, 200 mm on.
-fn rays_across_the_pit_edge(seed: u64, count: usize, exponents: [f64; 2]) -> Vec<RayRow> {
-    let mut rng = Rng(seed);
-    let elevation = 30f64.to_radians();
-    (0..count)
-        .map(|i| {
-            let below = 10f64.powf(exponents[0] + (exponents[1] - exponents[0]) * rng.uniform());
-            let across = if i % 2 == 0 {
-                0.0
-            } else {
-                0.3 * (2.0 * rng.uniform() - 1.0)
-            };
-            let d = unit([elevation.cos(), across, elevation.sin()]);
-            // Where the ray meets the wall x = 200, `below` under the top face z = 500.
-            let wall = [200.0, 100.0 * (2.0 * rng.uniform() - 1.0), 500.0 - below];
-            row([0, 1, 2].map(|k| wall[k] - 200.0 * d[k]), d)
-        })
-        .collect()
-}
 
 /// How many of `rows` the plain f32 trace of `f` flags as passing a dropped span, checking
 /// that it answers every other one within the oracle's tolerance of `want`.
