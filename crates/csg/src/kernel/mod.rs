@@ -365,7 +365,7 @@ impl<T: Real> Leaf<T> {
         // The quadrics are solved from the ray's closest approach to the primitive's centre,
         // with coefficients of the primitive's size however far away the ray starts; a ray
         // starting beside the wall of a cylinder or tube is solved where it starts
-        // ([`origin_shift`]).
+        // ([`origin_shift`]). Z caps are met from the unmoved origin ([`primitive_spans`]).
         let d = local.direction;
         let shift = origin_shift(self.code, &self.params, local.origin, d);
         let planes = &planes[self.planes.clone()];
