@@ -13,27 +13,30 @@
 // #import csg/torus
 // #endif
 
-fn primitive_spans(code: u32, p: array<f32, 6>, plane_first: u32, plane_count: u32, o: vec3<f32>, d: vec3<f32>) -> Spans {
+// The spans of the ray start + t d, solved from start + shift d and given as parameters from
+// there (capped quadrics meet their z caps from start itself).
+fn primitive_spans(code: u32, p: array<f32, 6>, plane_first: u32, plane_count: u32, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
     // #if sphere
     if code == CSG_SPHERE { return sphere_spans(p, o, d); }
     // #endif
     // #if zsphere
-    if code == CSG_ZSPHERE { return zsphere_spans(p, o, d); }
+    if code == CSG_ZSPHERE { return zsphere_spans(p, start, d, shift); }
     // #endif
     // #if cylinder
-    if code == CSG_CYLINDER { return cylinder_spans(p, o, d); }
+    if code == CSG_CYLINDER { return cylinder_spans(p, start, d, shift); }
     // #endif
     // #if tube
-    if code == CSG_DISC { return tube_spans(p, o, d); }
+    if code == CSG_DISC { return tube_spans(p, start, d, shift); }
     // #endif
     // #if cone
-    if code == CSG_CONE { return cone_spans(p, o, d); }
+    if code == CSG_CONE { return cone_spans(p, start, d, shift); }
     // #endif
     // #if hyperboloid
-    if code == CSG_HYPERBOLOID { return hyperboloid_spans(p, o, d); }
+    if code == CSG_HYPERBOLOID { return hyperboloid_spans(p, start, d, shift); }
     // #endif
     // #if paraboloid
-    if code == CSG_PARABOLOID { return paraboloid_spans(p, o, d); }
+    if code == CSG_PARABOLOID { return paraboloid_spans(p, start, d, shift); }
     // #endif
     // #if torus
     if code == CSG_TORUS { return torus_spans(p, o, d); }

@@ -93,9 +93,14 @@ fn ray_at(o: vec3<f32>, d: vec3<f32>, t: f32) -> vec3<f32> {
     return vec3<f32>(o.x + d.x * t, o.y + d.y * t, o.z + d.z * t);
 }
 
-// The span between the planes z = lo and z = hi.
-fn z_slab(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> MaybeSpan {
-    return slab_span(o.z, d.z, lo, hi, vec3<f32>(0.0, 0.0, 1.0));
+// The span between the planes z = lo and z = hi of the ray o + t d, in parameters from
+// o + shift d: the caps are met from the unmoved origin, so that leaves sharing a z plane
+// meet it at the same parameter (twin of the CPU's z_slab).
+fn z_slab(o: vec3<f32>, d: vec3<f32>, shift: f32, lo: f32, hi: f32) -> MaybeSpan {
+    var s = slab_span(o.z, d.z, lo, hi, vec3<f32>(0.0, 0.0, 1.0));
+    s.span.t0 = s.span.t0 - shift;
+    s.span.t1 = s.span.t1 - shift;
+    return s;
 }
 
 // Signed distance of a capped solid of revolution from its radial distance dr (negative
@@ -150,8 +155,9 @@ fn sphere_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 }
 
 // Z-cut sphere [cx, cy, cz, r], [z1, z2] relative to the centre.
-fn zsphere_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
-    let slab = z_slab(o, d, p[2] + p[4], p[2] + p[5]);
+fn zsphere_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
+    let slab = z_slab(start, d, shift, p[2] + p[4], p[2] + p[5]);
     return spans_clip_opt(sphere_spans(p, o, d), slab);
 }
 
@@ -161,8 +167,9 @@ fn zsphere_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 }
 
 // Cylinder [cx, cy, -, r], [z1, z2].
-fn cylinder_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
-    return spans_clip_opt(cylinder_wall(o, d, p[0], p[1], p[3]), z_slab(o, d, p[4], p[5]));
+fn cylinder_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
+    return spans_clip_opt(cylinder_wall(o, d, p[0], p[1], p[3]), z_slab(start, d, shift, p[4], p[5]));
 }
 
 fn cylinder_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
@@ -171,12 +178,13 @@ fn cylinder_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 }
 
 // Tube [cx, cy, rin, r], [z1, z2]; rin = 0 is a cylinder.
-fn tube_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+fn tube_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
     var walls = cylinder_wall(o, d, p[0], p[1], p[3]);
     if p[2] > 0.0 {
         walls = spans_subtract(walls, cylinder_wall(o, d, p[0], p[1], p[2]));
     }
-    return spans_clip_opt(walls, z_slab(o, d, p[4], p[5]));
+    return spans_clip_opt(walls, z_slab(start, d, shift, p[4], p[5]));
 }
 
 fn tube_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
@@ -185,7 +193,8 @@ fn tube_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 }
 
 // Cone frustum [r1, z1, r2, z2]: radius r1 at z1, r2 at z2.
-fn cone_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+fn cone_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
     let r1 = p[0];
     let z1 = p[1];
     let k = (p[2] - r1) / (p[3] - z1);
@@ -207,7 +216,7 @@ fn cone_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
             s.items[i].n1 = vec3<f32>(q.x, q.y, -k * (r1 + k * (q.z - z1)));
         }
     }
-    return spans_clip_opt(s, z_slab(o, d, z1, p[3]));
+    return spans_clip_opt(s, z_slab(start, d, shift, z1, p[3]));
 }
 
 fn cone_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
@@ -221,7 +230,8 @@ fn cone_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
 }
 
 // One-sheet hyperboloid [r0, tan(stereo), z1, z2]: x^2 + y^2 = r0^2 + tan^2 z^2.
-fn hyperboloid_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+fn hyperboloid_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
     let r0 = p[0];
     let s2 = p[1] * p[1];
     let a = d.x * d.x + d.y * d.y - s2 * d.z * d.z;
@@ -240,7 +250,7 @@ fn hyperboloid_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
             s.items[i].n1 = vec3<f32>(q.x, q.y, -s2 * q.z);
         }
     }
-    return spans_clip_opt(s, z_slab(o, d, p[2], p[3]));
+    return spans_clip_opt(s, z_slab(start, d, shift, p[2], p[3]));
 }
 
 fn hyperboloid_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
@@ -264,7 +274,8 @@ fn paraboloid_coefficients(p: array<f32, 6>) -> vec2<f32> {
 }
 
 // Paraboloid [rlo, rhi, dz], capped at z = -dz and +dz.
-fn paraboloid_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+fn paraboloid_spans(p: array<f32, 6>, start: vec3<f32>, d: vec3<f32>, shift: f32) -> Spans {
+    let o = start + d * shift;
     let k = paraboloid_coefficients(p);
     let k1 = k.x;
     let a = d.x * d.x + d.y * d.y;
@@ -283,7 +294,7 @@ fn paraboloid_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
             s.items[i].n1 = vec3<f32>(q.x, q.y, -0.5 * k1);
         }
     }
-    return spans_clip_opt(s, z_slab(o, d, -p[2], p[2]));
+    return spans_clip_opt(s, z_slab(start, d, shift, -p[2], p[2]));
 }
 
 fn paraboloid_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {

@@ -121,7 +121,7 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
         ld = frame_linear(f, d);
     }
     let shift = csg_origin_shift(n.code & ~COMPLEMENT_BIT, csg_node_params(n), lo, ld);
-    let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo + ld * shift, ld);
+    let spans = primitive_spans(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, lo, ld, shift);
     // Short spans of curved primitives and of leaves sharing faces are touches; a planar
     // leaf alone skips spans within a few ulps of the solid's size of empty only.
     var touch = tol;
@@ -262,9 +262,11 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
             break;
         }
         let after = csg_list_inside(n.code, count + entries - exits, all);
-        // Entries and exits merged at different points with the result unchanged: a chord
-        // or a gap between members may lie between them (list_step's, noted).
-        if entries > 0u && exits > 0u && last != best && before == after {
+        // Entries and exits merged with the result unchanged, at different points or where
+        // surfaces meet at an angle: a chord or a gap between members may lie between them
+        // (list_step's, noted).
+        let apart = last != best || csg_meet_at_an_angle(entry_normal, exit_normal);
+        if entries > 0u && exits > 0u && apart && before == after {
             dropped_span = min(dropped_span, best);
         }
         if before != after {
@@ -274,6 +276,13 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
         tau = best;
     }
     return result;
+}
+
+// Twin of prim_tree's meet_at_an_angle: surfaces crossed at one point with normals a and b
+// meet there at an angle (sine over 1e-3).
+fn csg_meet_at_an_angle(a: vec3<f32>, b: vec3<f32>) -> bool {
+    let c = v3_cross(a, b);
+    return v3_dot(c, c) > 1e-6 * v3_dot(a, a) * v3_dot(b, b);
 }
 
 fn csg_operator_inside(code: u32, a: bool, b: bool) -> bool {
@@ -309,12 +318,21 @@ fn csg_decide(code: u32, a: Step, b: Step, scale: f32) -> CsgDecision {
     let b_after = b.inside_before != cross_b;
     if csg_operator_inside(code, a_after, b_after) == before {
         // A chord through an edge where the children meet (or a gap between them) dropped
-        // (decide's sliver): noted in `dropped_span`.
-        var between = csg_operator_inside(code, a.inside_before, b_after);
-        if a.t < b.t {
-            between = csg_operator_inside(code, a_after, b.inside_before);
+        // (decide's sliver): noted in `dropped_span`; where their surfaces meet at an
+        // angle, in either order.
+        let a_first = csg_operator_inside(code, a_after, b.inside_before) != before;
+        let b_first = csg_operator_inside(code, a.inside_before, b_after) != before;
+        var sliver = false;
+        if cross_a && cross_b {
+            if csg_meet_at_an_angle(a.normal, b.normal) {
+                sliver = a_first || b_first;
+            } else if a.t < b.t {
+                sliver = a_first;
+            } else {
+                sliver = a.t > b.t && b_first;
+            }
         }
-        if cross_a && cross_b && between != before && a.t != b.t {
+        if sliver {
             dropped_span = min(dropped_span, t);
         }
         return CsgDecision(false, step_miss(false), cross_a, cross_b);

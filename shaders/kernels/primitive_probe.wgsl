@@ -32,7 +32,7 @@ fn probe_primitives(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_
     let item = probe_items[i];
     let p = array<f32, 6>(item.p0.x, item.p0.y, item.p0.z, item.p0.w, item.p1.x, item.p1.y);
     let o = item.origin.xyz;
-    let spans = primitive_spans(item.code, p, item.plane_first, item.plane_count, o, item.direction.xyz);
+    let spans = primitive_spans(item.code, p, item.plane_first, item.plane_count, o, item.direction.xyz, 0.0);
     let sdf = primitive_sdf(item.code, p, item.plane_first, item.plane_count, o);
     let base = i * PROBE_STRIDE;
     probe_out[base] = vec4<f32>(bitcast<f32>(spans.len), sdf, 0.0, 0.0);

@@ -245,6 +245,15 @@ enum Decision<T> {
     Advance(bool, bool, T),
 }
 
+/// Whether two surfaces crossed at one point, with normals `a` and `b` (not normalized),
+/// meet there at an angle: the sine of the angle between them over 1e-3. Faces that
+/// operands share, placed by transforms rounded in their own frames, are parallel to a few
+/// ulps.
+fn meet_at_an_angle<T: Real>(a: V3<T>, b: V3<T>) -> bool {
+    let sine2 = T::from_f64(1e-6);
+    a.cross(b).length_squared() > sine2 * a.length_squared() * b.length_squared()
+}
+
 /// The state table of a binary operator: combines the children's next crossings.
 fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decision<T> {
     let t = a.t.min(b.t);
@@ -261,14 +270,22 @@ fn decide<T: Real>(code: TypeCode, a: &Step<T>, b: &Step<T>, scale: T) -> Decisi
     let a_after = a.inside_before != cross_a;
     let b_after = b.inside_before != cross_b;
     if operator_inside(code, a_after, b_after) == before {
-        // Both children crossing within the tolerance at different points, the result
-        // between their crossings other than before and after: a chord through an edge
-        // where they meet (or a gap between them) is dropped.
-        let between = match a.t < b.t {
-            true => operator_inside(code, a_after, b.inside_before),
-            false => operator_inside(code, a.inside_before, b_after),
+        // Both children crossing within the tolerance, the result between their crossings
+        // other than before and after: a chord through an edge where they meet (or a gap
+        // between them) is dropped. Where their surfaces meet at an angle, the chord may be
+        // shorter than the rounding of `t`, its ends at one parameter or in either order:
+        // either may lie between. Faces both share (parallel normals) are ordered by `t`.
+        let a_first = operator_inside(code, a_after, b.inside_before) != before;
+        let b_first = operator_inside(code, a.inside_before, b_after) != before;
+        let sliver = cross_a && cross_b && {
+            if meet_at_an_angle(a.normal, b.normal) {
+                a_first || b_first
+            } else if a.t < b.t {
+                a_first
+            } else {
+                a.t > b.t && b_first
+            }
         };
-        let sliver = cross_a && cross_b && between != before && a.t != b.t;
         let dropped = if sliver { t } else { T::INFINITY };
         return Decision::Advance(cross_a, cross_b, dropped);
     }
@@ -552,9 +569,11 @@ impl<T: Real> PrimTree<T> {
                 };
             }
             let after = count + entries - exits;
-            // Entries and exits merged at different points with the result unchanged: a
-            // chord or a gap between members may lie between them (decide's sliver).
-            if entries > 0 && exits > 0 && last != best && inside(count) == inside(after) {
+            // Entries and exits merged with the result unchanged: a chord or a gap between
+            // members may lie between them (decide's sliver), at one parameter where the
+            // surfaces meet at an angle.
+            let apart = last != best || meet_at_an_angle(entry_normal, exit_normal);
+            if entries > 0 && exits > 0 && apart && inside(count) == inside(after) {
                 dropped = dropped.min(best);
             }
             if inside(count) != inside(after) {

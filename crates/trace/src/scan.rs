@@ -242,30 +242,6 @@ impl ScanResult {
 /// Number of columns of the ids array.
 pub const ID_COLUMNS: usize = 3;
 
-/// Traces every ray with `trace` (a tracer's `trace`: ray, tmin, tmax).
-#[cfg(feature = "embree")]
-fn trace_all<T: Real>(
-    f: &Foundry,
-    rays: &[RayRow],
-    trace: impl Fn(&Ray<f64>, T, T) -> crate::Result<Option<Hit<T>>> + Sync,
-) -> crate::Result<ScanResult> {
-    Ok(result_from(f, &answers(rays, trace)?))
-}
-
-/// Every ray's answer from `trace` (a tracer's `trace`: ray, tmin, tmax).
-#[cfg(feature = "embree")]
-fn answers<T: Real>(
-    rays: &[RayRow],
-    trace: impl Fn(&Ray<f64>, T, T) -> crate::Result<Option<Hit<T>>> + Sync,
-) -> crate::Result<Vec<Answer>> {
-    rays.par_iter()
-        .map(|r| {
-            let (ray, tmin, tmax) = query_of(r);
-            Ok(answer_of(trace(&ray, tmin, tmax)?))
-        })
-        .collect()
-}
-
 /// Every ray's answer from the CPU tracer and its trace's flags
 /// ([`CpuScene::trace_batch_flagged`]: what the f32 fallback needs).
 pub(crate) fn cpu_answers_flagged<T: Real>(
@@ -1018,7 +994,10 @@ fn add_times(total: &mut GpuTimes, more: &GpuTimes) {
     total.redone_on_cpu += more.redone_on_cpu;
 }
 
-/// The Embree backend's scan: build times include preparing the CPU scene it borrows.
+/// The Embree backend's scan: build times include preparing the CPU scene it borrows. As
+/// the default scan, the rays whose f32 answers its trace flags
+/// ([`crate::embree::EmbreeScene::trace_flagged`]) or the answers show doubtful are traced
+/// again in f64 ([`redo_flagged_in_f64`]).
 #[cfg(feature = "embree")]
 fn embree_scan(f: &Foundry, rays: &[RayRow]) -> crate::Result<(ScanResult, ScanTimes)> {
     let t0 = Instant::now();
@@ -1027,20 +1006,29 @@ fn embree_scan(f: &Foundry, rays: &[RayRow]) -> crate::Result<(ScanResult, ScanT
     let build_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     // Embree takes rays in f32.
-    let result = trace_all(f, rays, |r, tmin, tmax| {
-        scene.trace(
-            &Ray::from_f64(r.origin.to_f64(), r.direction.to_f64()),
-            tmin,
-            tmax,
-        )
-    })?;
-    let trace_s = t1.elapsed().as_secs_f64();
+    let traced = rays
+        .par_iter()
+        .map(|r| {
+            let (ray, tmin, tmax) = query_of::<f32>(r);
+            let ray = Ray::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
+            let t = scene.trace_flagged(&ray, tmin, tmax)?;
+            Ok((answer_of(t.hit), t.flags))
+        })
+        .collect::<crate::Result<Vec<_>>>()?;
+    let (mut answers, flags): (Vec<Answer>, Vec<u32>) = traced.into_iter().unzip();
+    let t2 = Instant::now();
+    let flagged = flags.par_iter().filter(|&&f| f != 0).count();
+    let redone_in_f64 = redo_flagged_in_f64(f, &cpu, rays, &mut answers, &flags)?;
+    let fallback_s = t2.elapsed().as_secs_f64();
     let times = ScanTimes {
         build_s,
-        trace_s,
+        trace_s: t1.elapsed().as_secs_f64(),
+        redone_in_f64,
+        fallback_s,
+        flagged,
         ..Default::default()
     };
-    Ok((result, times))
+    Ok((result_from(f, &answers), times))
 }
 
 #[cfg(not(feature = "embree"))]

@@ -1,6 +1,7 @@
 //! The Embree backend (`--features embree`): the FFI's struct layouts match Embree 3.13's
 //! headers, Embree and the CPU tracer agree ray by ray on CSG, mesh and hierarchical
-//! (GDML) scenes, and `hytrace scan --backend embree` writes what the CPU backend writes.
+//! (GDML) scenes, `hytrace scan --backend embree` writes what the CPU backend writes, and
+//! its scans trace the rays they flag again in f64.
 
 /// Without the feature, asking for Embree is a clear error.
 #[cfg(not(feature = "embree"))]
@@ -30,7 +31,10 @@ mod common;
 
 #[cfg(feature = "embree")]
 mod with_embree {
-    use super::common::{check, f32_ray, mesh_obj, mesh_scene_rays, rays_for};
+    use super::common::{
+        block_with_pit, check, f32_ray, mesh_obj, mesh_scene_rays, rays_across_the_pit_edge,
+        rays_for, Random, Rng,
+    };
     use std::mem::{align_of, offset_of, size_of};
     use std::path::{Path, PathBuf};
     use std::process::{Command, Output};
@@ -42,7 +46,7 @@ mod with_embree {
     use hytrace_trace::cpu::media::SceneMedia;
     use hytrace_trace::cpu::{CpuScene, Hit};
     use hytrace_trace::embree::{ffi, EmbreeScene};
-    use hytrace_trace::scan::RayRow;
+    use hytrace_trace::scan::{scan_with, Backend, Precision, RayRow};
     use hytrace_trace::scene::{default_scene, load_scene, obj_to_foundry};
     use hytrace_volume::{Estimator, TransmittanceParams};
 
@@ -505,5 +509,85 @@ mod with_embree {
             }
         }
         assert!(total > 0 && same * 1000 >= 999 * total, "{same} of {total}");
+    }
+
+    /// The f32 fallback on Embree (issue 30): an Embree scan traces again in f64 the rays
+    /// its trace flags, as the default scan does. On [`block_with_pit`]: chords through the
+    /// edge of its pit (2e-4 to 4e-3 mm, and under one ulp of `t`: `f32_decisions`' rays),
+    /// which the CSG user geometry drops as touches, and rays starting 1e-6 to 1e-3 mm
+    /// below its top face going out, or above it coming in (their starts round onto the
+    /// face in f32). Exact answers, from the geometry: the pit's wall 200 mm on, the face
+    /// at `offset / sine of elevation`. Embree's plain f32 trace is wrong on most of them;
+    /// its scan is right on every one, having flagged them (`flagged`, `redone_in_f64` and
+    /// `fallback_s` of `--stats`).
+    #[test]
+    fn embree_scans_trace_flagged_rays_again_in_f64() {
+        let f = block_with_pit();
+        let mut rows = rays_across_the_pit_edge(23, 400, [-4.0, -2.7]);
+        rows.extend(rays_across_the_pit_edge(29, 400, [-7.0, -5.5]));
+        let mut want = vec![200.0; rows.len()];
+        let mut rng = Rng(31);
+        for i in 0..400 {
+            // Away from the pit, at 20 to 70 degrees to the face: out from below, in from
+            // above.
+            let below = i % 2 == 0;
+            let offset = 10f64.powf(-6.0 + 3.0 * rng.uniform());
+            let elevation = (20.0 + 50.0 * rng.uniform()).to_radians();
+            let phi = std::f64::consts::TAU * rng.uniform();
+            let up = if below { 1.0 } else { -1.0 };
+            let d = [
+                elevation.cos() * phi.cos(),
+                elevation.cos() * phi.sin(),
+                up * elevation.sin(),
+            ];
+            let z = 500.0 - up * offset;
+            rows.push(RayRow {
+                origin: [
+                    500.0 + 300.0 * rng.uniform(),
+                    600.0 * rng.uniform() - 300.0,
+                    z,
+                ],
+                direction: d,
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            });
+            want.push(offset / elevation.sin());
+        }
+        let tolerance = |r: &RayRow, t: f64| {
+            let o = r.origin.iter().map(|c| c * c).sum::<f64>().sqrt();
+            (2e-6 * (o + t)).max(1e-9)
+        };
+        let right = |got: f64, i: usize| (got - want[i]).abs() <= tolerance(&rows[i], want[i]);
+        let plain = embree_answers(&f, &rows);
+        let plain_wrong = (0..rows.len())
+            .filter(|&i| !right(plain[i].map_or(f64::INFINITY, |h| f64::from(h.t)), i))
+            .count();
+        eprintln!(
+            "plain Embree f32 trace: {plain_wrong} of {} rays wrong",
+            rows.len()
+        );
+        assert!(plain_wrong > rows.len() / 2, "{plain_wrong}");
+        let (got, times) = scan_with(&f, &rows, Precision::F32, Backend::Embree).unwrap();
+        eprintln!(
+            "Embree scan: {} flagged, {} traced again in f64, fallback {} s",
+            times.flagged, times.redone_in_f64, times.fallback_s
+        );
+        let wrong: Vec<String> = (0..rows.len())
+            .filter(|&i| !right(got.hits[i][3], i))
+            .map(|i| {
+                format!(
+                    "ray {i} {:?}: {}, exact {}",
+                    rows[i], got.hits[i][3], want[i]
+                )
+            })
+            .collect();
+        assert!(
+            wrong.is_empty(),
+            "{} wrong: {:?}",
+            wrong.len(),
+            &wrong[..wrong.len().min(5)]
+        );
+        assert!(times.flagged >= plain_wrong && times.redone_in_f64 >= plain_wrong);
+        assert!(times.fallback_s > 0.0);
     }
 }

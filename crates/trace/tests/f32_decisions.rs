@@ -4,7 +4,8 @@
 //! on a face and running along it, grazing crossings of a large sphere, thin chords past
 //! the edge of a long box, rays from inside a long thin tube (an optical fibre), and a
 //! thin horn torus seen from metres away, and chords shorter than the tolerance through the
-//! edge where two operands of a boolean solid meet. An f32 scan answers these as f64 does:
+//! edge where two operands of a boolean solid meet, and a polycone's internal face crossed
+//! at a shallow angle (a ray of CMS's `cmse.gdml`). An f32 scan answers these as f64 does:
 //! it traces again in f64 the rays its trace flags (starts within its tolerance of a
 //! surface, short spans dropped as touches), that cross at grazing incidence, or whose
 //! crossing of a torus lies off the f64 surface (`scan::redo_flagged_in_f64`); each f32
@@ -13,9 +14,9 @@
 
 mod common;
 
-use common::{f32_ray, gpu_run, unit, Random, Rng};
+use common::{block_with_pit, f32_ray, gpu_run, rays_across_the_pit_edge, unit, Random, Rng};
 use hytrace_csg::Ray;
-use hytrace_csg::{box3, sphere, to_tree, torus, tube, Shape};
+use hytrace_csg::{box3, polyhedron, sphere, to_tree, torus, tube, Shape};
 use hytrace_foundry::{Foundry, Transform64, TypeCode, UNSET};
 use hytrace_trace::cpu::{CpuScene, STATUS_DROPPED_SPAN};
 use hytrace_trace::gpu::GpuContext;
@@ -437,56 +438,39 @@ both_precisions!(
     horn_torus_from_afar_f64
 );
 
-/// A concrete block 2 x 2 x 1 m with a pit 0.4 x 0.4 m cut into its top face (a box minus a
-/// box that rises above it), and rays from inside the pit crossing its wall 1e-4 to 2e-3
-/// mm below the top face at about 30 degrees of elevation: each cuts the edge where the
-/// wall meets the top in a chord of 2e-4 to 4e-3 mm, under the f32 tolerance there (4.4e-3
-/// mm, so the tree merges the wall's and the top's crossings and drops the chord) and over
-/// the rounding of `t` there (1.5e-5 mm: a chord within it has both ends at one f32 `t`,
-/// as the faces two operands share do, and is not flagged). Exact (f64, and Geant4 with its 1e-9 mm)
-/// answer: the entry through the wall, 200 mm on. Without the trace flagging the dropped
-/// chord, the f32 scan misses the block. Half the rays come at an angle across the wall.
-fn chord_through_a_boolean_edge(p: Precision) {
-    let pit = box3(400.0, 400.0, 400.0)
-        .unwrap()
-        .translate(0.0, 0.0, 500.0);
-    let f = placed(
-        box3(2000.0, 2000.0, 1000.0).unwrap() - pit,
-        Transform64::IDENTITY,
-    );
-    let mut rng = Rng(23);
-    let (mut rows, mut want) = (Vec::new(), Vec::new());
-    let elevation = 30f64.to_radians();
-    for i in 0..400 {
-        let below = 10f64.powf(-4.0 + 1.3 * rng.uniform());
-        let across = if i % 2 == 0 {
-            0.0
-        } else {
-            0.3 * (2.0 * rng.uniform() - 1.0)
-        };
-        let d = unit([elevation.cos(), across, elevation.sin()]);
-        // Where the ray meets the wall x = 200, `below` under the top face z = 500.
-        let wall = [200.0, 100.0 * (2.0 * rng.uniform() - 1.0), 500.0 - below];
-        let back = 200.0;
-        rows.push(row([0, 1, 2].map(|k| wall[k] - back * d[k]), d));
-        want.push(back);
+/// How many of `rows` the plain f32 trace of `f` flags as passing a dropped span, checking
+/// that it answers every other one within the oracle's tolerance of `want`.
+fn flagged_or_right(f: &Foundry, rows: &[RayRow], want: &[f64]) -> usize {
+    let cpu = CpuScene::<f32>::new(f).unwrap();
+    let mut flagged = 0;
+    for (i, r) in rows.iter().enumerate() {
+        let (_, tmin, tmax) = f32_ray(r);
+        let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+        let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
+        let dropped = traced.flags & STATUS_DROPPED_SPAN != 0;
+        flagged += usize::from(dropped);
+        assert!(
+            dropped || (t - want[i]).abs() <= relative(r, want[i]),
+            "ray {i} {r:?}: f32 {t}, exact {}, not flagged",
+            want[i]
+        );
     }
+    eprintln!("{flagged} of {} rays flagged", rows.len());
+    flagged
+}
+
+/// Rays crossing the wall of [`block_with_pit`] 1e-4 to 2e-3 mm below the top face: chords
+/// of 2e-4 to 4e-3 mm, under the f32 tolerance there (4.4e-3 mm, so the tree merges the
+/// wall's and the top's crossings and drops the chord) and over the rounding of `t` there
+/// (1.5e-5 mm). Without the trace flagging the dropped chord, the f32 scan misses the
+/// block.
+fn chord_through_a_boolean_edge(p: Precision) {
+    let f = block_with_pit();
+    let rows = rays_across_the_pit_edge(23, 400, [-4.0, -2.7]);
+    let want = vec![200.0; rows.len()];
     if p == Precision::F32 {
         // Every ray the plain f32 trace gets wrong is flagged (the longer chords it keeps).
-        let cpu = CpuScene::<f32>::new(&f).unwrap();
-        let mut flagged = 0;
-        for (i, r) in rows.iter().enumerate() {
-            let (_, tmin, tmax) = f32_ray(r);
-            let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
-            let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
-            let dropped = traced.flags & STATUS_DROPPED_SPAN != 0;
-            flagged += usize::from(dropped);
-            assert!(
-                dropped || (t - want[i]).abs() <= relative(r, want[i]),
-                "ray {i} {r:?}: f32 {t}, not flagged"
-            );
-        }
-        eprintln!("{flagged} of {} rays flagged", rows.len());
+        let flagged = flagged_or_right(&f, &rows, &want);
         assert!(flagged > rows.len() / 2, "{flagged} rays flagged");
     }
     let got = scanned(&f, &rows, p, true);
@@ -503,6 +487,154 @@ both_precisions!(
     chord_through_a_boolean_edge,
     chord_through_a_boolean_edge_f32,
     chord_through_a_boolean_edge_f64
+);
+
+/// Chords under one ulp of `t` through the edge of [`block_with_pit`]: rays crossing its
+/// wall 1e-7 to 3e-6 mm below the top face, 200 mm from their start (f32 spacing there:
+/// 1.5e-5 mm), so that both ends of most chords round to one f32 `t` (as the ends of a face
+/// two operands share do) or to the wrong order; f64 (tolerance 1.2e-8 mm here) keeps them
+/// all. The trace tells them apart by the surfaces' normals: the wall and the top meet at a
+/// right angle, shared faces are parallel. The plain f32 trace flags every ray it gets wrong and the scan
+/// answers the exact entry; rays across the face that two boxes of a union share, at the
+/// same parameters and angles, are never flagged. The GPU kernel gives the CPU's flags bit
+/// for bit.
+#[test]
+fn chords_under_one_ulp_are_traced_in_f64() {
+    let f = block_with_pit();
+    let rows = rays_across_the_pit_edge(29, 400, [-7.0, -5.5]);
+    let want = vec![200.0; rows.len()];
+    let flagged = flagged_or_right(&f, &rows, &want);
+    assert!(flagged > rows.len() / 2, "{flagged} rays flagged");
+    for p in [Precision::F32, Precision::F64] {
+        let got = scanned(&f, &rows, p, p == Precision::F32);
+        check("chords under one ulp of t", &rows, &got, &want, relative);
+    }
+    // The block as two convex halves split at x = 200 (the pit's wall extended), the same
+    // rays 100 mm lower: both halves meet the face they share at one parameter, to the bit,
+    // with parallel normals; crossing it changes nothing, the top is the exit, and no ray
+    // is flagged.
+    let half = |x0: f64, x1: f64| {
+        polyhedron(&[
+            [1.0, 0.0, 0.0, x1],
+            [-1.0, 0.0, 0.0, -x0],
+            [0.0, 1.0, 0.0, 1000.0],
+            [0.0, -1.0, 0.0, 1000.0],
+            [0.0, 0.0, 1.0, 500.0],
+            [0.0, 0.0, -1.0, 500.0],
+        ])
+        .unwrap()
+    };
+    let f = placed(
+        half(-1000.0, 200.0) + half(200.0, 1000.0),
+        Transform64::IDENTITY,
+    );
+    let rows: Vec<RayRow> = rows
+        .iter()
+        .map(|r| row([r.origin[0], r.origin[1], r.origin[2] - 100.0], r.direction))
+        .collect();
+    let block = [1000.0, 1000.0, 500.0];
+    let want: Vec<f64> = rows
+        .iter()
+        .map(|r| box_distance(block, r.origin, r.direction))
+        .collect();
+    assert_eq!(flagged_or_right(&f, &rows, &want), 0);
+    let got = scanned(&f, &rows, Precision::F32, false);
+    check("rays across a shared face", &rows, &got, &want, relative);
+}
+
+/// The polycone `TotemT1` of CMS (`celeritas/cmse.gdml`): hollow pieces from z = 7499 mm
+/// to 10500 mm, a cone frustum of outer radius 814 mm at z = 7950 mm to 1041.1 mm at
+/// z = 10165 mm under a cylinder of radius 1130 mm from there; the plane z = 10165 mm is a
+/// face the two pieces share, inside the solid.
+fn totem_t1() -> Shape {
+    use hytrace_csg::geant4::{G4Mapping, G4Solid};
+    G4Solid::Polycone {
+        sphi: 0.0,
+        dphi: std::f64::consts::TAU,
+        z: vec![7499.0, 7950.0, 7950.0, 10165.0, 10165.0, 10500.0],
+        rmin: vec![117.85, 121.5, 122.0, 154.1, 154.1, 159.0],
+        rmax: vec![768.0, 814.0, 814.0, 1041.1, 1130.0, 1130.0],
+    }
+    .to_shape()
+    .unwrap()
+}
+
+/// Where a ray from `o` along the unit `d`, inside the cone of [`totem_t1`]'s middle piece
+/// (extended past its caps), leaves that cone: the larger root of the quadratic, in f64.
+fn totem_t1_cone_exit(o: [f64; 3], d: [f64; 3]) -> f64 {
+    let k = (1041.1 - 814.0) / (10165.0 - 7950.0);
+    let r0 = 814.0 + k * (o[2] - 7950.0);
+    let a = d[0] * d[0] + d[1] * d[1] - k * k * d[2] * d[2];
+    let b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0;
+    let c = o[0] * o[0] + o[1] * o[1] - r0 * r0;
+    (-b + (b * b - a * c).sqrt()) / a
+}
+
+/// Rays from inside the top piece of the polycone [`totem_t1`], moving outward and down
+/// across the face z = 10165 mm that its top two pieces share, at 7 to 17 degrees to it,
+/// to leave through the middle piece's cone: ray 8996 of the GDML oracle's `cmse.gdml`
+/// sample (Geant4: 916.7113927192937 mm) and 400 like it. The f32 cone met its cap from
+/// the ray's origin moved to the cone's centre, rounded at the frame's coordinates (z about
+/// 10^4 mm) where the cylinder met the same plane from the origin itself: over the cosine
+/// of 0.131 the two crossings of the face came 3.7e-3 mm apart, over the tolerance, and
+/// the plain f32 trace answered the face (93.8 mm) as an exit, unflagged. Both now meet
+/// shared caps from the unmoved origin, to the same bits: the plain f32 trace must answer
+/// right on every ray, flagged or not.
+fn polycone_face_at_a_shallow_angle(p: Precision) {
+    let f = placed(totem_t1(), Transform64::IDENTITY);
+    let mut rows = vec![row(
+        [249.32925415039062, -44.159305572509766, 10177.3037109375],
+        [
+            0.20207668687199148,
+            -0.9705437803022788,
+            -0.13118606305321087,
+        ],
+    )];
+    let mut rng = Rng(8996);
+    while rows.len() < 401 {
+        let (r0, phi) = (
+            200.0 + 700.0 * rng.uniform(),
+            std::f64::consts::TAU * rng.uniform(),
+        );
+        let z0 = 10165.0 + 10f64.powf(-0.3 + 1.5 * rng.uniform());
+        let cos = 0.12 + 0.18 * rng.uniform();
+        let heading = phi + (2.0 * rng.uniform() - 1.0) * 60f64.to_radians();
+        let across = (1.0 - cos * cos).sqrt();
+        let d = [across * heading.cos(), across * heading.sin(), -cos];
+        rows.push(row([r0 * phi.cos(), r0 * phi.sin(), z0], d));
+    }
+    let want: Vec<f64> = rows
+        .iter()
+        .map(|r| totem_t1_cone_exit(r.origin, r.direction))
+        .collect();
+    assert!((want[0] - 916.7113927192937).abs() < 1e-9, "{}", want[0]);
+    if p == Precision::F32 {
+        let cpu = CpuScene::<f32>::new(&f).unwrap();
+        for (i, r) in rows.iter().enumerate() {
+            let (_, tmin, tmax) = f32_ray(r);
+            let traced = cpu.trace_flagged(&Ray::from_f64(r.origin, r.direction), tmin, tmax);
+            let t = traced.hit.map_or(f64::INFINITY, |h| f64::from(h.t));
+            assert!(
+                (t - want[i]).abs() <= relative(r, want[i]),
+                "ray {i} {r:?}: plain f32 trace {t}, exact {}",
+                want[i]
+            );
+        }
+    }
+    let got = scanned(&f, &rows, p, false);
+    check(
+        "a polycone's shared face at a shallow angle",
+        &rows,
+        &got,
+        &want,
+        relative,
+    );
+}
+
+both_precisions!(
+    polycone_face_at_a_shallow_angle,
+    polycone_face_at_a_shallow_angle_f32,
+    polycone_face_at_a_shallow_angle_f64
 );
 
 /// Half side of the mesh cube of the mesh cases (mm).

@@ -610,7 +610,7 @@ fn gpu_primitive_kernels_match_cpu_f32() {
         let c = &cases[owner[i]];
         let o = V3::new(item.origin[0], item.origin[1], item.origin[2]);
         let d = V3::new(item.direction[0], item.direction[1], item.direction[2]);
-        let cpu = primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d);
+        let cpu = primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d, 0.0);
         let cpu_sdf = primitive_sdf::<f32>(c.code, &c.params, &planes[c.planes.clone()], o);
         let g = &gpu[i * STRIDE..(i + 1) * STRIDE];
         let len = g[0][0].to_bits() as usize;

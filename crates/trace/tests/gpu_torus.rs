@@ -300,7 +300,7 @@ fn gpu_run(ctx: &GpuContext, items: &[Item]) -> Vec<Got> {
 fn cpu_run(it: &Item) -> Got {
     let o = V3::new(it.o[0], it.o[1], it.o[2]);
     let d = V3::new(it.d[0], it.d[1], it.d[2]);
-    let spans = primitive_spans::<f32>(TypeCode::Torus, &it.p, &[], o, d);
+    let spans = primitive_spans::<f32>(TypeCode::Torus, &it.p, &[], o, d, 0.0);
     let n3 = |v: V3<f32>| [v.x, v.y, v.z];
     Got {
         spans: spans

@@ -188,8 +188,31 @@ pub fn centre<T: Real>(code: TypeCode, p: &[T; 6]) -> V3<T> {
     }
 }
 
-/// The spans of a ray (in the primitive's own frame) inside a primitive.
+/// The spans of the ray `o + t d` (in the primitive's own frame) inside a primitive, solved
+/// from `o + shift d` (see [`origin_shift`]) and given as parameters from there. The z caps
+/// of capped quadrics are met from `o` itself, so that leaves sharing a cap plane meet it
+/// at the same parameter whatever their moves.
 pub fn primitive_spans<T: Real>(
+    code: TypeCode,
+    p: &[T; 6],
+    planes: &[[T; 4]],
+    o: V3<T>,
+    d: V3<T>,
+    shift: T,
+) -> Spans<T> {
+    match code {
+        TypeCode::ZSphere => quadric::zsphere_spans(p, o, d, shift),
+        TypeCode::Cylinder => quadric::cylinder_spans(p, o, d, shift),
+        TypeCode::Disc => quadric::tube_spans(p, o, d, shift),
+        TypeCode::Cone => quadric::cone_spans(p, o, d, shift),
+        TypeCode::Hyperboloid => quadric::hyperboloid_spans(p, o, d, shift),
+        TypeCode::Paraboloid => quadric::paraboloid_spans(p, o, d, shift),
+        _ => moved_spans(code, p, planes, o.at(d, shift), d),
+    }
+}
+
+/// The spans of primitives without z caps, from the moved origin.
+fn moved_spans<T: Real>(
     code: TypeCode,
     p: &[T; 6],
     planes: &[[T; 4]],
@@ -198,12 +221,6 @@ pub fn primitive_spans<T: Real>(
 ) -> Spans<T> {
     match code {
         TypeCode::Sphere => quadric::sphere_spans(p, o, d),
-        TypeCode::ZSphere => quadric::zsphere_spans(p, o, d),
-        TypeCode::Cylinder => quadric::cylinder_spans(p, o, d),
-        TypeCode::Disc => quadric::tube_spans(p, o, d),
-        TypeCode::Cone => quadric::cone_spans(p, o, d),
-        TypeCode::Hyperboloid => quadric::hyperboloid_spans(p, o, d),
-        TypeCode::Paraboloid => quadric::paraboloid_spans(p, o, d),
         TypeCode::Torus => torus_prim::torus_spans(p, o, d),
         TypeCode::Box3 => planar::box_spans(p, o, d),
         TypeCode::ConvexPolyhedron => planar::polyhedron_spans(planes, o, d),
@@ -348,11 +365,11 @@ impl<T: Real> Leaf<T> {
         // The quadrics are solved from the ray's closest approach to the primitive's centre,
         // with coefficients of the primitive's size however far away the ray starts; a ray
         // starting beside the wall of a cylinder or tube is solved where it starts
-        // ([`origin_shift`]).
+        // ([`origin_shift`]). Z caps are met from the unmoved origin ([`primitive_spans`]).
         let d = local.direction;
         let shift = origin_shift(self.code, &self.params, local.origin, d);
-        let o = local.origin.at(d, shift);
-        let spans = primitive_spans(self.code, &self.params, &planes[self.planes.clone()], o, d);
+        let planes = &planes[self.planes.clone()];
+        let spans = primitive_spans(self.code, &self.params, planes, local.origin, d, shift);
         // A curved surface's near-double roots (a tangent ray) are uncertain by more than
         // their distance: such short spans are touches, and so are the slivers that the
         // rounded planes of faces that leaves share leave along a ray near those faces.

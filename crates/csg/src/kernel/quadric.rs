@@ -2,7 +2,10 @@
 //! sphere, cylinder, tube (annular cylinder), cone frustum, hyperboloid, paraboloid.
 //!
 //! Each primitive gives the spans of a ray inside it (see [`super::spans`]) and a signed
-//! distance. Quadrics are written `a t^2 + 2 b t + c` in the ray parameter.
+//! distance. Quadrics are written `a t^2 + 2 b t + c` in the ray parameter. The capped
+//! ones take the ray's origin in their frame and the move along the ray that
+//! [`super::origin_shift`] chose: their walls are solved from the moved origin, their z
+//! caps from the origin itself (see `z_slab`), both as parameters from the moved origin.
 
 use super::spans::{quadric_spans, slab_span, Span, Spans};
 use crate::real::{Real, V3};
@@ -11,9 +14,17 @@ fn z_axis<T: Real>() -> V3<T> {
     V3::new(T::ZERO, T::ZERO, T::ONE)
 }
 
-/// The span between the planes `z = lo` and `z = hi`.
-fn z_slab<T: Real>(o: V3<T>, d: V3<T>, lo: T, hi: T) -> Option<Span<T>> {
-    slab_span(o.z, d.z, lo, hi, z_axis())
+/// The span between the planes `z = lo` and `z = hi` of the ray `o + t d`, in parameters
+/// from `o + shift d`. The caps are met from the unmoved origin: every leaf of a tree in one
+/// frame then meets a z plane they share at the same parameter to the last bit (from a
+/// moved origin, the move's rounding, a few ulps of the frame's coordinates over the
+/// cosine, split a polycone's internal faces into gaps longer than the tolerance).
+fn z_slab<T: Real>(o: V3<T>, d: V3<T>, shift: T, lo: T, hi: T) -> Option<Span<T>> {
+    slab_span(o.z, d.z, lo, hi, z_axis()).map(|s| Span {
+        t0: s.t0 - shift,
+        t1: s.t1 - shift,
+        ..s
+    })
 }
 
 /// Signed distance of a capped solid of revolution from its radial distance `dr` (negative
@@ -46,8 +57,9 @@ pub fn sphere_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 }
 
 /// Z-cut sphere `[cx, cy, cz, r]`, `[z1, z2]` relative to the centre.
-pub fn zsphere_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
-    let slab = z_slab(o, d, p[2] + p[4], p[2] + p[5]);
+pub fn zsphere_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
+    let slab = z_slab(start, d, shift, p[2] + p[4], p[2] + p[5]);
     sphere_spans(p, o, d).clip_opt(slab)
 }
 
@@ -58,8 +70,9 @@ pub fn zsphere_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 }
 
 /// Cylinder `[cx, cy, -, r]`, `[z1, z2]`.
-pub fn cylinder_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
-    cylinder_wall(o, d, p[0], p[1], p[3]).clip_opt(z_slab(o, d, p[4], p[5]))
+pub fn cylinder_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
+    cylinder_wall(o, d, p[0], p[1], p[3]).clip_opt(z_slab(start, d, shift, p[4], p[5]))
 }
 
 /// Signed distance to a cylinder (exact).
@@ -69,14 +82,15 @@ pub fn cylinder_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 }
 
 /// Tube (annular cylinder) `[cx, cy, rin, r]`, `[z1, z2]`; `rin = 0` is a cylinder.
-pub fn tube_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+pub fn tube_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
     let outer = cylinder_wall(o, d, p[0], p[1], p[3]);
     let walls = if p[2] > T::ZERO {
         outer.subtract(&cylinder_wall(o, d, p[0], p[1], p[2]))
     } else {
         outer
     };
-    walls.clip_opt(z_slab(o, d, p[4], p[5]))
+    walls.clip_opt(z_slab(start, d, shift, p[4], p[5]))
 }
 
 /// Signed distance to a tube (exact).
@@ -86,7 +100,8 @@ pub fn tube_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 }
 
 /// Cone frustum `[r1, z1, r2, z2]`: radius `r1` at `z1`, `r2` at `z2`.
-pub fn cone_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+pub fn cone_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
     let [r1, z1, r2, z2] = [p[0], p[1], p[2], p[3]];
     let k = (r2 - r1) / (z2 - z1);
     let r_at = |z: T| r1 + k * (z - z1);
@@ -99,7 +114,7 @@ pub fn cone_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
         let q = o.at(d, t);
         V3::new(q.x, q.y, -k * r_at(q.z))
     });
-    wall.clip_opt(z_slab(o, d, z1, z2))
+    wall.clip_opt(z_slab(start, d, shift, z1, z2))
 }
 
 /// Signed distance bound of a cone frustum: the distance to the side line in the meridian
@@ -113,7 +128,8 @@ pub fn cone_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 }
 
 /// One-sheet hyperboloid `[r0, tan(stereo), z1, z2]`: `x^2 + y^2 = r0^2 + tan^2 z^2`.
-pub fn hyperboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+pub fn hyperboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
     let (r0, s2) = (p[0], p[1] * p[1]);
     let a = d.x * d.x + d.y * d.y - s2 * d.z * d.z;
     let b = o.x * d.x + o.y * d.y - s2 * o.z * d.z;
@@ -122,7 +138,7 @@ pub fn hyperboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
         let q = o.at(d, t);
         V3::new(q.x, q.y, -s2 * q.z)
     });
-    wall.clip_opt(z_slab(o, d, p[2], p[3]))
+    wall.clip_opt(z_slab(start, d, shift, p[2], p[3]))
 }
 
 /// Signed distance bound of a hyperboloid (first-order estimate; exact sign).
@@ -137,7 +153,8 @@ pub fn hyperboloid_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
 
 /// Paraboloid `[rlo, rhi, dz]`: `x^2 + y^2 = k1 z + k2` through radius `rlo` at `z = -dz`
 /// and `rhi` at `z = +dz`, capped there.
-pub fn paraboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+pub fn paraboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>, shift: T) -> Spans<T> {
+    let (start, o) = (o, o.at(d, shift));
     let (k1, k2) = paraboloid_coefficients(p);
     let a = d.x * d.x + d.y * d.y;
     let b = o.x * d.x + o.y * d.y - T::HALF * k1 * d.z;
@@ -146,7 +163,7 @@ pub fn paraboloid_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
         let q = o.at(d, t);
         V3::new(q.x, q.y, -T::HALF * k1)
     });
-    wall.clip_opt(z_slab(o, d, -p[2], p[2]))
+    wall.clip_opt(z_slab(start, d, shift, -p[2], p[2]))
 }
 
 fn paraboloid_coefficients<T: Real>(p: &[T; 6]) -> (T, T) {

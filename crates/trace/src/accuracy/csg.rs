@@ -85,8 +85,7 @@ fn leaf_crossing<T: Real>(leaf: &Leaf<T>, case: &Case, strategy: bool) -> Option
     } else {
         T::ZERO
     };
-    let o = local.origin.at(d, shift);
-    let spans = primitive_spans(leaf.code, &leaf.params, &[], o, d);
+    let spans = primitive_spans(leaf.code, &leaf.params, &[], local.origin, d, shift);
     let step = first_crossing(&spans, shift, d, T::ZERO, T::ZERO, T::ZERO);
     step.is_hit().then(|| step.t.to_f64())
 }

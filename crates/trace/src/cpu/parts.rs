@@ -5,7 +5,7 @@
 use hytrace_csg::kernel::Frame;
 use hytrace_csg::{PreparedPrim, Ray, Real, V3};
 
-use super::batch::Direct;
+use super::batch::Noting;
 #[cfg(feature = "embree")]
 use super::solid::Cluster;
 use super::{CpuScene, Hit, Layout, WorldPoint, WorldRay};
@@ -65,20 +65,37 @@ impl<T: Real> CpuScene<T> {
     }
 
     /// Where the ray leaves instance `instance`, the navigator's exit (normal in the
-    /// instance's frame, not normalized).
+    /// instance's frame, not normalized), and the least world parameter at which its
+    /// search decided within rounding (`+inf`: nowhere; see [`CpuScene::trace_flagged`]).
     pub(crate) fn exit_from(
         &self,
         instance: u32,
         ray: &Ray<f64>,
         tmin: T,
         tmax: T,
-    ) -> Option<Hit<T>> {
-        self.exit(
+    ) -> (Option<Hit<T>>, T) {
+        let mut noting = Noting::default();
+        let exit = self.exit(
             instance as usize,
             &WorldRay::new(ray),
             tmin,
             tmax,
-            &mut Direct,
-        )
+            &mut noting,
+        );
+        (exit, noting.dropped)
+    }
+
+    /// The flags [`CpuScene::trace_flagged`] gives a trace of `ray` from `tmin` whose origin
+    /// was located in `located` (as [`Self::locate_origin`] finds it), which decided within
+    /// rounding at world parameters down to `dropped`, and answered `hit`.
+    pub(crate) fn flags_for(
+        &self,
+        ray: &Ray<f64>,
+        tmin: T,
+        located: Option<u32>,
+        dropped: T,
+        hit: Option<&Hit<T>>,
+    ) -> u32 {
+        self.flags_of(&WorldRay::new(ray), tmin, Some(located), dropped, hit)
     }
 }

@@ -15,6 +15,12 @@
 //! of the two wins (the exit on a tie, as on the CPU). Ties between instances at the same
 //! `t` may go to a different instance than on the CPU (which takes the lowest index).
 //!
+//! [`EmbreeScene::trace_flagged`] adds the flags of [`CpuScene::trace_flagged`] where the
+//! information exists: starts near a surface (the CPU's check, from the instance the origin
+//! was located in) and spans the CSG prims dropped (noted by the navigator's exit and by
+//! the user geometry's callbacks), so that an f32 scan on Embree traces the same doubtful
+//! rays again in f64 as the default scan. Embree's triangle tests report no doubt.
+//!
 //! Any-hit queries ([`EmbreeScene::occluded`]) go through `rtcOccluded1`, which stops at the
 //! first crossing it finds.
 //!
@@ -33,7 +39,7 @@ use hytrace_csg::{Ray, V3};
 use hytrace_foundry::{Foundry, PrimKind, Transform64};
 
 use crate::cpu::media::{SceneMedia, Transmitted};
-use crate::cpu::{CpuScene, Hit};
+use crate::cpu::{CpuScene, Hit, Traced};
 use handle::{Device, Geometry, Scene};
 use user_geometry::{ClusterBoxes, CsgPrims, MediaContext, TraceContext};
 
@@ -147,23 +153,58 @@ impl<'a> EmbreeScene<'a> {
     /// as [`CpuScene::trace`] answers it (up to ties and rounding). Fails only if one of
     /// our intersection callbacks panicked.
     pub fn trace(&self, ray: &Ray<f32>, tmin: f32, tmax: f32) -> crate::Result<Option<Hit<f32>>> {
+        Ok(self.trace_noting(ray, tmin, tmax)?.0)
+    }
+
+    /// [`Self::trace`] and what it could not decide within its rounding, as
+    /// [`CpuScene::trace_flagged`] flags it: starts near a surface, from the instance the
+    /// origin was located in, and spans that CSG prims dropped, in the navigator's exit
+    /// and in the user geometry's callbacks, not beyond the answer. Embree's own triangle
+    /// tests report no doubt: a mesh hit is Embree's.
+    pub fn trace_flagged(
+        &self,
+        ray: &Ray<f32>,
+        tmin: f32,
+        tmax: f32,
+    ) -> crate::Result<Traced<f32>> {
+        let (hit, located, dropped) = self.trace_noting(ray, tmin, tmax)?;
+        let exact = Ray::<f64>::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
+        Ok(Traced {
+            hit,
+            flags: self
+                .cpu
+                .flags_for(&exact, tmin, located, dropped, hit.as_ref()),
+        })
+    }
+
+    /// [`Self::trace`], where the origin was located, and the least world parameter at
+    /// which a CSG prim decided within rounding (`+inf`: nowhere).
+    fn trace_noting(
+        &self,
+        ray: &Ray<f32>,
+        tmin: f32,
+        tmax: f32,
+    ) -> crate::Result<(Option<Hit<f32>>, Option<u32>, f32)> {
         let exact = Ray::<f64>::from_f64(ray.origin.to_f64(), ray.direction.to_f64());
         let located = self.cpu.locate_origin(exact.origin);
-        let exit = located.and_then(|c| self.cpu.exit_from(c, &exact, tmin, tmax));
+        let (exit, exit_dropped) = located.map_or((None, f32::INFINITY), |c| {
+            self.cpu.exit_from(c, &exact, tmin, tmax)
+        });
         let group = match located {
             Some(c) => self.daughters[c as usize].as_ref(),
             None => self.top.as_ref(),
         };
         let limit = exit.map_or(tmax, |h| h.t);
-        let entry = match group {
+        let (entry, entry_dropped) = match group {
             Some(g) => self.enter(g, ray, tmin, limit)?,
-            None => None,
+            None => (None, f32::INFINITY),
         };
-        Ok(entry.filter(|h| h.t < limit).or(exit).map(|mut h| {
+        let hit = entry.filter(|h| h.t < limit).or(exit).map(|mut h| {
             let frame = self.cpu.instance_frame(h.instance);
             h.normal = frame.normal_to_parent(h.normal).normalized();
             h
-        }))
+        });
+        Ok((hit, located, exit_dropped.min(entry_dropped)))
     }
 
     /// Whether any surface crosses the ray with `tmin < t < tmax`, as
@@ -274,18 +315,20 @@ impl<'a> EmbreeScene<'a> {
             members: &group.members,
             cpu: self.cpu,
             panicked: Cell::new(false),
+            dropped: Cell::new(f32::INFINITY),
         }
     }
 
     /// Embree's closest hit in `(tmin, tmax)` among a group's instances (normal in the
-    /// instance's frame).
+    /// instance's frame), and the least parameter at which a CSG prim it asked decided
+    /// within rounding (`+inf`: nowhere).
     fn enter(
         &self,
         group: &GroupScene,
         ray: &Ray<f32>,
         tmin: f32,
         tmax: f32,
-    ) -> crate::Result<Option<Hit<f32>>> {
+    ) -> crate::Result<(Option<Hit<f32>>, f32)> {
         let mut rayhit = ray_hit(ray, tmin, tmax);
         let mut ctx = self.context(group, ray);
         // SAFETY: the scene is committed and alive; `ctx` starts with the
@@ -300,9 +343,10 @@ impl<'a> EmbreeScene<'a> {
         if ctx.panicked.get() {
             bail!("Embree: an intersection callback panicked");
         }
+        let dropped = ctx.dropped.get();
         let (r, h) = (&rayhit.ray, &rayhit.hit);
         if h.geom_id == ffi::RTC_INVALID_GEOMETRY_ID || !(r.tfar > tmin && r.tfar < tmax) {
-            return Ok(None);
+            return Ok((None, dropped));
         }
         let solid = group
             .members
@@ -316,12 +360,13 @@ impl<'a> EmbreeScene<'a> {
             Some(&mesh) => mesh,
             None => bail!("Embree: hit an unknown geometry id {}", h.geom_id),
         };
-        Ok(Some(Hit {
+        let hit = Hit {
             t: r.tfar,
             normal: V3::new(h.ng_x, h.ng_y, h.ng_z),
             instance,
             prim,
-        }))
+        };
+        Ok((Some(hit), dropped))
     }
 }
 

@@ -105,6 +105,9 @@ pub(crate) struct TraceContext<'s> {
     pub(crate) cpu: &'s CpuScene<f32>,
     /// Set when a callback panicked (the answer is then not to be trusted).
     pub(crate) panicked: Cell<bool>,
+    /// The least parameter, before the segment's end, at which a CSG prim decided within
+    /// rounding ([`hytrace_csg::kernel::Step::dropped`]; `+inf`: nowhere).
+    pub(crate) dropped: Cell<f32>,
 }
 
 /// `RTCBoundsFunction`: a CSG prim's bounds in the solid's frame.
@@ -191,6 +194,10 @@ unsafe fn crossing(
         let index = *ctx.members.get(instance as usize)?;
         let local = ctx.cpu.instance_frame(index).ray_to_local(&ctx.ray);
         let step = prim.first_crossing(&local, tnear);
+        // The frame keeps the world ray's parameter: `dropped` is a world parameter.
+        if step.dropped < tfar {
+            ctx.dropped.set(ctx.dropped.get().min(step.dropped));
+        }
         (step.t > tnear && step.t < tfar).then_some((*id, step, instance))
     }));
     found.unwrap_or_else(|_| {

@@ -1,5 +1,6 @@
 //! Shared by the backend comparison tests (Embree, GPU): ray sets around a scene, a mesh
-//! scene, the GPU scan's answers, and the ray-by-ray comparison with the CPU's f32 tracer.
+//! scene, a hard CSG case (chords through a boolean edge), the GPU scan's answers, and the
+//! ray-by-ray comparison with the CPU's f32 tracer.
 
 // Each test crate uses only some of these helpers.
 #![allow(dead_code)]
@@ -7,10 +8,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use hytrace_csg::{box3, to_tree};
 use hytrace_csg::{Ray, V3};
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
-use hytrace_foundry::Foundry;
+use hytrace_foundry::{Foundry, Transform64, UNSET};
 use hytrace_trace::cpu::{CpuScene, Hit};
 use hytrace_trace::gpu::records::{STATUS_CUT_SHORT, STATUS_FLAGS};
 use hytrace_trace::gpu::{GpuContext, GpuError, GpuTracer, GPU_INF};
@@ -43,6 +45,54 @@ impl Random for PcgDraws {
     fn uniform(&mut self) -> f64 {
         self.0.next_f64()
     }
+}
+
+/// A concrete block 2 x 2 x 1 m with a pit 0.4 x 0.4 m cut into its top face (a box minus a
+/// box that rises above it).
+pub fn block_with_pit() -> Foundry {
+    let pit = box3(400.0, 400.0, 400.0)
+        .unwrap()
+        .translate(0.0, 0.0, 500.0);
+    let mut f = Foundry::new();
+    let mut s = f.begin_solid("block");
+    s.add_csg(
+        to_tree(&(box3(2000.0, 2000.0, 1000.0).unwrap() - pit)).unwrap(),
+        0,
+        UNSET,
+    )
+    .unwrap();
+    let solid = s.finish(0).unwrap();
+    f.add_instance(solid, Transform64::IDENTITY, 0, 0).unwrap();
+    f
+}
+
+/// `count` rays from inside the pit of [`block_with_pit`] crossing its wall `10^e` mm below
+/// the top face (`e` uniform in `exponents`) at about 30 degrees of elevation, half of them
+/// at an angle across the wall, each cutting the edge where the wall meets the top in a
+/// chord of about twice that. Exact (f64, and Geant4 with its 1e-9 mm) answer: the entry
+/// through the wall, 200 mm on.
+pub fn rays_across_the_pit_edge(seed: u64, count: usize, exponents: [f64; 2]) -> Vec<RayRow> {
+    let mut rng = Rng(seed);
+    let elevation = 30f64.to_radians();
+    (0..count)
+        .map(|i| {
+            let below = 10f64.powf(exponents[0] + (exponents[1] - exponents[0]) * rng.uniform());
+            let across = if i % 2 == 0 {
+                0.0
+            } else {
+                0.3 * (2.0 * rng.uniform() - 1.0)
+            };
+            let d = unit([elevation.cos(), across, elevation.sin()]);
+            // Where the ray meets the wall x = 200, `below` under the top face z = 500.
+            let wall = [200.0, 100.0 * (2.0 * rng.uniform() - 1.0), 500.0 - below];
+            RayRow {
+                origin: [0, 1, 2].map(|k| wall[k] - 200.0 * d[k]),
+                direction: d,
+                tmin: 0.0,
+                tmax: f64::INFINITY,
+            }
+        })
+        .collect()
 }
 
 /// The NanoVDB fixture `name` of `tests/data/nanovdb`, parsed.
