@@ -110,6 +110,31 @@ fn csg_node_params(n: CsgNode) -> array<f32, 6> {
     return array<f32, 6>(n.param.x, n.param.y, n.param.z, n.param.w, n.param_ext[0], n.param_ext[1]);
 }
 
+// Twin of hytrace_csg::kernel::contact_spans: a bit per span of the ray o + t d (in the
+// leaf's frame, o shifted) whose points at a quarter, half and three quarters of its length
+// are within tol of the surface; asked only for rays with a zero direction component.
+fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: f32) -> u32 {
+    if !(d.x == 0.0 || d.y == 0.0 || d.z == 0.0) {
+        return 0u;
+    }
+    var contacts = 0u;
+    for (var i = 0u; i < spans.len; i += 1u) {
+        let s = spans.items[i];
+        if !(is_finite_t(s.t0) && is_finite_t(s.t1)) {
+            continue;
+        }
+        let length = s.t1 - s.t0;
+        var on_surface = true;
+        for (var k = 1u; k <= 3u; k += 1u) {
+            let x = o + d * (s.t0 + length * (0.25 * f32(k)));
+            let v = primitive_sdf(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, x);
+            on_surface = on_surface && v >= -tol;
+        }
+        contacts |= select(0u, 1u, on_surface) << i;
+    }
+    return contacts;
+}
+
 // The first crossing of a leaf's surface by the ray o + t d (in the tree's frame) after
 // tmin + tol; normal in the tree's frame.
 fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool) -> Step {
@@ -128,7 +153,12 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
     if alone && csg_is_planar(n.code & ~COMPLEMENT_BIT) {
         touch = tol / 4.0;
     }
-    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch);
+    // A primitive alone has Geant4's surface: a ray running along it is outside.
+    var contacts = 0u;
+    if alone && (n.code & COMPLEMENT_BIT) == 0u {
+        contacts = csg_contact_spans(n, spans, lo + ld * shift, ld, tol);
+    }
+    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch, contacts);
     if n.frame != UNSET {
         step.normal = frame_normal_to_parent(csg_frame(n.frame), step.normal);
     }

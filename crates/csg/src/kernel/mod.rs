@@ -289,10 +289,49 @@ impl<T: Real> Step<T> {
     }
 }
 
+/// Which spans of a ray `o + t d` (in the primitive's own frame, `o` shifted as the spans
+/// were solved) only run along the primitive's surface: a bit per span whose points at a
+/// quarter, half and three quarters of its length are all within `tol` of the surface
+/// (signed distance `>= -tol`). Such a span is a *contact*: the ray lies in a face, along a
+/// wall's generator or on a tangent, and never enters the interior. Geant4 takes the surface
+/// for outside the solid (`Inside()` is `kSurface` all along) and answers no boundary
+/// there; a primitive alone follows it (callers skip contact spans). Three points, not one:
+/// a ray tangent to a tube's inner wall has its middle on the surface but runs deep through
+/// the wall on both sides. The points are only asked for rays with a zero direction
+/// component (a ray parallel to a face or wall of the primitive's frame): others are not
+/// contacts but for the rounding of a tangent, which the touch length already decides.
+pub fn contact_spans<T: Real>(
+    code: TypeCode,
+    p: &[T; 6],
+    planes: &[[T; 4]],
+    spans: &Spans<T>,
+    o: V3<T>,
+    d: V3<T>,
+    tol: T,
+) -> u32 {
+    if !(d.x == T::ZERO || d.y == T::ZERO || d.z == T::ZERO) {
+        return 0;
+    }
+    let mut contacts = 0;
+    for (i, s) in spans.as_slice().iter().enumerate() {
+        if !(s.t0.is_finite() && s.t1.is_finite()) {
+            continue;
+        }
+        let length = s.t1 - s.t0;
+        let on_surface = [0.25, 0.5, 0.75].iter().all(|&f| {
+            let x = o.at(d, s.t0 + length * T::from_f64(f));
+            primitive_sdf(code, p, planes, x) >= -tol
+        });
+        contacts |= (on_surface as u32) << i;
+    }
+    contacts
+}
+
 /// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
-/// spans no longer than `touch` (tangent touches, not crossings; the least start of those
-/// skipped that end after `tmin + tol` is reported as [`Step::dropped`]). Normals are oriented outward
-/// from the span's role (entries face against the ray, exits along it).
+/// spans no longer than `touch` (tangent touches, not crossings) and the spans whose bit is
+/// set in `contacts` (see [`contact_spans`]); the least start of those skipped that end
+/// after `tmin + tol` is reported as [`Step::dropped`]. Normals are oriented outward from
+/// the span's role (entries face against the ray, exits along it).
 pub fn first_crossing<T: Real>(
     spans: &Spans<T>,
     shift: T,
@@ -300,11 +339,12 @@ pub fn first_crossing<T: Real>(
     tmin: T,
     tol: T,
     touch: T,
+    contacts: u32,
 ) -> Step<T> {
     let after = tmin + tol;
     let mut dropped = T::INFINITY;
-    for s in spans.as_slice() {
-        if s.t1 - s.t0 <= touch {
+    for (i, s) in spans.as_slice().iter().enumerate() {
+        if s.t1 - s.t0 <= touch || contacts & (1 << i) != 0 {
             if s.t1 + shift > after && s.t0 < T::INFINITY {
                 dropped = dropped.min(s.t0 + shift);
             }
@@ -352,7 +392,8 @@ impl<T: Real> Leaf<T> {
         let d = local.direction;
         let shift = origin_shift(self.code, &self.params, local.origin, d);
         let o = local.origin.at(d, shift);
-        let spans = primitive_spans(self.code, &self.params, &planes[self.planes.clone()], o, d);
+        let leaf_planes = &planes[self.planes.clone()];
+        let spans = primitive_spans(self.code, &self.params, leaf_planes, o, d);
         // A curved surface's near-double roots (a tangent ray) are uncertain by more than
         // their distance: such short spans are touches, and so are the slivers that the
         // rounded planes of faces that leaves share leave along a ray near those faces.
@@ -364,7 +405,14 @@ impl<T: Real> Leaf<T> {
         } else {
             tol
         };
-        let mut step = first_crossing(&spans, shift, d, tmin, tol, touch);
+        // A primitive alone has Geant4's surface: a ray running along it is outside. In a
+        // tree, faces its leaves share are inside (a tree rule, not yet made).
+        let contacts = if alone && !self.complement {
+            contact_spans(self.code, &self.params, leaf_planes, &spans, o, d, tol)
+        } else {
+            0
+        };
+        let mut step = first_crossing(&spans, shift, d, tmin, tol, touch, contacts);
         if let Some(f) = &self.frame {
             step.normal = f.normal_to_parent(step.normal);
         }
