@@ -151,3 +151,63 @@ fn rays_along_faces_two_union_operands_share_stay_inside_f32() {
 fn rays_along_faces_two_union_operands_share_stay_inside_f64() {
     shared_face_case::<f64>();
 }
+
+fn boolean_case<T: Real>() {
+    let (y, z) = ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    // Geant4's testG4IntersectionSolid: the box |x| <= 20, |y| <= 30, |z| <= 40 and a cube of
+    // side 20 centred on (0, 10, 0): the intersection is the open box [-10, 10] x [0, 20] x
+    // [-10, 10]. Rays in its faces (the cube's faces, inside the first box) never enter it.
+    let cut = prepared::<T>(
+        &(box3(40.0, 60.0, 80.0).unwrap()
+            * box3(20.0, 20.0, 20.0).unwrap().translate(0.0, 10.0, 0.0)),
+    );
+    let h = [10.0, 10.0, 10.0];
+    let centred = |o: [f64; 3]| [o[0], o[1] - 10.0, o[2]];
+    for (o, d) in [
+        ([0.0, 0.0, 100.0], z.map(|c: f64| -c)),
+        ([0.0, 0.0, -100.0], z),
+        ([10.0, 0.0, 0.0], y),
+        ([10.0, 0.0, 0.0], [-1.0, 0.0, 0.0]),
+        // Inside, parallel to the faces: the exit.
+        ([5.0, 5.0, -100.0], z),
+    ] {
+        let want = open_box_reference(h, centred(o), d);
+        let (t, _) = cross(&cut, o, d, 0.0);
+        let ok = (t.is_infinite() && want.is_infinite()) || (t - want).abs() <= 1e-4;
+        assert!(
+            ok,
+            "{}: intersection ray {o:?} {d:?}: {t}, want {want}",
+            T::NAME
+        );
+    }
+    // A slot cut into the top of a box: |x| <= 20, |y| <= 20, |z| <= 20 minus |x| <= 5,
+    // |y| <= 5, z >= 0. A ray down the slot's wall x = 5 runs along the surface of the
+    // difference (the subtracted box's face, inside the first box) and enters the
+    // difference's interior where the slot ends, at z = 0.
+    let slot = prepared::<T>(
+        &(box3(40.0, 40.0, 40.0).unwrap()
+            - box3(10.0, 10.0, 40.0).unwrap().translate(0.0, 0.0, 20.0)),
+    );
+    let (t, inside) = cross(&slot, [5.0, 0.0, 10.0], [0.0, 0.0, -1.0], 0.0);
+    assert!(
+        (t - 10.0).abs() <= 1e-4 && !inside,
+        "{}: down the slot's wall: {t}",
+        T::NAME
+    );
+    let (t, inside) = cross(&slot, [5.0, 0.0, 10.0], [0.0, 0.0, -1.0], 10.0);
+    assert!(
+        (t - 30.0).abs() <= 1e-4 && inside,
+        "{}: then the bottom: {t}",
+        T::NAME
+    );
+}
+
+#[test]
+fn rays_along_faces_of_intersections_and_differences_answer_as_geant4_f32() {
+    boolean_case::<f32>();
+}
+
+#[test]
+fn rays_along_faces_of_intersections_and_differences_answer_as_geant4_f64() {
+    boolean_case::<f64>();
+}
