@@ -137,7 +137,7 @@ fn csg_contacts_outside(node_offset: u32, position: u32, complement: bool) -> bo
 // are within tol of the surface; asked only for rays with a zero direction component, not
 // along the axis of a phi cut.
 fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: f32) -> u32 {
-    if !(d.x == 0.0 || d.y == 0.0 || d.z == 0.0) {
+    if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
         return 0u;
     }
     // Not along the axis of a phi cut, where Geant4's solids disagree (kernel::on_phi_axis).

@@ -315,7 +315,8 @@ pub fn contact_spans<T: Real>(
     d: V3<T>,
     tol: T,
 ) -> u32 {
-    if !(d.x == T::ZERO || d.y == T::ZERO || d.z == T::ZERO) || on_phi_axis(code, o, d) {
+    let oblique = d.x != T::ZERO && d.y != T::ZERO && d.z != T::ZERO;
+    if oblique || on_phi_axis(code, o, d) {
         return 0;
     }
     let mut contacts = 0;
