@@ -383,6 +383,7 @@ const PHOTON_DETECTED: u32 = 1u;
 const PHOTON_LOOPS_CUT: u32 = 2u;
 const PHOTON_DEPTH_LIMIT: u32 = 4u;
 const PHOTON_SEVERAL_EMITTED: u32 = 8u;
+const PHOTON_MISSING_BRICK: u32 = 16u;
 const LABEL_MI: u32 = 3u;
 const LABEL_AB: u32 = 4u;
 const LABEL_RE: u32 = 5u;

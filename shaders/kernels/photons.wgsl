@@ -31,6 +31,12 @@
 // #import photons/media
 // #endif
 
+// In a streamed pass (a medium read from a brick store through the brick pool,
+// volume/stream) invocation i propagates photon first + phistories[i].x (the host lists the
+// pass's photons there), and its outputs go to slot i. A photon that read an absent brick is
+// marked PHOTON_MISSING_BRICK; the host discards its results and runs it again from its
+// start in a later pass.
+
 // Twin of PhotonScene::next_boundary: the next boundary from `pos` along `dir` inside
 // instance `current`; a crossing of the surface the photon sits on, found again at a
 // rounding distance with the wrong orientation, is skipped.
@@ -93,9 +99,13 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     if i >= pparams.photon_count {
         return;
     }
-    // Photon index first + i, as 64 bits.
-    let lo = pparams.first_lo + i;
-    let hi = pparams.first_hi + select(0u, 1u, lo < i);
+    // Photon index first + p, as 64 bits.
+    var p = i;
+    // #if streamed
+    p = phistories[i].x;
+    // #endif
+    let lo = pparams.first_lo + p;
+    let hi = pparams.first_hi + select(0u, 1u, lo < p);
     var rng = rng_new(pparams.seed, lo, hi);
     let start = emitted_photon(lo, hi, &rng);
     var energy = start.energy;
@@ -251,6 +261,11 @@ fn propagate_photons(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     if loops_cut_short(pparams.probe_trips) {
         status |= PHOTON_LOOPS_CUT;
     }
+    // #if streamed
+    if stream_missing {
+        status |= PHOTON_MISSING_BRICK;
+    }
+    // #endif
     out.status = status;
     phistories[i] = vec2<u32>(history.lo, history.hi);
     // Only the photons the host needs more of: detected, or to be propagated again.

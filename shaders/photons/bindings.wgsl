@@ -14,7 +14,8 @@
 @group(2) @binding(6) var<storage, read> pborders: array<PhotonBorder>;
 // The records of the photons detected or cut short, appended (`pcount` of them).
 @group(2) @binding(7) var<storage, read_write> precords: array<PhotonRecord>;
-// Every photon's packed history (low, high 32 bits), by its index in the batch.
+// Every photon's packed history (low, high 32 bits), by its index in the batch (in a
+// streamed pass, by its place in the pass, where the host wrote its index first).
 @group(2) @binding(8) var<storage, read_write> phistories: array<vec2<u32>>;
 @group(2) @binding(9) var<storage, read_write> pcount: atomic<u32>;
 

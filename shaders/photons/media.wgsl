@@ -2,7 +2,8 @@
 // cpu/media.rs' SceneMedia::collision, and `collide`). Each placed medium is tracked by
 // the volume/estimate module's delta tracking on the photon's own stream, in placement
 // order; the earliest real collision wins. Placements and grids are bound as the renderer
-// binds them (crates/trace/src/gpu/photons.rs).
+// binds them (crates/trace/src/gpu/photons.rs); a medium read as stored from a brick store
+// is read through the brick pool (kernels composed with `streamed`, volume/stream).
 // #import generated/trace_records
 // #import transform
 // #import volume/rng

@@ -15,13 +15,13 @@ use common::{gpu_stats, hytrace, repo, stderr};
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::layout::Scalar;
 use hytrace_foundry::npy::read_array;
-use hytrace_trace::gpu::{GpuContext, GpuPhotons};
+use hytrace_trace::gpu::{GpuContext, GpuPhotons, StreamError};
 use hytrace_trace::photons::gensteps::GenstepFile;
 use hytrace_trace::photons::output::{compare_histories, history_string, HitRow};
 use hytrace_trace::photons::sources::{Source, Wavelength};
 use hytrace_trace::photons::tracer::Precision;
 use hytrace_trace::photons::{
-    load_photon_scene, propagate, Origin, PhotonRun, PhotonScene, RunOptions,
+    load_photon_scene, propagate, Batch, Origin, PhotonRun, PhotonScene, RunOptions,
 };
 
 fn options(source: &str, photons: u64) -> RunOptions {
@@ -443,17 +443,24 @@ fn stats_line(o: &std::process::Output) -> serde_json::Value {
 
 /// Batches overlap on the GPU (the next one runs while the host handles the last) and the
 /// kernel appends its hits in the order photons finish: whatever the batch, a run gives
-/// the one-batch run's histories and hit rows exactly, hits in photon order.
+/// the one-batch run's histories, hit rows and step points exactly, hits in photon order
+/// (the points past a photon's end zero, not those of a photon of the batch before).
 #[test]
 fn gpu_batches_give_the_one_batch_run_with_hits_in_photon_order() {
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
     let path = repo("tests/data/photons/every_process.gdml");
-    let run = options("point:0,0,0", 1000);
+    let run = RunOptions {
+        records: 3,
+        ..options("point:0,0,0", 1000)
+    };
     let s32 = scene(&path, Precision::F32);
     let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
     let whole = kernel.propagate(&ctx, &s32, &run, &|_| ()).unwrap().run;
+    // Photons ending before their third point: a batch before must not leave its points.
+    let short = whole.records.chunks(3).filter(|p| p[2][11] == 0.0).count();
+    assert!(short > 10, "{short} photons with fewer than 3 points");
     let photon_order = |hits: &[HitRow]| hits.windows(2).all(|w| w[0].0[13] < w[1].0[13]);
     assert!(whole.hits.len() >= 10, "{} hits", whole.hits.len());
     assert!(photon_order(&whole.hits));
@@ -481,6 +488,7 @@ fn gpu_batches_give_the_one_batch_run_with_hits_in_photon_order() {
         );
         assert_eq!(all.histories, whole.histories, "batch {batch}");
         assert_eq!(all.hits, whole.hits, "batch {batch}");
+        assert_eq!(all.records, whole.records, "batch {batch}");
         assert_eq!(summary.counts, whole.counts, "batch {batch}");
         assert_eq!(summary.hits as usize, whole.hits.len());
     }
@@ -697,46 +705,159 @@ fn the_command_runs_media_on_the_gpu_and_auto_picks_it() {
     );
 }
 
-/// The kernel reads media bricked in memory only: `GpuPhotons::new` refuses a brick store
-/// read as stored naming the medium, `--backend gpu` fails without output, and `--backend
-/// auto` says why on stderr and gives the CPU run's histories and hits exactly.
+/// A stored slab larger than the smallest brick pool: 64 x 64 x 2 bricks of density 1 in
+/// 0.5 mm voxels (256 x 256 x 8 mm, optical depth 4 across), 8192 bricks kept, more than
+/// one superchunk (4096, the pool's least) holds; the beam covers most of it.
+const SLAB_SOURCE: &str = "beam:0,0,-150:0,0,1:128";
+
+/// A medium read as stored streams through the kernel's brick pool. With the least budget
+/// the pool accepts (one superchunk's bricks) and batches of 1500 photons sharing the pool,
+/// the photons touch more bricks than it holds: the run takes several passes, evicts bricks
+/// and defers photons, and still gives the
+/// histories, hit rows and step points of the run with the whole store resident bit for bit (a deferred
+/// photon runs again from its start on its own stream); that run matches the f32 CPU twin
+/// photon by photon as the in-core media do ([`twin_within`], through the default 1 GiB
+/// pool), and the streamed runs give the same results whatever the budget.
 #[test]
-fn stored_media_are_refused_by_the_kernel_and_auto_runs_them_on_the_cpu() {
+fn stored_media_stream_through_a_brick_pool_and_match_the_resident_run() {
     let Some(ctx) = GpuContext::for_tests() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
+    let path = common::stored_slab(dir.path(), [512, 512, 16], 0.5, 0.5);
+    let run = RunOptions {
+        records: 4,
+        ..options(SLAB_SOURCE, 4000)
+    };
+    let (roomy, twin_same) =
+        twin_within("stored slab", path.clone(), run.clone(), 100, 0.0).unwrap();
+    assert!(twin_same >= 0.999, "{twin_same}");
+    let s32 = scene(&path, Precision::F32);
+    let kernel = || GpuPhotons::new(&ctx, &s32, &run).unwrap();
+    let least = match kernel().with_memory(1).propagate(&ctx, &s32, &run, &|_| ()) {
+        Err(hytrace_trace::Error::Stream(StreamError::Budget { least, .. })) => least,
+        other => panic!("a 1-byte budget: {:?}", other.err()),
+    };
+    let resident = kernel()
+        .with_store_resident()
+        .propagate(&ctx, &s32, &run, &|_| ())
+        .unwrap()
+        .run;
+    let mut tight = Batch::default();
+    let (_, _, host) = kernel()
+        .with_memory(least)
+        .propagate_into(
+            &ctx,
+            &s32,
+            &run,
+            Some(1500),
+            &mut |b| tight.gather(b),
+            &|_| (),
+        )
+        .unwrap();
+    let stream = host.stream.expect("the run streamed the store");
+    eprintln!("stored slab, pool of {least} bytes: {stream:?}");
+    assert!(stream.passes >= 3, "{stream:?}");
+    assert!(
+        stream.bricks_evicted > 0 && stream.deferred > 0,
+        "{stream:?}"
+    );
+    assert!(u64::from(stream.max_slots) < 8192, "{stream:?}");
+    let scattered = resident
+        .histories
+        .iter()
+        .filter(|&&h| history_string(h).contains("SC"))
+        .count();
+    assert!(scattered > 1000, "{scattered} scattered");
+    for (name, got) in [
+        ("tight pool", &tight.histories),
+        ("1 GiB pool", &roomy.histories),
+    ] {
+        assert!(got == &resident.histories, "{name}: histories differ");
+    }
+    let bits = |hits: &[HitRow]| -> Vec<[u64; 16]> {
+        hits.iter().map(|h| h.0.map(f64::to_bits)).collect()
+    };
+    assert!(!resident.hits.is_empty());
+    assert_eq!(bits(&tight.hits), bits(&resident.hits));
+    assert_eq!(bits(&roomy.hits), bits(&resident.hits));
+    let points = |r: &[hytrace_trace::photons::output::RecordPoint]| -> Vec<[u32; 12]> {
+        r.iter().map(|p| p.map(f32::to_bits)).collect()
+    };
+    assert_eq!(resident.records.len(), 4 * 4000);
+    assert_eq!(points(&tight.records), points(&resident.records));
+    assert_eq!(points(&roomy.records), points(&resident.records));
+}
+
+/// The command streams a medium read as stored on the GPU: `--backend gpu` reports the
+/// streaming under `stream` in `--stats`, `--backend auto` picks the GPU (nothing on
+/// stderr about the CPU) and writes the same files, `--explain` says where it runs; a
+/// `--memory` too small for the pool fails naming the file and the least budget, and a
+/// store cut short while the run reads it fails naming its bricks file; neither leaves an
+/// output file.
+#[test]
+fn the_command_streams_stored_media_on_the_gpu_and_auto_picks_it() {
+    if GpuContext::for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
     let path = common::stored_medium(dir.path());
     let source = "beam:0,0,-150:0,0,1:0";
-    let Err(e) = GpuPhotons::new(&ctx, &scene(&path, Precision::F32), &options(source, 100)) else {
-        panic!("the kernel accepted a medium read as stored");
-    };
-    assert!(e.to_string().contains("medium 0 is a brick store"), "{e}");
-    let (gpu, hits, _) = photons_command(dir.path(), &path, source, 500, "gpu", &[]);
-    assert!(!gpu.status.success());
-    assert!(
-        stderr(&gpu).contains("stored.toml") && stderr(&gpu).contains("brick store"),
-        "{}",
-        stderr(&gpu)
-    );
-    assert!(!hits.exists());
+    let (gpu, gpu_hits, gpu_history) =
+        photons_command(dir.path(), &path, source, 500, "gpu", &["--memory", "64M"]);
+    assert!(gpu.status.success(), "{}", stderr(&gpu));
+    let stats = stats_line(&gpu);
+    assert_eq!(stats["backend"], "gpu");
+    assert!(stats["stream"]["passes"].as_u64().unwrap() >= 2, "{stats}");
+    assert_eq!(stats["stream"]["bricks_uploaded"], 8, "{stats}");
     let (auto, auto_hits, auto_history) =
         photons_command(dir.path(), &path, source, 500, "auto", &[]);
     assert!(auto.status.success(), "{}", stderr(&auto));
-    assert!(stderr(&auto).contains("on the CPU"), "{}", stderr(&auto));
-    let (cpu, cpu_hits, cpu_history) = photons_command(dir.path(), &path, source, 500, "cpu", &[]);
-    assert!(cpu.status.success(), "{}", stderr(&cpu));
-    let absorbed_or_scattered = packed_histories(&cpu_history)
+    assert!(!stderr(&auto).contains("on the CPU"), "{}", stderr(&auto));
+    assert_eq!(stats_line(&auto)["backend"], "gpu");
+    let histories = packed_histories(&gpu_history);
+    assert_eq!(packed_histories(&auto_history), histories);
+    let absorbed_or_scattered = histories
         .iter()
         .filter(|&&h| history_string(h) != "TO SD")
         .count();
     assert!(absorbed_or_scattered > 50, "{absorbed_or_scattered}");
     assert_eq!(
-        packed_histories(&auto_history),
-        packed_histories(&cpu_history)
-    );
-    assert_eq!(
         std::fs::read(auto_hits).unwrap(),
-        std::fs::read(cpu_hits).unwrap()
+        std::fs::read(&gpu_hits).unwrap()
     );
+    let explain = hytrace(
+        &[
+            "photons",
+            path.to_str().unwrap(),
+            "--source",
+            source,
+            "--explain",
+        ],
+        &[],
+    );
+    assert!(
+        String::from_utf8_lossy(&explain.stdout).contains("streamed through the GPU's brick pool"),
+        "{}",
+        String::from_utf8_lossy(&explain.stdout)
+    );
+    let failed = dir.path().join("failed");
+    std::fs::create_dir(&failed).unwrap();
+    let (small, hits, _) = photons_command(&failed, &path, source, 500, "gpu", &["--memory", "1K"]);
+    assert!(!small.status.success());
+    let err = stderr(&small);
+    assert!(
+        err.contains("stored.toml") && err.contains("give at least") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!hits.exists());
+    common::cut_store_short(dir.path());
+    let (cut, hits, history) = photons_command(&failed, &path, source, 500, "gpu", &[]);
+    assert!(!cut.status.success());
+    let err = stderr(&cut);
+    assert!(
+        err.contains("bricks.bin") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!hits.exists() && !history.exists());
 }

@@ -364,12 +364,7 @@ fn a_stored_medium_cut_short_while_open_fails_naming_its_file() {
     let path = common::stored_medium(dir.path());
     let scene = scene(&path);
     let run = options("beam:0,0,-150:0,0,1:0", 500, 0);
-    std::fs::OpenOptions::new()
-        .write(true)
-        .open(dir.path().join("fog.bricks/bricks.bin"))
-        .unwrap()
-        .set_len(4096)
-        .unwrap();
+    common::cut_store_short(dir.path());
     let mut handed = 0;
     let err = propagate_batches(
         &scene,

@@ -95,6 +95,12 @@ pub struct PhotonsArgs {
     /// needs) or auto (the GPU when an adapter opens, else the CPU).
     #[arg(long, value_parser = choice::<PhotonBackend>(), default_value_t = PhotonBackend::Cpu)]
     pub backend: PhotonBackend,
+    /// Device memory a medium read as stored in a brick store may take on the GPU (its
+    /// brick pool, page table and request buffer), e.g. 256M; the run streams the store
+    /// through it in passes. A budget too small for one superchunk's bricks, or for the
+    /// bricks one photon reads, is refused.
+    #[arg(long, value_parser = hytrace_trace::memory::parse_bytes, default_value = "1G")]
+    pub memory: u64,
     /// Print the processes the run calls for (source, bulk processes with their materials,
     /// optical surfaces, outputs), where each runs (cpu, gpu), and what the GPU kernel would
     /// be composed of; propagate nothing.
@@ -102,7 +108,9 @@ pub struct PhotonsArgs {
     pub explain: bool,
     /// Print one JSON line of counts and timings (photons, hits, load_s, build_s,
     /// propagate_s and of it tally_s and write_s, photons_per_s, threads, backend; on the
-    /// GPU also the adapter, its times, the host's work on the results and the batch).
+    /// GPU also the adapter, its times, the host's work on the results and the batch, and
+    /// `stream` for a medium read as stored: passes, photons_deferred, bricks uploaded and
+    /// evicted, the pool's slots and device bytes).
     #[arg(long)]
     pub stats: bool,
 }
@@ -194,6 +202,7 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
         },
         args.backend,
         args.batch,
+        args.memory,
         &mut |batch| files.append(&batch),
         &|done| bar.set_position(done),
     )?;
@@ -224,6 +233,9 @@ pub fn run(args: PhotonsArgs, options: &GdmlOptions) -> anyhow::Result<()> {
             line["gpu_host_s"] = g.host.host_s.into();
             line["gpu_batch"] = g.host.batch.into();
             line["gpu_bytes_per_photon"] = BYTES_PER_PHOTON.into();
+            if let Some(st) = &g.host.stream {
+                line["stream"] = st.json("photons_deferred");
+            }
         }
         println!("{line}");
     } else {

@@ -187,6 +187,17 @@ impl OpenMedia {
             open: Held::Borrowed(self),
         }
     }
+
+    /// Number of media (the Foundry's `optics.media`).
+    pub fn medium_count(&self) -> usize {
+        self.grids.len()
+    }
+
+    /// The grid of `medium`, bricked in its Foundry texel format or read as stored, with an
+    /// identity map: its world space is its index space.
+    pub fn grid(&self, medium: u32) -> &MediumGrid {
+        &self.grids[medium as usize].grid
+    }
 }
 
 /// Seed of the random streams of the `k`-th placed medium on a ray (a Weyl step keeps the
@@ -422,15 +433,14 @@ impl<'a, T: Real> SceneMedia<'a, T> {
         self.open.to_index.iter().map(|(k, t)| (*k, t))
     }
 
-    /// Number of media (the Foundry's `optics.media`).
+    /// Number of media ([`OpenMedia::medium_count`]).
     pub fn medium_count(&self) -> usize {
-        self.open.grids.len()
+        self.open.medium_count()
     }
 
-    /// The grid of `medium`, bricked in its Foundry texel format or read as stored, with an
-    /// identity map: its world space is its index space.
+    /// The grid of `medium` ([`OpenMedia::grid`]).
     pub fn grid(&self, medium: u32) -> &MediumGrid {
-        &self.open.grids[medium as usize].grid
+        self.open.grid(medium)
     }
 
     /// What the caches of the media read as stored did, summed over them (`None` when no

@@ -284,6 +284,9 @@ pub const PHOTON_SEVERAL_EMITTED: u32 = 8;
 /// Bit: the placement tree was deeper than the navigator's loop bound (never for a
 /// validated scene); propagated again on the CPU.
 pub const PHOTON_DEPTH_LIMIT: u32 = 4;
+/// Bit: the photon read a brick a streamed brick store's pool lacked; its results are
+/// discarded and it runs again from its start in a later pass, once the brick is resident.
+pub const PHOTON_MISSING_BRICK: u32 = 16;
 
 /// The photon records, in declaration order.
 pub fn photon_records() -> Vec<RecordEntry> {
@@ -340,6 +343,7 @@ pub fn push_photon_wgsl(out: &mut String) {
         ("PHOTON_LOOPS_CUT", PHOTON_LOOPS_CUT),
         ("PHOTON_DEPTH_LIMIT", PHOTON_DEPTH_LIMIT),
         ("PHOTON_SEVERAL_EMITTED", PHOTON_SEVERAL_EMITTED),
+        ("PHOTON_MISSING_BRICK", PHOTON_MISSING_BRICK),
     ] {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }

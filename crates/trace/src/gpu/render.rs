@@ -8,9 +8,7 @@
 use std::time::Instant;
 
 use super::compose::declared_constants;
-use super::context::{
-    compute_pipeline, storage_layout_entry, whole_buffer_entries, GpuContext, GpuError,
-};
+use super::context::{compute_pipeline, whole_buffer_entries, GpuContext, GpuError};
 use super::records::{
     RenderInstance, RenderItem, RenderMedium, RenderParams, VolumeParams, RENDER_CUT_INTERSECTION,
     RENDER_CUT_UNION, RENDER_EFFECT_SHADING, RENDER_EFFECT_SPECULAR, RENDER_LIGHT_DIRECTIONAL,
@@ -324,7 +322,7 @@ pub fn compose_render_kernel(renderer: &Renderer) -> Result<(Vec<&'static str>, 
     let mut features = super::tracer::scene_features(&arrays);
     features.extend(effect_features(renderer).0);
     if streamed_medium(renderer).is_some() {
-        features.push("streamed");
+        features.extend(["streamed", "stream_lods"]);
     }
     let source = kernel_source(KERNEL, &features)?;
     Ok((features, source))
@@ -539,14 +537,7 @@ impl GpuRenderer {
             });
             let medium_group = medium_group.or_else(|| {
                 let (grid, _) = streamed.as_ref()?;
-                let mut entries = vec![storage_layout_entry(0, true)];
-                entries.extend(StorePool::layout_entries());
-                let layout =
-                    ctx.device
-                        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                            label: Some("streamed medium"),
-                            entries: &entries,
-                        });
+                let layout = StorePool::group_layout(ctx, "streamed medium", true);
                 Some((
                     layout.clone(),
                     MediumGroup::Streamed(layout, Box::new(*grid)),
@@ -707,18 +698,7 @@ impl GpuRenderer {
             let run = &pending[..size.of(pending.len())];
             let mut missing = Vec::new();
             for chunk in run.chunks(batch) {
-                let group0 = {
-                    let mut entries = vec![wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params.as_entire_binding(),
-                    }];
-                    entries.extend(pool.entries());
-                    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("streamed medium"),
-                        layout,
-                        entries: &entries,
-                    })
-                };
+                let group0 = pool.group(ctx, layout, "streamed medium", &params, true);
                 let batch = Batch::Listed(chunk);
                 let texels =
                     self.dispatch(ctx, inputs, batch, Some(&group0), &mut times, &|_| {})?;

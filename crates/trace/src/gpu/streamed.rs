@@ -65,12 +65,14 @@ impl<'a> GpuStreamedVolume<'a> {
             ))
             .into());
         }
-        let source = transmittance_source(&["streamed"]).map_err(|problem| GpuError::Shader {
-            name: KERNEL.to_string(),
-            problem: problem.to_string(),
+        let source = transmittance_source(&["streamed", "stream_lods"]).map_err(|problem| {
+            GpuError::Shader {
+                name: KERNEL.to_string(),
+                problem: problem.to_string(),
+            }
         })?;
         let mut layout = vec![super::context::storage_layout_entry(0, true)];
-        layout.extend(StorePool::layout_entries());
+        layout.extend(StorePool::layout_entries(true));
         let kernel =
             TransmittanceKernel::new(ctx, "streamed transmittance", &source, &layout, 3, &[])?;
         Ok(GpuStreamedVolume { pool, mips, kernel })
@@ -168,7 +170,7 @@ impl<'a> GpuStreamedVolume<'a> {
         streams: &[u32],
         times: &mut GpuTimes,
     ) -> Result<Vec<TransmittanceRecord>, GpuError> {
-        let arrays = self.pool.entries();
+        let arrays = self.pool.entries(true);
         let streams = [bytemuck::cast_slice(streams)];
         let label = "streamed transmittance";
         (self.kernel).dispatch(ctx, label, params, rays, &streams, &arrays, times)

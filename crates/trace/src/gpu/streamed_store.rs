@@ -309,30 +309,73 @@ impl<'a> StorePool<'a> {
         &self.grid
     }
 
-    /// The layout entries of group 0 but the parameters: the arrays and levels of detail
-    /// (read-only) and the state (read-write).
-    pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    /// The layout entries of group 0 but the parameters: the arrays (read-only), the state
+    /// (read-write) and, for a kernel composed with `stream_lods` (`lods`), the levels of
+    /// detail (read-only).
+    pub fn layout_entries(lods: bool) -> Vec<wgpu::BindGroupLayoutEntry> {
         let mut layout: Vec<_> = (1..5).map(|b| storage_layout_entry(b, true)).collect();
         layout.push(storage_layout_entry(STATE_BINDING, false));
-        layout.push(storage_layout_entry(LODS_BINDING, true));
+        if lods {
+            layout.push(storage_layout_entry(LODS_BINDING, true));
+        }
         layout
     }
 
-    /// The bind group entries of the arrays, the state and the levels of detail (the pool's
-    /// buffer changes as it grows: bind them again each pass).
-    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
-        [
+    /// The layout of group 0 of a kernel that streams a store: its parameters (binding 0)
+    /// beside the pool's arrays, state and levels of detail when `lods`
+    /// ([`StorePool::layout_entries`]).
+    pub fn group_layout(ctx: &GpuContext, label: &str, lods: bool) -> wgpu::BindGroupLayout {
+        let mut entries = vec![storage_layout_entry(0, true)];
+        entries.extend(Self::layout_entries(lods));
+        ctx.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
+    /// Group 0 of a pass in `layout` ([`StorePool::group_layout`] of `lods`): `params`
+    /// beside the pool's buffers (made again each pass: the pool's buffer changes as it
+    /// grows).
+    pub fn group(
+        &self,
+        ctx: &GpuContext,
+        layout: &wgpu::BindGroupLayout,
+        label: &str,
+        params: &wgpu::Buffer,
+        lods: bool,
+    ) -> wgpu::BindGroup {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: params.as_entire_binding(),
+        }];
+        entries.extend(self.entries(lods));
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+
+    /// The bind group entries of the arrays, the state and, when `lods`, the levels of
+    /// detail (the pool's buffer changes as it grows: bind them again each pass).
+    pub fn entries(&self, lods: bool) -> Vec<wgpu::BindGroupEntry<'_>> {
+        let mut buffers = vec![
             (1, &self.ranges),
             (2, &self.page_table),
             (3, &self.brick_table),
             (4, &self.atlas),
             (STATE_BINDING, &self.state),
-            (LODS_BINDING, &self.lods),
-        ]
-        .map(|(binding, b)| wgpu::BindGroupEntry {
-            binding,
-            resource: b.as_entire_binding(),
-        })
+        ];
+        if lods {
+            buffers.push((LODS_BINDING, &self.lods));
+        }
+        (buffers.into_iter())
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            })
+            .collect()
     }
 
     /// What the streaming did so far.

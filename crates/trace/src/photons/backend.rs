@@ -40,7 +40,8 @@ pub struct GpuPhotonInfo {
     pub features: Vec<&'static str>,
     /// Upload, kernel and readback seconds, and the photons the CPU propagated again.
     pub times: GpuTimes,
-    /// The host's work on the batches' results, and the photons a batch.
+    /// The host's work on the batches' results, the photons a batch and what streaming a
+    /// medium read as stored did.
     pub host: PhotonHostWork,
 }
 
@@ -57,7 +58,9 @@ pub struct BackendRun {
 /// Prepares the scene `f` read from `path` and propagates `run` on `backend`, `batch`
 /// photons at a time (by default the CPU's [`super::propagate::BATCH`], on the GPU as many
 /// as fill it), handing each batch's results to `sink` as it finishes; errors name the
-/// file. `auto` tells on stderr why it fell back to the CPU.
+/// file. On the GPU a medium read as stored streams through a brick pool of at most
+/// `memory` device bytes ([`GpuPhotons::with_memory`]). `auto` tells on stderr why it fell
+/// back to the CPU.
 #[allow(clippy::too_many_arguments)]
 pub fn propagate_on(
     f: &Foundry,
@@ -66,6 +69,7 @@ pub fn propagate_on(
     run: &RunOptions,
     backend: PhotonBackend,
     batch: Option<u64>,
+    memory: u64,
     sink: &mut dyn FnMut(Batch) -> Result<(), PhotonError>,
     progress: &dyn Fn(u64),
 ) -> crate::Result<BackendRun> {
@@ -102,7 +106,8 @@ pub fn propagate_on(
         let scene = PhotonScene::with_precision(f, surfaces, Precision::F32)
             .with_context(|| format!("{}: preparing for photons", path.display()))?;
         let kernel = GpuPhotons::new(&ctx, &scene, run)
-            .with_context(|| format!("{}: the GPU photon kernel", path.display()))?;
+            .with_context(|| format!("{}: the GPU photon kernel", path.display()))?
+            .with_memory(memory);
         let build_s = t.elapsed().as_secs_f64();
         let mut sink = sink.borrow_mut();
         let mut noted = |b: Batch| {

@@ -1,8 +1,8 @@
 //! What a photon run calls for (`hytrace photons --explain`): the processes its scene's
 //! materials and surfaces, its source and its outputs need, each with the materials or
 //! surfaces that need it and where it runs (the CPU propagator and the GPU kernel have
-//! every one; the CPU alone propagates media read as stored in a brick store), then what
-//! the GPU kernel is composed of.
+//! every one; the GPU streams a medium read as stored in a brick store through its brick
+//! pool when it is the scene's only medium), then what the GPU kernel is composed of.
 
 use std::collections::BTreeSet;
 
@@ -18,8 +18,10 @@ const BOTH: &str = "cpu, gpu";
 /// Wavelength shifting: an absorption emitting several photons is propagated on the CPU.
 const WLS_ON: &str = "cpu, gpu; an absorption emitting several photons: cpu";
 
-/// Media: media read as stored in a brick store are the CPU's alone.
-const MEDIA_ON: &str = "cpu, gpu; a brick store read as stored: cpu";
+/// Media: the GPU streams a brick store read as stored through its brick pool, when it is
+/// the scene's only medium.
+const MEDIA_ON: &str =
+    "cpu, gpu; a brick store read as stored: streamed through the GPU's brick pool, alone";
 
 /// Whether a material needs a process.
 type Needs = dyn Fn(&MaterialOptics) -> bool;

@@ -515,19 +515,22 @@ pub fn torch_run(source: &str, photons: u64, seed: u32) -> RunOptions {
 /// A scene whose medium is a brick store read as stored (16^3 voxels of density 1, an
 /// extinction of 0.05 per mm) in the tank of `media_tank.gdml`, written into `dir`.
 pub fn stored_medium(dir: &Path) -> PathBuf {
-    let mut grid = DenseGrid::new([0; 3], [16; 3], 0.0).unwrap();
-    for z in 0..16 {
-        for y in 0..16 {
-            for x in 0..16 {
-                grid.set([x, y, z], 1.0);
-            }
-        }
-    }
+    stored_slab(dir, [16; 3], 1.0, 0.05)
+}
+
+/// A scene whose medium is a brick store read as stored: `dims` voxels of density 1 and
+/// side `voxel` mm centred on the origin, an extinction of `density_scale` per mm and an
+/// albedo of 0.8, in the tank of `media_tank.gdml` (a vacuum world of 400 mm with a sensor
+/// plate at z = 150), written into `dir` (`stored.toml`, `fog.bricks`).
+pub fn stored_slab(dir: &Path, dims: [u32; 3], voxel: f64, density_scale: f64) -> PathBuf {
+    let map = hytrace_volume::GridMap::uniform(voxel, [0.0; 3]).unwrap();
+    let mut grid = DenseGrid::new([0; 3], dims, 0.0).unwrap().with_map(map);
+    grid.values.fill(1.0);
     let options = ConvertOptions {
         background: 0.0,
         threshold: 0.0,
         range: None,
-        memory: 1 << 26,
+        memory: 1 << 28,
     };
     convert_grid(
         &grid,
@@ -539,15 +542,27 @@ pub fn stored_medium(dir: &Path) -> PathBuf {
     .unwrap();
     let path = dir.join("stored.toml");
     let tank = repo("tests/data/photons/media_tank.gdml");
+    let [x, y, z] = dims.map(|d| -f64::from(d) * voxel / 2.0);
     std::fs::write(
         &path,
         format!(
             "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"fog.bricks\"\n\
-             density_scale = 0.05\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
-             translate = [-8, -8, -8]\n",
+             density_scale = {density_scale}\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
+             translate = [{x}, {y}, {z}]\n",
             tank.display()
         ),
     )
     .unwrap();
     path
+}
+
+/// Cuts the bricks file of the store [`stored_slab`] wrote into `dir` short, to its first
+/// four bricks (a store damaged while a run reads it).
+pub fn cut_store_short(dir: &Path) {
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(dir.join("fog.bricks/bricks.bin"))
+        .unwrap()
+        .set_len(4096)
+        .unwrap();
 }
