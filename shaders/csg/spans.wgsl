@@ -142,8 +142,8 @@ struct Step {
     inside_before: bool,
 }
 
-// The least start of a span that `first_crossing_of_spans` skipped as a touch although it
-// ended past the search's start, since the caller last set it to INF: the twin of
+// The least start of a span that `first_crossing_of_spans` skipped as a touch or a contact
+// although it ended past the search's start, since the caller last set it to INF: the twin of
 // hytrace_csg::kernel::Step::dropped, which the CPU carries in its steps (here one value
 // per invocation, read by the scan kernel after each prim's first crossing).
 var<private> dropped_span: f32 = INF;
@@ -161,13 +161,13 @@ fn step_complemented(s: Step) -> Step {
 }
 
 // The first span end after tmin + tol among `spans` shifted by `shift`, skipping spans no
-// longer than `touch` (tangent touches). Normals face against the ray at entries, along it at
-// exits.
-fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, tol: f32, touch: f32) -> Step {
+// longer than `touch` (tangent touches) and those whose bit is set in `contacts` (see
+// csg_contact_spans). Normals face against the ray at entries, along it at exits.
+fn first_crossing_of_spans(spans: Spans, shift: f32, d: vec3<f32>, tmin: f32, tol: f32, touch: f32, contacts: u32) -> Step {
     let after = tmin + tol;
     for (var i = 0u; i < spans.len; i += 1u) {
         let s = spans.items[i];
-        if s.t1 - s.t0 <= touch {
+        if s.t1 - s.t0 <= touch || (contacts & (1u << i)) != 0u {
             // (Spans of empty parts sit at INF, where the CPU's infinite ones never pass.)
             if s.t1 + shift > after && s.t0 < INF {
                 dropped_span = min(dropped_span, s.t0 + shift);

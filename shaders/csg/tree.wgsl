@@ -110,9 +110,74 @@ fn csg_node_params(n: CsgNode) -> array<f32, 6> {
     return array<f32, 6>(n.param.x, n.param.y, n.param.z, n.param.w, n.param_ext[0], n.param_ext[1]);
 }
 
+// Twin of hytrace_csg::kernel::contacts_outside: whether a ray along the surface of the leaf
+// at `position` is outside the tree (no union above it, subtracted an even number of times,
+// its complement included).
+fn csg_contacts_outside(node_offset: u32, position: u32, complement: bool) -> bool {
+    var p = position;
+    var subtracted = complement;
+    loop {
+        if p <= 1u {
+            break;
+        }
+        let code = csg_node(node_offset + p / 2u - 1u).code;
+        if code == CSG_UNION {
+            return false;
+        }
+        if code == CSG_DIFFERENCE && p % 2u == 1u {
+            subtracted = !subtracted;
+        }
+        p = p / 2u;
+    }
+    return !subtracted;
+}
+
+// Twin of hytrace_csg::kernel::contact_spans: a bit per span of the ray o + t d (in the
+// leaf's frame, o shifted) whose points at a quarter, half and three quarters of its length
+// are within tol of the surface; asked only for rays with a zero direction component, not
+// along the axis of a phi cut.
+fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: f32) -> u32 {
+    if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
+        return 0u;
+    }
+    // Not along the axis of a phi cut, where Geant4's solids disagree (kernel::on_phi_axis).
+    // #if phicut
+    if (n.code & ~COMPLEMENT_BIT) == CSG_PHICUT && o.x == 0.0 && o.y == 0.0 && d.x == 0.0 && d.y == 0.0 {
+        return 0u;
+    }
+    // #endif
+    var contacts = 0u;
+    for (var i = 0u; i < spans.len; i += 1u) {
+        let s = spans.items[i];
+        // An infinite end replaced by one as far from the other end as that is from the
+        // closest approach to the centre (at least a unit), both by the unit around it.
+        var t0 = s.t0;
+        var t1 = s.t1;
+        if !is_finite_t(t0) && !is_finite_t(t1) {
+            t0 = -0.5;
+            t1 = 0.5;
+        } else if !is_finite_t(t1) {
+            t1 = t0 + max(abs(t0), 1.0);
+        } else if !is_finite_t(t0) {
+            t0 = t1 - max(abs(t1), 1.0);
+        }
+        let length = t1 - t0;
+        var on_surface = true;
+        for (var k = 1u; k <= 3u; k += 1u) {
+            let x = o + d * (t0 + length * (0.25 * f32(k)));
+            let v = primitive_sdf(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, x);
+            on_surface = on_surface && abs(v) <= tol;
+        }
+        contacts |= select(0u, 1u, on_surface) << i;
+    }
+    return contacts;
+}
+
 // The first crossing of a leaf's surface by the ray o + t d (in the tree's frame) after
 // tmin + tol; normal in the tree's frame.
-fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool) -> Step {
+// `position`: the leaf's position in the tree whose nodes start at `node_offset`, or 0 for a
+// list member (whose contacts are never outside).
+fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool, node_offset: u32, position: u32) -> Step {
     var lo = o;
     var ld = d;
     if n.frame != UNSET {
@@ -128,7 +193,16 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
     if alone && csg_is_planar(n.code & ~COMPLEMENT_BIT) {
         touch = tol / 4.0;
     }
-    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch);
+    // Contact spans are skipped where a ray along the leaf's surface is outside the tree
+    // (asked of the tree only when there are some).
+    var contacts = 0u;
+    if position != 0u {
+        contacts = csg_contact_spans(n, spans, lo + ld * shift, ld, tol);
+        if contacts != 0u && !csg_contacts_outside(node_offset, position, (n.code & COMPLEMENT_BIT) != 0u) {
+            contacts = 0u;
+        }
+    }
+    var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch, contacts);
     if n.frame != UNSET {
         step.normal = frame_normal_to_parent(csg_frame(n.frame), step.normal);
     }
@@ -194,8 +268,11 @@ fn csg_list_inside(code: u32, count: u32, all: u32) -> bool {
 // threshold (PrimTree::list_step; members whose widened bounds the ray misses are skipped).
 // A leaf slot is the same walk over the leaf alone without culling, which returns the
 // leaf's own step (PrimTree::non_operator_step): so the primitive kernels are inlined once.
-// `root`: the slot is the tree's root (a leaf there is the whole prim).
-fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, root: bool) -> Step {
+// The slot is the one at `position` of the tree whose nodes start at `node_offset` (at the
+// root, position 1, a leaf is the whole prim).
+fn csg_slot_step(scale: f32, node_offset: u32, position: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
+    let slot = node_offset + position - 1u;
+    let root = position == 1u;
     let n = csg_node(slot);
     if n.code == CSG_ZERO {
         return step_miss(false);
@@ -232,7 +309,7 @@ fn csg_slot_step(scale: f32, slot: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32, r
             if list && !csg_meets_widened(w, member.bounds, tau, INF) {
                 continue;
             }
-            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau), root && !list);
+            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau), root && !list, node_offset, select(position, 0u, list));
             count += select(0u, 1u, s.inside_before);
             if !step_is_hit(s) {
                 continue;
@@ -389,7 +466,7 @@ fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> 
                 stack[depth] = CsgOperatorFrame(query, query_tmin, step_miss(false), step_miss(false), CSG_PHASE_FIRST_LEFT);
                 depth += 1u;
             } else {
-                incoming = csg_slot_step(tr.scale, tr.node_offset + query - 1u, o, d, query_tmin, query == 1u);
+                incoming = csg_slot_step(tr.scale, tr.node_offset, query, o, d, query_tmin);
                 has_incoming = true;
                 if depth == 0u {
                     break;

@@ -20,7 +20,7 @@ use std::ops::Range;
 
 use hytrace_foundry::{Foundry, PrimKind, TypeCode, COMPLEMENT_BIT, MAX_TREE_HEIGHT};
 
-use crate::kernel::{is_bounded, Frame, Leaf, Step};
+use crate::kernel::{contacts_outside, is_bounded, Frame, Leaf, Step};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
@@ -56,6 +56,9 @@ pub struct PrimTree<T> {
     /// The surface tolerance at the farthest point of `bounds`: the most it is at a point
     /// near the surface.
     pub(crate) near_max: T,
+    /// Per slot: whether a ray along the surface of the leaf there is outside the tree
+    /// ([`crate::kernel::contacts_outside`]; false for other slots).
+    pub(crate) contacts_outside: Vec<bool>,
 }
 
 /// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
@@ -381,7 +384,20 @@ impl<T: Real> PrimTree<T> {
         let pad = if pad.is_finite() { pad } else { T::ZERO };
         let pad = V3::new(pad, pad, pad);
         let bounds = [lo - pad, hi + pad];
+        let operator = |position: usize| match slots.get(position - 1) {
+            Some(Slot::Operator(code)) => Some(*code),
+            _ => None,
+        };
+        let contacts_outside = slots
+            .iter()
+            .enumerate()
+            .map(|(k, slot)| match slot {
+                Slot::Leaf(leaf) => contacts_outside(k + 1, leaf.complement, operator),
+                _ => false,
+            })
+            .collect();
         Ok(PrimTree {
+            contacts_outside,
             slots,
             members,
             planes,
@@ -464,7 +480,15 @@ impl<T: Real> PrimTree<T> {
             Slot::Operator(code) => *code,
             Slot::Empty => return Step::miss(false),
             Slot::Leaf(leaf) => {
-                return leaf.step(&self.planes, ray, tmin, self.tol(tmin), position == 1)
+                let outside = self.contacts_outside[position - 1];
+                return leaf.step(
+                    &self.planes,
+                    ray,
+                    tmin,
+                    self.tol(tmin),
+                    position == 1,
+                    outside,
+                );
             }
             Slot::List {
                 code,
@@ -540,7 +564,7 @@ impl<T: Real> PrimTree<T> {
                 if !meets_widened(&widened, b, tau, T::INFINITY) {
                     continue;
                 }
-                let s = leaf.step(&self.planes, ray, tau, self.tol(tau), false);
+                let s = leaf.step(&self.planes, ray, tau, self.tol(tau), false, false);
                 dropped = dropped.min(s.dropped);
                 count += s.inside_before as usize;
                 if !s.is_hit() {

@@ -306,10 +306,91 @@ impl<T: Real> Step<T> {
     }
 }
 
+/// Which spans of a ray `o + t d` (in the primitive's own frame, `o` shifted as the spans
+/// were solved) only run along the primitive's surface: a bit per span whose points at a
+/// quarter, half and three quarters of its length are all within `tol` of the surface
+/// (signed distance within `tol` of 0: a span that a degenerate root put outside is no
+/// contact). Such a span is a *contact*: the ray lies in a face, along a
+/// wall's generator or on a tangent, and never enters the interior. Geant4 takes the surface
+/// for outside the solid (`Inside()` is `kSurface` all along) and answers no boundary
+/// there; callers skip contact spans where the tree agrees ([`contacts_outside`]). An
+/// infinite end (of a cut or half-space, whose faces are planes or cones through the
+/// origin) is replaced by one as far from the other end as that is from the closest
+/// approach to the centre (at least a unit: a plane crossed at a grazing angle far away is
+/// no contact), or by the unit around that approach if both ends are infinite (the ray
+/// parallel to every face it might run along). Three points, not one:
+/// a ray tangent to a tube's inner wall has its middle on the surface but runs deep through
+/// the wall on both sides. The points are only asked for rays with a zero direction
+/// component (a ray parallel to a face or wall of the primitive's frame): others are not
+/// contacts but for the rounding of a tangent, which the touch length already decides.
+pub fn contact_spans<T: Real>(
+    code: TypeCode,
+    p: &[T; 6],
+    planes: &[[T; 4]],
+    spans: &Spans<T>,
+    o: V3<T>,
+    d: V3<T>,
+    tol: T,
+) -> u32 {
+    let oblique = d.x != T::ZERO && d.y != T::ZERO && d.z != T::ZERO;
+    if oblique || on_phi_axis(code, o, d) {
+        return 0;
+    }
+    let mut contacts = 0;
+    for (i, s) in spans.as_slice().iter().enumerate() {
+        let (t0, t1) = match (s.t0.is_finite(), s.t1.is_finite()) {
+            (true, true) => (s.t0, s.t1),
+            (true, false) => (s.t0, s.t0 + s.t0.abs().max(T::ONE)),
+            (false, true) => (s.t1 - s.t1.abs().max(T::ONE), s.t1),
+            (false, false) => (-T::HALF, T::HALF),
+        };
+        let length = t1 - t0;
+        let on_surface = [0.25, 0.5, 0.75].iter().all(|&f| {
+            let x = o.at(d, t0 + length * T::from_f64(f));
+            primitive_sdf(code, p, planes, x).abs() <= tol
+        });
+        contacts |= (on_surface as u32) << i;
+    }
+    contacts
+}
+
+/// Whether a ray runs along the axis of a phi cut, the edge where its half-planes meet.
+/// Geant4's solids disagree there: G4Sphere does not check phi on the axis (inside),
+/// G4Tubs, G4Polycone and G4Polyhedra take it for surface; the closed rule is kept.
+fn on_phi_axis<T: Real>(code: TypeCode, o: V3<T>, d: V3<T>) -> bool {
+    code == TypeCode::PhiCut && o.x == T::ZERO && o.y == T::ZERO && d.x == T::ZERO && d.y == T::ZERO
+}
+
+/// Whether a ray running along the surface of the leaf at `position` of a complete binary
+/// tree (whose operator at position `k` is `operator(k)`, `None` for other slots) is
+/// outside the tree there, as Geant4's booleans decide: the surface of a solid is not its
+/// interior, an intersection is inside where both operands are, and a difference `A - B`
+/// where `A` is inside and `B` neither inside nor on its surface (the leaf's contacts count
+/// as inside it when it is subtracted an odd number of times, `complement` included). A
+/// union's faces may be shared by its operands, inside the union (G4UnionSolid: both on
+/// their surfaces with opposite normals): under a union, contacts keep the closed rule.
+pub fn contacts_outside(
+    position: usize,
+    complement: bool,
+    operator: impl Fn(usize) -> Option<TypeCode>,
+) -> bool {
+    let (mut p, mut subtracted) = (position, complement);
+    while p > 1 {
+        match operator(p / 2) {
+            Some(TypeCode::Union) => return false,
+            Some(TypeCode::Difference) if p % 2 == 1 => subtracted = !subtracted,
+            _ => {}
+        }
+        p /= 2;
+    }
+    !subtracted
+}
+
 /// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
-/// spans no longer than `touch` (tangent touches, not crossings; the least start of those
-/// skipped that end after `tmin + tol` is reported as [`Step::dropped`]). Normals are oriented outward
-/// from the span's role (entries face against the ray, exits along it).
+/// spans no longer than `touch` (tangent touches, not crossings) and the spans whose bit is
+/// set in `contacts` (see [`contact_spans`]); the least start of those skipped that end
+/// after `tmin + tol` is reported as [`Step::dropped`]. Normals are oriented outward from
+/// the span's role (entries face against the ray, exits along it).
 pub fn first_crossing<T: Real>(
     spans: &Spans<T>,
     shift: T,
@@ -317,11 +398,12 @@ pub fn first_crossing<T: Real>(
     tmin: T,
     tol: T,
     touch: T,
+    contacts: u32,
 ) -> Step<T> {
     let after = tmin + tol;
     let mut dropped = T::INFINITY;
-    for s in spans.as_slice() {
-        if s.t1 - s.t0 <= touch {
+    for (i, s) in spans.as_slice().iter().enumerate() {
+        if s.t1 - s.t0 <= touch || contacts & (1 << i) != 0 {
             if s.t1 + shift > after && s.t0 < T::INFINITY {
                 dropped = dropped.min(s.t0 + shift);
             }
@@ -356,8 +438,18 @@ pub fn first_crossing<T: Real>(
 impl<T: Real> Leaf<T> {
     /// The first crossing of the leaf's surface by `ray` (in the tree's frame) after
     /// `tmin + tol`; normals in the tree's frame. `alone`: the leaf is the whole prim (no
-    /// other leaf shares its faces).
-    pub fn step(&self, planes: &[[T; 4]], ray: &Ray<T>, tmin: T, tol: T, alone: bool) -> Step<T> {
+    /// other leaf shares its faces). `contacts_outside`: a ray running along the leaf's
+    /// surface is outside the tree there (see [`contacts_outside`]), so contact spans are
+    /// skipped.
+    pub fn step(
+        &self,
+        planes: &[[T; 4]],
+        ray: &Ray<T>,
+        tmin: T,
+        tol: T,
+        alone: bool,
+        contacts_outside: bool,
+    ) -> Step<T> {
         let local = match &self.frame {
             Some(f) => f.ray_to_local(ray),
             None => *ray,
@@ -368,8 +460,10 @@ impl<T: Real> Leaf<T> {
         // ([`origin_shift`]). Z caps are met from the unmoved origin ([`primitive_spans`]).
         let d = local.direction;
         let shift = origin_shift(self.code, &self.params, local.origin, d);
-        let planes = &planes[self.planes.clone()];
-        let spans = primitive_spans(self.code, &self.params, planes, local.origin, d, shift);
+        let leaf_planes = &planes[self.planes.clone()];
+        let spans = primitive_spans(self.code, &self.params, leaf_planes, local.origin, d, shift);
+        // The spans' parameter starts at the moved origin.
+        let o = local.origin.at(d, shift);
         // A curved surface's near-double roots (a tangent ray) are uncertain by more than
         // their distance: such short spans are touches, and so are the slivers that the
         // rounded planes of faces that leaves share leave along a ray near those faces.
@@ -381,7 +475,12 @@ impl<T: Real> Leaf<T> {
         } else {
             tol
         };
-        let mut step = first_crossing(&spans, shift, d, tmin, tol, touch);
+        let contacts = if contacts_outside {
+            contact_spans(self.code, &self.params, leaf_planes, &spans, o, d, tol)
+        } else {
+            0
+        };
+        let mut step = first_crossing(&spans, shift, d, tmin, tol, touch, contacts);
         if let Some(f) = &self.frame {
             step.normal = f.normal_to_parent(step.normal);
         }

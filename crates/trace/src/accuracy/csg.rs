@@ -86,7 +86,7 @@ fn leaf_crossing<T: Real>(leaf: &Leaf<T>, case: &Case, strategy: bool) -> Option
         T::ZERO
     };
     let spans = primitive_spans(leaf.code, &leaf.params, &[], local.origin, d, shift);
-    let step = first_crossing(&spans, shift, d, T::ZERO, T::ZERO, T::ZERO);
+    let step = first_crossing(&spans, shift, d, T::ZERO, T::ZERO, T::ZERO, 0);
     step.is_hit().then(|| step.t.to_f64())
 }
 
