@@ -47,11 +47,11 @@ fn stream_touch(slot: u32) {
 // The value an absent brick shows while it is requested: in kernels composed with
 // `stream_lods`, the mean of the octant of record `record`'s brick that holds texel `b` (0 to
 // 7 on each axis); else (the photon kernel on a device without a binding to spare for them:
-// what it computes there is discarded anyway) the background.
+// what it computes there is discarded anyway) zero.
 fn stream_coarse(record: u32, b: vec3<u32>) -> f32 {
     // #if stream_lods
     let octant = (b.x >> 2u) | ((b.y >> 2u) << 1u) | ((b.z >> 2u) << 2u);
     return stream_lods[record * 9u + 1u + octant];
     // #endif
-    return vparams.background;
+    return 0.0;
 }
