@@ -255,9 +255,9 @@ struct RenderMedium {
 }
 
 struct PhotonParams {
-    source_at: array<f32, 3>,
+    source_at: vec4<f32>,
+    source_direction: vec4<f32>,
     source_kind: u32,
-    source_direction: array<f32, 3>,
     source_radius: f32,
     cos_divergence: f32,
     inward: u32,
@@ -272,6 +272,7 @@ struct PhotonParams {
     probe_trips: u32,
     spectrum: u32,
     records: u32,
+    pad: u32,
 }
 
 struct PhotonTable {

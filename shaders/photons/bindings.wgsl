@@ -5,7 +5,9 @@
 // #import generated/foundry
 // #import generated/trace_records
 
-@group(2) @binding(0) var<storage, read> pparams: PhotonParams;
+// A uniform, not a storage buffer: a streamed run with step points and gensteps binds
+// 32 storage buffers without it, the least a device may allow (lavapipe).
+@group(2) @binding(0) var<uniform> pparams: PhotonParams;
 @group(2) @binding(1) var<storage, read> ptables: array<PhotonTable>;
 @group(2) @binding(2) var<storage, read> prows: array<vec2<f32>>;
 @group(2) @binding(3) var<storage, read> pmaterials: array<PhotonMaterial>;

@@ -14,11 +14,11 @@ struct Start {
 }
 
 fn torch_start(rng: ptr<function, VolumeRng>) -> Start {
-    let at = vec3<f32>(pparams.source_at[0], pparams.source_at[1], pparams.source_at[2]);
+    let at = pparams.source_at.xyz;
     var position = at;
     var direction: vec3<f32>;
     if pparams.source_kind == PHOTON_SOURCE_BEAM {
-        let axis = vec3<f32>(pparams.source_direction[0], pparams.source_direction[1], pparams.source_direction[2]);
+        let axis = pparams.source_direction.xyz;
         let r = pparams.source_radius * sqrt(rng_next(rng));
         let phi = TAU * rng_next(rng);
         position = at + rotate_uz(vec3<f32>(r * cos(phi), r * sin(phi), 0.0), axis);

@@ -789,6 +789,50 @@ fn stored_media_stream_through_a_brick_pool_and_match_the_resident_run() {
     assert_eq!(points(&roomy.records), points(&resident.records));
 }
 
+/// A streamed run with step points and gensteps: the kernel binds the scene's 14 arrays,
+/// the photon group's 12 storage buffers (tables, outputs, step points, gensteps, placed
+/// media; its parameters are a uniform buffer) and the brick pool's 6, 32 in all, which a
+/// device allowing 32 a stage (lavapipe) runs. A fog of 64^3 voxels of 1 mm read as stored
+/// in the scintillator cube, photons from a scintillation and a Cherenkov step crossing
+/// it: the GPU matches the f32 CPU twin photon by photon, step points included.
+#[test]
+fn streamed_runs_with_step_points_and_gensteps_match_the_cpu_twin() {
+    let Some(ctx) = GpuContext::for_tests() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cube = repo("tests/data/photons/scintillator.gdml");
+    let path = common::stored_slab_in(dir.path(), &cube, [64; 3], 1.0, 0.03);
+    #[rustfmt::skip]
+    let rows: [[f64; 14]; 2] = [
+        // kind, photons, material, t0, start, end, beta0, beta1, charge, component
+        [2.0, 500.0, 1.0, 10.0, -20.0, 0.0, 0.0, 20.0, 0.0, 0.0, 0.5, 0.5, -1.0, 0.0],
+        [1.0, 500.0, 1.0, 50.0, 0.0, 0.0, 30.0, 0.0, 0.0, 10.0, 0.99, 0.9, -1.0, 0.0],
+    ];
+    let file = GenstepFile::from_values("fog.npy".into(), &[2, 14], rows.as_flattened()).unwrap();
+    let run = RunOptions {
+        origin: Origin::Gensteps(Arc::new(file)),
+        photons: 993,
+        records: 4,
+        ..options("point:0,0,0", 1)
+    };
+    let s32 = scene(&path, Precision::F32);
+    let kernel = GpuPhotons::new(&ctx, &s32, &run).unwrap();
+    for feature in ["streamed", "records", "gensteps"] {
+        assert!(
+            kernel.features().contains(&feature),
+            "{:?}",
+            kernel.features()
+        );
+    }
+    let (gpu, twin_same) = twin_within("streamed gensteps", path, run, 50, 0.0).unwrap();
+    assert!(twin_same >= 0.99, "{twin_same}");
+    let scattered = (gpu.histories.iter())
+        .filter(|&&h| history_string(h).contains("SC"))
+        .count();
+    assert!(scattered > 50, "{scattered} scattered in the fog");
+}
+
 /// The command streams a medium read as stored on the GPU: `--backend gpu` reports the
 /// streaming under `stream` in `--stats`, `--backend auto` picks the GPU (nothing on
 /// stderr about the CPU) and writes the same files, `--explain` says where it runs; a

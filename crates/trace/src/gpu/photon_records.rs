@@ -10,14 +10,16 @@ use hytrace_foundry::wgsl::push_struct;
 
 record! {
     /// What every photon of a GPU run shares: the torch source (or gensteps), the
-    /// wavelength or spectrum, the run's photons and seed.
+    /// wavelength or spectrum, the run's photons and seed. The kernel reads it as a
+    /// uniform buffer (which spares a storage buffer: a device may allow as few as 32 a
+    /// stage), so its vectors are `vec4`s (a uniform's arrays need a stride of 16 bytes).
     pub struct PhotonParams {
-        /// Point: the position; beam, sphere: the centre (mm).
-        pub source_at: [f32; 3],
+        /// Point: the position; beam, sphere: the centre (mm); `w` unused (0).
+        pub source_at: [f32; 4],
+        /// Beam: the unit direction; `w` unused (0).
+        pub source_direction: [f32; 4],
         /// `PHOTON_SOURCE_*` (`PHOTON_SOURCE_GENSTEPS`: photons from the gensteps).
         pub source_kind: u32,
-        /// Beam: the unit direction.
-        pub source_direction: [f32; 3],
         /// Beam: the disk's radius; sphere: the sphere's (mm).
         pub source_radius: f32,
         /// Beam: cosine of the divergence half-angle (1: parallel).
@@ -47,6 +49,8 @@ record! {
         pub spectrum: u32,
         /// Step points written per photon (`--records`; 0: none).
         pub records: u32,
+        /// Padding to a multiple of 16 bytes, the size WGSL gives a struct of `vec4`s.
+        pub pad: u32,
     }
 }
 

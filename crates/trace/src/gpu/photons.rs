@@ -17,7 +17,9 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::compose::declared_constants;
-use super::context::{compute_pipeline, storage_layout_entry, GpuContext, GpuError};
+use super::context::{
+    compute_pipeline, storage_layout_entry, uniform_layout_entry, GpuContext, GpuError,
+};
 use super::photon_records::{
     PhotonParams, PhotonRecord, PHOTON_DEPTH_LIMIT, PHOTON_DETECTED, PHOTON_LOOPS_CUT,
     PHOTON_MISSING_BRICK, PHOTON_SEVERAL_EMITTED, PHOTON_SOURCE_BEAM, PHOTON_SOURCE_GENSTEPS,
@@ -40,9 +42,11 @@ use hytrace_volume::{BrickStore, RangeMips, DEFAULT_STORE_BUDGET};
 const KERNEL: &str = "kernels/photons";
 /// Photons per dispatch at most.
 const BATCH: u64 = 1 << 20;
-/// Storage buffers of the photon group (group 2) every kernel binds: the parameters, the
-/// tables (1-6) and the outputs (7-9).
+/// Buffers of the photon group (group 2) every kernel binds: the parameters (a uniform
+/// buffer, [`PARAMS_BINDING`]), the tables (1-6) and the outputs (7-9).
 const PHOTON_BINDINGS: u32 = 10;
+/// The binding of the parameters, the photon group's one uniform buffer.
+const PARAMS_BINDING: u32 = 0;
 /// The photon group's bindings a kernel binds when composed with a feature: the step
 /// points, the gensteps, the placed media.
 const FEATURE_BINDINGS: [(&str, u32); 3] = [("records", 10), ("gensteps", 11), ("media", 12)];
@@ -275,8 +279,9 @@ impl GpuPhotons {
                 .filter(|(feature, _)| physics.contains(feature))
                 .map(|&(_, binding)| binding),
         );
+        // Storage buffers: the photon group's but the parameters, and the media's.
         let kernel_bindings =
-            |lods| bindings.len() as u32 + media.as_ref().map_or(0, |m| m.binding_count(lods));
+            |lods| bindings.len() as u32 - 1 + media.as_ref().map_or(0, |m| m.binding_count(lods));
         // A streamed store's coarser levels of detail stand in for its absent bricks where
         // the device has a binding to spare (a pass's paths then stay close to those through
         // the bricks they lack, which they request); else the background does.
@@ -327,7 +332,10 @@ impl GpuPhotons {
         ctx.checked("building the photon kernel", || {
             let module = ctx.wgsl_module(KERNEL, &source);
             let entries: Vec<_> = (bindings.iter())
-                .map(|&b| storage_layout_entry(b, !WRITTEN.contains(&b)))
+                .map(|&b| match b {
+                    PARAMS_BINDING => uniform_layout_entry(b),
+                    _ => storage_layout_entry(b, !WRITTEN.contains(&b)),
+                })
                 .collect();
             let layout = ctx
                 .device
@@ -691,7 +699,8 @@ impl GpuPhotons {
         }
         let timer = PassTimer::new(ctx, "photon timestamps");
         let bound = ctx.checked("photon dispatch", || {
-            let mut buffers = vec![ctx.input_buffer("photon params", &binding_bytes(&[params]))];
+            let mut buffers =
+                vec![ctx.uniform_buffer("photon params", bytemuck::bytes_of(&params))];
             buffers.extend(self.tables.iter().cloned());
             buffers.extend(
                 [
@@ -878,7 +887,10 @@ fn params(run: &RunOptions, range: &Range<u64>, hierarchical: bool) -> PhotonPar
 
 /// Sets the torch `source` in the parameters `p`.
 fn torch(p: &mut PhotonParams, source: Source) {
-    let f = |v: crate::photons::V| v.to_f64().map(|c| c as f32);
+    let f = |v: crate::photons::V| {
+        let [x, y, z] = v.to_f64();
+        [x as f32, y as f32, z as f32, 0.0]
+    };
     match source {
         Source::Point { position } => {
             p.source_kind = PHOTON_SOURCE_POINT;

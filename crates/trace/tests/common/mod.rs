@@ -573,6 +573,23 @@ pub fn stored_medium(dir: &Path) -> PathBuf {
 /// albedo of 0.8, in the tank of `media_tank.gdml` (a vacuum world of 400 mm with a sensor
 /// plate at z = 150), written into `dir` (`stored.toml`, `fog.bricks`).
 pub fn stored_slab(dir: &Path, dims: [u32; 3], voxel: f64, density_scale: f64) -> PathBuf {
+    stored_slab_in(
+        dir,
+        &repo("tests/data/photons/media_tank.gdml"),
+        dims,
+        voxel,
+        density_scale,
+    )
+}
+
+/// [`stored_slab`] in the GDML scene `gdml` instead of the tank.
+pub fn stored_slab_in(
+    dir: &Path,
+    gdml: &Path,
+    dims: [u32; 3],
+    voxel: f64,
+    density_scale: f64,
+) -> PathBuf {
     let map = hytrace_volume::GridMap::uniform(voxel, [0.0; 3]).unwrap();
     let mut grid = DenseGrid::new([0; 3], dims, 0.0).unwrap().with_map(map);
     grid.values.fill(1.0);
@@ -591,7 +608,6 @@ pub fn stored_slab(dir: &Path, dims: [u32; 3], voxel: f64, density_scale: f64) -
     )
     .unwrap();
     let path = dir.join("stored.toml");
-    let tank = repo("tests/data/photons/media_tank.gdml");
     let [x, y, z] = dims.map(|d| -f64::from(d) * voxel / 2.0);
     std::fs::write(
         &path,
@@ -599,7 +615,7 @@ pub fn stored_slab(dir: &Path, dims: [u32; 3], voxel: f64, density_scale: f64) -
             "[gdml.tank]\nfile = \"{}\"\n\n[volumes.fog]\nsource = \"fog.bricks\"\n\
              density_scale = {density_scale}\nalbedo = 0.8\n\n[[place]]\nsolid = \"fog\"\n\
              translate = [{x}, {y}, {z}]\n",
-            tank.display()
+            gdml.display()
         ),
     )
     .unwrap();
