@@ -12,7 +12,7 @@ mod arrays;
 mod errors;
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex};
 
 use hytrace_foundry::gdml::GdmlOptions;
 use hytrace_foundry::Foundry;
@@ -59,9 +59,10 @@ struct Scene {
     foundry: Foundry,
     /// The scene's render description (its file's, or the defaults).
     render_spec: RenderSpec,
-    /// Prepared on the first photon run: the scene read again with what finds the optical
-    /// surface of every crossing (GDML), and its property tables.
-    photon_scene: OnceLock<PhotonScene>,
+    /// Prepared on the first photon run and again when a run asks for another memory
+    /// budget: the scene read again with what finds the optical surface of every crossing
+    /// (GDML), its property tables and its media, with the budget it was prepared for.
+    photon_scene: Mutex<Option<(u64, Arc<PhotonScene>)>>,
 }
 
 impl Scene {
@@ -71,20 +72,28 @@ impl Scene {
         }
     }
 
-    /// The scene prepared for photons, on first use.
-    fn photon_scene(&self) -> hytrace_trace::Result<&PhotonScene> {
-        if let Some(s) = self.photon_scene.get() {
-            return Ok(s);
+    /// The scene prepared for photons, each medium read as stored holding at most `memory`
+    /// bytes resident (`hytrace photons --memory`): the one prepared last when it was
+    /// prepared with that budget, else prepared again (a budget too small for a store is
+    /// refused naming it).
+    fn photon_scene(&self, memory: u64) -> hytrace_trace::Result<Arc<PhotonScene>> {
+        // A poisoned lock only means a run panicked: the scene it holds is whole.
+        let mut slot = self.photon_scene.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((budget, scene)) = slot.as_ref() {
+            if *budget == memory {
+                return Ok(Arc::clone(scene));
+            }
         }
         let (f, surfaces) = load_photon_scene(&self.path, &self.options())?;
-        let scene = prepare(
+        let scene = Arc::new(prepare(
             &f,
             surfaces,
             &self.path,
             PhotonPrecision::F64,
-            DEFAULT_STORE_BUDGET,
-        )?;
-        Ok(self.photon_scene.get_or_init(|| scene))
+            memory,
+        )?);
+        *slot = Some((memory, Arc::clone(&scene)));
+        Ok(scene)
     }
 }
 
@@ -111,7 +120,7 @@ fn load(py: Python<'_>, path: PathBuf, lenient: bool) -> PyResult<Scene> {
         lenient,
         foundry,
         render_spec,
-        photon_scene: OnceLock::new(),
+        photon_scene: Mutex::new(None),
     })
 }
 
@@ -292,13 +301,16 @@ impl Scene {
     /// spectrum of a scene material. With `gensteps` (a `(G, 14)` array of Cherenkov and
     /// scintillation steps, the layout of `hytrace photons --gensteps`) instead of a
     /// source, the photons they emit (`photons` defaults to all from `first` on).
+    /// `memory`: bytes each medium read as stored in a brick store may hold resident (its
+    /// tables and a cache of the bricks photons read), as `--memory`; a budget too small
+    /// for a store raises `HytraceError` naming it. The results do not depend on it.
     ///
     /// Returns the detected photons, (H, 16) float64 with the columns of the command's
     /// output; with `histories=True`, `(hits, histories)` where histories is every photon's
     /// packed step history, (photons,) uint64.
     #[pyo3(signature = (
         source = None, photons = None, *, gensteps = None, wavelength = WavelengthArg::Nm(420.0),
-        seed = 0, max_steps = 10_000, first = 0, histories = false
+        seed = 0, max_steps = 10_000, first = 0, histories = false, memory = DEFAULT_STORE_BUDGET
     ))]
     #[allow(clippy::too_many_arguments)]
     fn photons<'py>(
@@ -312,6 +324,7 @@ impl Scene {
         max_steps: u32,
         first: u64,
         histories: bool,
+        memory: u64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let origin = match (source, gensteps) {
             (Some(source), None) => {
@@ -334,7 +347,9 @@ impl Scene {
             }
             _ => return Err(value_error("give a source or gensteps, not both".into()).into()),
         };
-        let scene = py.detach(|| self.photon_scene()).map_err(library_error)?;
+        let scene = py
+            .detach(|| self.photon_scene(memory))
+            .map_err(library_error)?;
         let photons = match (photons, &origin) {
             (Some(n), _) => n,
             (None, Origin::Gensteps(file)) => {
@@ -362,7 +377,7 @@ impl Scene {
             records: 0,
         };
         let run = py
-            .detach(|| propagate_in(scene, &self.path, &options, &|_| ()))
+            .detach(|| propagate_in(&scene, &self.path, &options, &|_| ()))
             .map_err(library_error)?;
         let n = run.hits.len();
         let rows: Vec<[f64; 16]> = run.hits.into_iter().map(|h| h.0).collect();

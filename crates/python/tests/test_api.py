@@ -265,6 +265,36 @@ def test_photon_ranges_equal_the_commands_first_option_and_the_whole_run(cli, tm
     same(parts[1], np.load(tmp_path / "part.npy"))
 
 
+def test_photons_through_a_brick_store_within_a_memory_budget_equal_the_command(cli, tmp_path):
+    # A fog converted to a brick store, read as stored, in the tank of media_tank.gdml
+    # between a beam and the sensor plate: with a budget of 6 MiB (the store's tables and
+    # a cache of one superchunk's bricks) the hits and histories equal the command's with
+    # `--memory 6M` and those of the default budget, bit for bit.
+    cli("volume", "convert", "sphere:40,0.5", "--store", "-o", tmp_path / "fog.bricks")
+    scene = tmp_path / "fog.toml"
+    scene.write_text(f'[gdml.tank]\nfile = "{DATA / "photons" / "media_tank.gdml"}"\n\n'
+                     '[volumes.fog]\nsource = "fog.bricks"\ndensity_scale = 0.05\n'
+                     'albedo = 0.8\n\n[[place]]\nsolid = "fog"\n')
+    source = "beam:0,0,-150:0,0,1:45"
+    cli("photons", scene, "--source", source, "-n", "2000", "--seed", "4", "--memory", "6M",
+        "--out", tmp_path / "hits.npy", f"--history={tmp_path / 'histories.npy'}")
+    fog = hytrace.load(scene)
+    hits, histories = fog.photons(source, 2000, seed=4, memory=6 << 20, histories=True)
+    same(hits, np.load(tmp_path / "hits.npy"))
+    same(histories, np.load(tmp_path / "histories.npy"))
+    # Some photons crossed the fog, some were scattered or absorbed in it.
+    assert 0 < len(hits) < 2000
+    same(fog.photons(source, 2000, seed=4), hits)
+    # A budget too small for the store is refused naming it and the least it needs; the
+    # scene still runs with a budget that holds it.
+    with pytest.raises(hytrace.HytraceError, match="fog.bricks.*too small.*give at least"):
+        fog.photons(source, 10, memory=1)
+    p = cli("photons", scene, "--source", source, "-n", "10", "--memory", "1",
+            "--out", tmp_path / "refused.npy", check=False)
+    assert p.returncode != 0 and "too small" in p.stderr
+    same(fog.photons(source, 2000, seed=4, memory=6 << 20), hits)
+
+
 # A scintillation step along x and a Cherenkov step of a fast electron down the z axis in
 # the scintillator cube (material 1), in the layout of `hytrace photons --gensteps`.
 GENSTEPS = np.array([

@@ -67,6 +67,7 @@ class Scene:
         transparent: Sequence[str] = (),
         backend: Literal["cpu", "gpu", "auto"] = "cpu",
         gpu_texels: Literal["storage", "texture"] = "storage",
+        memory: Optional[int] = None,
     ) -> npt.NDArray[np.float32]:
         """Renders the scene as ``hytrace render``: (H, W, 3) float32 linear radiance."""
     @overload
@@ -81,6 +82,7 @@ class Scene:
         max_steps: int = 10000,
         first: int = 0,
         histories: Literal[False] = False,
+        memory: int = 1 << 30,
     ) -> npt.NDArray[np.float64]: ...
     @overload
     def photons(
@@ -94,6 +96,7 @@ class Scene:
         max_steps: int = 10000,
         first: int = 0,
         histories: Literal[True],
+        memory: int = 1 << 30,
     ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.uint64]]: ...
 
 class Volume:

@@ -153,7 +153,8 @@ def photons(
     a task are its ``seed`` and its first index): the detected photons, a dask array
     (H, 16) float64 in photon order whose chunk lengths are known once computed; with
     ``histories=True`` also every photon's packed history, (photons,) uint64. ``options``
-    are the method's (``wavelength``, ``seed``, ``max_steps``)."""
+    are the method's (``wavelength``, ``seed``, ``max_steps``, ``memory``: each task's
+    budget for the media read as stored)."""
     path = os.fspath(path)
     hits, codes = [], []
     for first, count in photon_ranges(photons, chunk):
