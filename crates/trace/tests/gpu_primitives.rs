@@ -1,5 +1,6 @@
 //! The WGSL primitive kernels (shaders/csg/{quadric,planar,cuts,twisted,primitive}.wgsl)
-//! agree with their CPU twins, `hytrace_csg::kernel::primitive_spans::<f32>` and
+//! agree with their CPU twins, `hytrace_csg::kernel::primitive_spans::<f32>` (for twisted
+//! half-spaces, which the CPU solves in f64, `twisted_spans_in::<f32>`) and
 //! `primitive_sdf::<f32>`, ray by ray: random rays plus named hard cases (zero direction
 //! components, rays along faces and axes, tangent rays, rays along the rulings of saddles and
 //! twisted half-spaces, origins inside and 1e5 mm away, non-unit and zero directions) for
@@ -15,7 +16,7 @@
 use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
-use hytrace_csg::kernel::{primitive_sdf, primitive_spans};
+use hytrace_csg::kernel::{primitive_sdf, primitive_spans, twisted_spans_in};
 use hytrace_csg::V3;
 use hytrace_foundry::TypeCode;
 use hytrace_trace::gpu::oneshot::{run, Buffer};
@@ -663,7 +664,13 @@ fn gpu_primitive_kernels_match_cpu_f32() {
         let c = &cases[owner[i]];
         let o = V3::new(item.origin[0], item.origin[1], item.origin[2]);
         let d = V3::new(item.direction[0], item.direction[1], item.direction[2]);
-        let cpu = primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d, 0.0);
+        // The CPU solves twisted half-spaces in f64 for either precision; its twin of the
+        // WGSL kernel's f32 steps is `twisted_spans_in::<f32>`.
+        let cpu = if c.code == TypeCode::TwistedHalfSpace {
+            twisted_spans_in::<f32>(&c.params, o, d, 0.0)
+        } else {
+            primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d, 0.0)
+        };
         let cpu_sdf = primitive_sdf::<f32>(c.code, &c.params, &planes[c.planes.clone()], o);
         let g = &gpu[i * STRIDE..(i + 1) * STRIDE];
         let len = g[0][0].to_bits() as usize;

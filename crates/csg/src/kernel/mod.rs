@@ -11,6 +11,7 @@ mod torus_prim;
 mod twisted;
 
 use hytrace_foundry::{Transform64, TypeCode};
+pub use twisted::twisted_spans_in;
 
 use crate::real::{Ray, Real, V3};
 use spans::Spans;

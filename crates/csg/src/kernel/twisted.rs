@@ -32,8 +32,11 @@
 //! the frame's origin first and the caps met from the unmoved origin, as for the capped
 //! quadrics.
 //!
-//! The CPU solves in f64 for either precision (the answers rounded to it); the WGSL twin,
-//! `shaders/csg/twisted.wgsl`, takes the same steps in f32 with a fixed-size stack.
+//! The CPU solves in f64 for either precision (the answers rounded to it): in f32 the
+//! cancellation of `m . q` against `d` near the face leaves an ulp of the solid's size,
+//! which a crossing at a grazing angle turns into more than the oracle's tolerance. The
+//! WGSL twin, `shaders/csg/twisted.wgsl`, takes the same steps in f32 with a fixed-size
+//! stack; its CPU twin is [`twisted_spans_in`] in f32.
 
 use super::spans::{slab_span, Span, Spans, MAX_SPANS};
 use crate::real::{Real, V3};
@@ -215,7 +218,7 @@ fn crossings<T: Real>(face: &Face<T>, a: T, b: T, out: &mut [T; MAX_SPANS]) -> u
 /// crossing by more than the tolerance); the answers are rounded to `T`.
 pub fn twisted_spans<T: Real>(p: &[T; 6], start: V3<T>, u: V3<T>, shift: T) -> Spans<T> {
     let v3 = |v: V3<T>| V3::<f64>::from_f64(v.to_f64());
-    let spans = twisted_spans_f64(&p.map(T::to_f64), v3(start), v3(u), shift.to_f64());
+    let spans = twisted_spans_in::<f64>(&p.map(T::to_f64), v3(start), v3(u), shift.to_f64());
     let back = |v: V3<f64>| V3::<T>::from_f64(v.to_f64());
     let mut out = Spans::empty();
     for s in spans.as_slice() {
@@ -229,9 +232,10 @@ pub fn twisted_spans<T: Real>(p: &[T; 6], start: V3<T>, u: V3<T>, shift: T) -> S
     out
 }
 
-/// [`twisted_spans`] in f64.
-fn twisted_spans_f64(p: &[f64; 6], start: V3<f64>, u: V3<f64>, shift: f64) -> Spans<f64> {
-    let z_axis = V3::new(0.0, 0.0, 1.0);
+/// [`twisted_spans`] solved in `T` throughout: the steps the WGSL twin takes in f32 (the
+/// GPU parity test compares them item by item), and [`twisted_spans`]'s solver in f64.
+pub fn twisted_spans_in<T: Real>(p: &[T; 6], start: V3<T>, u: V3<T>, shift: T) -> Spans<T> {
+    let z_axis = V3::new(T::ZERO, T::ZERO, T::ONE);
     let Some(slab) = slab_span(start.z, u.z, -p[5], p[5], z_axis) else {
         return Spans::empty();
     };
@@ -241,19 +245,19 @@ fn twisted_spans_f64(p: &[f64; 6], start: V3<f64>, u: V3<f64>, shift: f64) -> Sp
         ..slab
     };
     let face = Face::new(p, start.at(u, shift), u);
-    if u.z == 0.0 {
+    if u.z == T::ZERO {
         // A fixed angle: f(t) = f(0) + f'(0) t.
-        let (c, slope) = (face.value(0.0), face.slope(0.0));
-        let walls = super::spans::quadric_spans(0.0, slope * 0.5, c, |t| face.gradient(t));
+        let (c, slope) = (face.value(T::ZERO), face.slope(T::ZERO));
+        let walls = super::spans::quadric_spans(T::ZERO, slope * T::HALF, c, |t| face.gradient(t));
         return walls.clip(&slab);
     }
-    let mut roots = [0.0; MAX_SPANS];
+    let mut roots = [T::ZERO; MAX_SPANS];
     let count = crossings(&face, slab.t0, slab.t1, &mut roots);
-    let mut toggles = [(0.0, V3::zero()); MAX_SPANS];
+    let mut toggles = [(T::ZERO, V3::zero()); MAX_SPANS];
     for (c, &t) in toggles.iter_mut().zip(&roots[..count]) {
         *c = (t, face.gradient(t));
     }
-    let inside = face.value(slab.t0) <= 0.0;
+    let inside = face.value(slab.t0) <= T::ZERO;
     Spans::from_toggles(inside, &toggles[..count]).clip(&slab)
 }
 
