@@ -124,6 +124,9 @@ fn in_trap(q: &TrapParams, p: [f64; 3]) -> bool {
     y.abs() <= dy && (x - y * alpha.tan()).abs() <= half_width
 }
 
+/// An exact inside test.
+type Inside = Box<dyn Fn([f64; 3]) -> bool>;
+
 /// The ray in `T`, and the same ray read back in f64 (what `T` traces exactly).
 fn ray<T: Real>(o: [f64; 3], d: [f64; 3]) -> (Ray<T>, [f64; 3], [f64; 3]) {
     let r = Ray::<T>::from_f64(o, d);
@@ -312,7 +315,7 @@ fn rays_grazing_a_twisted_face_from_outside_miss_f32() {
 /// caps), and parallel to it at azimuths and radii where the ray enters through the bottom
 /// cap and leaves through a side as the section turns, or crosses the caps only.
 fn along_the_axis<T: Real>() {
-    let cases: [(G4Solid, Box<dyn Fn([f64; 3]) -> bool>, Option<bool>); 2] = [
+    let cases: [(G4Solid, Inside, Option<bool>); 2] = [
         (tubs(), Box::new(in_tubs), Some(false)),
         (trap(&BOX), Box::new(|p| in_trap(&BOX, p)), Some(true)),
     ];
@@ -346,7 +349,7 @@ fn rays_along_and_parallel_to_the_axis_f32() {
 /// 12 mm of them: the error is the solid's own rounding, not the offset's.
 fn far_from_the_origin<T: Real>() {
     let offset = [600000.0, -480000.0, 640000.0];
-    let cases: [(G4Solid, Box<dyn Fn([f64; 3]) -> bool>); 2] = [
+    let cases: [(G4Solid, Inside); 2] = [
         (tubs(), Box::new(in_tubs)),
         (trap(&TRAP), Box::new(|p| in_trap(&TRAP, p))),
     ];
