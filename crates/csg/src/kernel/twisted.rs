@@ -232,8 +232,10 @@ pub fn twisted_spans<T: Real>(p: &[T; 6], start: V3<T>, u: V3<T>, shift: T) -> S
     out
 }
 
-/// [`twisted_spans`] solved in `T` throughout: the steps the WGSL twin takes in f32 (the
-/// GPU parity test compares them item by item), and [`twisted_spans`]'s solver in f64.
+/// The spans of a twisted half-space (see the module's description) solved in `T`
+/// throughout: the steps the WGSL twin takes in f32 (the GPU parity test compares them item
+/// by item), and the CPU's solver in f64 for either precision
+/// ([`super::primitive_spans`] rounds its answers).
 pub fn twisted_spans_in<T: Real>(p: &[T; 6], start: V3<T>, u: V3<T>, shift: T) -> Spans<T> {
     let z_axis = V3::new(T::ZERO, T::ZERO, T::ONE);
     let Some(slab) = slab_span(start.z, u.z, -p[5], p[5], z_axis) else {
