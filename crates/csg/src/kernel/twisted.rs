@@ -23,8 +23,8 @@
 //! * a piece where `|f'(mid)| > M L / 2` is monotonic: one crossing if the ends' signs
 //!   differ (found by Newton's method kept inside the bracket, bisecting when a step leaves
 //!   it), none otherwise;
-//! * other pieces are halved, down to a length of a few ulps of the interval (a tangency
-//!   within rounding: a crossing if the ends' signs differ).
+//! * other pieces are halved, down to 2^-40 of the interval or until the midpoint rounds
+//!   onto an end (a tangency within rounding: a crossing if the ends' signs differ).
 //!
 //! Crossings are found in increasing order and alternate, so the spans follow from the sign
 //! at the start of the interval. A ray in a plane `z = c` sees a fixed angle: `f` is linear
