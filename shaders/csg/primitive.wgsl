@@ -12,6 +12,9 @@
 // #if torus
 // #import csg/torus
 // #endif
+// #if twisted
+// #import csg/twisted
+// #endif
 
 // The spans of the ray start + t d, solved from start + shift d and given as parameters from
 // there (capped quadrics meet their z caps from start itself).
@@ -59,6 +62,12 @@ fn primitive_spans(code: u32, p: array<f32, 6>, plane_first: u32, plane_count: u
     // #if thetacut
     if code == CSG_THETACUT { return thetacut_spans(p, o, d); }
     // #endif
+    // #if saddle
+    if code == CSG_SADDLE { return saddle_spans(p, o, d); }
+    // #endif
+    // #if twisted
+    if code == CSG_TWISTED_HALFSPACE { return twisted_spans(p, start, d, shift); }
+    // #endif
     return spans_empty();
 }
 
@@ -104,6 +113,12 @@ fn primitive_sdf(code: u32, p: array<f32, 6>, plane_first: u32, plane_count: u32
     // #endif
     // #if thetacut
     if code == CSG_THETACUT { return thetacut_sdf(p, x); }
+    // #endif
+    // #if saddle
+    if code == CSG_SADDLE { return saddle_sdf(p, x); }
+    // #endif
+    // #if twisted
+    if code == CSG_TWISTED_HALFSPACE { return twisted_sdf(p, x); }
     // #endif
     return INF;
 }

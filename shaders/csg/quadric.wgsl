@@ -1,5 +1,6 @@
 // Primitives bounded by quadrics of revolution around z, capped by z planes: sphere, z-cut
-// sphere, cylinder, tube, cone frustum, hyperboloid, paraboloid. Twin of
+// sphere, cylinder, tube, cone frustum, hyperboloid, paraboloid; and the uncapped half-space
+// below a hyperbolic paraboloid (the saddle). Twin of
 // hytrace_csg::kernel::quadric, with the quadric helpers of hytrace_csg::kernel::spans
 // (quadratic_roots, quadric_spans); vector arithmetic is real.wgsl's (hytrace_csg::real::V3).
 //
@@ -308,4 +309,34 @@ fn paraboloid_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
         wall = f / grad;
     }
     return max(max(wall, -p[2] - x.z), x.z - p[2]);
+}
+
+// The gradient of y - kappa x z at x (never zero: its y component is 1).
+fn saddle_gradient(k: f32, x: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(-k * x.z, 1.0, -k * x.x);
+}
+
+// Saddle [kappa]: the half-space y - kappa x z <= 0, uncapped.
+fn saddle_spans(p: array<f32, 6>, o: vec3<f32>, d: vec3<f32>) -> Spans {
+    let k = p[0];
+    let a = -k * d.x * d.z;
+    let b = 0.5 * (d.y - k * (o.x * d.z + o.z * d.x));
+    let c = o.y - k * o.x * o.z;
+    var s = quadric_spans(a, b, c);
+    for (var i = 0u; i < s.len; i += 1u) {
+        let t0 = s.items[i].t0;
+        let t1 = s.items[i].t1;
+        if is_finite_t(t0) {
+            s.items[i].n0 = saddle_gradient(k, ray_at(o, d, t0));
+        }
+        if is_finite_t(t1) {
+            s.items[i].n1 = saddle_gradient(k, ray_at(o, d, t1));
+        }
+    }
+    return s;
+}
+
+fn saddle_sdf(p: array<f32, 6>, x: vec3<f32>) -> f32 {
+    let k = p[0];
+    return (x.y - k * x.x * x.z) / v3_length(saddle_gradient(k, x));
 }

@@ -135,7 +135,7 @@ fn csg_contacts_outside(node_offset: u32, position: u32, complement: bool) -> bo
 // Twin of hytrace_csg::kernel::contact_spans: a bit per span of the ray o + t d (in the
 // leaf's frame, o shifted) whose points at a quarter, half and three quarters of its length
 // are within tol of the surface; asked only for rays with a zero direction component, not
-// along the axis of a phi cut.
+// along the axis of a phi cut, not for saddles and twisted half-spaces.
 fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: f32) -> u32 {
     if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
         return 0u;
@@ -146,6 +146,11 @@ fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: 
         return 0u;
     }
     // #endif
+    // None for saddles and twisted half-spaces (see kernel::contact_spans).
+    let code = n.code & ~COMPLEMENT_BIT;
+    if code == CSG_SADDLE || code == CSG_TWISTED_HALFSPACE {
+        return 0u;
+    }
     var contacts = 0u;
     for (var i = 0u; i < spans.len; i += 1u) {
         let s = spans.items[i];

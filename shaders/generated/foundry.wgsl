@@ -90,6 +90,8 @@ const CSG_HALFSPACE: u32 = 111u;
 const CSG_SLAB: u32 = 112u;
 const CSG_PHICUT: u32 = 113u;
 const CSG_THETACUT: u32 = 114u;
+const CSG_SADDLE: u32 = 115u;
+const CSG_TWISTED_HALFSPACE: u32 = 116u;
 
 const PRIM_CSG: u32 = 0u;
 const PRIM_MESH: u32 = 1u;

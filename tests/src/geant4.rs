@@ -104,20 +104,14 @@ pub fn run_oracle(python: &Path, dir: &Path, args: &[&str]) -> OracleData {
 
 /// Distance within which meshes of solids with no analytic form follow the true surface.
 /// Planar triangles approach a twisted face slowly (the deviation falls only as the inverse
-/// of the triangle count), so 0.01 mm keeps the oracle's 100-300 mm twisted solids at
-/// 10^4-10^5 triangles.
+/// of the triangle count), so 0.01 mm keeps the oracle's 100-300 mm generic traps with
+/// twisted faces at 10^3-10^4 triangles.
 pub const TESSELLATION_TOLERANCE: f64 = 1e-2;
 
 /// Kinds whose mesh approximates a curved (twisted) surface: distances agree within the
 /// tessellation tolerance over the cosine of incidence rather than the analytic tolerance.
-/// (G4TwistedTubs: hyperboloids and twisted sides, meshed within the tolerance.)
-pub const APPROXIMATED_KINDS: [&str; 5] = [
-    "twistedBox",
-    "twistedTrd",
-    "twistedTrap",
-    "genericTrap",
-    "twistedTubs",
-];
+/// (The twisted solids are exact: saddles, hyperboloids and twisted half-spaces.)
+pub const APPROXIMATED_KINDS: [&str; 1] = ["genericTrap"];
 
 /// Builds one Foundry solid per Geant4 solid (CSG, or a mesh within
 /// [`TESSELLATION_TOLERANCE`]) and prepares each for tracing in `T`.

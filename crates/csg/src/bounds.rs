@@ -61,7 +61,9 @@ pub fn primitive_bounds(p: &Primitive) -> Aabb {
         Primitive::HalfSpace { .. }
         | Primitive::Slab { .. }
         | Primitive::PhiCut { .. }
-        | Primitive::ThetaCut { .. } => {
+        | Primitive::ThetaCut { .. }
+        | Primitive::Saddle { .. }
+        | Primitive::TwistedHalfSpace { .. } => {
             let u = UNBOUNDED;
             [-u, -u, -u, u, u, u]
         }

@@ -13,6 +13,7 @@
 //!   `cone(r1, z1, r2, z2)`, `hyperboloid(r0, tan_stereo, z1, z2)`,
 //!   `torus(rmin, rmax, rtor)`, `paraboloid(rlo, rhi, dz)`, `halfspace(nx, ny, nz, d)`,
 //!   `slab(nx, ny, nz, a, b)`, `phicut(phi0, dphi)`, `thetacut(theta0, theta1)`,
+//!   `saddle(kappa)` (the half-space `y <= kappa x z`),
 //!   `polyhedron(nx, ny, nz, d, ...)` (four numbers per plane).
 //! - Numbers: decimal literals, `pi`, unary minus, and `*` `/` between them
 //!   (`-2*pi/3`).
@@ -20,8 +21,8 @@
 use hytrace_foundry::{Transform64, TypeCode};
 
 use crate::shape::{
-    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, slab, sphere,
-    theta_cut, torus, tube, zsphere, CsgError, Shape,
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, saddle, slab,
+    sphere, theta_cut, torus, tube, zsphere, CsgError, Shape,
 };
 
 /// A syntax or parameter error, with the byte offset where it was found.
@@ -425,6 +426,7 @@ impl Parser<'_> {
             "slab" => want(5).map(|_| slab([a[0], a[1], a[2]], a[3], a[4]))?,
             "phicut" => want(2).map(|_| phi_cut(a[0].to_radians(), a[1].to_radians()))?,
             "thetacut" => want(2).map(|_| theta_cut(a[0].to_radians(), a[1].to_radians()))?,
+            "saddle" => want(1).map(|_| saddle(a[0]))?,
             "polyhedron" => {
                 if a.is_empty() || a.len() % 4 != 0 {
                     return Err(at_error(format!(
@@ -442,7 +444,7 @@ impl Parser<'_> {
                 return Err(at_error(format!(
                     "unknown primitive `{other}` (sphere, zsphere, box, cylinder, tube, cone, \
                      hyperboloid, torus, paraboloid, halfspace, slab, phicut, thetacut, \
-                     polyhedron)"
+                     saddle, polyhedron)"
                 )))
             }
         };

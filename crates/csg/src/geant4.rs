@@ -15,6 +15,8 @@
 //! | G4Polycone, G4GenericPolycone | union over z slabs of (cone - inner cone), * phi cut |
 //! | G4Polyhedra (both constructors) | union over z slabs of (convex polyhedron - inner one), one per run of sides spanning <= pi |
 //! | G4Hype | hyperboloid - inner hyperboloid (or inner double cone) |
+//! | G4TwistedTubs | (hyperboloid - inner hyperboloid) * two turned saddles (hyperbolic paraboloid half-spaces) |
+//! | G4TwistedBox, G4TwistedTrd, G4TwistedTrap | bounding cylinder * four twisted half-spaces, sheared along (theta, phi) |
 //! | G4Paraboloid | paraboloid |
 //! | G4Ellipsoid, G4EllipticalTube, G4EllipticalCone | scaled z-cut sphere, cylinder, cone |
 //! | G4ExtrudedSolid | union over section pairs and convex pieces of the polygon of convex polyhedra |
@@ -37,8 +39,8 @@
 //! 1.3x the expression's speed, depending on the polygon); the expression makes it a
 //! boolean operand.
 //!
-//! The twisted solids, G4GenericTrap, G4TessellatedSolid and G4TwistedTubs have no
-//! expression here: [`G4Mapping::to_geometry`] meshes them.
+//! G4GenericTrap and G4TessellatedSolid have no expression here:
+//! [`G4Mapping::to_geometry`] meshes them.
 //!
 //! Booleans place their second operand by `p_first = rotation * p_second + translation`
 //! (the `G4Transform3D` form: the rotation applies to the solid, not the frame).
@@ -49,8 +51,8 @@
 use std::f64::consts::PI;
 
 use crate::shape::{
-    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, sphere,
-    theta_cut, torus, tube, zsphere, CsgError, Shape,
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, saddle, sphere,
+    theta_cut, torus, tube, twisted_halfspace, zsphere, CsgError, Shape,
 };
 use crate::tessellate::{convex_pieces, ruled_solid, section_stack, simple_polygon, Tri};
 use hytrace_foundry::Transform64;
@@ -58,7 +60,7 @@ use hytrace_foundry::Transform64;
 pub use hytrace_foundry::g4solid::{Boolean, G4Solid, PlacedSolid, XtruSection};
 
 /// What a Geant4 solid becomes: an exact CSG expression, or a closed triangle mesh where
-/// no analytic form exists here (twisted solids, extrusions, tessellated solids).
+/// no analytic form exists here (generic traps, extrusions, tessellated solids).
 #[derive(Clone, Debug, PartialEq)]
 pub enum G4Geometry {
     /// An exact expression.
@@ -94,12 +96,17 @@ fn hexahedron(v: &[[f64; 3]; 8]) -> Result<Shape, CsgError> {
     faces_to_polyhedron(v, &FACES)
 }
 
-/// A convex polyhedron from faces given as vertex indices; each face's plane comes from
-/// Newell's method and is oriented away from the centroid.
+/// A convex polyhedron from faces given as vertex indices (see [`face_planes`]).
 fn faces_to_polyhedron<const N: usize>(
     v: &[[f64; 3]],
     faces: &[[usize; N]],
 ) -> Result<Shape, CsgError> {
+    polyhedron(&face_planes(v, faces))
+}
+
+/// The planes `[n, d]` (`dot(n, x) <= d`, `n` not normalized) of faces given as vertex
+/// indices: each from Newell's method, oriented away from the vertices' centroid.
+fn face_planes<const N: usize>(v: &[[f64; 3]], faces: &[[usize; N]]) -> Vec<[f64; 4]> {
     let centroid: [f64; 3] =
         std::array::from_fn(|k| v.iter().map(|p| p[k]).sum::<f64>() / v.len() as f64);
     let mut planes = Vec::with_capacity(faces.len());
@@ -123,7 +130,7 @@ fn faces_to_polyhedron<const N: usize>(
             planes.push([n[0], n[1], n[2], d]);
         }
     }
-    polyhedron(&planes)
+    planes
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -163,12 +170,17 @@ fn trapezoid(dy: f64, tan_alpha: f64, dxa: f64, dxb: f64) -> [[f64; 2]; 4] {
     ]
 }
 
-/// The mesh of a G4TwistedTrap (G4TwistedBox and G4TwistedTrd are special cases): at
-/// height z the trapezoid interpolated between its end sections, rotated counter-clockwise
-/// by `twist * z / (2 dz)`, then shifted along the (theta, phi) axis (the geometry the
-/// oracle established against Geant4).
+/// A G4TwistedTrap (G4TwistedBox and G4TwistedTrd are special cases) as an exact
+/// expression: at height z the trapezoid interpolated between its end sections, rotated
+/// counter-clockwise by `twist * z / (2 dz)`, then shifted along the (theta, phi) axis (the
+/// geometry the oracle established against Geant4). Without the shift (a shear, the
+/// expression's placement) and the twist, the solid is a trapezoid prism whose lateral
+/// faces Geant4 requires to be planar (checked here as Geant4 11.4's
+/// `G4VTwistedFaceted` checks it); twisted, each face is a [`twisted_halfspace`] of that
+/// plane, capped at `|z| <= dz`. Their intersection, with a cylinder just wider than the
+/// corners to bound it, is the solid.
 #[allow(clippy::too_many_arguments)]
-fn twisted_trap_mesh(
+fn twisted_trap_shape(
     what: &'static str,
     twist: f64,
     dz: f64,
@@ -181,8 +193,7 @@ fn twisted_trap_mesh(
     dx3: f64,
     dx4: f64,
     alpha: f64,
-    tolerance: f64,
-) -> Result<Vec<Tri>, CsgError> {
+) -> Result<Shape, CsgError> {
     let lengths = [dz, dy1, dx1, dx2, dy2, dx3, dx4];
     if !lengths.iter().all(|x| x.is_finite() && *x > 0.0) {
         return Err(bad(
@@ -190,29 +201,56 @@ fn twisted_trap_mesh(
             format!("lengths must be finite and > 0, got {lengths:?}"),
         ));
     }
-    let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
-    let ta = alpha.tan();
-    let section = |z: f64| {
-        let f = (z + dz) / (2.0 * dz);
-        let t = trapezoid(
-            dy1 + f * (dy2 - dy1),
-            ta,
-            dx1 + f * (dx3 - dx1),
-            dx2 + f * (dx4 - dx2),
-        );
-        let (s, c) = (twist * z / (2.0 * dz)).sin_cos();
-        // Counter-clockwise corner order for the section stack.
-        [t[0], t[1], t[3], t[2]]
-            .map(|p| {
-                [
-                    c * p[0] - s * p[1] + z * tx,
-                    s * p[0] + c * p[1] + z * ty,
-                    z,
-                ]
-            })
-            .to_vec()
+    if ![twist, theta, phi, alpha].iter().all(|a| a.is_finite()) {
+        return Err(bad(
+            what,
+            format!("angles must be finite, got {twist} {theta} {phi} {alpha}"),
+        ));
+    }
+    // The lateral faces x = ... are planar before the twist only when the bottom and top
+    // trapezoids narrow alike: dx1 - dx2 over dy1 as dx3 - dx4 over dy2.
+    let narrowing = (dx1 != dx2, dx3 != dx4);
+    let planar = match narrowing {
+        (true, true) => (dy1 * (dx3 - dx4) / (dx1 - dx2) - dy2).abs() <= CAR_TOLERANCE,
+        (false, false) => true,
+        _ => false,
     };
-    ruled_solid(&section, -dz, dz, tolerance)
+    if !planar {
+        return Err(bad(
+            what,
+            format!(
+                "its untwisted side faces are not planar (Geant4 needs dy2 = dy1 (dx3 - dx4) / (dx1 - dx2)): {lengths:?}"
+            ),
+        ));
+    }
+    let ta = alpha.tan();
+    let (bottom, top) = (trapezoid(dy1, ta, dx1, dx2), trapezoid(dy2, ta, dx3, dx4));
+    let corner = |t: &[[f64; 2]; 4], k: usize, z: f64| [t[k][0], t[k][1], z];
+    let v: [[f64; 3]; 8] = std::array::from_fn(|i| {
+        if i < 4 {
+            corner(&bottom, i, -dz)
+        } else {
+            corner(&top, i - 4, dz)
+        }
+    });
+    // Geant4's trapezoid order (-x -y, +x -y, -x +y, +x +y): the -y, +y, -x and +x sides.
+    const SIDES: [[usize; 4]; 4] = [[0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let reach = v.iter().map(|p| p[0].hypot(p[1])).fold(0.0f64, f64::max);
+    let mut solid = cylinder(1.01 * reach, -dz, dz)?;
+    let rate = twist / (2.0 * dz);
+    for [nx, ny, nz, d] in face_planes(&v, &SIDES) {
+        let l = (nx * nx + ny * ny + nz * nz).sqrt();
+        solid = solid * twisted_halfspace([nx, ny, nz], d / l, rate, dz)?;
+    }
+    let (tx, ty) = (theta.tan() * phi.cos(), theta.tan() * phi.sin());
+    if tx == 0.0 && ty == 0.0 {
+        return Ok(solid);
+    }
+    // x += z tx, y += z ty.
+    let mut shear = Transform64::IDENTITY;
+    shear.rows[0][2] = tx;
+    shear.rows[1][2] = ty;
+    Ok(solid.placed(shear))
 }
 
 /// Geant4's kCarTolerance (mm): G4GenericTrap takes lengths below it for zero.
@@ -572,29 +610,25 @@ fn swept_polygon(
     Ok(union_of(parts))
 }
 
-/// The mesh of a G4TwistedTubs (twist angle `twist` from -dz to +dz, end radii `end_inner`
-/// and `end_outer`, half length `dz`, opening `dphi`), the geometry the oracle established
-/// against Geant4: with `kappa = tan(twist / 2) / dz`, the solid is the image of the box
-/// `|a| <= dphi / 2`, `r_in <= x <= r_out`, `|z| <= dz` under
-/// `(a, x, z) -> R_z(a) (x, kappa x z, z)`, where `r_in, r_out` are the end radii times
-/// `cos(twist / 2)` (the waists). Its cross-section at height z is the annular sector
+/// A G4TwistedTubs (twist angle `twist` from -dz to +dz, end radii `end_inner` and
+/// `end_outer`, half length `dz`, opening `dphi`) as an exact expression. With
+/// `kappa = tan(twist / 2) / dz`, the solid is the image of the box `|a| <= dphi / 2`,
+/// `r_in <= x <= r_out`, `|z| <= dz` under `(a, x, z) -> R_z(a) (x, kappa x z, z)`, where
+/// `r_in, r_out` are the end radii times `cos(twist / 2)` (the waists): the geometry the
+/// oracle established against Geant4. Its cross-section at height z is the annular sector
 /// between the hyperboloids `r = r_in/out sqrt(1 + (kappa z)^2)` over the phi range
-/// `atan(kappa z) +- dphi / 2`; every line `a, x = const` is straight (a ruling of the
-/// hyperboloids at `x = r_in, r_out`, an edge of the side faces), and the side faces
-/// `a = +-dphi / 2` are hyperbolic paraboloids.
-///
-/// The box faces are meshed on a grid of `m` phi steps, `k` radial and `nz` z steps: `m`
-/// keeps the arc chords within half the tolerance at the end radius, then `nz` and `k` are
-/// doubled until the true surface at every grid cell's centre is within `tolerance` of both
-/// triangles of the cell, whichever diagonal.
-fn twisted_tubs_mesh(
+/// `atan(kappa z) +- dphi / 2`. Each side face `a = +-dphi / 2` lies on the hyperbolic
+/// paraboloid `y = kappa x z` of a frame turned by `a`, and for `dphi <= pi` the sector is the
+/// intersection of the two half-planes its sides bound: so the solid is
+/// `(outer hyperboloid - inner hyperboloid) * saddle turned by dphi / 2 * saddle turned by
+/// pi - dphi / 2` (the half-turn takes `y - kappa x z` to its negative: the other side).
+fn twisted_tubs_shape(
     twist: f64,
     end_inner: f64,
     end_outer: f64,
     dz: f64,
     dphi: f64,
-    tolerance: f64,
-) -> Result<Vec<Tri>, CsgError> {
+) -> Result<Shape, CsgError> {
     let what = "twistedTubs";
     if ![twist, end_inner, end_outer, dz, dphi]
         .iter()
@@ -616,174 +650,15 @@ fn twisted_tubs_mesh(
             format!("needs 0 < dphi <= pi and |twistedangle| < pi, got {dphi} {twist}"),
         ));
     }
-    if !(tolerance > 0.0 && tolerance.is_finite()) {
-        return Err(bad(what, format!("needs a tolerance > 0, got {tolerance}")));
-    }
     let half_twist = 0.5 * twist;
     let (r_in, r_out) = (end_inner * half_twist.cos(), end_outer * half_twist.cos());
     let kappa = half_twist.tan() / dz;
-    let point = |a: f64, x: f64, z: f64| {
-        let (s, c) = a.sin_cos();
-        let y = kappa * x * z;
-        [c * x - s * y, s * x + c * y, z]
-    };
-    // Largest distance from the true point `p` to the planes of the two triangles of the
-    // cell (p00, p10, p11, p01), for either diagonal.
-    let cell_dev = |q: [[f64; 3]; 4], p: [f64; 3]| {
-        let plane = |a: [f64; 3], b: [f64; 3], c: [f64; 3]| {
-            let (u, v) = (sub(b, a), sub(c, a));
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            let w = sub(p, a);
-            if l > 0.0 {
-                (w[0] * n[0] + w[1] * n[1] + w[2] * n[2]).abs() / l
-            } else {
-                (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt()
-            }
-        };
-        [
-            plane(q[0], q[1], q[2]),
-            plane(q[0], q[2], q[3]),
-            plane(q[0], q[1], q[3]),
-            plane(q[1], q[2], q[3]),
-        ]
-        .into_iter()
-        .fold(0.0f64, f64::max)
-    };
-    // Phi steps: chord sagitta at the end radius within half the tolerance.
-    let max_step = 2.0 * (1.0 - 0.5 * tolerance / end_outer).max(-1.0).acos();
-    let steps = (dphi / max_step).ceil().max(1.0);
-    if steps > (1u32 << 19) as f64 {
-        return Err(bad(
-            what,
-            format!("more than 2^21 triangles needed for tolerance {tolerance} mm"),
-        ));
-    }
-    let m = steps as usize;
-    let da = dphi / m as f64;
-    let (mut k, mut nz) = (1usize, 1usize);
-    loop {
-        let z_at = |i: usize| -dz + 2.0 * dz * (i as f64 / nz as f64);
-        let x_at = |j: usize| r_in + (r_out - r_in) * (j as f64 / k as f64);
-        let (mut dev_hyp, mut dev_side) = (0.0f64, 0.0f64);
-        for i in 0..nz {
-            let (z0, z1) = (z_at(i), z_at(i + 1));
-            let zm = 0.5 * (z0 + z1);
-            for x in [r_in, r_out] {
-                let q = [
-                    point(0.0, x, z0),
-                    point(da, x, z0),
-                    point(da, x, z1),
-                    point(0.0, x, z1),
-                ];
-                dev_hyp = dev_hyp.max(cell_dev(q, point(0.5 * da, x, zm)));
-            }
-            for j in 0..k {
-                let (x0, x1) = (x_at(j), x_at(j + 1));
-                let q = [
-                    point(0.0, x0, z0),
-                    point(0.0, x1, z0),
-                    point(0.0, x1, z1),
-                    point(0.0, x0, z1),
-                ];
-                dev_side = dev_side.max(cell_dev(q, point(0.0, 0.5 * (x0 + x1), zm)));
-            }
-        }
-        if dev_hyp <= tolerance && dev_side <= tolerance {
-            break;
-        }
-        if dev_hyp > tolerance || (r_out - r_in) / (k as f64) < 2.0 * dz / (nz as f64) {
-            nz *= 2;
-        } else {
-            k *= 2;
-        }
-        if 4 * (m * k + m * nz + k * nz) > 1 << 21 {
-            return Err(bad(
-                what,
-                format!("more than 2^21 triangles needed for tolerance {tolerance} mm"),
-            ));
-        }
-    }
-    // The grid: a_j over [-dphi/2, dphi/2], x_j over [r_in, r_out], z_i over [-dz, dz].
-    let a_at = |j: usize| -0.5 * dphi + dphi * (j as f64 / m as f64);
-    let x_at = |j: usize| r_in + (r_out - r_in) * (j as f64 / k as f64);
-    let z_at = |i: usize| -dz + 2.0 * dz * (i as f64 / nz as f64);
-    let mut tris = Vec::with_capacity(4 * (m * k + m * nz + k * nz));
-    // (x, a, z) -> position preserves orientation, so a quad counter-clockwise seen from
-    // outside the parameter box stays counter-clockwise seen from outside the solid.
-    let mut quad = |p: [[f64; 3]; 4]| {
-        tris.push([p[0], p[1], p[2]]);
-        tris.push([p[0], p[2], p[3]]);
-    };
-    for i in 0..nz {
-        let (z0, z1) = (z_at(i), z_at(i + 1));
-        for j in 0..m {
-            let (a0, a1) = (a_at(j), a_at(j + 1));
-            // Outer (+x): counter-clockwise in (a, z); inner (-x): the reverse.
-            let x = r_out;
-            quad([
-                point(a0, x, z0),
-                point(a1, x, z0),
-                point(a1, x, z1),
-                point(a0, x, z1),
-            ]);
-            let x = r_in;
-            quad([
-                point(a0, x, z0),
-                point(a0, x, z1),
-                point(a1, x, z1),
-                point(a1, x, z0),
-            ]);
-        }
-        for j in 0..k {
-            let (x0, x1) = (x_at(j), x_at(j + 1));
-            // End side (+a): counter-clockwise in (z, x); start side (-a): the reverse.
-            let a = a_at(m);
-            quad([
-                point(a, x0, z0),
-                point(a, x0, z1),
-                point(a, x1, z1),
-                point(a, x1, z0),
-            ]);
-            let a = a_at(0);
-            quad([
-                point(a, x0, z0),
-                point(a, x1, z0),
-                point(a, x1, z1),
-                point(a, x0, z1),
-            ]);
-        }
-    }
-    for j in 0..m {
-        let (a0, a1) = (a_at(j), a_at(j + 1));
-        for l in 0..k {
-            let (x0, x1) = (x_at(l), x_at(l + 1));
-            // Top (+z): counter-clockwise in (x, a); bottom (-z): the reverse.
-            let z = z_at(nz);
-            quad([
-                point(a0, x0, z),
-                point(a0, x1, z),
-                point(a1, x1, z),
-                point(a1, x0, z),
-            ]);
-            let z = z_at(0);
-            quad([
-                point(a0, x0, z),
-                point(a1, x0, z),
-                point(a1, x1, z),
-                point(a0, x1, z),
-            ]);
-        }
-    }
-    Ok(tris)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    let wall = hyperboloid(r_out, r_out * kappa.abs(), -dz, dz)?
+        - hyperboloid(r_in, r_in * kappa.abs(), -dz, dz)?;
+    let z = [0.0, 0.0, 1.0];
+    let end_side = saddle(kappa)?.rotate(z, 0.5 * dphi);
+    let start_side = saddle(kappa)?.rotate(z, PI - 0.5 * dphi);
+    Ok(wall * end_side * start_side)
 }
 
 /// Most corners of one convex piece of a G4ExtrudedSolid: bounds the cost of checking the
@@ -1153,18 +1028,86 @@ impl G4Mapping for G4Solid {
                 }
                 Ok(cone(zheight + zcut, -zcut, zheight - zcut, zcut)?.scale(xsemi, ysemi, 1.0))
             }
-            G4Solid::TwistedBox { .. }
-            | G4Solid::TwistedTrd { .. }
-            | G4Solid::TwistedTrap { .. }
-            | G4Solid::GenericTrap { .. }
-            | G4Solid::Tessellated { .. }
-            | G4Solid::TwistedTubs { .. } => Err(bad(
+            G4Solid::GenericTrap { .. } | G4Solid::Tessellated { .. } => Err(bad(
                 "geant4",
                 format!(
                     "{} has no analytic form: it is a mesh (see to_geometry)",
                     self.kind()
                 ),
             )),
+            &G4Solid::TwistedBox {
+                twistedangle,
+                dx,
+                dy,
+                dz,
+            } => twisted_trap_shape(
+                "twistedBox",
+                twistedangle,
+                dz,
+                0.0,
+                0.0,
+                dy,
+                dx,
+                dx,
+                dy,
+                dx,
+                dx,
+                0.0,
+            ),
+            &G4Solid::TwistedTrd {
+                dx1,
+                dx2,
+                dy1,
+                dy2,
+                dz,
+                twistedangle,
+            } => twisted_trap_shape(
+                "twistedTrd",
+                twistedangle,
+                dz,
+                0.0,
+                0.0,
+                dy1,
+                dx1,
+                dx1,
+                dy2,
+                dx2,
+                dx2,
+                0.0,
+            ),
+            &G4Solid::TwistedTrap {
+                twistedangle,
+                dz,
+                theta,
+                phi,
+                dy1,
+                dx1,
+                dx2,
+                dy2,
+                dx3,
+                dx4,
+                alpha,
+            } => twisted_trap_shape(
+                "twistedTrap",
+                twistedangle,
+                dz,
+                theta,
+                phi,
+                dy1,
+                dx1,
+                dx2,
+                dy2,
+                dx3,
+                dx4,
+                alpha,
+            ),
+            &G4Solid::TwistedTubs {
+                twistedangle,
+                endinnerrad,
+                endouterrad,
+                halfzlen,
+                dphi,
+            } => twisted_tubs_shape(twistedangle, endinnerrad, endouterrad, halfzlen, dphi),
             G4Solid::Xtru { polygon, sections } => xtru_shape(polygon, sections),
             G4Solid::MultiUnion { parts } => {
                 if parts.is_empty() {
@@ -1186,89 +1129,6 @@ impl G4Mapping for G4Solid {
     fn to_geometry(&self, tolerance: f64) -> Result<G4Geometry, CsgError> {
         let mesh = |tris: Vec<Tri>| Ok(G4Geometry::Mesh(tris));
         match self {
-            &G4Solid::TwistedBox {
-                twistedangle,
-                dx,
-                dy,
-                dz,
-            } => mesh(twisted_trap_mesh(
-                "twistedBox",
-                twistedangle,
-                dz,
-                0.0,
-                0.0,
-                dy,
-                dx,
-                dx,
-                dy,
-                dx,
-                dx,
-                0.0,
-                tolerance,
-            )?),
-            &G4Solid::TwistedTrd {
-                dx1,
-                dx2,
-                dy1,
-                dy2,
-                dz,
-                twistedangle,
-            } => mesh(twisted_trap_mesh(
-                "twistedTrd",
-                twistedangle,
-                dz,
-                0.0,
-                0.0,
-                dy1,
-                dx1,
-                dx1,
-                dy2,
-                dx2,
-                dx2,
-                0.0,
-                tolerance,
-            )?),
-            &G4Solid::TwistedTrap {
-                twistedangle,
-                dz,
-                theta,
-                phi,
-                dy1,
-                dx1,
-                dx2,
-                dy2,
-                dx3,
-                dx4,
-                alpha,
-            } => mesh(twisted_trap_mesh(
-                "twistedTrap",
-                twistedangle,
-                dz,
-                theta,
-                phi,
-                dy1,
-                dx1,
-                dx2,
-                dy2,
-                dx3,
-                dx4,
-                alpha,
-                tolerance,
-            )?),
-            &G4Solid::TwistedTubs {
-                twistedangle,
-                endinnerrad,
-                endouterrad,
-                halfzlen,
-                dphi,
-            } => mesh(twisted_tubs_mesh(
-                twistedangle,
-                endinnerrad,
-                endouterrad,
-                halfzlen,
-                dphi,
-                tolerance,
-            )?),
             G4Solid::GenericTrap { dz, vertices } => {
                 let dz = *dz;
                 let [bottom, top] = generic_trap_ends(dz, vertices)?;
@@ -1529,13 +1389,9 @@ mod tests {
             halfzlen: 4.0,
             dphi: 1.0,
         };
-        assert!(matches!(ok.to_geometry(1e-2), Ok(G4Geometry::Mesh(_))));
-        assert!(ok.to_shape().is_err());
-        assert!(ok.to_geometry(0.0).is_err());
-        assert!(ok.to_geometry(f64::NAN).is_err());
-        assert!(ok.to_geometry(1e-300).is_err());
-        assert!(ok.to_geometry(1e-9).is_err());
-        assert!(matches!(ok.to_geometry(1e3), Ok(G4Geometry::Mesh(_))));
+        // An exact expression whatever the tessellation tolerance.
+        assert!(matches!(ok.to_geometry(1e-2), Ok(G4Geometry::Csg(_))));
+        assert!(ok.to_shape().is_ok());
         // (parameter index, bad value) in (twistedangle, endinnerrad, endouterrad,
         // halfzlen, dphi).
         let bad_cases = [
@@ -1560,6 +1416,7 @@ mod tests {
                 dphi: p[4],
             };
             assert!(s.to_geometry(1e-2).is_err(), "{s:?}");
+            assert!(s.to_shape().is_err(), "{s:?}");
         }
     }
 

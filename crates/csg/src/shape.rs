@@ -132,6 +132,28 @@ pub enum Primitive {
         /// Largest polar angle (pi: open).
         theta1: f64,
     },
+    /// Half-space below the hyperbolic paraboloid `y = kappa x z`: the points with
+    /// `y <= kappa x z` (unbounded: only inside intersections). Its surface holds the lines
+    /// `z = c, y = kappa c x` (through the z axis, turning with z): a side face of
+    /// G4TwistedTubs in a frame turned to it.
+    Saddle {
+        /// Twist rate: `tan(twist / 2) / dz` for a G4TwistedTubs.
+        kappa: f64,
+    },
+    /// The slab `|z| <= half_height` cut by the half-space `dot(normal, q) <= distance`
+    /// twisted about z: a point is inside when, turned back by the angle `rate z` about z,
+    /// it lies in the half-space (unbounded in x and y: only inside intersections). A
+    /// lateral face of G4TwistedBox, G4TwistedTrd and G4TwistedTrap.
+    TwistedHalfSpace {
+        /// Unit outward normal of the untwisted half-space.
+        normal: [f64; 3],
+        /// Signed distance of its plane from the origin.
+        distance: f64,
+        /// Twist angle per unit height (radians per mm).
+        rate: f64,
+        /// Half height of the slab.
+        half_height: f64,
+    },
 }
 
 /// A CSG expression.
@@ -393,6 +415,39 @@ pub fn theta_cut(theta0: f64, theta1: f64) -> Result<Shape, CsgError> {
     leaf(Primitive::ThetaCut { theta0, theta1 })
 }
 
+/// The half-space `dot(normal, q) <= distance` twisted about z by `rate` radians per mm
+/// (`q` is the point turned back by `rate z`), capped at `|z| <= half_height`.
+pub fn twisted_halfspace(
+    normal: [f64; 3],
+    distance: f64,
+    rate: f64,
+    half_height: f64,
+) -> Result<Shape, CsgError> {
+    let normal = unit("twisted halfspace", normal)?;
+    check(
+        "twisted halfspace",
+        distance.is_finite() && rate.is_finite() && positive(half_height),
+        || {
+            format!("needs a finite distance and rate and a half height > 0, got {distance} {rate} {half_height}")
+        },
+    )?;
+    leaf(Primitive::TwistedHalfSpace {
+        normal,
+        distance,
+        rate,
+        half_height,
+    })
+}
+
+/// The half-space `y <= kappa x z` below a hyperbolic paraboloid (finite `kappa`; 0 is the
+/// half-space `y <= 0`).
+pub fn saddle(kappa: f64) -> Result<Shape, CsgError> {
+    check("saddle", kappa.is_finite(), || {
+        format!("needs a finite kappa, got {kappa}")
+    })?;
+    leaf(Primitive::Saddle { kappa })
+}
+
 impl Primitive {
     /// The Foundry typecode and node parameters in f32 (see [`TypeCode`]'s conventions):
     /// [`Primitive::node_params64`] rounded. Convex polyhedra return their plane count in
@@ -462,6 +517,16 @@ impl Primitive {
             &Primitive::ThetaCut { theta0, theta1 } => {
                 (TypeCode::ThetaCut, [theta0, theta1, 0.0, 0.0, 0.0, 0.0])
             }
+            &Primitive::Saddle { kappa } => (TypeCode::Saddle, [kappa, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            &Primitive::TwistedHalfSpace {
+                normal,
+                distance,
+                rate,
+                half_height,
+            } => (
+                TypeCode::TwistedHalfSpace,
+                [normal[0], normal[1], normal[2], distance, rate, half_height],
+            ),
         }
     }
 
@@ -473,6 +538,8 @@ impl Primitive {
                 | Primitive::Slab { .. }
                 | Primitive::PhiCut { .. }
                 | Primitive::ThetaCut { .. }
+                | Primitive::Saddle { .. }
+                | Primitive::TwistedHalfSpace { .. }
         )
     }
 }

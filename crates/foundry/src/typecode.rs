@@ -58,6 +58,9 @@ code_enum! {
     /// - `Slab`: normal x, y, z; `param_ext`: a, b (inside where a < dot(n, p) < b).
     /// - `PhiCut`: cos phi0, sin phi0, cos phi1, sin phi1 (inside the wedge from phi0 to phi1).
     /// - `ThetaCut`: theta0, theta1 in radians (inside the cone shell between them).
+    /// - `Saddle`: kappa (inside where y <= kappa x z, below a hyperbolic paraboloid).
+    /// - `TwistedHalfSpace`: unit normal x, y, z, distance; `param_ext`: twist rate w, half
+    ///   height h (inside where |z| <= h and dot(n, (R(-w z) (x, y), z)) <= distance).
     pub enum TypeCode : "CSG_" {
         /// An empty slot of the complete binary tree.
         Zero = 0 => "ZERO",
@@ -101,6 +104,10 @@ code_enum! {
         PhiCut = 113 => "PHICUT",
         /// Region between two polar-angle cones around z.
         ThetaCut = 114 => "THETACUT",
+        /// Half-space below the hyperbolic paraboloid `y = kappa x z` (a G4TwistedTubs side).
+        Saddle = 115 => "SADDLE",
+        /// Half-space twisted about z, capped by two z planes (a G4TwistedBox/Trd/Trap side).
+        TwistedHalfSpace = 116 => "TWISTED_HALFSPACE",
     }
 }
 

@@ -195,7 +195,7 @@ mod with_embree {
     }
 
     /// The project's GDML file (24 placements, several levels, reflections, replicas,
-    /// tessellated and twisted solids as meshes).
+    /// tessellated solids as meshes, twisted solids as CSG).
     #[test]
     fn backends_agree_on_a_hierarchical_gdml_scene() {
         let path = repo("tests/data/gdml/coverage.gdml");

@@ -1,7 +1,9 @@
-//! The WGSL primitive kernels (shaders/csg/{quadric,planar,cuts,primitive}.wgsl) agree with
-//! their CPU twins, `hytrace_csg::kernel::primitive_spans::<f32>` and `primitive_sdf::<f32>`,
-//! ray by ray: random rays plus named hard cases (zero direction components, rays along faces
-//! and axes, tangent rays, origins inside and 1e5 mm away, non-unit and zero directions) for
+//! The WGSL primitive kernels (shaders/csg/{quadric,planar,cuts,twisted,primitive}.wgsl)
+//! agree with their CPU twins, `hytrace_csg::kernel::primitive_spans::<f32>` (for twisted
+//! half-spaces, which the CPU solves in f64, `twisted_spans_in::<f32>`) and
+//! `primitive_sdf::<f32>`, ray by ray: random rays plus named hard cases (zero direction
+//! components, rays along faces and axes, tangent rays, rays along the rulings of saddles and
+//! twisted half-spaces, origins inside and 1e5 mm away, non-unit and zero directions) for
 //! every primitive type but the torus.
 //!
 //! Agreement of one item: the same number of spans; every span end within
@@ -14,7 +16,7 @@
 use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
-use hytrace_csg::kernel::{primitive_sdf, primitive_spans};
+use hytrace_csg::kernel::{primitive_sdf, primitive_spans, twisted_spans_in};
 use hytrace_csg::V3;
 use hytrace_foundry::TypeCode;
 use hytrace_trace::gpu::oneshot::{run, Buffer};
@@ -392,6 +394,58 @@ fn cases(planes: &mut Vec<[f32; 4]>) -> Vec<Case> {
             10.0,
             vec![([0.0, 0.0, 0.0], [0.8, 0.0, -0.6])],
         ),
+        case(
+            "saddle",
+            TypeCode::Saddle,
+            [0.08, 0.0, 0.0, 0.0, 0.0, 0.0],
+            10.0,
+            vec![
+                // Along rulings in the surface (z = 3, y = 0.24 x; the z and x axes), across
+                // them, and in planes x = c and z = c (one crossing).
+                ([-10.0, -2.4, 3.0], [1.0, 0.24, 0.0]),
+                ([0.0, 0.0, -20.0], [0.0, 0.0, 1.0]),
+                ([-20.0, 0.0, 0.0], [1.0, 0.0, 0.0]),
+                ([2.0, 1.0, -20.0], [0.0, 0.0, 1.0]),
+                ([-10.0, 1.0, 4.0], [1.0, 0.0, 0.0]),
+                ([-10.0, -3.0, -10.0], [1.0, 0.2, 1.0]),
+                ([1.0e5, 0.0, 3.0], [-1.0, 0.0, 0.0]),
+            ],
+        ),
+        case(
+            "saddle flat",
+            TypeCode::Saddle,
+            [0.0; 6],
+            10.0,
+            vec![([-10.0, 0.0, 2.0], [1.0, 0.0, 0.0])],
+        ),
+        case(
+            "twisted halfspace",
+            TypeCode::TwistedHalfSpace,
+            [0.0, 1.0, 0.0, 4.0, 0.09, 5.0],
+            10.0,
+            vec![
+                // Along the axis, along the face line at z = 0 (y = 4) and inside it, across
+                // the caps, and horizontal at heights where the face has turned.
+                ([0.0, 0.0, -20.0], [0.0, 0.0, 1.0]),
+                ([-20.0, 4.0, 0.0], [1.0, 0.0, 0.0]),
+                ([-20.0, 3.9, 0.0], [1.0, 0.0, 0.0]),
+                ([1.0, 3.0, -20.0], [0.0, 0.2, 1.0]),
+                ([-20.0, 3.0, 4.0], [1.0, 0.0, 0.0]),
+                ([3.0, -20.0, -3.0], [0.0, 1.0, 0.0]),
+                ([1.0e5, 2.0, 1.0], [-1.0, 0.0, 0.0]),
+            ],
+        ),
+        case(
+            "twisted halfspace tilted",
+            TypeCode::TwistedHalfSpace,
+            [0.6, 0.0, 0.8, 2.0, -0.15, 6.0],
+            10.0,
+            vec![
+                ([0.0, 0.0, -20.0], [0.0, 0.0, 1.0]),
+                ([-20.0, 1.0, 2.0], [1.0, 0.0, 0.0]),
+                ([5.0, 5.0, 5.0], [-1.0, -1.0, -1.0]),
+            ],
+        ),
         phicut("phicut 0..90", 0.0, 90.0),
         phicut("phicut 30..300", 30.0, 300.0),
         phicut("phicut 0..180", 0.0, 180.0),
@@ -610,7 +664,13 @@ fn gpu_primitive_kernels_match_cpu_f32() {
         let c = &cases[owner[i]];
         let o = V3::new(item.origin[0], item.origin[1], item.origin[2]);
         let d = V3::new(item.direction[0], item.direction[1], item.direction[2]);
-        let cpu = primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d, 0.0);
+        // The CPU solves twisted half-spaces in f64 for either precision; its twin of the
+        // WGSL kernel's f32 steps is `twisted_spans_in::<f32>`.
+        let cpu = if c.code == TypeCode::TwistedHalfSpace {
+            twisted_spans_in::<f32>(&c.params, o, d, 0.0)
+        } else {
+            primitive_spans::<f32>(c.code, &c.params, &planes[c.planes.clone()], o, d, 0.0)
+        };
         let cpu_sdf = primitive_sdf::<f32>(c.code, &c.params, &planes[c.planes.clone()], o);
         let g = &gpu[i * STRIDE..(i + 1) * STRIDE];
         let len = g[0][0].to_bits() as usize;

@@ -8,8 +8,10 @@ mod quadric;
 pub mod spans;
 pub mod torus;
 mod torus_prim;
+mod twisted;
 
 use hytrace_foundry::{Transform64, TypeCode};
+pub use twisted::twisted_spans_in;
 
 use crate::real::{Ray, Real, V3};
 use spans::Spans;
@@ -125,7 +127,12 @@ pub struct Leaf<T> {
 pub fn is_bounded(code: TypeCode) -> bool {
     !matches!(
         code,
-        TypeCode::HalfSpace | TypeCode::Slab | TypeCode::PhiCut | TypeCode::ThetaCut
+        TypeCode::HalfSpace
+            | TypeCode::Slab
+            | TypeCode::PhiCut
+            | TypeCode::ThetaCut
+            | TypeCode::Saddle
+            | TypeCode::TwistedHalfSpace
     )
 }
 
@@ -207,6 +214,7 @@ pub fn primitive_spans<T: Real>(
         TypeCode::Cone => quadric::cone_spans(p, o, d, shift),
         TypeCode::Hyperboloid => quadric::hyperboloid_spans(p, o, d, shift),
         TypeCode::Paraboloid => quadric::paraboloid_spans(p, o, d, shift),
+        TypeCode::TwistedHalfSpace => twisted::twisted_spans(p, o, d, shift),
         _ => moved_spans(code, p, planes, o.at(d, shift), d),
     }
 }
@@ -228,6 +236,7 @@ fn moved_spans<T: Real>(
         TypeCode::Slab => planar::slab_spans(p, o, d),
         TypeCode::PhiCut => cuts::phicut_spans(p, o, d),
         TypeCode::ThetaCut => cuts::thetacut_spans(p, o, d),
+        TypeCode::Saddle => quadric::saddle_spans(p, o, d),
         _ => Spans::empty(),
     }
 }
@@ -251,6 +260,8 @@ pub fn primitive_sdf<T: Real>(code: TypeCode, p: &[T; 6], planes: &[[T; 4]], x: 
         TypeCode::Slab => planar::slab_sdf(p, x),
         TypeCode::PhiCut => cuts::phicut_sdf(p, x),
         TypeCode::ThetaCut => cuts::thetacut_sdf(p, x),
+        TypeCode::Saddle => quadric::saddle_sdf(p, x),
+        TypeCode::TwistedHalfSpace => twisted::twisted_sdf(p, x),
         _ => T::INFINITY,
     }
 }
@@ -323,6 +334,10 @@ impl<T: Real> Step<T> {
 /// the wall on both sides. The points are only asked for rays with a zero direction
 /// component (a ray parallel to a face or wall of the primitive's frame): others are not
 /// contacts but for the rounding of a tangent, which the touch length already decides.
+/// Saddles and twisted half-spaces have none: their distance bounds shrink along a ruling
+/// away from the axis (their gradients grow there), so a ray parallel to a ruling inside
+/// the solid, whose span reaches far along it, would pass the three points for one; a ray
+/// exactly in such a face is inside or outside by the rounding of its function.
 pub fn contact_spans<T: Real>(
     code: TypeCode,
     p: &[T; 6],
@@ -333,7 +348,8 @@ pub fn contact_spans<T: Real>(
     tol: T,
 ) -> u32 {
     let oblique = d.x != T::ZERO && d.y != T::ZERO && d.z != T::ZERO;
-    if oblique || on_phi_axis(code, o, d) {
+    let ruled = matches!(code, TypeCode::Saddle | TypeCode::TwistedHalfSpace);
+    if oblique || ruled || on_phi_axis(code, o, d) {
         return 0;
     }
     let mut contacts = 0;

@@ -1,5 +1,6 @@
 //! Primitives bounded by quadrics of revolution around z, capped by z planes: sphere, z-cut
-//! sphere, cylinder, tube (annular cylinder), cone frustum, hyperboloid, paraboloid.
+//! sphere, cylinder, tube (annular cylinder), cone frustum, hyperboloid, paraboloid; and the
+//! uncapped half-space below a hyperbolic paraboloid (the saddle).
 //!
 //! Each primitive gives the spans of a ray inside it (see [`super::spans`]) and a signed
 //! distance. Quadrics are written `a t^2 + 2 b t + c` in the ray parameter. The capped
@@ -179,4 +180,26 @@ pub fn paraboloid_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
     let grad = (T::TWO * T::TWO * rho2 + k1 * k1).sqrt();
     let wall = if grad > T::ZERO { f / grad } else { f };
     wall.max(-p[2] - x.z).max(x.z - p[2])
+}
+
+/// Saddle `[kappa]`: the half-space `y - kappa x z <= 0`. Along the ray the function is the
+/// quadratic `-kappa dx dz t^2 + (dy - kappa (ox dz + oz dx)) t + oy - kappa ox oz`, whose
+/// leading coefficient vanishes for rays in a plane `x = c` or `z = c` (one crossing then).
+pub fn saddle_spans<T: Real>(p: &[T; 6], o: V3<T>, d: V3<T>) -> Spans<T> {
+    let k = p[0];
+    let a = -k * d.x * d.z;
+    let b = T::HALF * (d.y - k * (o.x * d.z + o.z * d.x));
+    let c = o.y - k * o.x * o.z;
+    quadric_spans(a, b, c, |t| saddle_gradient(k, o.at(d, t)))
+}
+
+/// The gradient of `y - kappa x z` at `x` (never zero: its y component is 1).
+fn saddle_gradient<T: Real>(k: T, x: V3<T>) -> V3<T> {
+    V3::new(-k * x.z, T::ONE, -k * x.x)
+}
+
+/// Signed distance bound of a saddle (first-order estimate; exact sign).
+pub fn saddle_sdf<T: Real>(p: &[T; 6], x: V3<T>) -> T {
+    let k = p[0];
+    (x.y - k * x.x * x.z) / saddle_gradient(k, x).length()
 }

@@ -39,6 +39,8 @@ pub fn primitive_feature(code: TypeCode) -> Option<&'static str> {
         TypeCode::Slab => "slab",
         TypeCode::PhiCut => "phicut",
         TypeCode::ThetaCut => "thetacut",
+        TypeCode::Saddle => "saddle",
+        TypeCode::TwistedHalfSpace => "twisted",
         _ => return None,
     })
 }

@@ -20,8 +20,8 @@ use hytrace_foundry::{Foundry, Transform64, UNSET};
 
 use crate::render::spec::VolumeLabel;
 
-/// Distance within which meshes of solids with no analytic form (twisted solids) follow
-/// the true surface, in mm.
+/// Distance within which meshes of solids with no analytic form (generic traps with twisted
+/// faces) follow the true surface, in mm.
 pub const GDML_MESH_TOLERANCE: f64 = 1e-3;
 
 /// Most instances a file may expand into (about 2 GB of Foundry).
