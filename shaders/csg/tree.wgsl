@@ -168,9 +168,10 @@ fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: 
     if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
         return 0u;
     }
-    // Not along the axis of a phi cut, where Geant4's solids disagree (kernel::on_phi_axis).
+    // Not along the axis of a phi cut that takes it for inside (param_ext[0] = 0: G4Sphere's;
+    // kernel::on_phi_axis).
     // #if phicut
-    if (n.code & ~COMPLEMENT_BIT) == CSG_PHICUT && o.x == 0.0 && o.y == 0.0 && d.x == 0.0 && d.y == 0.0 {
+    if (n.code & ~COMPLEMENT_BIT) == CSG_PHICUT && n.param_ext[0] == 0.0 && o.x == 0.0 && o.y == 0.0 && d.x == 0.0 && d.y == 0.0 {
         return 0u;
     }
     // #endif

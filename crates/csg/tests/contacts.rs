@@ -326,3 +326,88 @@ fn rays_along_the_outer_faces_of_a_union_answer_as_geant4_f32() {
 fn rays_along_the_outer_faces_of_a_union_answer_as_geant4_f64() {
     polycone_case::<f64>();
 }
+
+fn phi_axis_case<T: Real>() {
+    use hytrace_csg::geant4::{G4Mapping, G4Solid};
+    let quarter = std::f64::consts::FRAC_PI_2;
+    let down = [0.0, 0.0, -1.0];
+    // Geant4's testG4Tubs solid 7 (ray 910): a quarter of a full tube of radius 50 and
+    // half-length 50. G4Tubs::Inside is kSurface on the axis of its phi segment: a ray
+    // down the axis never enters (no boundary); one beside it, in the segment, enters
+    // through the cap.
+    let tubs = G4Solid::Tubs {
+        rmin: 0.0,
+        rmax: 50.0,
+        dz: 50.0,
+        sphi: 0.0,
+        dphi: quarter,
+    };
+    let tubs = prepared::<T>(&tubs.to_shape().unwrap());
+    let (t, _) = cross(&tubs, [0.0, 0.0, 100.0], down, 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: down the tube's phi axis: {t}",
+        T::NAME
+    );
+    let (t, _) = cross(&tubs, [0.0, 0.0, 20.0], down, 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: down the tube's phi axis from its middle: {t}",
+        T::NAME
+    );
+    let (t, inside) = cross(&tubs, [1.0, 1.0, 100.0], down, 0.0);
+    assert!(
+        (t - 50.0).abs() <= 1e-4 && !inside,
+        "{}: beside the axis: {t}",
+        T::NAME
+    );
+    // The same quarter of a sphere of radius 50: G4Sphere does not check phi on its axis
+    // (inside), so the ray down the axis enters at the pole and leaves at the other.
+    let ball = G4Solid::Sphere {
+        rmin: 0.0,
+        rmax: 50.0,
+        sphi: 0.0,
+        dphi: quarter,
+        stheta: 0.0,
+        dtheta: std::f64::consts::PI,
+    };
+    let ball = prepared::<T>(&ball.to_shape().unwrap());
+    let (t, inside) = cross(&ball, [0.0, 0.0, 100.0], down, 0.0);
+    assert!(
+        (t - 50.0).abs() <= 1e-4 && !inside,
+        "{}: down the sphere's phi axis: {t}",
+        T::NAME
+    );
+    let (t, inside) = cross(&ball, [0.0, 0.0, 100.0], down, 50.0);
+    assert!(
+        (t - 150.0).abs() <= 1e-4 && inside,
+        "{}: out of the sphere's far pole: {t}",
+        T::NAME
+    );
+    // Geant4's testG4Polycone ray 1362: the polycone of `polycone_case` over phi in
+    // [-10, 0] degrees, from below along its axis: G4Polycone takes the axis for surface.
+    let polycone = G4Solid::Polycone {
+        sphi: -10f64.to_radians(),
+        dphi: 10f64.to_radians(),
+        z: vec![-20.0, -10.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0],
+        rmin: vec![30.0, 30.0, 0.0, 0.0, 0.0, 0.0, 40.0, 40.0],
+        rmax: vec![70.0, 70.0, 70.0, 40.0, 40.0, 80.0, 80.0, 60.0],
+    };
+    let polycone = prepared::<T>(&polycone.to_shape().unwrap());
+    let (t, _) = cross(&polycone, [0.0, 0.0, -50.0], [0.0, 0.0, 1.0], 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: up the polycone's phi axis: {t}",
+        T::NAME
+    );
+}
+
+#[test]
+fn rays_along_the_axis_of_a_phi_segment_answer_as_each_geant4_solid_f32() {
+    phi_axis_case::<f32>();
+}
+
+#[test]
+fn rays_along_the_axis_of_a_phi_segment_answer_as_each_geant4_solid_f64() {
+    phi_axis_case::<f64>();
+}

@@ -333,7 +333,7 @@ pub fn contact_spans<T: Real>(
     tol: T,
 ) -> u32 {
     let oblique = d.x != T::ZERO && d.y != T::ZERO && d.z != T::ZERO;
-    if oblique || on_phi_axis(code, o, d) {
+    if oblique || on_phi_axis(code, p, o, d) {
         return 0;
     }
     let mut contacts = 0;
@@ -360,11 +360,18 @@ pub fn contact_samples<T: Real>(s: &spans::Span<T>) -> [T; 3] {
     [0.25, 0.5, 0.75].map(|f| t0 + length * T::from_f64(f))
 }
 
-/// Whether a ray runs along the axis of a phi cut, the edge where its half-planes meet.
-/// Geant4's solids disagree there: G4Sphere does not check phi on the axis (inside),
-/// G4Tubs, G4Polycone and G4Polyhedra take it for surface; the closed rule is kept.
-fn on_phi_axis<T: Real>(code: TypeCode, o: V3<T>, d: V3<T>) -> bool {
-    code == TypeCode::PhiCut && o.x == T::ZERO && o.y == T::ZERO && d.x == T::ZERO && d.y == T::ZERO
+/// Whether a ray runs along the axis of a phi cut (the edge where its half-planes meet)
+/// that takes its axis for inside (`p[4] = 0`). Geant4's solids disagree there: G4Sphere
+/// does not check phi on the axis (inside: the closed rule), G4Tubs, G4Cons, G4CutTubs
+/// and G4Polycone take it for surface (`p[4] = 1`, see
+/// [`crate::shape::phi_cut_surface_axis`]), where its contacts are decided as any other.
+fn on_phi_axis<T: Real>(code: TypeCode, p: &[T; 6], o: V3<T>, d: V3<T>) -> bool {
+    code == TypeCode::PhiCut
+        && p[4] == T::ZERO
+        && o.x == T::ZERO
+        && o.y == T::ZERO
+        && d.x == T::ZERO
+        && d.y == T::ZERO
 }
 
 /// What a leaf does with its contact spans ([`contact_spans`]), as Geant4's booleans decide:
