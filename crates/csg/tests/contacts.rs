@@ -211,3 +211,203 @@ fn rays_along_faces_of_intersections_and_differences_answer_as_geant4_f32() {
 fn rays_along_faces_of_intersections_and_differences_answer_as_geant4_f64() {
     boolean_case::<f64>();
 }
+
+/// The open interval `(a, b)` of radii at which the plane `z = z0` lies in the interior of
+/// the polycone of z planes `z` and radii `rmin`, `rmax` (not at its first or last plane's
+/// z, nor inside a zero-height section): a point of the plane is interior where it is
+/// inside the open sections both below and above it (the closest section on each side).
+fn polycone_interior_radii(z: &[f64], rmin: &[f64], rmax: &[f64], z0: f64) -> (f64, f64) {
+    // The radii (inner, outer) of the section [z[i], z[i + 1]] at z0.
+    let at = |i: usize| {
+        let f = (z0 - z[i]) / (z[i + 1] - z[i]);
+        (
+            rmin[i] + f * (rmin[i + 1] - rmin[i]),
+            rmax[i] + f * (rmax[i + 1] - rmax[i]),
+        )
+    };
+    let sections: Vec<usize> = (0..z.len() - 1).filter(|&i| z[i] < z[i + 1]).collect();
+    let below = sections.iter().find(|&&i| z[i] < z0 && z0 <= z[i + 1]);
+    let above = sections.iter().find(|&&i| z[i] <= z0 && z0 < z[i + 1]);
+    match (below, above) {
+        (Some(&i), Some(&j)) => {
+            let ((a0, b0), (a1, b1)) = (at(i), at(j));
+            (a0.max(a1), b0.min(b1))
+        }
+        _ => (0.0, 0.0),
+    }
+}
+
+/// The first boundary after 0 of a ray in the plane of `radii` through the axis, at signed
+/// distance `s0` from it along its direction: the first end of `(-b, -a) u (a, b)` (or of
+/// `(-b, b)` when `a = 0`) beyond `s0`, or `inf`.
+fn through_axis_reference((a, b): (f64, f64), s0: f64) -> f64 {
+    if a >= b {
+        return f64::INFINITY;
+    }
+    let ends: &[f64] = if a > 0.0 { &[-b, -a, a, b] } else { &[-b, b] };
+    ends.iter()
+        .find(|&&e| e > s0)
+        .map_or(f64::INFINITY, |e| e - s0)
+}
+
+fn polycone_case<T: Real>() {
+    use hytrace_csg::geant4::{G4Mapping, G4Solid};
+    // Geant4's testG4Polycone solid, built (as every polycone) as the union over its z
+    // sections of `cone(outer) - cone(inner)`: its first and last planes are faces of one
+    // section each (Geant4's rays 394, 406, 411 and 423 run along them: no boundary), the
+    // planes between are faces two sections share (inside where both sections are).
+    let (z, rmin, rmax) = (
+        [-20.0, -10.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0],
+        [30.0, 30.0, 0.0, 0.0, 0.0, 0.0, 40.0, 40.0],
+        [70.0, 70.0, 70.0, 40.0, 40.0, 80.0, 80.0, 60.0],
+    );
+    let solid = G4Solid::Polycone {
+        sphi: 0.0,
+        dphi: 2.0 * std::f64::consts::PI,
+        z: z.to_vec(),
+        rmin: rmin.to_vec(),
+        rmax: rmax.to_vec(),
+    };
+    let tree = prepared::<T>(&solid.to_shape().unwrap());
+    let diagonal = std::f64::consts::FRAC_1_SQRT_2;
+    for z0 in [-20.0, 0.0, 10.0, 20.0, 30.0, 40.0] {
+        let radii = polycone_interior_radii(&z, &rmin, &rmax, z0);
+        // From the axis along a diagonal, and from y = -100 along y; then on from each
+        // boundary crossed.
+        for (o, d, s0) in [
+            ([0.0, 0.0, z0], [diagonal, diagonal, 0.0], 0.0),
+            ([0.0, -100.0, z0], [0.0, 1.0, 0.0], -100.0),
+        ] {
+            let mut t = 0.0;
+            loop {
+                let want = through_axis_reference(radii, s0 + t) + t;
+                let (got, _) = cross(&tree, o, d, t);
+                let ok = (got.is_infinite() && want.is_infinite()) || (got - want).abs() <= 1e-4;
+                assert!(
+                    ok,
+                    "{}: polycone ray {o:?} {d:?} in the plane z = {z0} after {t}: {got}, \
+                     want {want}",
+                    T::NAME
+                );
+                if want.is_infinite() {
+                    break;
+                }
+                t = want;
+            }
+        }
+    }
+    // Two boxes, one taller, side by side: the faces of the union's outer boundary are
+    // contacts (no boundary along them), from either box.
+    let pair = prepared::<T>(
+        &(box3(10.0, 10.0, 10.0).unwrap().translate(-5.0, 0.0, 0.0)
+            + box3(10.0, 20.0, 10.0).unwrap().translate(5.0, 5.0, 0.0)),
+    );
+    for (o, d) in [
+        ([-100.0, 0.0, 5.0], [1.0, 0.0, 0.0]),
+        ([-100.0, -5.0, 0.0], [1.0, 0.0, 0.0]),
+        ([10.0, -100.0, 0.0], [0.0, 1.0, 0.0]),
+        ([-10.0, 0.0, -100.0], [0.0, 0.0, 1.0]),
+    ] {
+        let (t, _) = cross(&pair, o, d, 0.0);
+        assert!(
+            t.is_infinite(),
+            "{}: along the union's face {o:?} {d:?}: {t}",
+            T::NAME
+        );
+    }
+}
+
+#[test]
+fn rays_along_the_outer_faces_of_a_union_answer_as_geant4_f32() {
+    polycone_case::<f32>();
+}
+
+#[test]
+fn rays_along_the_outer_faces_of_a_union_answer_as_geant4_f64() {
+    polycone_case::<f64>();
+}
+
+fn phi_axis_case<T: Real>() {
+    use hytrace_csg::geant4::{G4Mapping, G4Solid};
+    let quarter = std::f64::consts::FRAC_PI_2;
+    let down = [0.0, 0.0, -1.0];
+    // Geant4's testG4Tubs solid 7 (ray 910): a quarter of a full tube of radius 50 and
+    // half-length 50. G4Tubs::Inside is kSurface on the axis of its phi segment: a ray
+    // down the axis never enters (no boundary); one beside it, in the segment, enters
+    // through the cap.
+    let tubs = G4Solid::Tubs {
+        rmin: 0.0,
+        rmax: 50.0,
+        dz: 50.0,
+        sphi: 0.0,
+        dphi: quarter,
+    };
+    let tubs = prepared::<T>(&tubs.to_shape().unwrap());
+    let (t, _) = cross(&tubs, [0.0, 0.0, 100.0], down, 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: down the tube's phi axis: {t}",
+        T::NAME
+    );
+    let (t, _) = cross(&tubs, [0.0, 0.0, 20.0], down, 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: down the tube's phi axis from its middle: {t}",
+        T::NAME
+    );
+    let (t, inside) = cross(&tubs, [1.0, 1.0, 100.0], down, 0.0);
+    assert!(
+        (t - 50.0).abs() <= 1e-4 && !inside,
+        "{}: beside the axis: {t}",
+        T::NAME
+    );
+    // The same quarter of a sphere of radius 50: G4Sphere does not check phi on its axis
+    // (inside), so the ray down the axis enters at the pole and leaves at the other.
+    let ball = G4Solid::Sphere {
+        rmin: 0.0,
+        rmax: 50.0,
+        sphi: 0.0,
+        dphi: quarter,
+        stheta: 0.0,
+        dtheta: std::f64::consts::PI,
+    };
+    let ball = prepared::<T>(&ball.to_shape().unwrap());
+    let (t, inside) = cross(&ball, [0.0, 0.0, 100.0], down, 0.0);
+    assert!(
+        (t - 50.0).abs() <= 1e-4 && !inside,
+        "{}: down the sphere's phi axis: {t}",
+        T::NAME
+    );
+    let (t, inside) = cross(&ball, [0.0, 0.0, 100.0], down, 50.0);
+    assert!(
+        (t - 150.0).abs() <= 1e-4 && inside,
+        "{}: out of the sphere's far pole: {t}",
+        T::NAME
+    );
+    // Geant4's testG4Polycone ray 1362: the polycone of `polycone_case` over phi in
+    // [-10, 0] degrees, from below along its axis: G4Polycone takes the axis for surface.
+    let polycone = G4Solid::Polycone {
+        sphi: -10f64.to_radians(),
+        dphi: 10f64.to_radians(),
+        z: vec![-20.0, -10.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0],
+        rmin: vec![30.0, 30.0, 0.0, 0.0, 0.0, 0.0, 40.0, 40.0],
+        rmax: vec![70.0, 70.0, 70.0, 40.0, 40.0, 80.0, 80.0, 60.0],
+    };
+    let polycone = prepared::<T>(&polycone.to_shape().unwrap());
+    let (t, _) = cross(&polycone, [0.0, 0.0, -50.0], [0.0, 0.0, 1.0], 0.0);
+    assert!(
+        t.is_infinite(),
+        "{}: up the polycone's phi axis: {t}",
+        T::NAME
+    );
+}
+
+#[test]
+fn rays_along_the_axis_of_a_phi_segment_answer_as_each_geant4_solid_f32() {
+    phi_axis_case::<f32>();
+}
+
+#[test]
+fn rays_along_the_axis_of_a_phi_segment_answer_as_each_geant4_solid_f64() {
+    phi_axis_case::<f64>();
+}
