@@ -35,6 +35,10 @@ pub fn wavelength_of_energy(mev: f64) -> f64 {
 pub struct Property {
     energies: Vec<f64>,
     values: Vec<f64>,
+    /// Whether every value is the same finite number, bit for bit (most tables of real scenes:
+    /// reflectivities, efficiencies, indices given at two energies): [`Property::value`]
+    /// then skips the search and the interpolation, whose answer it knows.
+    flat: bool,
 }
 
 impl Property {
@@ -80,15 +84,23 @@ impl Property {
             energies.push(e);
             values.push(v);
         }
-        Ok(Property { energies, values })
+        Ok(Property::of_rows(energies, values))
+    }
+
+    /// The property of checked rows.
+    fn of_rows(energies: Vec<f64>, values: Vec<f64>) -> Property {
+        let flat =
+            values[0].is_finite() && values.iter().all(|v| v.to_bits() == values[0].to_bits());
+        Property {
+            energies,
+            values,
+            flat,
+        }
     }
 
     /// A constant property (tests, defaults).
     pub fn constant(value: f64) -> Property {
-        Property {
-            energies: vec![1e-6],
-            values: vec![value],
-        }
+        Property::of_rows(vec![1e-6], vec![value])
     }
 
     /// The photon energies of the rows (MeV), not decreasing.
@@ -122,6 +134,11 @@ impl Property {
         }
         if e >= es[last] {
             return vs[last];
+        }
+        if self.flat {
+            // What the interpolation below gives between equal values `v`: `v + 0 * r`
+            // with `r` finite and not negative, that is `v + 0.0` (which turns -0 into 0).
+            return vs[0] + 0.0;
         }
         // First row above e: e lies in [es[i - 1], es[i]).
         let i = es.partition_point(|&x| x <= e);
@@ -428,10 +445,7 @@ pub fn group_velocity(rindex: &Property) -> Property {
     let (es, ns) = (&rindex.energies, &rindex.values);
     let c = C_LIGHT_MM_PER_NS;
     if es.len() < 2 {
-        return Property {
-            energies: es.clone(),
-            values: vec![c / ns[0]],
-        };
+        return Property::of_rows(es.clone(), vec![c / ns[0]]);
     }
     let bounded = |vg: f64, n: f64| if vg < 0.0 || vg > c / n { c / n } else { vg };
     let slope = |i: usize| (ns[i + 1] - ns[i]) / (es[i + 1] / es[i]).ln();
@@ -445,7 +459,7 @@ pub fn group_velocity(rindex: &Property) -> Property {
     let last = es.len() - 1;
     energies.push(es[last]);
     values.push(bounded(c / (ns[last] + slope(last - 1)), ns[last]));
-    Property { energies, values }
+    Property::of_rows(energies, values)
 }
 
 /// Geant4's surface types this propagator models.
