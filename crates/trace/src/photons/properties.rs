@@ -716,6 +716,52 @@ mod tests {
         assert_eq!(p.value(9e-6), 4.0);
     }
 
+    /// Tables of one value everywhere answer without searching; what they answer is, bit
+    /// for bit, the linear interpolation between the rows bracketing the energy, found
+    /// here by a scan (the sign of a zero included: between rows of -0 it is +0).
+    #[test]
+    fn flat_tables_answer_what_the_interpolation_gives_bit_for_bit() {
+        let interpolated = |rows: &[f64], e: f64| {
+            let pairs: Vec<(f64, f64)> = rows.chunks(2).map(|r| (r[0], r[1])).collect();
+            let (first, last) = (pairs[0], pairs[pairs.len() - 1]);
+            if e <= first.0 {
+                return first.1;
+            }
+            if e >= last.0 {
+                return last.1;
+            }
+            let k = pairs.iter().position(|&(x, _)| x > e).unwrap();
+            let ((e0, v0), (e1, v1)) = (pairs[k - 1], pairs[k]);
+            v0 + (v1 - v0) * (e - e0) / (e1 - e0)
+        };
+        let flat = [
+            vec![
+                1.512e-6, 0.0, 1.6e-6, 0.0, 2.0e-6, 0.0, 2.0e-6, 0.0, 2.0664e-5, 0.0,
+            ],
+            vec![1e-6, 0.98, 4e-6, 0.98],
+            vec![1e-6, -0.0, 2e-6, -0.0, 4e-6, -0.0],
+            vec![1.55e-6, 299.792, 1.55e-5, 299.792],
+            vec![3e-6, 7.5],
+        ];
+        let sloped = [
+            vec![1e-6, 0.98, 4e-6, 0.99],
+            vec![1e-6, 1.0, 2e-6, 1.0, 3e-6, 1.5],
+        ];
+        for rows in flat.iter().chain(&sloped) {
+            let p = Property::new(&table(rows), "t").unwrap();
+            assert_eq!(p.flat, flat.contains(rows), "{rows:?}");
+            for k in 0..=400 {
+                let e = 0.9e-6 + 2.2e-5 * f64::from(k) / 400.0;
+                let (got, want) = (p.value(e), interpolated(rows, e));
+                assert_eq!(
+                    got.to_bits(),
+                    want.to_bits(),
+                    "{rows:?} at {e:e}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn bad_tables_are_errors_naming_the_row() {
         let unsorted = Property::new(&table(&[2e-6, 1.0, 1e-6, 2.0]), "m: RINDEX");
