@@ -476,18 +476,62 @@ pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> crate::Result<(Foundry, Volume
 mod tests {
     use super::*;
 
+    /// Skins on a mother and on its daughter (entering the daughter takes the daughter's
+    /// first, leaving it its own), a border between siblings, and a border naming a
+    /// physical volume that two instances share (`cell`, placed in each of two boxes).
+    const NESTED_SURFACES: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<gdml>
+  <define/>
+  <materials>
+    <material name="M" Z="1"><D value="1" unit="g/cm3"/><atom value="1.008"/></material>
+  </materials>
+  <solids>
+    <box name="WorldBox" x="100" y="100" z="100" lunit="mm"/>
+    <box name="OuterBox" x="40" y="40" z="40" lunit="mm"/>
+    <box name="CellBox" x="10" y="10" z="10" lunit="mm"/>
+    <opticalsurface name="S0" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S1" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S2" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S3" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+  </solids>
+  <structure>
+    <volume name="Cell"><materialref ref="M"/><solidref ref="CellBox"/></volume>
+    <volume name="Outer">
+      <materialref ref="M"/><solidref ref="OuterBox"/>
+      <physvol name="cell"><volumeref ref="Cell"/></physvol>
+    </volume>
+    <volume name="World">
+      <materialref ref="M"/><solidref ref="WorldBox"/>
+      <physvol name="left"><volumeref ref="Outer"/><position name="pl" x="-25" unit="mm"/></physvol>
+      <physvol name="right"><volumeref ref="Outer"/><position name="pr" x="25" unit="mm"/></physvol>
+    </volume>
+    <skinsurface name="K0" surfaceproperty="S0"><volumeref ref="Outer"/></skinsurface>
+    <skinsurface name="K1" surfaceproperty="S1"><volumeref ref="Cell"/></skinsurface>
+    <bordersurface name="B2" surfaceproperty="S2"><physvolref ref="left"/><physvolref ref="right"/></bordersurface>
+    <bordersurface name="B3" surfaceproperty="S3"><physvolref ref="cell"/><physvolref ref="left"/></bordersurface>
+  </structure>
+  <setup name="Default" version="1.0"><world ref="World"/></setup>
+</gdml>
+"#;
+
     /// The lookup by instance numbers answers what the file's rules by name answer, for
     /// every ordered pair of instances of scenes with border and skin surfaces (sibling
     /// crossings included), and those scenes meet both kinds.
     #[test]
     fn surface_lookup_by_instance_agrees_with_the_rules_by_name() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/photons");
-        for file in [
+        let nested = std::env::temp_dir().join(format!(
+            "hytrace-nested-surfaces-{}.gdml",
+            std::process::id()
+        ));
+        std::fs::write(&nested, NESTED_SURFACES).unwrap();
+        let files = [
             "every_process.gdml",
             "rough_surfaces.gdml",
             "media_tank.gdml",
-        ] {
-            let path = root.join(file);
+        ];
+        for path in files.iter().map(|f| root.join(f)).chain([nested.clone()]) {
+            let file = path.file_name().unwrap().to_string_lossy().into_owned();
             let (f, v) = load_gdml_scene_with_surfaces(&path, &GdmlOptions::default()).unwrap();
             let n = f.inst.len() as u32;
             let (mut border, mut skin) = (0, 0);
@@ -504,9 +548,10 @@ mod tests {
                 }
             }
             assert!(skin > 0, "{file}: no crossing met a skin surface");
-            if file == "every_process.gdml" {
+            if file != "rough_surfaces.gdml" && file != "media_tank.gdml" {
                 assert!(border > 0, "{file}: no crossing met a border surface");
             }
         }
+        std::fs::remove_file(&nested).unwrap();
     }
 }
