@@ -71,6 +71,14 @@ pub const BATCH: usize = 256;
 /// Groups of more instances than this are searched through a BVH.
 pub const BVH_MIN_MEMBERS: usize = 8;
 
+thread_local! {
+    /// Working space of the searches that locate points (the candidates of a group's BVH),
+    /// kept by each thread across calls: a photon locates a point at most crossings, and
+    /// a fresh list allocated and freed each time (measured: 6% of a photon run among
+    /// many daughters).
+    static LOCATE_SCRATCH: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// One placement of a solid.
 #[derive(Clone, Debug)]
 struct Placement<T> {
@@ -619,12 +627,14 @@ impl<T: Real> CpuScene<T> {
     /// The deepest instance containing `x` as the navigator locates it (daughters tried
     /// last-placed first); `None` outside every root.
     fn locate_deepest(&self, h: &Hierarchy<T>, x: &WorldPoint<T>) -> Option<u32> {
-        let (mut current, mut group, mut scratch) = (None, &h.roots, Vec::new());
-        while let Some(c) = self.locate(group, x, &mut scratch) {
-            current = Some(c);
-            group = &h.daughters[c as usize];
-        }
-        current
+        LOCATE_SCRATCH.with_borrow_mut(|scratch| {
+            let (mut current, mut group) = (None, &h.roots);
+            while let Some(c) = self.locate(group, x, scratch) {
+                current = Some(c);
+                group = &h.daughters[c as usize];
+            }
+            current
+        })
     }
 
     /// Where the ray leaves the instance its origin was located in. An origin within the
@@ -915,7 +925,9 @@ impl<T: Real> CpuScene<T> {
         let x = WorldPoint::new(V3::from_f64(x));
         match &self.layout {
             Layout::Tree(h) => self.locate_deepest(h, &x),
-            Layout::Flat(all) => self.locate(all, &x, &mut Vec::new()),
+            Layout::Flat(all) => {
+                LOCATE_SCRATCH.with_borrow_mut(|scratch| self.locate(all, &x, scratch))
+            }
         }
     }
 

@@ -35,6 +35,10 @@ pub fn wavelength_of_energy(mev: f64) -> f64 {
 pub struct Property {
     energies: Vec<f64>,
     values: Vec<f64>,
+    /// Whether every value is the same finite number, bit for bit (most tables of real scenes:
+    /// reflectivities, efficiencies, indices given at two energies): [`Property::value`]
+    /// then skips the search and the interpolation, whose answer it knows.
+    flat: bool,
 }
 
 impl Property {
@@ -80,15 +84,23 @@ impl Property {
             energies.push(e);
             values.push(v);
         }
-        Ok(Property { energies, values })
+        Ok(Property::of_rows(energies, values))
+    }
+
+    /// The property of checked rows.
+    fn of_rows(energies: Vec<f64>, values: Vec<f64>) -> Property {
+        let flat =
+            values[0].is_finite() && values.iter().all(|v| v.to_bits() == values[0].to_bits());
+        Property {
+            energies,
+            values,
+            flat,
+        }
     }
 
     /// A constant property (tests, defaults).
     pub fn constant(value: f64) -> Property {
-        Property {
-            energies: vec![1e-6],
-            values: vec![value],
-        }
+        Property::of_rows(vec![1e-6], vec![value])
     }
 
     /// The photon energies of the rows (MeV), not decreasing.
@@ -122,6 +134,11 @@ impl Property {
         }
         if e >= es[last] {
             return vs[last];
+        }
+        if self.flat {
+            // What the interpolation below gives between equal values `v`: `v + 0 * r`
+            // with `r` finite and not negative, that is `v + 0.0` (which turns -0 into 0).
+            return vs[0] + 0.0;
         }
         // First row above e: e lies in [es[i - 1], es[i]).
         let i = es.partition_point(|&x| x <= e);
@@ -428,10 +445,7 @@ pub fn group_velocity(rindex: &Property) -> Property {
     let (es, ns) = (&rindex.energies, &rindex.values);
     let c = C_LIGHT_MM_PER_NS;
     if es.len() < 2 {
-        return Property {
-            energies: es.clone(),
-            values: vec![c / ns[0]],
-        };
+        return Property::of_rows(es.clone(), vec![c / ns[0]]);
     }
     let bounded = |vg: f64, n: f64| if vg < 0.0 || vg > c / n { c / n } else { vg };
     let slope = |i: usize| (ns[i + 1] - ns[i]) / (es[i + 1] / es[i]).ln();
@@ -445,7 +459,7 @@ pub fn group_velocity(rindex: &Property) -> Property {
     let last = es.len() - 1;
     energies.push(es[last]);
     values.push(bounded(c / (ns[last] + slope(last - 1)), ns[last]));
-    Property { energies, values }
+    Property::of_rows(energies, values)
 }
 
 /// Geant4's surface types this propagator models.
@@ -700,6 +714,52 @@ mod tests {
         assert!((p.value(3.5e-6) - 3.0).abs() < 1e-12);
         assert_eq!(p.value(4e-6), 4.0);
         assert_eq!(p.value(9e-6), 4.0);
+    }
+
+    /// Tables of one value everywhere answer without searching; what they answer is, bit
+    /// for bit, the linear interpolation between the rows bracketing the energy, found
+    /// here by a scan (the sign of a zero included: between rows of -0 it is +0).
+    #[test]
+    fn flat_tables_answer_what_the_interpolation_gives_bit_for_bit() {
+        let interpolated = |rows: &[f64], e: f64| {
+            let pairs: Vec<(f64, f64)> = rows.chunks(2).map(|r| (r[0], r[1])).collect();
+            let (first, last) = (pairs[0], pairs[pairs.len() - 1]);
+            if e <= first.0 {
+                return first.1;
+            }
+            if e >= last.0 {
+                return last.1;
+            }
+            let k = pairs.iter().position(|&(x, _)| x > e).unwrap();
+            let ((e0, v0), (e1, v1)) = (pairs[k - 1], pairs[k]);
+            v0 + (v1 - v0) * (e - e0) / (e1 - e0)
+        };
+        let flat = [
+            vec![
+                1.512e-6, 0.0, 1.6e-6, 0.0, 2.0e-6, 0.0, 2.0e-6, 0.0, 2.0664e-5, 0.0,
+            ],
+            vec![1e-6, 0.98, 4e-6, 0.98],
+            vec![1e-6, -0.0, 2e-6, -0.0, 4e-6, -0.0],
+            vec![1.55e-6, 299.792, 1.55e-5, 299.792],
+            vec![3e-6, 7.5],
+        ];
+        let sloped = [
+            vec![1e-6, 0.98, 4e-6, 0.99],
+            vec![1e-6, 1.0, 2e-6, 1.0, 3e-6, 1.5],
+        ];
+        for rows in flat.iter().chain(&sloped) {
+            let p = Property::new(&table(rows), "t").unwrap();
+            assert_eq!(p.flat, flat.contains(rows), "{rows:?}");
+            for k in 0..=400 {
+                let e = 0.9e-6 + 2.2e-5 * f64::from(k) / 400.0;
+                let (got, want) = (p.value(e), interpolated(rows, e));
+                assert_eq!(
+                    got.to_bits(),
+                    want.to_bits(),
+                    "{rows:?} at {e:e}: {got} vs {want}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -244,6 +244,48 @@ pub struct VolumeSurfaces {
     placed: Vec<(String, usize)>,
     /// Per instance: its mother instance, [`UNSET`] for the world.
     mother: Vec<u32>,
+    /// The rules by instance, which [`VolumeSurfaces::between`] answers from.
+    by_instance: InstanceRules,
+}
+
+/// The border and skin surfaces of a file by instance, for the lookup made at every
+/// crossing of a photon: numbers only, no names to hash.
+#[derive(Clone, Debug)]
+struct InstanceRules {
+    /// Per instance: its physical volume's name as a number (the same for instances of
+    /// the same name).
+    name: Vec<u32>,
+    /// The border surfaces by the numbers of their ordered pair of names, sorted (those
+    /// naming a volume no instance has are left out: no crossing meets them).
+    border: Vec<((u32, u32), u32)>,
+    /// Per instance: the skin surface of its logical volume, [`UNSET`] for none.
+    skin: Vec<u32>,
+}
+
+impl InstanceRules {
+    fn new(rules: &SurfaceRules, placed: &[(String, usize)]) -> Self {
+        let mut numbers: HashMap<&str, u32> = HashMap::new();
+        let name = placed
+            .iter()
+            .map(|(pv, _)| {
+                let next = numbers.len() as u32;
+                *numbers.entry(pv.as_str()).or_insert(next)
+            })
+            .collect();
+        let mut border: Vec<_> = rules
+            .border
+            .iter()
+            .filter_map(|((a, b), &s)| {
+                Some(((*numbers.get(a.as_str())?, *numbers.get(b.as_str())?), s))
+            })
+            .collect();
+        border.sort_unstable();
+        let skin = placed
+            .iter()
+            .map(|(_, lv)| rules.skin.get(lv).copied().unwrap_or(UNSET))
+            .collect();
+        InstanceRules { name, border, skin }
+    }
 }
 
 impl VolumeSurfaces {
@@ -251,6 +293,26 @@ impl VolumeSurfaces {
     /// applies when a photon crosses from instance `pre` into instance `post`, as
     /// G4OpBoundaryProcess finds it.
     pub fn between(&self, pre: u32, post: u32) -> u32 {
+        // SurfaceRules::between on the instances' numbers (tested against it).
+        let r = &self.by_instance;
+        let pair = (r.name[pre as usize], r.name[post as usize]);
+        if let Ok(k) = r.border.binary_search_by_key(&pair, |&(p, _)| p) {
+            return r.border[k].1;
+        }
+        let (first, second) = if self.mother[post as usize] == pre {
+            (post, pre)
+        } else {
+            (pre, post)
+        };
+        match r.skin[first as usize] {
+            UNSET => r.skin[second as usize],
+            s => s,
+        }
+    }
+
+    /// [`Self::between`] from the file's rules by name, as built.
+    #[cfg(test)]
+    fn between_by_name(&self, pre: u32, post: u32) -> u32 {
         let at = |i: u32| {
             let (pv, lv) = &self.placed[i as usize];
             (pv.as_str(), *lv)
@@ -261,8 +323,7 @@ impl VolumeSurfaces {
 
     /// The skin surface of instance `i`'s logical volume ([`UNSET`] for none).
     pub fn skin(&self, i: u32) -> u32 {
-        let lv = self.placed[i as usize].1;
-        self.rules.skin.get(&lv).copied().unwrap_or(UNSET)
+        self.by_instance.skin[i as usize]
     }
 
     /// Every ordered pair of instances `(pre, post)` that a border surface names, with
@@ -403,9 +464,94 @@ pub fn gdml_to_foundry_with_surfaces(g: &Gdml) -> crate::Result<(Foundry, Volume
     f.validate().context("built an invalid Foundry")?;
     let mother = f.inst_mother.iter().map(|m| m.index).collect();
     let surfaces = VolumeSurfaces {
+        by_instance: InstanceRules::new(&rules, &placed),
         rules,
         placed,
         mother,
     };
     Ok((f, surfaces))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Skins on a mother and on its daughter (entering the daughter takes the daughter's
+    /// first, leaving it its own), a border between siblings, and a border naming a
+    /// physical volume that two instances share (`cell`, placed in each of two boxes).
+    const NESTED_SURFACES: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<gdml>
+  <define/>
+  <materials>
+    <material name="M" Z="1"><D value="1" unit="g/cm3"/><atom value="1.008"/></material>
+  </materials>
+  <solids>
+    <box name="WorldBox" x="100" y="100" z="100" lunit="mm"/>
+    <box name="OuterBox" x="40" y="40" z="40" lunit="mm"/>
+    <box name="CellBox" x="10" y="10" z="10" lunit="mm"/>
+    <opticalsurface name="S0" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S1" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S2" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+    <opticalsurface name="S3" model="glisur" finish="polished" type="dielectric_dielectric" value="1"/>
+  </solids>
+  <structure>
+    <volume name="Cell"><materialref ref="M"/><solidref ref="CellBox"/></volume>
+    <volume name="Outer">
+      <materialref ref="M"/><solidref ref="OuterBox"/>
+      <physvol name="cell"><volumeref ref="Cell"/></physvol>
+    </volume>
+    <volume name="World">
+      <materialref ref="M"/><solidref ref="WorldBox"/>
+      <physvol name="left"><volumeref ref="Outer"/><position name="pl" x="-25" unit="mm"/></physvol>
+      <physvol name="right"><volumeref ref="Outer"/><position name="pr" x="25" unit="mm"/></physvol>
+    </volume>
+    <skinsurface name="K0" surfaceproperty="S0"><volumeref ref="Outer"/></skinsurface>
+    <skinsurface name="K1" surfaceproperty="S1"><volumeref ref="Cell"/></skinsurface>
+    <bordersurface name="B2" surfaceproperty="S2"><physvolref ref="left"/><physvolref ref="right"/></bordersurface>
+    <bordersurface name="B3" surfaceproperty="S3"><physvolref ref="cell"/><physvolref ref="left"/></bordersurface>
+  </structure>
+  <setup name="Default" version="1.0"><world ref="World"/></setup>
+</gdml>
+"#;
+
+    /// The lookup by instance numbers answers what the file's rules by name answer, for
+    /// every ordered pair of instances of scenes with border and skin surfaces (sibling
+    /// crossings included), and those scenes meet both kinds.
+    #[test]
+    fn surface_lookup_by_instance_agrees_with_the_rules_by_name() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/photons");
+        let nested = std::env::temp_dir().join(format!(
+            "hytrace-nested-surfaces-{}.gdml",
+            std::process::id()
+        ));
+        std::fs::write(&nested, NESTED_SURFACES).unwrap();
+        let files = [
+            "every_process.gdml",
+            "rough_surfaces.gdml",
+            "media_tank.gdml",
+        ];
+        for path in files.iter().map(|f| root.join(f)).chain([nested.clone()]) {
+            let file = path.file_name().unwrap().to_string_lossy().into_owned();
+            let (f, v) = load_gdml_scene_with_surfaces(&path, &GdmlOptions::default()).unwrap();
+            let n = f.inst.len() as u32;
+            let (mut border, mut skin) = (0, 0);
+            for pre in 0..n {
+                for post in (0..n).filter(|&post| post != pre) {
+                    let s = v.between(pre, post);
+                    assert_eq!(s, v.between_by_name(pre, post), "{file}: {pre} -> {post}");
+                    let named = |i: u32| v.placed[i as usize].0.clone();
+                    if v.rules.border.contains_key(&(named(pre), named(post))) {
+                        border += 1;
+                    } else if s != UNSET {
+                        skin += 1;
+                    }
+                }
+            }
+            assert!(skin > 0, "{file}: no crossing met a skin surface");
+            if file != "rough_surfaces.gdml" && file != "media_tank.gdml" {
+                assert!(border > 0, "{file}: no crossing met a border surface");
+            }
+        }
+        std::fs::remove_file(&nested).unwrap();
+    }
 }
