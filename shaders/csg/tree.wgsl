@@ -110,54 +110,26 @@ fn csg_node_params(n: CsgNode) -> array<f32, 6> {
     return array<f32, 6>(n.param.x, n.param.y, n.param.z, n.param.w, n.param_ext[0], n.param_ext[1]);
 }
 
-// What a leaf does with its contact spans (twin of hytrace_csg::kernel::ContactRule): kept
-// (the closed rule), skipped, or decided by classifying the tree along each (a union above
-// the leaf), the leaf subtracted an odd number of times or not.
-const CSG_CONTACTS_KEPT: u32 = 0u;
-const CSG_CONTACTS_SKIPPED: u32 = 1u;
-const CSG_CONTACTS_DECIDED: u32 = 2u;
-const CSG_CONTACTS_DECIDED_SUBTRACTED: u32 = 3u;
-
-// Twin of hytrace_csg::kernel::contact_rule for the leaf at `position`.
-fn csg_contact_rule(node_offset: u32, position: u32, complement: bool) -> u32 {
+// Twin of hytrace_csg::kernel::contacts_outside: whether a ray along the surface of the leaf
+// at `position` is outside the tree (no union above it, subtracted an even number of times,
+// its complement included).
+fn csg_contacts_outside(node_offset: u32, position: u32, complement: bool) -> bool {
     var p = position;
     var subtracted = complement;
-    var under_union = false;
     loop {
         if p <= 1u {
             break;
         }
         let code = csg_node(node_offset + p / 2u - 1u).code;
         if code == CSG_UNION {
-            under_union = true;
+            return false;
         }
         if code == CSG_DIFFERENCE && p % 2u == 1u {
             subtracted = !subtracted;
         }
         p = p / 2u;
     }
-    if under_union {
-        return select(CSG_CONTACTS_DECIDED, CSG_CONTACTS_DECIDED_SUBTRACTED, subtracted);
-    }
-    return select(CSG_CONTACTS_SKIPPED, CSG_CONTACTS_KEPT, subtracted);
-}
-
-// Twin of hytrace_csg::kernel::contact_samples: the parameters at a quarter, half and three
-// quarters of a span, an infinite end replaced by one as far from the other end as that is
-// from the closest approach to the centre (at least a unit), both by the unit around it.
-fn csg_contact_samples(s: Span) -> vec3<f32> {
-    var t0 = s.t0;
-    var t1 = s.t1;
-    if !is_finite_t(t0) && !is_finite_t(t1) {
-        t0 = -0.5;
-        t1 = 0.5;
-    } else if !is_finite_t(t1) {
-        t1 = t0 + max(abs(t0), 1.0);
-    } else if !is_finite_t(t0) {
-        t0 = t1 - max(abs(t1), 1.0);
-    }
-    let length = t1 - t0;
-    return vec3<f32>(t0 + length * 0.25, t0 + length * 0.5, t0 + length * 0.75);
+    return !subtracted;
 }
 
 // Twin of hytrace_csg::kernel::contact_spans: a bit per span of the ray o + t d (in the
@@ -168,10 +140,9 @@ fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: 
     if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
         return 0u;
     }
-    // Not along the axis of a phi cut that takes it for inside (param_ext[0] = 0: G4Sphere's;
-    // kernel::on_phi_axis).
+    // Not along the axis of a phi cut, where Geant4's solids disagree (kernel::on_phi_axis).
     // #if phicut
-    if (n.code & ~COMPLEMENT_BIT) == CSG_PHICUT && n.param_ext[0] == 0.0 && o.x == 0.0 && o.y == 0.0 && d.x == 0.0 && d.y == 0.0 {
+    if (n.code & ~COMPLEMENT_BIT) == CSG_PHICUT && o.x == 0.0 && o.y == 0.0 && d.x == 0.0 && d.y == 0.0 {
         return 0u;
     }
     // #endif
@@ -182,10 +153,23 @@ fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: 
     }
     var contacts = 0u;
     for (var i = 0u; i < spans.len; i += 1u) {
-        let ts = csg_contact_samples(spans.items[i]);
+        let s = spans.items[i];
+        // An infinite end replaced by one as far from the other end as that is from the
+        // closest approach to the centre (at least a unit), both by the unit around it.
+        var t0 = s.t0;
+        var t1 = s.t1;
+        if !is_finite_t(t0) && !is_finite_t(t1) {
+            t0 = -0.5;
+            t1 = 0.5;
+        } else if !is_finite_t(t1) {
+            t1 = t0 + max(abs(t0), 1.0);
+        } else if !is_finite_t(t0) {
+            t0 = t1 - max(abs(t1), 1.0);
+        }
+        let length = t1 - t0;
         var on_surface = true;
-        for (var k = 0u; k < 3u; k += 1u) {
-            let x = o + d * ts[k];
+        for (var k = 1u; k <= 3u; k += 1u) {
+            let x = o + d * (t0 + length * (0.25 * f32(k)));
             let v = primitive_sdf(n.code & ~COMPLEMENT_BIT, csg_node_params(n), n.first, n.count, x);
             on_surface = on_surface && abs(v) <= tol;
         }
@@ -194,169 +178,11 @@ fn csg_contact_spans(n: CsgNode, spans: Spans, o: vec3<f32>, d: vec3<f32>, tol: 
     return contacts;
 }
 
-// Twin of hytrace_csg::kernel::decide_contacts: the contacts (bits of `contacts`) along
-// which tree `tree` is, at all three samples (the ray o + t d in the tree's frame, t the
-// sample plus `shift`), interior when the leaf is subtracted, not interior when not.
-fn csg_decide_contacts(tree: u32, spans: Spans, contacts: u32, shift: f32, subtracted: bool, o: vec3<f32>, d: vec3<f32>) -> u32 {
-    var skipped = 0u;
-    for (var i = 0u; i < spans.len; i += 1u) {
-        if (contacts & (1u << i)) == 0u {
-            continue;
-        }
-        let ts = csg_contact_samples(spans.items[i]);
-        let a = csg_tree_interior(tree, o + d * (ts.x + shift));
-        let b = csg_tree_interior(tree, o + d * (ts.y + shift));
-        let c = csg_tree_interior(tree, o + d * (ts.z + shift));
-        if a == b && b == c && a == subtracted {
-            skipped |= 1u << i;
-        }
-    }
-    return skipped;
-}
-
-// Where a point lies relative to a subtree, as Geant4's Inside() answers (PrimTree's Place).
-const CSG_PLACE_OUTSIDE: u32 = 0u;
-const CSG_PLACE_SURFACE: u32 = 1u;
-const CSG_PLACE_INSIDE: u32 = 2u;
-
-// A subtree's place at a point with its signed distances there and at the six points a
-// small step away along the axes (PrimTree's Probe).
-struct CsgProbe {
-    place: u32,
-    values: array<f32, 7>,
-}
-
-// Twin of Probe::of_values.
-fn csg_probe_of_values(values: array<f32, 7>, near: f32) -> CsgProbe {
-    var place = CSG_PLACE_OUTSIDE;
-    if values[0] < -near {
-        place = CSG_PLACE_INSIDE;
-    } else if values[0] <= near {
-        place = CSG_PLACE_SURFACE;
-    }
-    return CsgProbe(place, values);
-}
-
-// Twin of Probe::gradient.
-fn csg_probe_gradient(p: CsgProbe) -> vec3<f32> {
-    return vec3<f32>(p.values[1] - p.values[2], p.values[3] - p.values[4], p.values[5] - p.values[6]);
-}
-
-// Twin of prim_tree's `opposite`: unit vectors of a and b summing to less than 0.1.
-fn csg_opposite(a: vec3<f32>, b: vec3<f32>) -> bool {
-    let la = sqrt(v3_dot(a, a));
-    let lb = sqrt(v3_dot(b, b));
-    let sum = a * lb + b * la;
-    return la > 0.0 && lb > 0.0 && v3_dot(sum, sum) < 0.01 * la * la * lb * lb;
-}
-
-// Twin of Probe::combine: Geant4's rules for its booleans.
-fn csg_probe_combine(code: u32, a: CsgProbe, b: CsgProbe) -> CsgProbe {
-    var out = a;
-    if code == CSG_UNION || code == CSG_LIST_CONTIGUOUS || code == CSG_LIST_DISCONTIGUOUS {
-        if a.place == CSG_PLACE_INSIDE || b.place == CSG_PLACE_INSIDE {
-            out.place = CSG_PLACE_INSIDE;
-        } else if a.place == CSG_PLACE_OUTSIDE {
-            out.place = b.place;
-        } else if b.place == CSG_PLACE_OUTSIDE {
-            out.place = a.place;
-        } else if csg_opposite(csg_probe_gradient(a), csg_probe_gradient(b)) {
-            out.place = CSG_PLACE_INSIDE;
-        } else {
-            out.place = CSG_PLACE_SURFACE;
-        }
-        for (var k = 0u; k < 7u; k += 1u) {
-            out.values[k] = min(a.values[k], b.values[k]);
-        }
-    } else if code == CSG_INTERSECTION || code == CSG_LIST_OVERLAP {
-        if a.place == CSG_PLACE_OUTSIDE || b.place == CSG_PLACE_OUTSIDE {
-            out.place = CSG_PLACE_OUTSIDE;
-        } else if a.place == CSG_PLACE_INSIDE && b.place == CSG_PLACE_INSIDE {
-            out.place = CSG_PLACE_INSIDE;
-        } else {
-            out.place = CSG_PLACE_SURFACE;
-        }
-        for (var k = 0u; k < 7u; k += 1u) {
-            out.values[k] = max(a.values[k], b.values[k]);
-        }
-    } else {
-        if a.place == CSG_PLACE_OUTSIDE || b.place == CSG_PLACE_INSIDE {
-            out.place = CSG_PLACE_OUTSIDE;
-        } else if a.place == CSG_PLACE_INSIDE && b.place == CSG_PLACE_OUTSIDE {
-            out.place = CSG_PLACE_INSIDE;
-        } else {
-            out.place = CSG_PLACE_SURFACE;
-        }
-        for (var k = 0u; k < 7u; k += 1u) {
-            out.values[k] = max(a.values[k], -b.values[k]);
-        }
-    }
-    return out;
-}
-
-// A leaf's probe at x and its six neighbours h away along the axes.
-fn csg_leaf_probe(n: CsgNode, x: vec3<f32>, h: f32, near: f32) -> CsgProbe {
-    var values: array<f32, 7>;
-    values[0] = csg_leaf_sdf(n, x);
-    for (var k = 0u; k < 3u; k += 1u) {
-        var e = vec3<f32>(0.0);
-        e[k] = h;
-        values[1u + 2u * k] = csg_leaf_sdf(n, x + e);
-        values[2u + 2u * k] = csg_leaf_sdf(n, x - e);
-    }
-    return csg_probe_of_values(values, near);
-}
-
-// Twin of PrimTree::interior: whether tree `tree` is interior at x (the solid's frame) by
-// Geant4's rules for its booleans, a postorder walk of the perfect tree with a probe stack
-// (as csg_tree_walk).
-fn csg_tree_interior(tree: u32, x: vec3<f32>) -> bool {
-    let tr = csg_tree(tree);
-    let near = csg_tolerance(tr.scale, v3_max_abs(x));
-    let h = 8.0 * near;
-    var probes: array<CsgProbe, MAX_TREE_HEIGHT + 2u>;
-    var top = 0u;
-    let deepest = tr.height;
-    var position = 1u << deepest;
-    loop {
-        let n = csg_node(tr.node_offset + position - 1u);
-        if csg_is_operator(n.code) {
-            let combined = csg_probe_combine(n.code, probes[top - 2u], probes[top - 1u]);
-            top -= 1u;
-            probes[top - 1u] = combined;
-        } else if n.code != CSG_ZERO {
-            // A leaf is a one-member list.
-            var first = tr.node_offset + position - 1u;
-            var all = 1u;
-            if csg_is_list(n.code) {
-                first = n.first;
-                all = n.count;
-            }
-            var p = csg_leaf_probe(csg_node(first), x, h, near);
-            for (var m = first + 1u; m < first + all; m += 1u) {
-                p = csg_probe_combine(n.code, p, csg_leaf_probe(csg_node(m), x, h, near));
-            }
-            probes[top] = p;
-            top += 1u;
-        }
-        if position == 1u {
-            break;
-        }
-        if (position & 1u) == 1u {
-            position = position >> 1u;
-        } else {
-            let sibling = position + 1u;
-            position = sibling << (deepest - firstLeadingBit(sibling));
-        }
-    }
-    return probes[0].place == CSG_PLACE_INSIDE;
-}
-
 // The first crossing of a leaf's surface by the ray o + t d (in the tree's frame) after
 // tmin + tol; normal in the tree's frame.
-// `position`: the leaf's position in tree `tree` (whose nodes start at `node_offset`), or 0
-// for a list member (whose contacts are kept).
-fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool, tree: u32, node_offset: u32, position: u32) -> Step {
+// `position`: the leaf's position in the tree whose nodes start at `node_offset`, or 0 for a
+// list member (whose contacts are never outside).
+fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, alone: bool, node_offset: u32, position: u32) -> Step {
     var lo = o;
     var ld = d;
     if n.frame != UNSET {
@@ -372,18 +198,13 @@ fn csg_leaf_step(n: CsgNode, o: vec3<f32>, d: vec3<f32>, tmin: f32, tol: f32, al
     if alone && csg_is_planar(n.code & ~COMPLEMENT_BIT) {
         touch = tol / 4.0;
     }
-    // Contact spans are skipped where the tree is not interior along them (asked of the tree
-    // only when there are some).
+    // Contact spans are skipped where a ray along the leaf's surface is outside the tree
+    // (asked of the tree only when there are some).
     var contacts = 0u;
     if position != 0u {
         contacts = csg_contact_spans(n, spans, lo + ld * shift, ld, tol);
-        if contacts != 0u {
-            let rule = csg_contact_rule(node_offset, position, (n.code & COMPLEMENT_BIT) != 0u);
-            if rule == CSG_CONTACTS_KEPT {
-                contacts = 0u;
-            } else if rule != CSG_CONTACTS_SKIPPED {
-                contacts = csg_decide_contacts(tree, spans, contacts, shift, rule == CSG_CONTACTS_DECIDED_SUBTRACTED, o, d);
-            }
+        if contacts != 0u && !csg_contacts_outside(node_offset, position, (n.code & COMPLEMENT_BIT) != 0u) {
+            contacts = 0u;
         }
     }
     var step = first_crossing_of_spans(spans, shift, ld, tmin, tol, touch, contacts);
@@ -454,7 +275,7 @@ fn csg_list_inside(code: u32, count: u32, all: u32) -> bool {
 // leaf's own step (PrimTree::non_operator_step): so the primitive kernels are inlined once.
 // The slot is the one at `position` of the tree whose nodes start at `node_offset` (at the
 // root, position 1, a leaf is the whole prim).
-fn csg_slot_step(tree: u32, scale: f32, node_offset: u32, position: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
+fn csg_slot_step(scale: f32, node_offset: u32, position: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> Step {
     let slot = node_offset + position - 1u;
     let root = position == 1u;
     let n = csg_node(slot);
@@ -493,7 +314,7 @@ fn csg_slot_step(tree: u32, scale: f32, node_offset: u32, position: u32, o: vec3
             if list && !csg_meets_widened(w, member.bounds, tau, INF) {
                 continue;
             }
-            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau), root && !list, tree, node_offset, select(position, 0u, list));
+            let s = csg_leaf_step(member, o, d, tau, csg_tolerance(scale, tau), root && !list, node_offset, select(position, 0u, list));
             count += select(0u, 1u, s.inside_before);
             if !step_is_hit(s) {
                 continue;
@@ -650,7 +471,7 @@ fn csg_tree_first_crossing(tree: u32, o: vec3<f32>, d: vec3<f32>, tmin: f32) -> 
                 stack[depth] = CsgOperatorFrame(query, query_tmin, step_miss(false), step_miss(false), CSG_PHASE_FIRST_LEFT);
                 depth += 1u;
             } else {
-                incoming = csg_slot_step(tree, tr.scale, tr.node_offset, query, o, d, query_tmin);
+                incoming = csg_slot_step(tr.scale, tr.node_offset, query, o, d, query_tmin);
                 has_incoming = true;
                 if depth == 0u {
                     break;

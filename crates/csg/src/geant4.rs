@@ -51,9 +51,8 @@
 use std::f64::consts::PI;
 
 use crate::shape::{
-    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, phi_cut_surface_axis,
-    polyhedron, saddle, sphere, theta_cut, torus, tube, twisted_halfspace, zsphere, CsgError,
-    Shape,
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, saddle, sphere,
+    theta_cut, torus, tube, twisted_halfspace, zsphere, CsgError, Shape,
 };
 use crate::tessellate::{convex_pieces, ruled_solid, section_stack, simple_polygon, Tri};
 use hytrace_foundry::Transform64;
@@ -74,23 +73,12 @@ fn bad(primitive: &'static str, problem: String) -> CsgError {
     CsgError { primitive, problem }
 }
 
-/// `shape * phi_cut(sphi, dphi)` unless the range covers the full circle (G4Sphere and
-/// G4Torus: a ray along the axis of the segment is inside where the shape is).
+/// `shape * phi_cut(sphi, dphi)` unless the range covers the full circle.
 fn with_phi(shape: Shape, sphi: f64, dphi: f64) -> Result<Shape, CsgError> {
     if dphi >= 2.0 * PI {
         Ok(shape)
     } else {
         Ok(shape * phi_cut(sphi, dphi)?)
-    }
-}
-
-/// [`with_phi`] for the solids whose `Inside()` takes the axis of their phi segment for
-/// surface (G4Tubs, G4Cons, G4CutTubs, G4Polycone): a ray along it runs outside.
-fn with_phi_surface_axis(shape: Shape, sphi: f64, dphi: f64) -> Result<Shape, CsgError> {
-    if dphi >= 2.0 * PI {
-        Ok(shape)
-    } else {
-        Ok(shape * phi_cut_surface_axis(sphi, dphi)?)
     }
 }
 
@@ -557,7 +545,7 @@ fn revolved_polygon(
         }
         parts.push(s);
     }
-    with_phi_surface_axis(union_of(parts), sphi, dphi)
+    with_phi(union_of(parts), sphi, dphi)
 }
 
 /// The (r, z) polygon swept around a regular polygon of `numside` sides over
@@ -849,7 +837,7 @@ impl G4Mapping for G4Solid {
                 dz,
                 sphi,
                 dphi,
-            } => with_phi_surface_axis(tube(rmin, rmax, -dz, dz)?, sphi, dphi),
+            } => with_phi(tube(rmin, rmax, -dz, dz)?, sphi, dphi),
             &G4Solid::CutTubs {
                 rmin,
                 rmax,
@@ -871,7 +859,7 @@ impl G4Mapping for G4Solid {
                 let s = tube(rmin, rmax, -h, h)?
                     * halfspace(low, -dz * low[2])?
                     * halfspace(high, dz * high[2])?;
-                with_phi_surface_axis(s, sphi, dphi)
+                with_phi(s, sphi, dphi)
             }
             &G4Solid::Cons {
                 rmin1,
@@ -886,7 +874,7 @@ impl G4Mapping for G4Solid {
                 if rmin1 > 0.0 || rmin2 > 0.0 {
                     s = s - cone(rmin1, -dz, rmin2, dz)?;
                 }
-                with_phi_surface_axis(s, sphi, dphi)
+                with_phi(s, sphi, dphi)
             }
             &G4Solid::Torus {
                 rmin,

@@ -41,8 +41,8 @@ pub use prim_tree::{
 pub use real::{Ray, Real, V3};
 pub use serialize::{to_tree, to_tree_with, TreeOptions, LIST_MIN_MEMBERS};
 pub use shape::{
-    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, phi_cut_surface_axis,
-    polyhedron, saddle, slab, sphere, theta_cut, torus, tube, twisted_halfspace, zsphere, CsgError,
-    Primitive, Shape, MAX_POLYHEDRON_PLANES,
+    box3, cone, cylinder, halfspace, hyperboloid, paraboloid, phi_cut, polyhedron, saddle, slab,
+    sphere, theta_cut, torus, tube, twisted_halfspace, zsphere, CsgError, Primitive, Shape,
+    MAX_POLYHEDRON_PLANES,
 };
 pub use solid_store::add_geometry;

@@ -20,7 +20,7 @@ use std::ops::Range;
 
 use hytrace_foundry::{Foundry, PrimKind, TypeCode, COMPLEMENT_BIT, MAX_TREE_HEIGHT};
 
-use crate::kernel::{contact_rule, is_bounded, ContactRule, Frame, Leaf, Step};
+use crate::kernel::{contacts_outside, is_bounded, Frame, Leaf, Step};
 use crate::real::{Ray, Real, V3};
 use crate::shape::CsgError;
 
@@ -56,9 +56,9 @@ pub struct PrimTree<T> {
     /// The surface tolerance at the farthest point of `bounds`: the most it is at a point
     /// near the surface.
     pub(crate) near_max: T,
-    /// Per slot: what the leaf there does with its contact spans
-    /// ([`crate::kernel::contact_rule`]; [`ContactRule::Kept`] for other slots).
-    pub(crate) contact_rules: Vec<ContactRule>,
+    /// Per slot: whether a ray along the surface of the leaf there is outside the tree
+    /// ([`crate::kernel::contacts_outside`]; false for other slots).
+    pub(crate) contacts_outside: Vec<bool>,
 }
 
 /// Tolerance for crossings near ray parameter `t` in a tree of size `scale`: crossings of
@@ -388,16 +388,16 @@ impl<T: Real> PrimTree<T> {
             Some(Slot::Operator(code)) => Some(*code),
             _ => None,
         };
-        let contact_rules = slots
+        let contacts_outside = slots
             .iter()
             .enumerate()
             .map(|(k, slot)| match slot {
-                Slot::Leaf(leaf) => contact_rule(k + 1, leaf.complement, operator),
-                _ => ContactRule::Kept,
+                Slot::Leaf(leaf) => contacts_outside(k + 1, leaf.complement, operator),
+                _ => false,
             })
             .collect();
         Ok(PrimTree {
-            contact_rules,
+            contacts_outside,
             slots,
             members,
             planes,
@@ -480,14 +480,14 @@ impl<T: Real> PrimTree<T> {
             Slot::Operator(code) => *code,
             Slot::Empty => return Step::miss(false),
             Slot::Leaf(leaf) => {
+                let outside = self.contacts_outside[position - 1];
                 return leaf.step(
                     &self.planes,
                     ray,
                     tmin,
                     self.tol(tmin),
                     position == 1,
-                    self.contact_rules[position - 1],
-                    |t| self.interior(ray.origin.at(ray.direction, t)),
+                    outside,
                 );
             }
             Slot::List {
@@ -564,16 +564,7 @@ impl<T: Real> PrimTree<T> {
                 if !meets_widened(&widened, b, tau, T::INFINITY) {
                     continue;
                 }
-                let tol = self.tol(tau);
-                let s = leaf.step(
-                    &self.planes,
-                    ray,
-                    tau,
-                    tol,
-                    false,
-                    ContactRule::Kept,
-                    |_| false,
-                );
+                let s = leaf.step(&self.planes, ray, tau, self.tol(tau), false, false);
                 dropped = dropped.min(s.dropped);
                 count += s.inside_before as usize;
                 if !s.is_hit() {
@@ -770,141 +761,6 @@ impl<T: Real> PrimTree<T> {
             }
         }
         inside
-    }
-}
-
-/// Where a point lies relative to a subtree, as Geant4's `Inside()` answers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Place {
-    Outside,
-    Surface,
-    Inside,
-}
-
-/// A subtree's [`Place`] at a point, with its signed distances there and at the six points
-/// a small step away along the axes (whose differences give its normal).
-#[derive(Clone, Copy, Debug)]
-struct Probe<T> {
-    place: Place,
-    values: [T; 7],
-}
-
-impl<T: Real> Probe<T> {
-    /// A leaf's probe: inside beyond `near` below its surface, surface within `near` of it.
-    fn of_values(values: [T; 7], near: T) -> Self {
-        let place = if values[0] < -near {
-            Place::Inside
-        } else if values[0] <= near {
-            Place::Surface
-        } else {
-            Place::Outside
-        };
-        Probe { place, values }
-    }
-
-    /// The gradient of the signed distance by central differences (not normalized).
-    fn gradient(&self) -> V3<T> {
-        let v = &self.values;
-        V3::new(v[1] - v[2], v[3] - v[4], v[5] - v[6])
-    }
-
-    /// Geant4's boolean rules (G4UnionSolid, G4IntersectionSolid, G4SubtractionSolid):
-    /// a union is inside where either operand is, or where both are on their surfaces with
-    /// opposite normals (a face they share); an intersection where both are, on its
-    /// surface where neither is outside; `A - B` is outside where `A` is outside or `B`
-    /// inside, inside where `A` is inside and `B` outside, on its surface elsewhere.
-    fn combine(code: TypeCode, a: &Self, b: &Self) -> Self {
-        use Place::*;
-        let (place, value): (Place, fn(T, T) -> T) = match code {
-            TypeCode::Union | TypeCode::ListContiguous | TypeCode::ListDiscontiguous => {
-                let place = match (a.place, b.place) {
-                    (Inside, _) | (_, Inside) => Inside,
-                    (Outside, p) | (p, Outside) => p,
-                    (Surface, Surface) if opposite(a.gradient(), b.gradient()) => Inside,
-                    _ => Surface,
-                };
-                (place, |a, b| a.min(b))
-            }
-            TypeCode::Intersection | TypeCode::ListOverlap => {
-                let place = match (a.place, b.place) {
-                    (Outside, _) | (_, Outside) => Outside,
-                    (Inside, Inside) => Inside,
-                    _ => Surface,
-                };
-                (place, |a, b| a.max(b))
-            }
-            _ => {
-                let place = match (a.place, b.place) {
-                    (Outside, _) | (_, Inside) => Outside,
-                    (Inside, Outside) => Inside,
-                    _ => Surface,
-                };
-                (place, |a, b| a.max(-b))
-            }
-        };
-        Probe {
-            place,
-            values: std::array::from_fn(|k| value(a.values[k], b.values[k])),
-        }
-    }
-}
-
-/// Whether two normals (not normalized) point opposite ways: their unit vectors sum to
-/// less than 0.1 in length (within about 6 degrees of opposite).
-fn opposite<T: Real>(a: V3<T>, b: V3<T>) -> bool {
-    let (la, lb) = (a.length_squared().sqrt(), b.length_squared().sqrt());
-    let sum = a * lb + b * la;
-    la > T::ZERO && lb > T::ZERO && sum.length_squared() < T::from_f64(0.01) * la * la * lb * lb
-}
-
-impl<T: Real> PrimTree<T> {
-    /// Whether the tree is interior at a point of the solid's frame by Geant4's rules for
-    /// its booleans ([`Probe::combine`]): each leaf is inside, outside or on its surface
-    /// (within the surface tolerance of the point), and a union is inside on a face its
-    /// operands share. Asked where a ray runs along the surface of a leaf under a union
-    /// ([`ContactRule::Decided`]), a rare case.
-    #[cold]
-    #[inline(never)]
-    fn interior(&self, x: V3<T>) -> bool {
-        let near = self.tol(x.max_abs());
-        // A step for the normals well beyond the rounding of the distances.
-        let h = T::from_f64(8.0) * near;
-        let mut points = [x; 7];
-        for k in 0..3 {
-            let mut e = [T::ZERO; 3];
-            e[k] = h;
-            let e = V3::new(e[0], e[1], e[2]);
-            points[1 + 2 * k] = x + e;
-            points[2 + 2 * k] = x - e;
-        }
-        self.probe(1, &points, near).place == Place::Inside
-    }
-
-    /// The [`Probe`] of the subtree at `position` at `points` (a point, then its six
-    /// neighbours).
-    fn probe(&self, position: usize, points: &[V3<T>; 7], near: T) -> Probe<T> {
-        let leaf =
-            |leaf: &Leaf<T>| Probe::of_values(points.map(|p| leaf.sdf(&self.planes, p)), near);
-        match &self.slots[position - 1] {
-            Slot::Empty => Probe {
-                place: Place::Outside,
-                values: [T::INFINITY; 7],
-            },
-            Slot::Leaf(l) => leaf(l),
-            Slot::List { code, members, .. } => self.members[members.clone()]
-                .iter()
-                .map(|(l, _)| leaf(l))
-                .reduce(|a, b| Probe::combine(*code, &a, &b))
-                .unwrap_or(Probe {
-                    place: Place::Outside,
-                    values: [T::INFINITY; 7],
-                }),
-            Slot::Operator(code) => {
-                let a = self.probe(2 * position, points, near);
-                let b = self.probe(2 * position + 1, points, near);
-                Probe::combine(*code, &a, &b)
-            }
-        }
     }
 }
 

@@ -124,10 +124,6 @@ pub enum Primitive {
         phi0: f64,
         /// Opening angle, in (0, 2 pi).
         dphi: f64,
-        /// Whether a ray running along the wedge's axis (the edge where its half-planes
-        /// meet) runs along its surface, outside it (G4Tubs, G4Cons, G4CutTubs,
-        /// G4Polycone), rather than inside (G4Sphere, which does not check phi there).
-        axis_is_surface: bool,
     },
     /// Polar angles between `theta0` and `theta1` from +z, apex at the origin (unbounded).
     ThetaCut {
@@ -397,30 +393,14 @@ pub fn slab(normal: [f64; 3], a: f64, b: f64) -> Result<Shape, CsgError> {
     })
 }
 
-/// The wedge of azimuths from `phi0` over `dphi` radians, `0 < dphi < 2 pi`; a ray along
-/// its axis runs inside it (as G4Sphere decides: it does not check phi on its axis).
+/// The wedge of azimuths from `phi0` over `dphi` radians, `0 < dphi < 2 pi`.
 pub fn phi_cut(phi0: f64, dphi: f64) -> Result<Shape, CsgError> {
-    wedge(phi0, dphi, false)
-}
-
-/// [`phi_cut`] whose axis is its surface for a ray running along it, as G4Tubs, G4Cons,
-/// G4CutTubs and G4Polycone decide (`Inside()` is `kSurface` on the axis of their phi
-/// segment).
-pub fn phi_cut_surface_axis(phi0: f64, dphi: f64) -> Result<Shape, CsgError> {
-    wedge(phi0, dphi, true)
-}
-
-fn wedge(phi0: f64, dphi: f64, axis_is_surface: bool) -> Result<Shape, CsgError> {
     check(
         "phicut",
         phi0.is_finite() && dphi > 0.0 && dphi < 2.0 * std::f64::consts::PI,
         || format!("needs 0 < dphi < 2 pi, got phi0 {phi0} dphi {dphi}"),
     )?;
-    leaf(Primitive::PhiCut {
-        phi0,
-        dphi,
-        axis_is_surface,
-    })
+    leaf(Primitive::PhiCut { phi0, dphi })
 }
 
 /// Polar angles from `theta0` to `theta1` (radians from +z, `0 <= theta0 < theta1 <= pi`,
@@ -527,16 +507,11 @@ impl Primitive {
             &Primitive::Slab { normal, a, b } => {
                 (TypeCode::Slab, [normal[0], normal[1], normal[2], 0.0, a, b])
             }
-            &Primitive::PhiCut {
-                phi0,
-                dphi,
-                axis_is_surface,
-            } => {
+            &Primitive::PhiCut { phi0, dphi } => {
                 let phi1 = phi0 + dphi;
-                let axis = if axis_is_surface { 1.0 } else { 0.0 };
                 (
                     TypeCode::PhiCut,
-                    [phi0.cos(), phi0.sin(), phi1.cos(), phi1.sin(), axis, 0.0],
+                    [phi0.cos(), phi0.sin(), phi1.cos(), phi1.sin(), 0.0, 0.0],
                 )
             }
             &Primitive::ThetaCut { theta0, theta1 } => {

@@ -56,9 +56,7 @@ code_enum! {
     /// - `Paraboloid`: r at z = -dz, r at z = +dz, dz.
     /// - `HalfSpace`: outward normal x, y, z, distance (inside where dot(n, p) < d).
     /// - `Slab`: normal x, y, z; `param_ext`: a, b (inside where a < dot(n, p) < b).
-    /// - `PhiCut`: cos phi0, sin phi0, cos phi1, sin phi1 (inside the wedge from phi0 to phi1);
-    ///   `param_ext[0]`: 1 when a ray along the wedge's axis runs on its surface (G4Tubs,
-    ///   G4Cons, G4CutTubs, G4Polycone), 0 when inside (G4Sphere).
+    /// - `PhiCut`: cos phi0, sin phi0, cos phi1, sin phi1 (inside the wedge from phi0 to phi1).
     /// - `ThetaCut`: theta0, theta1 in radians (inside the cone shell between them).
     /// - `Saddle`: kappa (inside where y <= kappa x z, below a hyperbolic paraboloid).
     /// - `TwistedHalfSpace`: unit normal x, y, z, distance; `param_ext`: twist rate w, half

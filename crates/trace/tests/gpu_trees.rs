@@ -177,16 +177,6 @@ fn cases() -> Vec<Case> {
             faces: vec![(2, 2.0), (1, 0.0)],
         },
         Case {
-            // Faces of the union's outer boundary (z = -2 and 1, the middle piece's face at
-            // z = -1 over the lower piece's hole) and a face its pieces share (z = -1 beyond
-            // the hole): contacts decided by classifying the tree.
-            name: "polycone pieces",
-            shape: (cone(7.0, -2.0, 7.0, -1.0).unwrap() - cone(3.0, -2.0, 3.0, -1.0).unwrap())
-                + cone(7.0, -1.0, 4.0, 0.0).unwrap()
-                + cone(4.0, 0.0, 4.0, 1.0).unwrap(),
-            faces: vec![(2, -2.0), (2, -1.0), (2, 1.0), (0, 0.0)],
-        },
-        Case {
             name: "torus",
             shape: torus(0.5, 1.0, 3.0).unwrap() - b(8.0, 8.0, 0.5),
             faces: vec![(2, 0.25), (2, 0.0)],

@@ -324,7 +324,7 @@ impl<T: Real> Step<T> {
 /// contact). Such a span is a *contact*: the ray lies in a face, along a
 /// wall's generator or on a tangent, and never enters the interior. Geant4 takes the surface
 /// for outside the solid (`Inside()` is `kSurface` all along) and answers no boundary
-/// there; callers skip contact spans where the tree agrees ([`ContactRule`]). An
+/// there; callers skip contact spans where the tree agrees ([`contacts_outside`]). An
 /// infinite end (of a cut or half-space, whose faces are planes or cones through the
 /// origin) is replaced by one as far from the other end as that is from the closest
 /// approach to the centre (at least a unit: a plane crossed at a grazing angle far away is
@@ -349,116 +349,57 @@ pub fn contact_spans<T: Real>(
 ) -> u32 {
     let oblique = d.x != T::ZERO && d.y != T::ZERO && d.z != T::ZERO;
     let ruled = matches!(code, TypeCode::Saddle | TypeCode::TwistedHalfSpace);
-    if oblique || ruled || on_phi_axis(code, p, o, d) {
+    if oblique || ruled || on_phi_axis(code, o, d) {
         return 0;
     }
     let mut contacts = 0;
     for (i, s) in spans.as_slice().iter().enumerate() {
-        let on_surface = contact_samples(s)
-            .iter()
-            .all(|&t| primitive_sdf(code, p, planes, o.at(d, t)).abs() <= tol);
+        let (t0, t1) = match (s.t0.is_finite(), s.t1.is_finite()) {
+            (true, true) => (s.t0, s.t1),
+            (true, false) => (s.t0, s.t0 + s.t0.abs().max(T::ONE)),
+            (false, true) => (s.t1 - s.t1.abs().max(T::ONE), s.t1),
+            (false, false) => (-T::HALF, T::HALF),
+        };
+        let length = t1 - t0;
+        let on_surface = [0.25, 0.5, 0.75].iter().all(|&f| {
+            let x = o.at(d, t0 + length * T::from_f64(f));
+            primitive_sdf(code, p, planes, x).abs() <= tol
+        });
         contacts |= (on_surface as u32) << i;
     }
     contacts
 }
 
-/// The parameters at a quarter, half and three quarters of a span at which
-/// [`contact_spans`] asks whether it runs along the surface (an infinite end replaced as
-/// described there).
-pub fn contact_samples<T: Real>(s: &spans::Span<T>) -> [T; 3] {
-    let (t0, t1) = match (s.t0.is_finite(), s.t1.is_finite()) {
-        (true, true) => (s.t0, s.t1),
-        (true, false) => (s.t0, s.t0 + s.t0.abs().max(T::ONE)),
-        (false, true) => (s.t1 - s.t1.abs().max(T::ONE), s.t1),
-        (false, false) => (-T::HALF, T::HALF),
-    };
-    let length = t1 - t0;
-    [0.25, 0.5, 0.75].map(|f| t0 + length * T::from_f64(f))
+/// Whether a ray runs along the axis of a phi cut, the edge where its half-planes meet.
+/// Geant4's solids disagree there: G4Sphere does not check phi on the axis (inside),
+/// G4Tubs, G4Polycone and G4Polyhedra take it for surface; the closed rule is kept.
+fn on_phi_axis<T: Real>(code: TypeCode, o: V3<T>, d: V3<T>) -> bool {
+    code == TypeCode::PhiCut && o.x == T::ZERO && o.y == T::ZERO && d.x == T::ZERO && d.y == T::ZERO
 }
 
-/// Whether a ray runs along the axis of a phi cut (the edge where its half-planes meet)
-/// that takes its axis for inside (`p[4] = 0`). Geant4's solids disagree there: G4Sphere
-/// does not check phi on the axis (inside: the closed rule), G4Tubs, G4Cons, G4CutTubs
-/// and G4Polycone take it for surface (`p[4] = 1`, see
-/// [`crate::shape::phi_cut_surface_axis`]), where its contacts are decided as any other.
-fn on_phi_axis<T: Real>(code: TypeCode, p: &[T; 6], o: V3<T>, d: V3<T>) -> bool {
-    code == TypeCode::PhiCut
-        && p[4] == T::ZERO
-        && o.x == T::ZERO
-        && o.y == T::ZERO
-        && d.x == T::ZERO
-        && d.y == T::ZERO
-}
-
-/// What a leaf does with its contact spans ([`contact_spans`]), as Geant4's booleans decide:
-/// the surface of a solid is not its interior, an intersection is inside where both operands
-/// are, a difference `A - B` where `A` is inside and `B` neither inside nor on its surface,
-/// and a union where either operand is inside or both are on their surfaces with opposite
-/// normals (a face they share: G4UnionSolid answers `kInside` there).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ContactRule {
-    /// Contacts count as inside the leaf (the closed rule): the leaf is subtracted an odd
-    /// number of times (its complement included) and no union lies above it, so a ray along
-    /// its surface stays the tree's surface by keeping it out of the difference.
-    Kept,
-    /// Contacts are skipped: no union lies above the leaf and it is subtracted an even
-    /// number of times, so the tree is not interior along them.
-    Skipped,
-    /// A union lies above the leaf, which may share the face with another operand: each
-    /// contact is decided by classifying the tree along it ([`decide_contacts`]).
-    Decided {
-        /// Whether the leaf is subtracted an odd number of times, complement included.
-        subtracted: bool,
-    },
-}
-
-/// The [`ContactRule`] of the leaf at `position` of a complete binary tree (whose operator
-/// at position `k` is `operator(k)`, `None` for other slots), `complement` its flag.
-pub fn contact_rule(
+/// Whether a ray running along the surface of the leaf at `position` of a complete binary
+/// tree (whose operator at position `k` is `operator(k)`, `None` for other slots) is
+/// outside the tree there, as Geant4's booleans decide: the surface of a solid is not its
+/// interior, an intersection is inside where both operands are, and a difference `A - B`
+/// where `A` is inside and `B` neither inside nor on its surface (the leaf's contacts count
+/// as inside it when it is subtracted an odd number of times, `complement` included). A
+/// union's faces may be shared by its operands, inside the union (G4UnionSolid: both on
+/// their surfaces with opposite normals): under a union, contacts keep the closed rule.
+pub fn contacts_outside(
     position: usize,
     complement: bool,
     operator: impl Fn(usize) -> Option<TypeCode>,
-) -> ContactRule {
-    let (mut p, mut subtracted, mut union) = (position, complement, false);
+) -> bool {
+    let (mut p, mut subtracted) = (position, complement);
     while p > 1 {
         match operator(p / 2) {
-            Some(TypeCode::Union) => union = true,
+            Some(TypeCode::Union) => return false,
             Some(TypeCode::Difference) if p % 2 == 1 => subtracted = !subtracted,
             _ => {}
         }
         p /= 2;
     }
-    match (union, subtracted) {
-        (true, subtracted) => ContactRule::Decided { subtracted },
-        (false, true) => ContactRule::Kept,
-        (false, false) => ContactRule::Skipped,
-    }
-}
-
-/// The contacts (bits of [`contact_spans`]) that a leaf under a union skips: those along
-/// which the tree is, at all three samples of [`contact_samples`] (parameters of the ray in
-/// the tree's frame once `shift` is added), interior by `interior` when the leaf is
-/// subtracted, not interior when it is not; so that the leaf, taken as outside itself along
-/// them, gives the tree's state. A contact along which the tree's state changes keeps the
-/// closed rule.
-pub fn decide_contacts<T: Real>(
-    spans: &Spans<T>,
-    contacts: u32,
-    shift: T,
-    subtracted: bool,
-    interior: impl Fn(T) -> bool,
-) -> u32 {
-    let mut skipped = 0;
-    for (i, s) in spans.as_slice().iter().enumerate() {
-        if contacts & (1 << i) == 0 {
-            continue;
-        }
-        let [a, b, c] = contact_samples(s).map(|t| interior(t + shift));
-        if a == b && b == c && a == subtracted {
-            skipped |= 1 << i;
-        }
-    }
-    skipped
+    !subtracted
 }
 
 /// Picks the first span end after `tmin + tol` among `spans` shifted by `shift`, skipping
@@ -513,10 +454,9 @@ pub fn first_crossing<T: Real>(
 impl<T: Real> Leaf<T> {
     /// The first crossing of the leaf's surface by `ray` (in the tree's frame) after
     /// `tmin + tol`; normals in the tree's frame. `alone`: the leaf is the whole prim (no
-    /// other leaf shares its faces). `rule`: what the leaf does with contact spans (see
-    /// [`ContactRule`]), `interior` whether the tree is interior at a parameter of `ray`
-    /// (asked for [`ContactRule::Decided`] only, where a contact is found).
-    #[allow(clippy::too_many_arguments)]
+    /// other leaf shares its faces). `contacts_outside`: a ray running along the leaf's
+    /// surface is outside the tree there (see [`contacts_outside`]), so contact spans are
+    /// skipped.
     pub fn step(
         &self,
         planes: &[[T; 4]],
@@ -524,8 +464,7 @@ impl<T: Real> Leaf<T> {
         tmin: T,
         tol: T,
         alone: bool,
-        rule: ContactRule,
-        interior: impl Fn(T) -> bool,
+        contacts_outside: bool,
     ) -> Step<T> {
         let local = match &self.frame {
             Some(f) => f.ray_to_local(ray),
@@ -552,17 +491,10 @@ impl<T: Real> Leaf<T> {
         } else {
             tol
         };
-        let contacts = match rule {
-            ContactRule::Kept => 0,
-            ContactRule::Skipped => {
-                contact_spans(self.code, &self.params, leaf_planes, &spans, o, d, tol)
-            }
-            ContactRule::Decided { subtracted } => {
-                match contact_spans(self.code, &self.params, leaf_planes, &spans, o, d, tol) {
-                    0 => 0,
-                    c => decide_contacts(&spans, c, shift, subtracted, interior),
-                }
-            }
+        let contacts = if contacts_outside {
+            contact_spans(self.code, &self.params, leaf_planes, &spans, o, d, tol)
+        } else {
+            0
         };
         let mut step = first_crossing(&spans, shift, d, tmin, tol, touch, contacts);
         if let Some(f) = &self.frame {
